@@ -1,0 +1,229 @@
+"""Exposure stacks: repeated frames at several exposure times, and their denoising.
+
+A capture of one static scene is a stack of frames ``(N, K, H, W, C)``: ``N``
+repeats of each of ``K`` exposure times, images of ``H`` rows, ``W`` columns and
+``C`` channels, holding integer pixel values in ``[0, 2**bit_depth - 1]``.
+
+Denoising averages the ``N`` repeats (eq. 2 of the reference paper); a pixel
+value is treated as *saturated* when any of its repeats reached the channel's
+saturation level, because the mean of partly clipped samples is biased.
+
+References
+----------
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1 (model),
+   eq. 2 (denoising), appendix A (1/sqrt(N) noise reduction).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from photoquant._checks import check_array, check_bit_depth, check_exposure_times
+from photoquant.errors import InputError
+
+__all__ = [
+    "ExposureStack",
+    "denoise_mean",
+    "detect_saturation_levels",
+]
+
+
+def denoise_mean(frames: np.ndarray) -> np.ndarray:
+    """Average the ``N`` repeats of a stack, eq. 2 of [PQ].
+
+    Parameters
+    ----------
+    frames : ndarray, shape (N, K, H, W, C)
+        Integer or float pixel values.
+
+    Returns
+    -------
+    ndarray, shape (K, H, W, C), float64
+        The denoised values ``c̄_pkλ = (1/N) Σ_n c_pkλn``.
+
+    Notes
+    -----
+    The standard deviation of the mean drops as ``σ/√N`` (appendix A of [PQ]).
+    """
+    frames = check_array(frames, "frames", ndim=5, kind="iuf")
+    if frames.shape[0] == 1:
+        return frames[0].astype(np.float64)
+    return frames.mean(axis=0, dtype=np.float64)
+
+
+def detect_saturation_levels(
+    frames: np.ndarray,
+    bit_depth: int,
+    *,
+    min_fraction: float = 1e-4,
+    min_count: int = 3,
+    pile_up_ratio: float = 4.0,
+) -> np.ndarray:
+    """Detect the level at which each channel clips, from a pile-up at its maximum.
+
+    Real cameras often clip a channel below the nominal ``2**bit_depth - 1``
+    (the white level of a raw file, or white balance applied after clipping).
+    Clipped pixels then pile up at one value, the channel's maximum.
+
+    Parameters
+    ----------
+    frames : ndarray, shape (..., C)
+        Integer pixel values, channels last.
+    bit_depth : int
+        Nominal bit depth, 8 to 16.
+    min_fraction, min_count : float, int
+        A pile-up must hold at least ``max(min_count, min_fraction * n)`` of the
+        channel's ``n`` values ...
+    pile_up_ratio : float
+        ... and at least ``pile_up_ratio`` times the mean count of the levels
+        just below it.
+
+    Returns
+    -------
+    ndarray, shape (C,), int64
+        Per channel: the maximum value when it piles up (or equals the nominal
+        maximum), otherwise the nominal maximum ``2**bit_depth - 1`` (the
+        data never clip, so nothing is treated as saturated before it).
+    """
+    bit_depth = check_bit_depth(bit_depth)
+    frames = check_array(frames, "frames", kind="iu")
+    c_max = 2**bit_depth - 1
+    values = frames.reshape(-1, frames.shape[-1])
+    levels = np.full(values.shape[1], c_max, dtype=np.int64)
+    span = max(2, (c_max + 1) // 64)
+    for ch in range(values.shape[1]):
+        v = values[:, ch]
+        top = int(v.max())
+        if top >= c_max:
+            continue
+        counts = np.bincount(v[v >= top - span].astype(np.int64) - (top - span), minlength=span + 1)
+        pile = counts[-1]
+        below = counts[:-1].mean()
+        if pile >= max(min_count, min_fraction * v.size) and pile >= pile_up_ratio * below:
+            levels[ch] = top
+    return levels
+
+
+@dataclass(frozen=True, eq=False)
+class ExposureStack:
+    """Frames of one static scene at ``K`` exposure times, ``N`` repeats each.
+
+    Parameters
+    ----------
+    frames : ndarray, shape (N, K, H, W, C)
+        Integer pixel values in ``[0, 2**bit_depth - 1]``.
+    exposure_s : ndarray, shape (K,)
+        Exposure times in seconds: finite, positive and unique. The stack is
+        reordered by increasing exposure time.
+    bit_depth : int
+        Bits per value, 8 to 16.
+    saturation_level : ndarray, shape (C,), optional
+        Per-channel clipping level. Detected from the data
+        (:func:`detect_saturation_levels`) when not given.
+    channels : tuple of str
+        Channel names, ``("R", "G", "B")`` by default.
+    """
+
+    frames: np.ndarray
+    exposure_s: np.ndarray
+    bit_depth: int = 8
+    saturation_level: np.ndarray | None = None
+    channels: tuple[str, ...] = ("R", "G", "B")
+    _mean: list = field(default_factory=list, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        frames = check_array(self.frames, "frames", ndim=5, kind="iu")
+        bit_depth = check_bit_depth(self.bit_depth)
+        t = check_exposure_times(self.exposure_s)
+        if t.size != frames.shape[1]:
+            raise InputError(
+                f"`exposure_s` has {t.size} times but `frames` has K={frames.shape[1]} "
+                f"exposures (frames shape is (N, K, H, W, C) = {frames.shape})"
+            )
+        c_max = 2**bit_depth - 1
+        lo, hi = int(frames.min()), int(frames.max())
+        if lo < 0 or hi > c_max:
+            raise InputError(
+                f"`frames` values must lie in [0, {c_max}] for bit_depth={bit_depth}, "
+                f"got [{lo}, {hi}]"
+            )
+        channels = tuple(str(c) for c in self.channels)
+        if len(channels) != frames.shape[-1]:
+            raise InputError(
+                f"`channels` names {len(channels)} channels but `frames` has C={frames.shape[-1]}"
+            )
+        order = np.argsort(t, kind="stable")
+        if not np.array_equal(order, np.arange(t.size)):
+            frames = frames[:, order]
+            t = t[order]
+        if self.saturation_level is None:
+            sat = detect_saturation_levels(frames, bit_depth)
+        else:
+            sat = check_array(
+                self.saturation_level, "saturation_level", shape=(frames.shape[-1],), kind="iuf"
+            ).astype(np.int64)
+            if np.any(sat < 1) or np.any(sat > c_max):
+                raise InputError(
+                    f"`saturation_level` must lie in [1, {c_max}], got {sat.tolist()}"
+                )
+        object.__setattr__(self, "frames", frames)
+        object.__setattr__(self, "exposure_s", t)
+        object.__setattr__(self, "bit_depth", bit_depth)
+        object.__setattr__(self, "saturation_level", sat)
+        object.__setattr__(self, "channels", channels)
+
+    @classmethod
+    def from_frames(
+        cls,
+        frames: Sequence[np.ndarray] | np.ndarray,
+        exposure_s: Sequence[float] | np.ndarray,
+        **kwargs,
+    ) -> ExposureStack:
+        """Build a stack from ``K`` images ``(H, W, C)`` (one repeat each) or ``(K, H, W, C)``."""
+        arr = np.asarray(frames)
+        if arr.ndim == 3:
+            arr = arr[..., None]
+        if arr.ndim != 4:
+            raise InputError(f"`frames` must be (K, H, W, C) images, got shape {arr.shape}")
+        return cls(arr[None], np.asarray(exposure_s, dtype=np.float64), **kwargs)
+
+    @property
+    def shape(self) -> tuple[int, int, int, int, int]:
+        """``(N, K, H, W, C)``."""
+        return tuple(self.frames.shape)  # type: ignore[return-value]
+
+    @property
+    def n_repeats(self) -> int:
+        return int(self.frames.shape[0])
+
+    @property
+    def n_exposures(self) -> int:
+        return int(self.frames.shape[1])
+
+    @property
+    def image_shape(self) -> tuple[int, int]:
+        """``(H, W)``."""
+        return int(self.frames.shape[2]), int(self.frames.shape[3])
+
+    @property
+    def n_channels(self) -> int:
+        return int(self.frames.shape[4])
+
+    @property
+    def c_max(self) -> int:
+        """Nominal maximum value ``2**bit_depth - 1``."""
+        return 2**self.bit_depth - 1
+
+    def mean(self) -> np.ndarray:
+        """Denoised values ``(K, H, W, C)`` float64, eq. 2 (computed once)."""
+        if not self._mean:
+            self._mean.append(denoise_mean(self.frames))
+        return self._mean[0]
+
+    def saturated(self) -> np.ndarray:
+        """``(K, H, W, C)`` bool: any repeat reached the channel's saturation level."""
+        sat = np.asarray(self.saturation_level).reshape(1, 1, 1, 1, -1)
+        return np.any(self.frames >= sat, axis=0)

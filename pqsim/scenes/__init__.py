@@ -1,0 +1,1 @@
+"""pqsim/scenes."""
