@@ -14,6 +14,7 @@ __all__ = [
     "ImageReadError",
     "CalibrationError",
     "CameraModelError",
+    "OutputExistsError",
 ]
 
 
@@ -39,3 +40,7 @@ class CalibrationError(PhotoquantError):
 
 class CameraModelError(PhotoquantError):
     """A camera model file is missing, malformed or of an unknown version."""
+
+
+class OutputExistsError(PhotoquantError):
+    """An output path already exists and overwriting was not requested."""

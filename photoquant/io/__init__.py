@@ -1,1 +1,43 @@
-"""photoquant/io."""
+"""File formats of photoquant: images, OpenEXR, capture manifests and atomic writes.
+
+Public API
+----------
+atomic_write, write_text_atomic, write_bytes_atomic
+    Write a file so that it is either complete or unchanged.
+read_image, write_image, read_exr, write_exr, exif_exposure_time
+    PNG, TIFF and JPEG frames, OpenEXR photoquantities, EXIF exposure times.
+CAPTURE_FORMAT, FrameRef, FrameSetRef, CaptureManifest, load_manifest, load_stack, write_manifest
+    Capture manifests (``photoquant.captures/1``) and loading their frames.
+"""
+
+from __future__ import annotations
+
+from photoquant.io.atomic import atomic_write, write_bytes_atomic, write_text_atomic
+from photoquant.io.images import exif_exposure_time, read_exr, read_image, write_exr, write_image
+from photoquant.io.manifest import (
+    CAPTURE_FORMAT,
+    CaptureManifest,
+    FrameRef,
+    FrameSetRef,
+    load_manifest,
+    load_stack,
+    write_manifest,
+)
+
+__all__ = [
+    "atomic_write",
+    "write_text_atomic",
+    "write_bytes_atomic",
+    "read_image",
+    "write_image",
+    "read_exr",
+    "write_exr",
+    "exif_exposure_time",
+    "CAPTURE_FORMAT",
+    "FrameRef",
+    "FrameSetRef",
+    "CaptureManifest",
+    "load_manifest",
+    "load_stack",
+    "write_manifest",
+]

@@ -1,0 +1,7 @@
+"""``python -m photoquant``."""
+
+import sys
+
+from photoquant.cli import main
+
+sys.exit(main())

@@ -1,0 +1,105 @@
+"""In-line correction (§4 of the paper): photoquantity ``l = exp(merge) / (u·v)``.
+
+Given a calibrated :class:`~photoquant.model.CameraModel` and frames of a
+static scene at one or more exposure times, :func:`correct` denoises (eq. 2),
+linearises and balances (eq. 6 with ``g_λ + ln a_λ``) and uniformises
+(``÷ u·v``, §4.3). Pixels without a valid exposure are flagged and NaN.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from photoquant.errors import InputError
+from photoquant.model import CameraModel
+from photoquant.stack import ExposureStack
+
+__all__ = ["Correction", "correct", "correct_manifest"]
+
+
+@dataclass(frozen=True, eq=False)
+class Correction:
+    """Corrected photoquantity of a scene.
+
+    Attributes
+    ----------
+    photoquantity : ndarray, shape (H, W, C), float32
+        ``l_pλ`` up to one global scale; NaN where ``mask`` is set.
+    mask : ndarray, shape (H, W, C), bool
+        No valid exposure (``all_saturated | all_dark``).
+    all_saturated, all_dark : ndarray, shape (H, W, C), bool
+        Why a pixel is flagged.
+    """
+
+    photoquantity: np.ndarray
+    mask: np.ndarray
+    all_saturated: np.ndarray
+    all_dark: np.ndarray
+
+
+def correct(stack: ExposureStack, model: CameraModel, *, weighting: str | None = None) -> Correction:
+    """Measure the photoquantity of a scene with a calibrated camera (§4 of the paper).
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        Frames of the scene (any ``N`` and exposure times).
+    model : CameraModel
+        The calibrated camera.
+    weighting : str, optional
+        Weighting function; the one used in calibration by default.
+
+    Returns
+    -------
+    Correction
+    """
+    # imported here: photoquant.calibrate imports this module's siblings
+    from photoquant.calibrate import merge_stack
+
+    if not isinstance(stack, ExposureStack):
+        raise InputError(f"`stack` must be an ExposureStack, got {type(stack).__name__}")
+    if not isinstance(model, CameraModel):
+        raise InputError(f"`model` must be a CameraModel, got {type(model).__name__}")
+    if stack.image_shape != tuple(model.image_shape):
+        raise InputError(
+            f"the scene's images are {stack.image_shape[1]}x{stack.image_shape[0]} (WxH) but the "
+            f"camera was calibrated at {model.image_shape[1]}x{model.image_shape[0]}"
+        )
+    if stack.n_channels != len(model.channels):
+        raise InputError(
+            f"the scene has {stack.n_channels} channels, the camera {len(model.channels)}"
+        )
+    if stack.bit_depth != model.bit_depth:
+        raise InputError(
+            f"the scene has bit depth {stack.bit_depth}, the camera {model.bit_depth}"
+        )
+    weighting = weighting or model.parameters.get("weighting", "hat")
+    merged = merge_stack(
+        stack,
+        model.response_levels,
+        model.balanced_log_inverse_response(),
+        model.saturation_level,
+        weighting=weighting,
+    )
+    with np.errstate(invalid="ignore"):
+        photoquantity = np.exp(merged.log_photoquantity) * model.gain_map()
+    return Correction(
+        photoquantity=photoquantity.astype(np.float32),
+        mask=merged.mask,
+        all_saturated=merged.all_saturated,
+        all_dark=merged.all_dark,
+    )
+
+
+def correct_manifest(manifest, model: CameraModel, *, allow_outside: bool = False,
+                     progress_bars: bool = False) -> Correction:
+    """Correct the ``scene`` of a capture manifest (a path or ``CaptureManifest``)."""
+    from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
+
+    if not isinstance(manifest, CaptureManifest):
+        manifest = load_manifest(manifest, allow_outside=allow_outside)
+    if manifest.scene is None:
+        raise InputError(f"{manifest.path} has no `scene` frames to correct")
+    return correct(load_stack(manifest.scene, manifest, progress=progress_bars), model)

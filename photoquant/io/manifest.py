@@ -1,0 +1,703 @@
+"""Capture manifests (format ``photoquant.captures/1``): which frames make a calibration.
+
+A manifest is a JSON object; file paths are relative to the manifest's folder::
+
+    {"format": "photoquant.captures/1", "bit_depth": 8, "channels": ["R", "G", "B"],
+     "views": [{"frames": [{"file": "v0/t0.001_n0.png", "exposure_s": 0.001, "repeat": 0},
+                           ...]},
+               ...],
+     "white_roi": [x0, y0, x1, y1],
+     "irradiance": {"frames": [...]},
+     "scene": {"frames": [...]},
+     "correspondences": [[[0, x, y], [1, x, y], ...], ...],
+     "saturation_level": [250, 255, 230]}
+
+============================  ========  =================================================
+Key                           Required  Meaning
+============================  ========  =================================================
+``format``                    yes       ``"photoquant.captures/1"``
+``bit_depth``                 yes       bits per value, an integer 8 to 16
+``channels``                  no        unique channel names, ``["R", "G", "B"]`` default
+``views``                     yes       non-empty list of frame sets; ``views[0]`` also
+                                        serves response recovery and the white chart
+``white_roi``                 no        white chart box ``[x0, y0, x1, y1]`` in pixels,
+                                        x right, y down, end exclusive
+``irradiance``, ``scene``     no        frame sets
+``correspondences``           no        tracks of ``[view_index, x, y]`` (pixels), at
+                                        least 2 entries each, one per view at most
+``saturation_level``          no        per-channel clipping level, 1 to 2**bit_depth - 1
+============================  ========  =================================================
+
+A frame set is ``{"frames": [frame, ...]}`` with at least one frame; a frame is
+``{"file": str, "exposure_s": float, "repeat": int}`` where ``exposure_s`` is
+optional (read from the image's EXIF ExposureTime when absent) and ``repeat``
+is optional (by default the order of appearance among the frames of the same
+exposure). Unknown top-level keys are kept in :attr:`CaptureManifest.extra`;
+unknown keys elsewhere are ignored.
+
+A manifest is untrusted input: every file must resolve (symbolic links
+followed) inside the manifest's folder unless ``allow_outside=True``, and
+nothing is ever unpickled.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path, PurePath
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from photoquant.errors import ManifestError
+from photoquant.io.atomic import write_text_atomic
+from photoquant.io.images import exif_exposure_time, read_image
+from photoquant.stack import ExposureStack
+
+__all__ = [
+    "CAPTURE_FORMAT",
+    "FrameRef",
+    "FrameSetRef",
+    "CaptureManifest",
+    "load_manifest",
+    "load_stack",
+    "write_manifest",
+]
+
+CAPTURE_FORMAT = "photoquant.captures/1"
+_FORMAT_NAME, _, _FORMAT_VERSION = CAPTURE_FORMAT.partition("/")
+_DEFAULT_CHANNELS = ("R", "G", "B")
+_KNOWN_KEYS = frozenset(
+    {
+        "format",
+        "bit_depth",
+        "channels",
+        "views",
+        "white_roi",
+        "irradiance",
+        "scene",
+        "correspondences",
+        "saturation_level",
+    }
+)
+
+PathLike = str | os.PathLike[str]
+
+
+@dataclass(frozen=True)
+class FrameRef:
+    """One frame of a capture.
+
+    Parameters
+    ----------
+    file : Path
+        Absolute, resolved path of the image file.
+    exposure_s : float or None
+        Exposure time in seconds; ``None`` means "read it from the EXIF data".
+    repeat : int or None
+        Index among the repeats of the same exposure; ``None`` means "order of
+        appearance".
+    """
+
+    file: Path
+    exposure_s: float | None
+    repeat: int | None
+
+
+@dataclass(frozen=True)
+class FrameSetRef:
+    """The frames of one static scene: repeats at several exposure times.
+
+    Parameters
+    ----------
+    frames : tuple of FrameRef
+        At least one frame, in manifest order.
+    """
+
+    frames: tuple[FrameRef, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class CaptureManifest:
+    """A validated capture manifest (see the module docstring for the format).
+
+    Parameters
+    ----------
+    path : Path
+        The manifest file (resolved).
+    root : Path
+        Its folder, against which relative file paths were resolved.
+    bit_depth : int
+        Bits per pixel value, 8 to 16.
+    channels : tuple of str
+        Channel names.
+    views : tuple of FrameSetRef
+        One frame set per camera view; ``views[0]`` also serves response
+        recovery and the white chart.
+    white_roi : tuple of 4 int or None
+        White chart box ``(x0, y0, x1, y1)`` in pixels, end exclusive.
+    irradiance, scene : FrameSetRef or None
+        Optional frame sets.
+    correspondences : tuple of ndarray
+        Tracks, each ``(n_i, 3)`` float64 rows ``[view, x, y]`` (read-only).
+    saturation_level : tuple of int or None
+        Per-channel clipping level, if given.
+    extra : dict
+        Unknown top-level keys, kept as read.
+    """
+
+    path: Path
+    root: Path
+    bit_depth: int
+    channels: tuple[str, ...]
+    views: tuple[FrameSetRef, ...]
+    white_roi: tuple[int, int, int, int] | None
+    irradiance: FrameSetRef | None
+    scene: FrameSetRef | None
+    correspondences: tuple[np.ndarray, ...]
+    saturation_level: tuple[int, ...] | None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- parsing
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+class _Parser:
+    """Validate a manifest's decoded JSON; every error names the manifest and the key."""
+
+    def __init__(
+        self, manifest_path: Path, root: Path, *, check_files: bool, allow_outside: bool
+    ) -> None:
+        self.manifest_path = manifest_path
+        self.root = root
+        self.resolved_root = root.resolve()
+        self.check_files = check_files
+        self.allow_outside = allow_outside
+
+    def error(self, message: str) -> ManifestError:
+        return ManifestError(f"manifest {self.manifest_path}: {message}")
+
+    # -- top level ---------------------------------------------------------------
+
+    def parse(self, data: Any) -> CaptureManifest:
+        if not isinstance(data, dict):
+            raise self.error(f"must be a JSON object, got a JSON {_json_type(data)}")
+        self.check_format(data)
+        bit_depth = self.parse_bit_depth(data)
+        channels = self.parse_channels(data)
+        if "views" not in data:
+            raise self.error("missing required key `views`")
+        views_raw = data["views"]
+        if not isinstance(views_raw, list) or not views_raw:
+            raise self.error(
+                f"`views` must be a non-empty list of frame sets, got {_describe(views_raw)}"
+            )
+        views = tuple(self.parse_frameset(v, f"views[{i}]") for i, v in enumerate(views_raw))
+        white_roi = self.parse_roi(data.get("white_roi"))
+        irradiance = self.parse_optional_frameset(data, "irradiance")
+        scene = self.parse_optional_frameset(data, "scene")
+        tracks = self.parse_tracks(data.get("correspondences"), len(views))
+        saturation = self.parse_saturation(data.get("saturation_level"), bit_depth, channels)
+        extra = {k: v for k, v in data.items() if k not in _KNOWN_KEYS}
+        return CaptureManifest(
+            path=self.manifest_path,
+            root=self.root,
+            bit_depth=bit_depth,
+            channels=channels,
+            views=views,
+            white_roi=white_roi,
+            irradiance=irradiance,
+            scene=scene,
+            correspondences=tracks,
+            saturation_level=saturation,
+            extra=extra,
+        )
+
+    def check_format(self, data: dict[str, Any]) -> None:
+        if "format" not in data:
+            raise self.error(f"missing required key `format` (expected {CAPTURE_FORMAT!r})")
+        fmt = data["format"]
+        if fmt == CAPTURE_FORMAT:
+            return
+        if isinstance(fmt, str) and fmt.startswith(_FORMAT_NAME + "/"):
+            version = fmt.partition("/")[2]
+            raise self.error(
+                f"format version {version!r} ({fmt!r}) is not supported; "
+                f"this photoquant reads version {_FORMAT_VERSION!r} ({CAPTURE_FORMAT!r})"
+            )
+        raise self.error(f"`format` is {fmt!r}, expected {CAPTURE_FORMAT!r}")
+
+    def parse_bit_depth(self, data: dict[str, Any]) -> int:
+        if "bit_depth" not in data:
+            raise self.error("missing required key `bit_depth` (an integer 8 to 16)")
+        value = data["bit_depth"]
+        if not _is_int(value) or not 8 <= value <= 16:
+            raise self.error(f"`bit_depth` must be an integer from 8 to 16, got {value!r}")
+        return int(value)
+
+    def parse_channels(self, data: dict[str, Any]) -> tuple[str, ...]:
+        if "channels" not in data:
+            return _DEFAULT_CHANNELS
+        value = data["channels"]
+        if (
+            not isinstance(value, list)
+            or not value
+            or not all(isinstance(c, str) and c for c in value)
+        ):
+            raise self.error(
+                f"`channels` must be a non-empty list of non-empty strings, got {value!r}"
+            )
+        if len(set(value)) != len(value):
+            raise self.error(f"`channels` must be unique, got {value!r}")
+        return tuple(value)
+
+    # -- frames ------------------------------------------------------------------
+
+    def parse_optional_frameset(self, data: dict[str, Any], key: str) -> FrameSetRef | None:
+        value = data.get(key)
+        return None if value is None else self.parse_frameset(value, key)
+
+    def parse_frameset(self, value: Any, where: str) -> FrameSetRef:
+        if not isinstance(value, dict):
+            raise self.error(f"`{where}` must be an object with `frames`, got {_describe(value)}")
+        frames_raw = value.get("frames")
+        if not isinstance(frames_raw, list) or not frames_raw:
+            raise self.error(
+                f"`{where}.frames` must be a non-empty list of frames, got {_describe(frames_raw)}"
+            )
+        frames = tuple(
+            self.parse_frame(f, f"{where}.frames[{i}]") for i, f in enumerate(frames_raw)
+        )
+        seen: dict[Path, int] = {}
+        for i, frame in enumerate(frames):
+            if frame.file in seen:
+                raise self.error(
+                    f"`{where}` lists file {frame.file} twice "
+                    f"(frames[{seen[frame.file]}] and frames[{i}])"
+                )
+            seen[frame.file] = i
+        if all(f.exposure_s is not None for f in frames):
+            _group_by_exposure(frames, [f.exposure_s for f in frames], where, self.error)
+        return FrameSetRef(frames)
+
+    def parse_frame(self, value: Any, where: str) -> FrameRef:
+        if not isinstance(value, dict):
+            raise self.error(f"`{where}` must be an object with `file`, got {_describe(value)}")
+        file = self.resolve_file(value.get("file"), where)
+        exposure = value.get("exposure_s")
+        if exposure is not None and (
+            not _is_number(exposure) or not math.isfinite(exposure) or exposure <= 0
+        ):
+            raise self.error(
+                f"`{where}.exposure_s` must be a positive finite number of seconds, "
+                f"got {exposure!r}"
+            )
+        repeat = value.get("repeat")
+        if repeat is not None and (not _is_int(repeat) or repeat < 0):
+            raise self.error(f"`{where}.repeat` must be a non-negative integer, got {repeat!r}")
+        return FrameRef(
+            file=file,
+            exposure_s=None if exposure is None else float(exposure),
+            repeat=repeat,
+        )
+
+    def resolve_file(self, name: Any, where: str) -> Path:
+        if not isinstance(name, str) or not name or "\x00" in name:
+            raise self.error(f"`{where}.file` must be a non-empty path string, got {name!r}")
+        rel = PurePath(name)
+        if rel.is_absolute() and not self.allow_outside:
+            raise self.error(
+                f"`{where}.file` {name!r} is an absolute path; files must lie inside the "
+                f"manifest's folder {self.resolved_root} (pass allow_outside=True to permit it)"
+            )
+        try:
+            resolved = (self.root / rel).resolve()
+        except (OSError, RuntimeError) as exc:  # symlink loops
+            raise self.error(f"`{where}.file` {name!r} cannot be resolved: {exc}") from None
+        if not self.allow_outside and not resolved.is_relative_to(self.resolved_root):
+            raise self.error(
+                f"`{where}.file` {name!r} resolves to {resolved}, outside the manifest's "
+                f"folder {self.resolved_root} (pass allow_outside=True to permit it)"
+            )
+        if self.check_files:
+            if not resolved.exists():
+                raise self.error(f"`{where}.file` {name!r} does not exist ({resolved})")
+            if not resolved.is_file():
+                raise self.error(f"`{where}.file` {name!r} is not a regular file ({resolved})")
+        return resolved
+
+    # -- geometry ----------------------------------------------------------------
+
+    def parse_roi(self, value: Any) -> tuple[int, int, int, int] | None:
+        if value is None:
+            return None
+        if not isinstance(value, list) or len(value) != 4 or not all(_is_int(v) for v in value):
+            raise self.error(f"`white_roi` must be 4 integers [x0, y0, x1, y1], got {value!r}")
+        x0, y0, x1, y1 = value
+        if x0 < 0 or y0 < 0 or x0 >= x1 or y0 >= y1:
+            raise self.error(
+                f"`white_roi` [x0, y0, x1, y1] needs 0 <= x0 < x1 and 0 <= y0 < y1, got {value!r}"
+            )
+        return (x0, y0, x1, y1)
+
+    def parse_tracks(self, value: Any, n_views: int) -> tuple[np.ndarray, ...]:
+        if value is None:
+            return ()
+        if not isinstance(value, list):
+            raise self.error(f"`correspondences` must be a list of tracks, got {_describe(value)}")
+        tracks = []
+        for t, track in enumerate(value):
+            where = f"correspondences[{t}]"
+            if not isinstance(track, list) or len(track) < 2:
+                raise self.error(
+                    f"`{where}` must be a list of at least 2 [view, x, y] entries, "
+                    f"got {_describe(track)}"
+                )
+            seen_views: set[int] = set()
+            for e, entry in enumerate(track):
+                if (
+                    not isinstance(entry, list)
+                    or len(entry) != 3
+                    or not _is_int(entry[0])
+                    or not all(_is_number(v) and math.isfinite(v) for v in entry[1:])
+                ):
+                    raise self.error(
+                        f"`{where}[{e}]` must be [view_index, x, y] with an integer view and "
+                        f"finite x, y, got {entry!r}"
+                    )
+                view = entry[0]
+                if not 0 <= view < n_views:
+                    raise self.error(
+                        f"`{where}[{e}]` refers to view {view}, but there are {n_views} views "
+                        f"(indices 0 to {n_views - 1})"
+                    )
+                if view in seen_views:
+                    raise self.error(f"`{where}` lists view {view} more than once")
+                seen_views.add(view)
+            arr = np.asarray(track, dtype=np.float64)
+            arr.setflags(write=False)
+            tracks.append(arr)
+        return tuple(tracks)
+
+    def parse_saturation(
+        self, value: Any, bit_depth: int, channels: tuple[str, ...]
+    ) -> tuple[int, ...] | None:
+        if value is None:
+            return None
+        c_max = 2**bit_depth - 1
+        if (
+            not isinstance(value, list)
+            or len(value) != len(channels)
+            or not all(_is_int(v) and 1 <= v <= c_max for v in value)
+        ):
+            raise self.error(
+                f"`saturation_level` must be {len(channels)} integers (one per channel "
+                f"{list(channels)}) from 1 to {c_max}, got {value!r}"
+            )
+        return tuple(value)
+
+
+def _json_type(value: Any) -> str:
+    names = {dict: "object", list: "array", str: "string", bool: "boolean", type(None): "null"}
+    return names.get(type(value), "number")
+
+
+def _describe(value: Any) -> str:
+    if isinstance(value, list | dict) and not value:
+        return f"an empty {_json_type(value)}"
+    if isinstance(value, list | dict):
+        return f"a JSON {_json_type(value)}"
+    return repr(value)
+
+
+def _group_by_exposure(
+    frames: Sequence[FrameRef],
+    exposures: Sequence[float],
+    where: str,
+    error: Callable[[str], ManifestError],
+) -> dict[float, list[FrameRef]]:
+    """Group frames by exposure time and order each group by repeat index.
+
+    Frames with an explicit ``repeat`` take that slot; the others fill the free
+    slots in order of appearance. Every exposure must then have the same number
+    ``N`` of repeats, with indices ``0 .. N-1``.
+
+    Returns
+    -------
+    dict
+        Exposure time -> its frames in repeat order, by increasing exposure.
+    """
+    groups: dict[float, list[int]] = {}
+    for i, t in enumerate(exposures):
+        groups.setdefault(float(t), []).append(i)
+    counts = {t: len(idx) for t, idx in groups.items()}
+    if len(set(counts.values())) > 1:
+        detail = ", ".join(f"{t:g} s: {n}" for t, n in sorted(counts.items()))
+        raise error(
+            f"`{where}` must have the same number of repeats for every exposure, "
+            f"got frames per exposure {detail}"
+        )
+    ordered: dict[float, list[FrameRef]] = {}
+    for t in sorted(groups):
+        idx = groups[t]
+        n = len(idx)
+        slots: dict[int, int] = {}
+        for i in idx:
+            r = frames[i].repeat
+            if r is None:
+                continue
+            if r in slots:
+                raise error(
+                    f"`{where}` has two frames with exposure {t:g} s and repeat {r}: "
+                    f"{frames[slots[r]].file} and {frames[i].file}"
+                )
+            slots[r] = i
+        free = iter(r for r in range(n) if r not in slots)
+        for i in idx:
+            if frames[i].repeat is None:
+                slots[next(free)] = i
+        if sorted(slots) != list(range(n)):
+            raise error(
+                f"`{where}` repeat indices for exposure {t:g} s must be 0 to {n - 1}, "
+                f"got {sorted(slots)}"
+            )
+        ordered[t] = [frames[slots[r]] for r in range(n)]
+    return ordered
+
+
+def _to_json_value(value: Any) -> Any:
+    """Convert numpy scalars and arrays, tuples and paths to plain JSON values."""
+    if isinstance(value, Mapping):
+        return {str(k): _to_json_value(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return _to_json_value(value.tolist())
+    if isinstance(value, list | tuple):
+        return [_to_json_value(v) for v in value]
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if isinstance(value, PurePath):
+        return value.as_posix()
+    return value
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def load_manifest(path: PathLike, *, allow_outside: bool = False) -> CaptureManifest:
+    """Read and validate a capture manifest (images are not read).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The manifest's JSON file.
+    allow_outside : bool
+        Whether image files may lie outside the manifest's folder (absolute
+        paths, ``..`` or symbolic links leading out). Refused by default,
+        because a manifest is untrusted input.
+
+    Returns
+    -------
+    CaptureManifest
+        With every file path resolved to an absolute path.
+
+    Raises
+    ------
+    ManifestError
+        If the file cannot be read, is not a JSON object, has a missing or
+        unsupported ``format``, breaks any rule of the format, refers to a file
+        outside its folder, or refers to an image file that does not exist.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ManifestError(f"manifest {path}: no such file") from None
+    except UnicodeDecodeError as exc:
+        raise ManifestError(f"manifest {path}: not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise ManifestError(f"manifest {path}: cannot read it ({exc.strerror or exc})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ManifestError(
+            f"manifest {path}: not valid JSON ({exc.msg} at line {exc.lineno}, column {exc.colno})"
+        ) from None
+    except RecursionError:
+        raise ManifestError(f"manifest {path}: not valid JSON (nested too deeply)") from None
+    resolved = path.resolve()
+    parser = _Parser(resolved, resolved.parent, check_files=True, allow_outside=allow_outside)
+    return parser.parse(data)
+
+
+def write_manifest(path: PathLike, data: Mapping[str, Any], *, allow_outside: bool = False) -> None:
+    """Validate a manifest and write it as indented JSON, atomically.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Destination file; file paths in ``data`` are relative to its folder.
+    data : mapping
+        The manifest content (see the module docstring). Numpy scalars and
+        arrays, tuples and :class:`~pathlib.PurePath` values are converted to
+        JSON values. Image files need not exist yet.
+    allow_outside : bool
+        Whether image files may lie outside the manifest's folder.
+
+    Raises
+    ------
+    ManifestError
+        If ``data`` breaks any rule of the format (the same rules as
+        :func:`load_manifest`, except file existence) or holds a value JSON
+        cannot represent (NaN, infinity or an unknown type).
+    OSError
+        If the file cannot be written; an existing file is then left unchanged.
+    """
+    path = Path(path)
+    plain = _to_json_value(data)
+    resolved = path.resolve()
+    parser = _Parser(resolved, resolved.parent, check_files=False, allow_outside=allow_outside)
+    parser.parse(plain)
+    try:
+        text = json.dumps(plain, indent=2, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise parser.error(f"cannot be written as JSON: {exc}") from None
+    write_text_atomic(path, text + "\n")
+
+
+def load_stack(
+    frameset: FrameSetRef, manifest: CaptureManifest, *, progress: bool = False
+) -> ExposureStack:
+    """Read the frames of a frame set into an :class:`~photoquant.stack.ExposureStack`.
+
+    Parameters
+    ----------
+    frameset : FrameSetRef
+        One of ``manifest.views``, ``manifest.irradiance`` or ``manifest.scene``.
+    manifest : CaptureManifest
+        Supplies the bit depth, channel names and saturation levels.
+    progress : bool
+        Whether to show a tqdm progress bar while reading.
+
+    Returns
+    -------
+    ExposureStack
+        Frames ``(N, K, H, W, C)`` by increasing exposure time; same
+        ``exposure_s`` means repeats, ordered by their ``repeat`` index.
+
+    Raises
+    ------
+    ManifestError
+        If a frame has neither ``exposure_s`` nor an EXIF ExposureTime, the
+        exposures have different numbers of repeats, an image's shape or
+        channel count differs, its type does not match ``bit_depth`` (e.g. a
+        16-bit file in an 8-bit manifest), or a value exceeds
+        ``2**bit_depth - 1``. Every message names the file concerned.
+    ImageReadError
+        If an image file cannot be read.
+    """
+    where = "frame set"
+    for name, candidate in [(f"views[{i}]", v) for i, v in enumerate(manifest.views)] + [
+        ("irradiance", manifest.irradiance),
+        ("scene", manifest.scene),
+    ]:
+        if candidate == frameset:
+            where = name
+            break
+
+    def error(message: str) -> ManifestError:
+        return ManifestError(f"manifest {manifest.path}: {message}")
+
+    exposures = []
+    for frame in frameset.frames:
+        t = frame.exposure_s if frame.exposure_s is not None else exif_exposure_time(frame.file)
+        if t is None:
+            raise error(
+                f"frame {frame.file} has no `exposure_s` in the manifest and no EXIF "
+                "ExposureTime in the image"
+            )
+        exposures.append(t)
+    groups = _group_by_exposure(frameset.frames, exposures, where, error)
+    times = list(groups)
+    n_rep = len(groups[times[0]])
+
+    bit_depth = manifest.bit_depth
+    want_dtype = np.dtype(np.uint8 if bit_depth == 8 else np.uint16)
+    c_max = 2**bit_depth - 1
+    n_channels = len(manifest.channels)
+    stack: np.ndarray | None = None
+    first: Path | None = None
+    jobs = [(n, k, groups[t][n]) for k, t in enumerate(times) for n in range(n_rep)]
+    with tqdm(jobs, desc=f"reading {where}", unit="frame", disable=not progress) as bar:
+        for n, k, frame in bar:
+            img = read_image(frame.file)
+            if img.dtype != want_dtype:
+                raise error(_dtype_message(frame.file, img.dtype, bit_depth))
+            if img.shape[2] != n_channels:
+                raise error(
+                    f"{frame.file} has {img.shape[2]} channel(s) (shape {img.shape}) but the "
+                    f"manifest names {n_channels} channels {list(manifest.channels)}"
+                )
+            if stack is None:
+                stack = np.empty((n_rep, len(times), *img.shape), dtype=want_dtype)
+                first = frame.file
+            elif img.shape != stack.shape[2:]:
+                raise error(
+                    f"{frame.file} has shape {img.shape} but {first} has shape {stack.shape[2:]}"
+                )
+            top = int(img.max())
+            if top > c_max:
+                raise error(
+                    f"{frame.file} holds values up to {top}, above {c_max} = 2**{bit_depth} - 1; "
+                    f"is `bit_depth` {bit_depth} mislabelled?"
+                )
+            stack[n, k] = img
+    assert stack is not None  # frame sets are never empty
+    if manifest.white_roi is not None and frameset == manifest.views[0]:
+        x0, y0, x1, y1 = manifest.white_roi
+        h, w = stack.shape[2:4]
+        if x1 > w or y1 > h:
+            raise error(
+                f"`white_roi` {list(manifest.white_roi)} extends beyond the {w}x{h} (WxH) "
+                f"images of views[0]"
+            )
+    return ExposureStack(
+        frames=stack,
+        exposure_s=np.asarray(times, dtype=np.float64),
+        bit_depth=bit_depth,
+        saturation_level=(
+            None
+            if manifest.saturation_level is None
+            else np.asarray(manifest.saturation_level, dtype=np.int64)
+        ),
+        channels=manifest.channels,
+    )
+
+
+def _dtype_message(file: Path, dtype: np.dtype, bit_depth: int) -> str:
+    want = "uint8" if bit_depth == 8 else "uint16"
+    if dtype.kind == "f":
+        return (
+            f"{file} holds {dtype} values but capture frames must be integers "
+            f"({want} for bit_depth {bit_depth})"
+        )
+    bits = 8 * dtype.itemsize
+    return (
+        f"{file} is a {bits}-bit image ({dtype}) but the manifest says bit_depth {bit_depth}, "
+        f"which needs {want} files; the manifest or the file is mislabelled"
+    )

@@ -1,0 +1,155 @@
+"""HDR merge of an exposure stack into log photoquantities, eq. 6 of the paper.
+
+``ln c_pλ = Σ_k w(c_pkλ) [g_λ(c_pkλ) − ln t_k] / Σ_k w(c_pkλ)``
+
+A pixel whose every exposure has zero weight (all saturated, or all at the
+dark floor) has no valid exposure: it is *flagged* in the result's mask and
+its value is NaN, never a silently wrong number.
+
+References
+----------
+.. [Debevec1997] Debevec, P. E., & Malik, J. (1997). Recovering high dynamic
+   range radiance maps from photographs. SIGGRAPH '97, eq. 6.
+   doi:10.1145/258734.258884
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 5-6.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from photoquant._checks import check_array, check_exposure_times
+from photoquant.errors import InputError
+from photoquant.weighting import WeightingFunction, weighting_function
+
+__all__ = ["MergeResult", "merge_Debevec1997", "apply_log_inverse_response"]
+
+
+@dataclass(frozen=True, eq=False)
+class MergeResult:
+    """An HDR merge.
+
+    Attributes
+    ----------
+    log_photoquantity : ndarray, shape (H, W, C), float64
+        ``ln c_pλ``; NaN where ``mask`` is set.
+    mask : ndarray, shape (H, W, C), bool
+        True where the pixel has no valid exposure.
+    all_saturated : ndarray, shape (H, W, C), bool
+        Flagged because every exposure was saturated (too bright).
+    all_dark : ndarray, shape (H, W, C), bool
+        Flagged because no exposure rose above the dark floor (too dark).
+    weight_sum : ndarray, shape (H, W, C), float64
+        ``Σ_k w``: a confidence of each merged value.
+    """
+
+    log_photoquantity: np.ndarray
+    mask: np.ndarray
+    all_saturated: np.ndarray
+    all_dark: np.ndarray
+    weight_sum: np.ndarray
+
+    def photoquantity(self) -> np.ndarray:
+        """``exp(ln c)``: linear photoquantity, NaN at flagged pixels."""
+        return np.exp(self.log_photoquantity)
+
+
+def apply_log_inverse_response(
+    values: np.ndarray, levels: np.ndarray, log_inverse_response: np.ndarray
+) -> np.ndarray:
+    """Evaluate ``g_λ`` at pixel values ``(..., C)`` by linear interpolation."""
+    out = np.empty(values.shape, dtype=np.float64)
+    for ch in range(values.shape[-1]):
+        out[..., ch] = np.interp(values[..., ch], levels, log_inverse_response[ch])
+    return out
+
+
+def merge_Debevec1997(
+    values: np.ndarray,
+    exposure_s: np.ndarray,
+    levels: np.ndarray,
+    log_inverse_response: np.ndarray,
+    *,
+    saturation_level: np.ndarray | None = None,
+    saturated: np.ndarray | None = None,
+    weighting: str | WeightingFunction = "hat",
+    c_min: float = 0.0,
+) -> MergeResult:
+    """Merge ``K`` exposures into log photoquantities (eq. 6 of [PQ]_).
+
+    Parameters
+    ----------
+    values : ndarray, shape (K, H, W, C)
+        Denoised pixel values (eq. 2).
+    exposure_s : ndarray, shape (K,)
+        Exposure times in seconds (positive, unique).
+    levels : ndarray, shape (L,)
+        Pixel values at which ``log_inverse_response`` is tabulated (increasing).
+    log_inverse_response : ndarray, shape (C, L)
+        ``g_λ`` per channel (balance may be folded in by adding ``ln a_λ``).
+    saturation_level : ndarray, shape (C,), optional
+        Clipping level per channel; the top level when not given.
+    saturated : ndarray, shape (K, H, W, C) of bool, optional
+        Values known to be clipped (any repeat at the saturation level).
+    weighting : str or callable
+        Weighting function, the paper's hat by default.
+    c_min : float
+        Lowest value the camera outputs.
+
+    Returns
+    -------
+    MergeResult
+
+    Notes
+    -----
+    The result does not depend on the order of the exposures, and scaling
+    every exposure time by ``s`` shifts ``ln c`` by ``−ln s``.
+    """
+    values = check_array(values, "values", ndim=4, kind="iuf", finite=True)
+    t = check_exposure_times(exposure_s)
+    k_count, _, _, n_ch = values.shape
+    if t.size != k_count:
+        raise InputError(
+            f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures"
+        )
+    levels = check_array(levels, "levels", ndim=1, kind="iuf", finite=True).astype(np.float64)
+    if levels.size < 2 or np.any(np.diff(levels) <= 0):
+        raise InputError("`levels` must be at least two increasing values")
+    g = check_array(
+        log_inverse_response, "log_inverse_response", shape=(n_ch, levels.size), kind="f"
+    )
+    if not np.all(np.isfinite(g)):
+        raise InputError("`log_inverse_response` contains NaN or infinite values")
+    if saturation_level is None:
+        sat = np.full(n_ch, levels[-1])
+    else:
+        sat = check_array(saturation_level, "saturation_level", shape=(n_ch,), kind="iuf")
+        sat = sat.astype(np.float64)
+    if saturated is not None:
+        saturated = check_array(saturated, "saturated", shape=values.shape, kind="b")
+    wfun = weighting_function(weighting)
+
+    num = np.zeros(values.shape[1:], dtype=np.float64)
+    den = np.zeros(values.shape[1:], dtype=np.float64)
+    any_unsat = np.zeros(values.shape[1:], dtype=bool)
+    log_t = np.log(t)
+    for k in range(k_count):
+        v = values[k]
+        w = wfun(v, c_min, sat)
+        clipped = v >= sat if saturated is None else (saturated[k] | (v >= sat))
+        w = np.where(clipped, 0.0, w)
+        any_unsat |= ~clipped
+        num += w * (apply_log_inverse_response(v, levels, g) - log_t[k])
+        den += w
+    mask = den <= 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        log_c = np.where(mask, np.nan, num / np.where(mask, 1.0, den))
+    return MergeResult(
+        log_photoquantity=log_c,
+        mask=mask,
+        all_saturated=mask & ~any_unsat,
+        all_dark=mask & any_unsat,
+        weight_sum=den,
+    )

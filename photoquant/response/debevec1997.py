@@ -1,0 +1,390 @@
+"""Camera response recovery by Debevec & Malik (1997), §5.2 of the paper.
+
+For each channel λ the log inverse response ``g_λ(c) = ln f_λ⁻¹(c)`` is the
+minimiser of eq. 7 of [PQ]_::
+
+    O_λ = Σ_{p∈P⁻, k} (w(c_pk) [g_λ(c_pk) − ln c_p − ln t_k])²
+          + β Σ_c [w(c) g_λ''(c)]²
+
+over the values of ``g_λ`` at the response levels and the log photoquantities
+``ln c_p`` of a subset ``P⁻`` of pixels.
+
+Implementation notes
+--------------------
+* **Samples** cover the whole intensity range: for every exposure, pixels are
+  drawn from every bin of the value range (not only at random), and a pixel
+  is kept only when at least two of its exposures are valid.
+* **Fractional values**: averaging ``N`` repeats (eq. 2) yields non-integer
+  values; ``g`` between two levels is interpolated linearly, so each data
+  equation involves the two neighbouring levels.
+* **Binned unknowns**: above ``max_levels`` levels (bit depths > 10 by
+  default) ``g`` is represented by ``max_levels`` evenly spaced knots and
+  interpolated linearly in between; 8- to 10-bit data get one unknown per
+  integer level, as in the paper. ``g''`` is taken between knots, so β acts
+  per knot.
+* **Why β matters**: with a geometric exposure series (constant ratio ``R``),
+  adding to ``g`` any function periodic in ``ln X`` with period ``ln R`` and
+  shifting each ``ln c_p`` accordingly leaves every data equation satisfied:
+  the data alone do not fix such wiggles, only the smoothness term does.
+  Exposure series with unequal ratios break this ambiguity.
+* **Sparse solve**: the least-squares system is assembled as a sparse matrix.
+  Its normal equations have a diagonal block for the pixel unknowns, which is
+  eliminated exactly (Schur complement), leaving a small dense system in the
+  response levels; no dense SVD of the full system is formed.
+* **Gauge**: ``g`` is defined up to an additive constant; it is fixed by
+  ``g = 0`` at the level nearest the middle of the channel's valid range
+  (the lower one on a tie).
+* **Monotonicity**: the unconstrained minimiser is returned when it is
+  non-decreasing; otherwise (sparse or noisy data) the same objective is
+  minimised under ``g(c_{i+1}) ≥ g(c_i)`` (bounded least squares on the
+  increments), and the channel is reported as constrained.
+* **Saturation**: values at a channel's saturation level (in any repeat) are
+  excluded; ``g`` above the saturation level is held constant (never used
+  with a non-zero weight).
+
+References
+----------
+.. [Debevec1997] Debevec, P. E., & Malik, J. (1997). Recovering high dynamic
+   range radiance maps from photographs. SIGGRAPH '97, 369-378.
+   doi:10.1145/258734.258884
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.2, eq. 7.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+import scipy.sparse as sp
+
+from photoquant._checks import (
+    check_array,
+    check_bit_depth,
+    check_exposure_times,
+    check_positive,
+)
+from photoquant.errors import CalibrationError, InputError
+from photoquant.weighting import WeightingFunction, weighting_function
+
+__all__ = [
+    "ResponseRecovery",
+    "response_levels",
+    "select_samples_histogram",
+    "camera_response_Debevec1997",
+    "DEFAULT_SMOOTHNESS",
+]
+
+DEFAULT_SMOOTHNESS = 300.0
+"""Default β of eq. 7 (weights scaled to a peak of 1). The paper leaves β free."""
+
+
+@dataclass(frozen=True, eq=False)
+class ResponseRecovery:
+    """Recovered log inverse responses and diagnostics.
+
+    Attributes
+    ----------
+    levels : ndarray, shape (L,)
+        Pixel values at which ``g`` is tabulated (``0 … 2**bit_depth − 1``).
+    log_inverse_response : ndarray, shape (C, L)
+        ``g_λ = ln f_λ⁻¹`` at ``levels``, gauge ``g = 0`` mid-range; linear
+        interpolation between levels.
+    saturation_level : ndarray, shape (C,)
+        Clipping level of each channel; ``g`` is constant above it.
+    n_samples : ndarray, shape (C,)
+        Pixels used per channel.
+    n_equations : ndarray, shape (C,)
+        Data equations (pixel × valid exposure) per channel.
+    residual_rms : ndarray, shape (C,)
+        Root mean square of the weighted data residuals, in ln units.
+    monotone_constrained : ndarray, shape (C,) of bool
+        Whether the monotonicity constraint was active.
+    smoothness : float
+        The β used.
+    """
+
+    levels: np.ndarray
+    log_inverse_response: np.ndarray
+    saturation_level: np.ndarray
+    n_samples: np.ndarray
+    n_equations: np.ndarray
+    residual_rms: np.ndarray
+    monotone_constrained: np.ndarray
+    smoothness: float
+
+
+def response_levels(bit_depth: int, max_levels: int = 1024) -> np.ndarray:
+    """Pixel values at which the response is tabulated.
+
+    One level per integer value when ``2**bit_depth <= max_levels``, otherwise
+    ``max_levels`` evenly spaced knots over ``[0, 2**bit_depth − 1]``.
+    """
+    bit_depth = check_bit_depth(bit_depth)
+    n = 2**bit_depth
+    if max_levels < 16:
+        raise InputError(f"`max_levels` must be at least 16, got {max_levels}")
+    if n <= max_levels:
+        return np.arange(n, dtype=np.float64)
+    return np.linspace(0.0, n - 1.0, int(max_levels))
+
+
+def select_samples_histogram(
+    values: np.ndarray,
+    valid: np.ndarray,
+    c_max: float,
+    n_samples: int,
+    rng: np.random.Generator,
+    *,
+    n_bins: int = 64,
+) -> np.ndarray:
+    """Choose pixels whose values cover the whole intensity range.
+
+    For every exposure the valid range ``[0, c_max]`` is cut into ``n_bins``
+    bins; pixels are ranked by a random draw and, bin by bin, the first ones
+    are taken, round-robin over exposures and bins, until ``n_samples``
+    pixels are chosen. Only pixels with at least two valid exposures qualify.
+
+    Parameters
+    ----------
+    values : ndarray, shape (K, P)
+        Denoised values of one channel.
+    valid : ndarray, shape (K, P) of bool
+        Whether each value may be used (weight > 0, not saturated).
+    c_max : float
+        Upper end of the valid range (the saturation level).
+    n_samples : int
+        Number of pixels wanted.
+    rng : numpy.random.Generator
+        Source of the random ranking.
+
+    Returns
+    -------
+    ndarray of int
+        Indices into ``P``, sorted.
+    """
+    usable = np.flatnonzero(valid.sum(axis=0) >= 2)
+    if usable.size <= n_samples:
+        return usable
+    order = rng.permutation(usable)
+    k_count = values.shape[0]
+    # rank[k, i]: position of pixel order[i] within its value bin at exposure k
+    ranks = np.full((k_count, order.size), np.iinfo(np.int64).max, dtype=np.int64)
+    for k in range(k_count):
+        ok = valid[k, order]
+        bins = np.minimum((values[k, order] / c_max * n_bins).astype(np.int64), n_bins - 1)
+        bins = np.where(ok, bins, n_bins)  # invalid values go to an overflow bin
+        sort = np.argsort(bins, kind="stable")
+        sorted_bins = bins[sort]
+        first = np.searchsorted(sorted_bins, sorted_bins, side="left")
+        rank = np.arange(sort.size) - first
+        rank = np.where(sorted_bins == n_bins, np.iinfo(np.int64).max, rank)
+        ranks[k, sort] = rank
+    best = ranks.min(axis=0)  # each pixel's best rank over exposures
+    chosen = np.argsort(best, kind="stable")[:n_samples]
+    return np.sort(order[chosen])
+
+
+def _solve_channel(
+    values: np.ndarray,
+    valid: np.ndarray,
+    weights: np.ndarray,
+    log_t: np.ndarray,
+    knot_pos: np.ndarray,
+    top: int,
+    smooth_w: np.ndarray,
+    smoothness: float,
+    gauge: int,
+) -> tuple[np.ndarray, float, bool, int]:
+    """Solve eq. 7 for one channel on sampled pixels ``values (K, P)``."""
+    k_count, p_count = values.shape
+    n_g = top + 1
+    kk, pp = np.nonzero(valid)
+    w = weights[kk, pp]
+    u = np.minimum(knot_pos[kk, pp], top)
+    i0 = np.minimum(np.floor(u).astype(np.int64), max(top - 1, 0))
+    alpha = u - i0
+    n_data = w.size
+    rows = np.arange(n_data)
+    # data rows: w[(1-α) g_i + α g_{i+1} - lnE_p] = w ln t_k
+    data = sp.coo_matrix(
+        (
+            np.concatenate([w * (1 - alpha), w * alpha, -w]),
+            (np.concatenate([rows, rows, rows]), np.concatenate([i0, i0 + 1, n_g + pp])),
+        ),
+        shape=(n_data, n_g + p_count),
+    )
+    b_data = w * log_t[kk]
+    # smoothness rows: sqrt(β) w(c_j) (g_{j-1} - 2 g_j + g_{j+1}), j = 1..top-1
+    j = np.arange(1, top)
+    sw = np.sqrt(smoothness) * smooth_w[j]
+    srows = np.arange(j.size)
+    smooth = sp.coo_matrix(
+        (
+            np.concatenate([sw, -2 * sw, sw]),
+            (np.concatenate([srows, srows, srows]), np.concatenate([j - 1, j, j + 1])),
+        ),
+        shape=(j.size, n_g + p_count),
+    )
+    gauge_row = sp.coo_matrix(([1.0], ([0], [gauge])), shape=(1, n_g + p_count))
+    a = sp.vstack([data, smooth, gauge_row]).tocsr()
+    b = np.concatenate([b_data, np.zeros(j.size + 1)])
+
+    normal = (a.T @ a).tocsr()
+    rhs = a.T @ b
+    n_gg = normal[:n_g, :n_g].toarray()
+    n_ge = normal[:n_g, n_g:]
+    d = normal[n_g:, n_g:].diagonal()
+    if np.any(d <= 0):  # pragma: no cover - sampling guarantees two equations per pixel
+        raise CalibrationError("a sampled pixel has no valid exposure")
+    schur = n_gg - (n_ge @ sp.diags(1.0 / d) @ n_ge.T).toarray()
+    r_red = rhs[:n_g] - n_ge @ (rhs[n_g:] / d)
+    schur = 0.5 * (schur + schur.T)
+    try:
+        chol = scipy.linalg.cho_factor(schur, lower=True)
+        g = scipy.linalg.cho_solve(chol, r_red)
+    except np.linalg.LinAlgError:
+        raise CalibrationError(
+            "the response equations are singular: too few valid samples or exposures"
+        ) from None
+    constrained = False
+    if np.any(np.diff(g) < 0):
+        # min ||Lᵀ g − L⁻¹ r||² with g = T x, x = [g_0, increments ≥ 0]
+        lower = np.tril(chol[0])
+        y = scipy.linalg.solve_triangular(lower, r_red, lower=True)
+        design = lower.T @ np.tril(np.ones((n_g, n_g)))
+        lb = np.zeros(n_g)
+        lb[0] = -np.inf
+        res = scipy.optimize.lsq_linear(design, y, bounds=(lb, np.full(n_g, np.inf)), tol=1e-12)
+        g = np.cumsum(res.x)
+        g -= g[gauge]
+        constrained = True
+    log_e = (rhs[n_g:] - n_ge.T @ g) / d
+    resid = a[:n_data] @ np.concatenate([g, log_e]) - b_data
+    rms = float(np.sqrt(np.mean(resid**2))) if n_data else float("nan")
+    return g, rms, constrained, n_data
+
+
+def camera_response_Debevec1997(
+    values: np.ndarray,
+    exposure_s: np.ndarray,
+    *,
+    bit_depth: int = 8,
+    saturation_level: np.ndarray | None = None,
+    saturated: np.ndarray | None = None,
+    smoothness: float = DEFAULT_SMOOTHNESS,
+    n_samples: int = 2000,
+    weighting: str | WeightingFunction = "hat",
+    max_levels: int = 1024,
+    rng: np.random.Generator | int | None = 0,
+    c_min: float = 0.0,
+) -> ResponseRecovery:
+    """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
+
+    Parameters
+    ----------
+    values : ndarray, shape (K, H, W, C)
+        Denoised pixel values (eq. 2), one image per exposure time.
+    exposure_s : ndarray, shape (K,)
+        Exposure times in seconds (positive, unique).
+    bit_depth : int
+        Bits per value (8 to 16).
+    saturation_level : ndarray, shape (C,), optional
+        Per-channel clipping level; ``2**bit_depth − 1`` when not given.
+    saturated : ndarray, shape (K, H, W, C) of bool, optional
+        Values known to be clipped (any repeat at the saturation level).
+    smoothness : float
+        β of eq. 7, with weights scaled to a peak of 1.
+    n_samples : int
+        Pixels sampled per channel (the paper used 500).
+    weighting : str or callable
+        Weighting function (:data:`photoquant.weighting.WEIGHTING_FUNCTIONS`).
+    max_levels : int
+        Most unknowns per channel; above it the levels are binned.
+    rng : numpy.random.Generator or int or None
+        Randomness of the sample selection (an int seeds a new generator).
+    c_min : float
+        Lowest value the camera outputs.
+
+    Returns
+    -------
+    ResponseRecovery
+    """
+    values = check_array(values, "values", ndim=4, kind="iuf", finite=True)
+    t = check_exposure_times(exposure_s)
+    bit_depth = check_bit_depth(bit_depth)
+    k_count, height, width, n_ch = values.shape
+    if t.size != k_count:
+        raise InputError(
+            f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures"
+        )
+    if k_count < 2:
+        raise InputError("response recovery needs at least 2 exposure times, got 1")
+    smoothness = check_positive(smoothness, "smoothness", allow_zero=True)
+    if int(n_samples) < 2:
+        raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
+    c_full = 2**bit_depth - 1
+    if saturation_level is None:
+        sat = np.full(n_ch, c_full, dtype=np.float64)
+    else:
+        sat = check_array(saturation_level, "saturation_level", shape=(n_ch,), kind="iuf")
+        sat = sat.astype(np.float64)
+    if saturated is None:
+        saturated = values >= sat
+    else:
+        saturated = check_array(saturated, "saturated", shape=values.shape, kind="b")
+    wfun = weighting_function(weighting)
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(rng)
+
+    levels = response_levels(bit_depth, max_levels)
+    spacing = levels[1] - levels[0]
+    log_t = np.log(t)
+    n_levels = levels.size
+    g_all = np.zeros((n_ch, n_levels))
+    n_used = np.zeros(n_ch, dtype=np.int64)
+    n_eq = np.zeros(n_ch, dtype=np.int64)
+    rms = np.zeros(n_ch)
+    constrained = np.zeros(n_ch, dtype=bool)
+    for ch in range(n_ch):
+        vals = values[..., ch].reshape(k_count, -1)
+        weights = wfun(vals, c_min, sat[ch])
+        valid = (weights > 0) & ~saturated[..., ch].reshape(k_count, -1)
+        idx = select_samples_histogram(vals, valid, sat[ch], int(n_samples), rng)
+        if idx.size < 2:
+            raise CalibrationError(
+                f"channel {ch}: only {idx.size} pixels have two or more well-exposed "
+                "values; the exposures do not overlap (add exposure times in between)"
+            )
+        top = min(int(np.ceil(sat[ch] / spacing)), n_levels - 1)
+        if top < 3:
+            raise CalibrationError(f"channel {ch}: saturation level {sat[ch]} is too low")
+        mid = 0.5 * (c_min + sat[ch])
+        gauge = int(np.argmin(np.abs(levels[: top + 1] - mid)))
+        smooth_w = wfun(levels, c_min, sat[ch])
+        g, rms[ch], constrained[ch], n_eq[ch] = _solve_channel(
+            vals[:, idx],
+            valid[:, idx],
+            np.where(valid[:, idx], weights[:, idx], 0.0),
+            log_t,
+            vals[:, idx] / spacing,
+            top,
+            smooth_w,
+            smoothness,
+            gauge,
+        )
+        g_all[ch, : top + 1] = g
+        g_all[ch, top + 1 :] = g[-1]
+        n_used[ch] = idx.size
+    del height, width
+    return ResponseRecovery(
+        levels=levels,
+        log_inverse_response=g_all,
+        saturation_level=sat,
+        n_samples=n_used,
+        n_equations=n_eq,
+        residual_rms=rms,
+        monotone_constrained=constrained,
+        smoothness=smoothness,
+    )

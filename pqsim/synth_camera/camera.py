@@ -1,0 +1,373 @@
+"""The synthetic camera: eq. 1 of the photoquantity paper as a numpy forward model.
+
+For a true photoquantity ``l_pλ`` (an ``(H, W, C)`` array), exposure times
+``t_k`` and ``N`` repeats, :meth:`SyntheticCamera.capture` computes
+
+    X_pkλ   = u_pλ · v_pλ · t_k · l_pλ                      (exposure, photoquantity·s)
+    n_pkλn  = Poisson(X · exposure_scale + D t_k) + N(0, σ_read²)    (electrons)
+    c_pkλn  = clip(round(a_λ · c_max · F_λ(max(n, 0) / full_well)), 0, c_max)
+
+i.e. ``c = a_λ f_λ(u v t l) + b`` (eq. 1 of [PQ]) with ``f_λ(X) = c_max
+F_λ(X · exposure_scale / full_well)`` and the noise ``b`` of EMVA 1288
+[EMVA] plus quantisation. A channel with ``a_λ < 1`` therefore saturates at
+``round(a_λ c_max) < c_max`` — as real cameras do when white balance is
+applied after clipping.
+
+This module implements the physics itself; it deliberately imports nothing
+from photoquant's method modules (response, merge, vignetting, ...), only its
+input checks and error types, so that a wrong formula there cannot agree with
+itself here.
+
+References
+----------
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1 (model),
+   §3.2 (distortions), §5.4 (irradiance scene, no optics).
+.. [EMVA] EMVA Standard 1288, release 4.0 (2021), §2 (linear camera model).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from photoquant._checks import check_array, check_bit_depth, check_exposure_times, check_positive
+from photoquant.errors import InputError
+from pqsim.synth_camera.optics import check_shape, prnu_field, vignetting_extended_goldman_chen
+from pqsim.synth_camera.responses import ResponseCurve
+from pqsim.synth_camera.sensor import SensorNoise
+from pqsim.synth_camera.truth import CameraTruth, CaptureTruth
+
+__all__ = ["SyntheticCamera", "Capture", "as_generator"]
+
+
+def as_generator(rng: Any, name: str = "rng") -> tuple[np.random.Generator, int | None]:
+    """Return ``(generator, seed)`` from a Generator (seed ``None``) or an int seed."""
+    if isinstance(rng, np.random.Generator):
+        return rng, None
+    if isinstance(rng, int | np.integer) and not isinstance(rng, bool) and int(rng) >= 0:
+        return np.random.default_rng(int(rng)), int(rng)
+    raise InputError(
+        f"`{name}` must be a numpy.random.Generator or a non-negative int seed, got {rng!r}"
+    )
+
+
+@functools.lru_cache(maxsize=32)
+def _sensor_lut(
+    seed: int, shape: tuple[int, int], channels: int, sp: float, sl: float, scale: float
+) -> np.ndarray:
+    u = prnu_field(shape, channels, np.random.default_rng(seed), sp, sl, scale)
+    u.setflags(write=False)
+    return u
+
+
+@dataclass(frozen=True, eq=False)
+class Capture:
+    """Frames of one simulated capture and its ground truth.
+
+    Parameters
+    ----------
+    frames : ndarray, shape (N, K, H, W, C)
+        Pixel values, uint8 (8 bits) or uint16 (9–16 bits).
+    exposure_s : ndarray, shape (K,)
+        Exposure times in seconds, in capture order.
+    truth : CaptureTruth
+        True photoquantity, settings and the camera truth.
+    """
+
+    frames: np.ndarray
+    exposure_s: np.ndarray
+    truth: CaptureTruth
+
+    @property
+    def bit_depth(self) -> int:
+        return self.truth.camera.bit_depth
+
+    @property
+    def n_repeats(self) -> int:
+        return int(self.frames.shape[0])
+
+    @property
+    def n_exposures(self) -> int:
+        return int(self.frames.shape[1])
+
+    def to_stack(self) -> Any:
+        """The frames as a :class:`photoquant.stack.ExposureStack` (a data container).
+
+        The saturation levels are left for the stack to detect from the data,
+        as for real frames.
+        """
+        from photoquant.stack import ExposureStack
+
+        return ExposureStack(
+            self.frames,
+            self.exposure_s,
+            bit_depth=self.bit_depth,
+            channels=self.truth.camera.channels,
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class SyntheticCamera:
+    """A camera following eq. 1 of [PQ], with known ground truth.
+
+    Parameters
+    ----------
+    responses : sequence of ResponseCurve
+        ``F_λ`` per channel (normalised exposure → ``[0, 1]``).
+    balance : sequence of float, shape (C,)
+        Colour balance ``a_λ > 0``; the value of channel λ is ``a_λ c_max F_λ``.
+    noise : SensorNoise
+        Shot, dark and read noise (electrons) and the full well.
+    vignetting_params : array_like (C, 6) or None
+        Extended Goldman–Chen ``m1..m6`` per channel; ``None``: no vignetting.
+    prnu_sigma_pixel, prnu_sigma_lowfreq : float
+        Per-pixel and smooth relative standard deviation of the sensor
+        sensitivity ``u`` (see :func:`~pqsim.synth_camera.optics.prnu_field`).
+    bit_depth : int
+        8 gives uint8 frames, 9–16 uint16 frames; ``c_max = 2**bit_depth - 1``.
+    exposure_scale : float
+        Photo-electrons per unit exposure (photoquantity·s). The presets use
+        ``100 · full_well``: photoquantity 1 fills the well in 10 ms.
+    prnu_seed : int
+        Seed of the sensor's sensitivity field: ``u`` is a property of the
+        sensor, the same for every capture of a given image shape.
+    channels : sequence of str
+        Channel names, ``("R", "G", "B")``.
+    prnu_lowfreq_scale : float
+        Correlation length of the smooth PRNU component, fraction of ``min(H, W)``.
+
+    Examples
+    --------
+    >>> cam = SyntheticCamera((ResponseCurve.linear(),) * 3, (1.0, 1.0, 1.0))
+    >>> cap = cam.capture(np.full((4, 5, 3), 1.0), [1e-3, 4e-3], 2, rng=0)
+    >>> cap.frames.shape, cap.frames.dtype.name
+    ((2, 2, 4, 5, 3), 'uint8')
+    """
+
+    responses: tuple[ResponseCurve, ...]
+    balance: tuple[float, ...]
+    noise: SensorNoise = SensorNoise()
+    vignetting_params: tuple[tuple[float, ...], ...] | None = None
+    prnu_sigma_pixel: float = 0.01
+    prnu_sigma_lowfreq: float = 0.01
+    bit_depth: int = 8
+    exposure_scale: float = 2.0e6
+    prnu_seed: int = 0
+    channels: tuple[str, ...] = ("R", "G", "B")
+    prnu_lowfreq_scale: float = 0.15
+
+    def __post_init__(self) -> None:
+        responses = tuple(self.responses) if isinstance(self.responses, Sequence) else None
+        if not responses or not all(isinstance(r, ResponseCurve) for r in responses):
+            raise InputError(
+                "`responses` must be a non-empty sequence of ResponseCurve, one per channel"
+            )
+        c = len(responses)
+        bal = check_array(self.balance, "balance", shape=(c,), kind="iuf", finite=True)
+        if np.any(bal <= 0):
+            raise InputError(f"`balance` must be positive, got {bal.tolist()}")
+        if not isinstance(self.noise, SensorNoise):
+            raise InputError(f"`noise` must be a SensorNoise, got {type(self.noise).__name__}")
+        vp = None
+        if self.vignetting_params is not None:
+            p = check_array(
+                self.vignetting_params, "vignetting_params", shape=(c, 6), kind="iuf", finite=True
+            )
+            vp = tuple(tuple(float(m) for m in row) for row in p)
+        for name in ("prnu_sigma_pixel", "prnu_sigma_lowfreq"):
+            v = check_positive(getattr(self, name), name, allow_zero=True)
+            if v > 0.25:
+                raise InputError(f"`{name}` must be at most 0.25, got {v}")
+            object.__setattr__(self, name, v)
+        seed = self.prnu_seed
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise InputError(f"`prnu_seed` must be a non-negative int, got {seed!r}")
+        channels = tuple(str(s) for s in self.channels)
+        if len(channels) != c:
+            raise InputError(f"`channels` names {len(channels)} channels but `responses` has {c}")
+        object.__setattr__(self, "responses", responses)
+        object.__setattr__(self, "balance", tuple(float(a) for a in bal))
+        object.__setattr__(self, "vignetting_params", vp)
+        object.__setattr__(self, "bit_depth", check_bit_depth(self.bit_depth))
+        object.__setattr__(
+            self, "exposure_scale", check_positive(self.exposure_scale, "exposure_scale")
+        )
+        object.__setattr__(self, "prnu_seed", int(seed))
+        object.__setattr__(self, "channels", channels)
+        object.__setattr__(
+            self,
+            "prnu_lowfreq_scale",
+            check_positive(self.prnu_lowfreq_scale, "prnu_lowfreq_scale"),
+        )
+
+    # -- properties of the camera ------------------------------------------------
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.responses)
+
+    @property
+    def c_max(self) -> int:
+        """Nominal maximum value ``2**bit_depth - 1``."""
+        return 2**self.bit_depth - 1
+
+    @property
+    def dtype(self) -> np.dtype:
+        """uint8 for 8 bits, uint16 above."""
+        return np.dtype(np.uint8 if self.bit_depth == 8 else np.uint16)
+
+    @property
+    def saturation_dn(self) -> np.ndarray:
+        """``(C,)`` int64: the value of a saturated pixel, ``min(c_max, round(a_λ c_max F_λ(∞)))``."""
+        return np.array(
+            [
+                min(self.c_max, int(np.rint(a * self.c_max * r.max_output)))
+                for a, r in zip(self.balance, self.responses, strict=True)
+            ],
+            dtype=np.int64,
+        )
+
+    def replace(self, **changes: Any) -> SyntheticCamera:
+        """A copy with some fields changed (validated again)."""
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = set(changes) - names
+        if unknown:
+            raise InputError(f"unknown camera field(s) {sorted(unknown)}; valid: {sorted(names)}")
+        return dataclasses.replace(self, **changes)
+
+    def sensor_lut(self, shape: Sequence[int]) -> np.ndarray:
+        """The sensor sensitivity ``u`` for images of ``shape`` (H, W): (H, W, C), read-only.
+
+        Deterministic from ``prnu_seed``, the shape and the PRNU parameters.
+        """
+        h, w = check_shape(shape)
+        return _sensor_lut(
+            self.prnu_seed,
+            (h, w),
+            self.n_channels,
+            self.prnu_sigma_pixel,
+            self.prnu_sigma_lowfreq,
+            self.prnu_lowfreq_scale,
+        )
+
+    def vignetting_map(self, shape: Sequence[int]) -> np.ndarray:
+        """The vignetting ``v`` (H, W, C); all ones without vignetting parameters."""
+        h, w = check_shape(shape)
+        if self.vignetting_params is None:
+            return np.ones((h, w, self.n_channels))
+        return vignetting_extended_goldman_chen(self.vignetting_params, (h, w))
+
+    def truth(self, shape: Sequence[int]) -> CameraTruth:
+        """The camera's ground truth for images of ``shape`` (H, W)."""
+        return CameraTruth(
+            responses=self.responses,
+            balance=self.balance,
+            noise=self.noise,
+            vignetting_params=self.vignetting_params,
+            vignetting=self.vignetting_map(shape),
+            sensor_lut=self.sensor_lut(shape),
+            bit_depth=self.bit_depth,
+            exposure_scale=self.exposure_scale,
+            channels=self.channels,
+            prnu={
+                "seed": self.prnu_seed,
+                "sigma_pixel": self.prnu_sigma_pixel,
+                "sigma_lowfreq": self.prnu_sigma_lowfreq,
+                "lowfreq_scale": self.prnu_lowfreq_scale,
+            },
+        )
+
+    # -- simulation ------------------------------------------------------------------
+
+    def _dn(self, electrons: np.ndarray) -> np.ndarray:
+        """Electrons (H, W, C) → quantised pixel values of dtype :attr:`dtype`."""
+        e = np.maximum(electrons, 0.0) / self.noise.full_well_e
+        out = np.empty(e.shape, dtype=self.dtype)
+        for ch, (a, resp) in enumerate(zip(self.balance, self.responses, strict=True)):
+            dn = np.rint(a * self.c_max * resp(e[..., ch]))
+            out[..., ch] = np.clip(dn, 0, self.c_max)
+        return out
+
+    def capture(
+        self,
+        l: Any,  # noqa: E741 - the paper's symbol
+        exposure_s: Any,
+        n_repeats: int = 1,
+        rng: np.random.Generator | int | None = None,
+        *,
+        optics: bool = True,
+    ) -> Capture:
+        """Simulate ``N`` repeats of ``K`` exposures of a static scene (eq. 1 of [PQ]).
+
+        Parameters
+        ----------
+        l : array_like, shape (H, W, C)
+            True photoquantity reaching each pixel, finite and ``>= 0``.
+        exposure_s : array_like, shape (K,)
+            Exposure times in seconds (positive, unique).
+        n_repeats : int
+            Repeats ``N >= 1`` of each exposure.
+        rng : numpy.random.Generator or int
+            Source of noise, required: a Generator (its state at the start is
+            recorded in the truth) or a seed (recorded, and a fresh
+            ``default_rng(seed)`` used). The same state gives bit-identical
+            frames.
+        optics : bool
+            ``False`` simulates the irradiance scene of §5.4 of [PQ]: the sensor
+            without its optics, so ``v = 1``.
+
+        Returns
+        -------
+        Capture
+            ``frames`` (N, K, H, W, C), ``exposure_s`` (K,) and the truth.
+
+        Notes
+        -----
+        Draws happen in the order ``for k: for n:`` one Poisson image then one
+        normal image (see :meth:`SensorNoise.sample_electrons`).
+        """
+        if rng is None:
+            raise InputError("`rng` is required (a numpy.random.Generator or an int seed)")
+        gen, seed = as_generator(rng)
+        state = gen.bit_generator.state
+        arr = check_array(l, "l", ndim=3, kind="iuf", finite=True).astype(np.float64)
+        if arr.shape[2] != self.n_channels:
+            raise InputError(
+                f"`l` must have {self.n_channels} channels last, got shape {arr.shape}"
+            )
+        if np.any(arr < 0):
+            raise InputError("`l` must be non-negative photoquantities")
+        t = check_exposure_times(exposure_s)
+        if (
+            isinstance(n_repeats, bool)
+            or not isinstance(n_repeats, int | np.integer)
+            or n_repeats < 1
+        ):
+            raise InputError(f"`n_repeats` must be a positive int, got {n_repeats!r}")
+        if not isinstance(optics, bool | np.bool_):
+            raise InputError(f"`optics` must be a bool, got {optics!r}")
+        shape = arr.shape[:2]
+        cam_truth = self.truth(shape)
+        gain = cam_truth.sensor_lut * cam_truth.vignetting if optics else cam_truth.sensor_lut
+        photo_rate = gain * arr * self.exposure_scale  # photo-electrons per second
+        n = int(n_repeats)
+        frames = np.empty((n, t.size, *arr.shape), dtype=self.dtype)
+        for k, tk in enumerate(t):
+            mu = photo_rate * tk
+            for i in range(n):
+                frames[i, k] = self._dn(self.noise.sample_electrons(mu, tk, gen))
+        truth = CaptureTruth(
+            l=arr,
+            exposure_s=t,
+            n_repeats=n,
+            seed=seed,
+            rng_state=state,
+            optics=bool(optics),
+            camera=cam_truth,
+        )
+        return Capture(frames=frames, exposure_s=t.copy(), truth=truth)

@@ -1,0 +1,115 @@
+"""HDR merge (eq. 6): accuracy, invariances, flagged pixels, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from photoquant.errors import InputError
+from photoquant.merge import merge_Debevec1997
+
+from .analytic import capture, log_uniform_scene, true_g
+
+BALANCE = (0.85, 1.0, 0.75)
+EXPOSURES = np.geomspace(0.5, 500.0, 8)
+LEVELS = np.arange(256.0)
+
+
+def _true_table(gamma=2.2):
+    # ln f⁻¹ at every level; level 0 maps to -inf: any finite value does (weight 0 there)
+    g = np.stack([true_g(np.maximum(LEVELS, 0.5), ch, gamma=gamma, balance=BALANCE) for ch in range(3)])
+    return g
+
+
+def test_merge_with_true_response_is_exact_to_quantisation(rng):
+    l = log_uniform_scene(rng, (30, 40, 3), decades=3.0)
+    frames = capture(l, EXPOSURES, balance=BALANCE)[0]
+    sat = np.round(np.array(BALANCE) * 255)
+    res = merge_Debevec1997(frames, EXPOSURES, LEVELS, _true_table(), saturation_level=sat)
+    assert not res.mask.any()
+    # each exposure's value is within half a bin of the truth: |Δ ln c| <= (g(c+.5)-g(c-.5))/2
+    # for its own c, so the weighted mean is within the largest such bound of the used values
+    half_bins = np.zeros(l.shape)
+    for k in range(EXPOSURES.size):
+        c = frames[k].astype(float)
+        used = (c > 0) & (c < sat)
+        q = 0.5 * 2.2 * (np.log(c + 0.5) - np.log(np.maximum(c - 0.5, 1e-9)))
+        half_bins = np.maximum(half_bins, np.where(used, q, 0))
+    err = np.abs(res.log_photoquantity - np.log(l))
+    assert np.all(err <= half_bins + 1e-12)
+    # and on average far better than the worst case
+    assert err.mean() < 0.01
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), data=st.data())
+def test_merge_is_invariant_to_the_order_of_frames(seed, data):
+    rng = np.random.default_rng(seed)
+    l = log_uniform_scene(rng, (6, 7, 3))
+    frames = capture(l, EXPOSURES, balance=BALANCE)[0]
+    perm = np.array(data.draw(st.permutations(range(EXPOSURES.size))))
+    a = merge_Debevec1997(frames, EXPOSURES, LEVELS, _true_table())
+    b = merge_Debevec1997(frames[perm], EXPOSURES[perm], LEVELS, _true_table())
+    np.testing.assert_array_equal(a.mask, b.mask)
+    np.testing.assert_allclose(a.log_photoquantity, b.log_photoquantity, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), log_s=st.floats(-5, 5))
+def test_scaling_exposure_times_shifts_log_photoquantity(seed, log_s):
+    """Times × s ⇒ ln c − ln s (eq. 6: ln c = g(c) − ln t)."""
+    rng = np.random.default_rng(seed)
+    frames = capture(log_uniform_scene(rng, (6, 7, 3)), EXPOSURES, balance=BALANCE)[0]
+    s = np.exp(log_s)
+    a = merge_Debevec1997(frames, EXPOSURES, LEVELS, _true_table())
+    b = merge_Debevec1997(frames, EXPOSURES * s, LEVELS, _true_table())
+    np.testing.assert_allclose(b.log_photoquantity, a.log_photoquantity - log_s, atol=1e-9)
+
+
+def test_pixels_without_valid_exposure_are_flagged_not_wrong():
+    values = np.full((3, 2, 2, 3), 120.0)
+    values[:, 0, 0, :] = 255.0  # saturated everywhere
+    values[:, 1, 1, :] = 0.0  # dark everywhere
+    res = merge_Debevec1997(values, [1.0, 2.0, 4.0], LEVELS, np.tile(np.log(LEVELS + 1), (3, 1)))
+    assert res.mask[0, 0].all() and res.all_saturated[0, 0].all() and not res.all_dark[0, 0].any()
+    assert res.mask[1, 1].all() and res.all_dark[1, 1].all() and not res.all_saturated[1, 1].any()
+    assert np.isnan(res.log_photoquantity[res.mask]).all()
+    assert np.isfinite(res.log_photoquantity[~res.mask]).all()
+    assert res.mask.sum() == 6
+
+
+def test_saturated_repeats_are_excluded_even_below_the_level():
+    # mean of repeats 255 and 240 = 247.5 < 255, but a repeat clipped: weight 0
+    values = np.full((2, 1, 1, 1), 100.0)
+    values[1] = 247.5
+    saturated = np.zeros(values.shape, dtype=bool)
+    saturated[1] = True
+    g = np.log(LEVELS + 1)[None]
+    res = merge_Debevec1997(values, [1.0, 2.0], LEVELS, g, saturated=saturated)
+    assert res.log_photoquantity[0, 0, 0] == pytest.approx(np.log(101.0))
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        ({"exposure_s": [1.0, 2.0]}, "has 2 times but `values` has K=3"),
+        ({"levels": np.arange(256.0)[::-1]}, "increasing"),
+        ({"log_inverse_response": np.zeros((2, 256))}, r"shape \(3, 256\)"),
+        ({"values": np.zeros((3, 2, 2))}, "4 dimensions"),
+        ({"saturation_level": [255, 255]}, "saturation_level"),
+        ({"log_inverse_response": np.full((3, 256), np.nan)}, "NaN"),
+    ],
+)
+def test_bad_input_is_named(args, match):
+    base = {
+        "values": np.full((3, 2, 2, 3), 100.0),
+        "exposure_s": [1.0, 2.0, 4.0],
+        "levels": LEVELS,
+        "log_inverse_response": np.zeros((3, 256)),
+    }
+    base |= args
+    kw = {k: base.pop(k) for k in list(base) if k == "saturation_level"}
+    with pytest.raises(InputError, match=match):
+        merge_Debevec1997(*base.values(), **kw)

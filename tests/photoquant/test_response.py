@@ -1,0 +1,175 @@
+"""Debevec–Malik response recovery (§5.2, eq. 7)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from photoquant.errors import CalibrationError, InputError
+from photoquant.response import (
+    camera_response_Debevec1997,
+    recover_response,
+    response_levels,
+)
+from photoquant.stack import ExposureStack
+from photoquant.weighting import weighting_hat_Debevec1997
+
+from .analytic import capture, log_uniform_scene, true_g
+
+BALANCE = (0.85, 1.0, 0.75)
+EXPOSURES = np.geomspace(0.5, 500.0, 8)  # ratio ~2.7 between neighbours, 3 decades
+
+
+def _gauge_free_error(g_rec, g_true, levels, lo, hi):
+    """Difference after removing the additive gauge (mean over mid-range levels)."""
+    d = g_rec - g_true
+    mid = (levels > lo + 0.25 * (hi - lo)) & (levels < lo + 0.75 * (hi - lo))
+    return d - d[mid].mean()
+
+
+@pytest.mark.parametrize("gamma", [1.0, 2.2])
+def test_noise_free_8bit_recovers_g_within_quantisation(rng, gamma):
+    l = log_uniform_scene(rng, (60, 80, 3))
+    frames = capture(l, EXPOSURES, gamma=gamma, balance=BALANCE)
+    sat = np.round(np.array(BALANCE) * 255)
+    rec = camera_response_Debevec1997(frames[0], EXPOSURES, saturation_level=sat)
+    assert rec.levels.size == 256
+    for ch in range(3):
+        levels = np.arange(1.0, sat[ch])
+        g_true = true_g(levels, ch, gamma=gamma, balance=BALANCE)
+        err = _gauge_free_error(
+            rec.log_inverse_response[ch, 1 : int(sat[ch])], g_true, levels, 0, sat[ch]
+        )
+        # Quantisation: a value c stands for every exposure in [c-0.5, c+0.5), so
+        # g(c) is known to half a bin, q(c) = (g(c+0.5) - g(c-0.5))/2. The pixels'
+        # ln E are weighted means of their other values, whose weights peak at
+        # mid-range: they carry up to q(mid) more; removing the gauge (fixed at
+        # mid-range) adds q(mid) again.
+        q = 0.5 * (
+            true_g(levels + 0.5, ch, gamma=gamma, balance=BALANCE)
+            - true_g(levels - 0.5, ch, gamma=gamma, balance=BALANCE)
+        )
+        bound = q + 2 * q[int(sat[ch] / 2)]
+        # Where the hat weight is below 5 % the data barely count and the
+        # smoothness term (by design) shapes g: test where the data speak.
+        informative = weighting_hat_Debevec1997(levels, 0, sat[ch]) >= 0.05
+        assert np.all(np.abs(err[informative]) <= bound[informative]), (
+            ch,
+            levels[informative][np.abs(err[informative]) > bound[informative]],
+        )
+
+
+def test_16bit_unknowns_are_binned_and_recover_g(rng):
+    l = log_uniform_scene(rng, (40, 50, 3))
+    frames = capture(l, EXPOSURES, gamma=2.2, balance=BALANCE, bit_depth=16)
+    sat = np.round(np.array(BALANCE) * 65535)
+    rec = camera_response_Debevec1997(frames[0], EXPOSURES, bit_depth=16, saturation_level=sat)
+    assert rec.levels.size == 1024
+    np.testing.assert_array_equal(rec.levels, response_levels(16))
+    spacing = rec.levels[1] - rec.levels[0]
+    for ch in range(3):
+        sel = (rec.levels > 0.05 * sat[ch]) & (rec.levels < 0.95 * sat[ch])
+        lv = rec.levels[sel]
+        err = _gauge_free_error(
+            rec.log_inverse_response[ch, sel],
+            true_g(lv, ch, balance=BALANCE, bit_depth=16),
+            lv,
+            lv[0],
+            lv[-1],
+        )
+        # Quantisation is negligible at 16 bits and linear interpolation between
+        # knots misses g = 2.2 ln c by spacing²·2.2/(8c²) < 1e-3 here; what is
+        # left is the smoothing bias. An error of δ in g is a relative error δ
+        # in the photoquantity: the 0.5 % budget of the method bounds it.
+        assert np.all(spacing**2 * 2.2 / (8 * lv**2) < 1e-3)
+        assert np.all(np.abs(err) <= 0.005)
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    gamma=st.floats(0.45, 3.0),
+    noise=st.floats(0.0, 3.0),
+    ratio=st.floats(1.5, 4.0),
+    seed=st.integers(0, 2**16),
+)
+def test_recovered_g_is_monotonic(gamma, noise, ratio, seed):
+    rng = np.random.default_rng(seed)
+    l = log_uniform_scene(rng, (20, 24, 3))
+    t = ratio ** np.arange(6) / ratio**3
+    frames = capture(l, t, gamma=gamma, balance=BALANCE, noise_dn=noise, n_repeats=2, rng=rng)
+    stack = ExposureStack(frames, t)
+    rec = recover_response(stack, smoothness=1.0)  # weak smoothing: the constraint must hold
+    assert np.all(np.diff(rec.log_inverse_response, axis=1) >= 0)
+
+
+def test_same_seed_same_result(rng):
+    l = log_uniform_scene(rng, (30, 30, 3))
+    frames = capture(l, EXPOSURES, noise_dn=1.0, rng=rng)
+    a = camera_response_Debevec1997(frames[0], EXPOSURES, n_samples=300, rng=7)
+    b = camera_response_Debevec1997(frames[0], EXPOSURES, n_samples=300, rng=7)
+    np.testing.assert_array_equal(a.log_inverse_response, b.log_inverse_response)
+
+
+def test_gauge_is_zero_mid_range(rng):
+    frames = capture(log_uniform_scene(rng), EXPOSURES)
+    sat = np.round(np.array(BALANCE) * 255)
+    rec = camera_response_Debevec1997(frames[0], EXPOSURES, saturation_level=sat)
+    for ch in range(3):
+        # documented gauge: g = 0 at the level nearest the middle of [0, sat] (lower on a tie)
+        gauge = int(np.ceil(sat[ch] / 2 - 0.5))
+        assert rec.log_inverse_response[ch, gauge] == pytest.approx(0, abs=1e-9)
+
+
+def test_samples_cover_the_whole_range(rng):
+    frames = capture(log_uniform_scene(rng, (80, 80, 3)), EXPOSURES)
+    sat = np.round(np.array(BALANCE) * 255)
+    rec = camera_response_Debevec1997(frames[0], EXPOSURES, saturation_level=sat, n_samples=200)
+    assert np.all(rec.n_samples == 200)
+    # with 200 of 6400 pixels, a random draw would rarely hit the darkest bins
+    # of every exposure; the histogram sampling must
+    from photoquant.response import select_samples_histogram
+
+    vals = frames[0, ..., 1].reshape(8, -1).astype(float)
+    valid = (vals > 0) & (vals < sat[1])
+    idx = select_samples_histogram(vals, valid, sat[1], 200, np.random.default_rng(0), n_bins=16)
+    chosen = vals[:, idx][valid[:, idx]]
+    hist = np.histogram(chosen, bins=16, range=(0, sat[1]))[0]
+    assert np.all(hist > 0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"exposure_s": [1.0]}, InputError, "exposure_s` has 1 times"),
+        ({"exposure_s": [1.0, 1.0, 2.0]}, InputError, "unique"),
+        ({"exposure_s": [1.0, -1.0, 2.0]}, InputError, "positive"),
+        ({"smoothness": -1}, InputError, "smoothness"),
+        ({"bit_depth": 7}, InputError, "bit_depth"),
+        ({"n_samples": 1}, InputError, "n_samples"),
+        ({"weighting": "triangle"}, InputError, "valid methods are: hat, uniform"),
+    ],
+)
+def test_bad_input_is_named(kwargs, error, match):
+    values = np.full((3, 4, 4, 3), 100.0)
+    args = {"exposure_s": [1.0, 2.0, 4.0]} | kwargs
+    with pytest.raises(error, match=match):
+        camera_response_Debevec1997(values, **{k: v for k, v in args.items()})
+
+
+def test_single_exposure_and_bad_shape_are_refused():
+    with pytest.raises(InputError, match="at least 2 exposure"):
+        camera_response_Debevec1997(np.full((1, 4, 4, 3), 9.0), [1.0])
+    with pytest.raises(InputError, match="4 dimensions"):
+        camera_response_Debevec1997(np.full((4, 4, 3), 9.0), [1.0, 2.0, 3.0, 4.0])
+    with pytest.raises(InputError, match="NaN"):
+        camera_response_Debevec1997(np.full((2, 4, 4, 3), np.nan), [1.0, 2.0])
+
+
+def test_no_overlapping_exposures_is_a_clear_error():
+    # every pixel is saturated or black in all but one exposure
+    values = np.zeros((2, 6, 6, 3))
+    values[0] = 255.0
+    with pytest.raises(CalibrationError, match="exposures do not overlap"):
+        camera_response_Debevec1997(values, [1.0, 100.0])
