@@ -58,18 +58,24 @@ def merge_stack(
     log_inverse_response: np.ndarray,
     saturation_level: np.ndarray,
     *,
+    min_level: np.ndarray | None = None,
     weighting: str = "hat",
 ) -> MergeResult:
-    """Denoise (eq. 2) and merge (eq. 6) a stack with a known response."""
-    sat = np.asarray(saturation_level, dtype=np.float64).reshape(1, 1, 1, 1, -1)
-    saturated = np.any(stack.frames >= sat, axis=0)
+    """Denoise (eq. 2) and merge (eq. 6) a stack with a known response.
+
+    A value is left out when any of its repeats is clipped: at the saturation
+    level, or at the floor 0; and when it lies below ``min_level``, where the
+    response was not measured.
+    """
     return merge_Debevec1997(
         stack.mean(),
         stack.exposure_s,
         levels,
         log_inverse_response,
         saturation_level=np.asarray(saturation_level, dtype=np.float64),
-        saturated=saturated,
+        saturated=stack.saturated(saturation_level),
+        dark_clipped=stack.dark_clipped(),
+        min_level=min_level,
         weighting=weighting,
     )
 
@@ -105,6 +111,7 @@ def calibrate(
     smoothness: float = DEFAULT_SMOOTHNESS,
     n_samples: int = 2000,
     weighting: str = "hat",
+    merge_weighting: str = "hat-quantisation",
     vignetting_method: str = "Extended Goldman-Chen",
     vignetting_normalise: Literal["track", "none"] = "track",
     sample_radius: int = 1,
@@ -130,7 +137,13 @@ def calibrate(
         ``V ≥ 2``.
     response_method, smoothness, n_samples, weighting
         Response recovery (§5.2): method name, β of eq. 7, pixels sampled,
-        weighting function.
+        weighting function (the paper's hat by default).
+    merge_weighting : str
+        Weighting of the HDR merges (eq. 6), stored in the model for the
+        correction. ``"hat-quantisation"`` (default) is the paper's hat reduced
+        where one DN is a coarse step in log exposure
+        (:func:`photoquant.weighting.weighting_hat_quantisation`); ``"hat"``
+        is the paper's exactly.
     vignetting_method, vignetting_normalise, sample_radius
         Vignetting fit (§5.5): method, residual normalisation, and the
         half-size of the window averaged at each correspondence.
@@ -177,11 +190,14 @@ def calibrate(
         "residual_rms": resp.residual_rms,
         "monotone_constrained": resp.monotone_constrained,
         "saturation_level": resp.saturation_level,
+        "valid_min": resp.valid_min,
     }
     levels, g, sat = resp.levels, resp.log_inverse_response, resp.saturation_level
 
     def merge(stack: ExposureStack) -> MergeResult:
-        return merge_stack(stack, levels, g, sat, weighting=weighting)
+        return merge_stack(
+            stack, levels, g, sat, min_level=resp.valid_min, weighting=merge_weighting
+        )
 
     # 2. merge the views ------------------------------------------------------
     say(f"merge {len(views)} view(s)")
@@ -282,6 +298,7 @@ def calibrate(
         "smoothness": float(smoothness),
         "n_samples": int(n_samples),
         "weighting": weighting,
+        "merge_weighting": merge_weighting,
         "vignetting_method": vignetting_method,
         "vignetting_normalise": vignetting_normalise,
         "sample_radius": int(sample_radius),
@@ -300,6 +317,7 @@ def calibrate(
         balance=balance,
         sensor_lut=lut,
         vignetting_params=vig_params,
+        response_valid_min=resp.valid_min,
         parameters=parameters,
         report=report,
     )

@@ -49,7 +49,7 @@ def correct(stack: ExposureStack, model: CameraModel, *, weighting: str | None =
     model : CameraModel
         The calibrated camera.
     weighting : str, optional
-        Weighting function; the one used in calibration by default.
+        Weighting function; the calibration's merge weighting by default.
 
     Returns
     -------
@@ -75,12 +75,13 @@ def correct(stack: ExposureStack, model: CameraModel, *, weighting: str | None =
         raise InputError(
             f"the scene has bit depth {stack.bit_depth}, the camera {model.bit_depth}"
         )
-    weighting = weighting or model.parameters.get("weighting", "hat")
+    weighting = weighting or model.parameters.get("merge_weighting", "hat")
     merged = merge_stack(
         stack,
         model.response_levels,
         model.balanced_log_inverse_response(),
         model.saturation_level,
+        min_level=model.response_valid_min,
         weighting=weighting,
     )
     with np.errstate(invalid="ignore"):

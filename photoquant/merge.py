@@ -74,6 +74,8 @@ def merge_Debevec1997(
     *,
     saturation_level: np.ndarray | None = None,
     saturated: np.ndarray | None = None,
+    dark_clipped: np.ndarray | None = None,
+    min_level: np.ndarray | None = None,
     weighting: str | WeightingFunction = "hat",
     c_min: float = 0.0,
 ) -> MergeResult:
@@ -93,6 +95,12 @@ def merge_Debevec1997(
         Clipping level per channel; the top level when not given.
     saturated : ndarray, shape (K, H, W, C) of bool, optional
         Values known to be clipped (any repeat at the saturation level).
+    dark_clipped : ndarray, shape (K, H, W, C) of bool, optional
+        Values clipped at the floor (any repeat at ``c_min``): the mean of
+        partly clipped repeats is biased, so they get no weight either.
+    min_level : ndarray, shape (C,), optional
+        Per channel, values below it get no weight: the response was not
+        measured there (see ``ResponseRecovery.valid_min``).
     weighting : str or callable
         Weighting function, the paper's hat by default.
     c_min : float
@@ -129,17 +137,34 @@ def merge_Debevec1997(
         sat = sat.astype(np.float64)
     if saturated is not None:
         saturated = check_array(saturated, "saturated", shape=values.shape, kind="b")
+    if dark_clipped is not None:
+        dark_clipped = check_array(dark_clipped, "dark_clipped", shape=values.shape, kind="b")
+    if min_level is not None:
+        min_level = check_array(min_level, "min_level", shape=(n_ch,), kind="iuf").astype(float)
     wfun = weighting_function(weighting)
 
     num = np.zeros(values.shape[1:], dtype=np.float64)
     den = np.zeros(values.shape[1:], dtype=np.float64)
     any_unsat = np.zeros(values.shape[1:], dtype=bool)
     log_t = np.log(t)
+    step_table = None
+    if getattr(wfun, "uses_log_step", False):
+        step_table = np.stack(
+            [np.interp(levels + 0.5, levels, g[ch]) - np.interp(levels - 0.5, levels, g[ch])
+             for ch in range(n_ch)]
+        )
     for k in range(k_count):
         v = values[k]
-        w = wfun(v, c_min, sat)
+        if step_table is None:
+            w = wfun(v, c_min, sat)
+        else:
+            w = wfun(v, c_min, sat, log_step=apply_log_inverse_response(v, levels, step_table))
         clipped = v >= sat if saturated is None else (saturated[k] | (v >= sat))
         w = np.where(clipped, 0.0, w)
+        if dark_clipped is not None:
+            w = np.where(dark_clipped[k], 0.0, w)
+        if min_level is not None:
+            w = np.where(v < min_level, 0.0, w)
         any_unsat |= ~clipped
         num += w * (apply_log_inverse_response(v, levels, g) - log_t[k])
         den += w

@@ -72,6 +72,9 @@ class CameraModel:
         Sensor sensitivity ``u``, mean 1 per channel.
     vignetting_params : ndarray, shape (C, 6)
         ``m1 … m6`` per channel (paper's order), normalised coordinates.
+    response_valid_min : ndarray, shape (C,), optional
+        Lowest pixel value at which the response was measured; lower values
+        get no weight in the merge (0, all values, by default).
     parameters : dict
         The methods and parameters that produced the model.
     report : dict
@@ -87,6 +90,7 @@ class CameraModel:
     balance: np.ndarray
     sensor_lut: np.ndarray
     vignetting_params: np.ndarray
+    response_valid_min: np.ndarray | None = None
     parameters: dict[str, Any] = field(default_factory=dict)
     report: dict[str, Any] = field(default_factory=dict)
     _cache: dict = field(default_factory=dict, init=False, repr=False)
@@ -131,6 +135,13 @@ class CameraModel:
         vig = check_array(
             self.vignetting_params, "vignetting_params", shape=(n_ch, 6), kind="iuf", finite=True
         ).astype(np.float64)
+        if self.response_valid_min is None:
+            valid_min = np.zeros(n_ch)
+        else:
+            valid_min = check_array(
+                self.response_valid_min, "response_valid_min", shape=(n_ch,), kind="iuf",
+                finite=True,
+            ).astype(np.float64)
         for name, value in [
             ("image_shape", (height, width)),
             ("channels", channels),
@@ -141,6 +152,7 @@ class CameraModel:
             ("balance", balance),
             ("sensor_lut", lut),
             ("vignetting_params", vig),
+            ("response_valid_min", valid_min),
             ("parameters", dict(self.parameters)),
             ("report", dict(self.report)),
         ]:
@@ -212,6 +224,7 @@ class CameraModel:
             "response": {
                 "quantity": "g = ln f^-1 (natural log, without balance), linear between levels",
                 "levels": self.response_levels.tolist(),
+                "valid_min": self.response_valid_min.tolist(),
                 "log_inverse_response": self.log_inverse_response.tolist(),
             },
             "sensor_lut": {"file": _LUT_NAME, "normalisation": "mean 1 per channel"},
@@ -314,6 +327,9 @@ def load_camera(path: str | os.PathLike[str]) -> CameraModel:
             balance=np.asarray(data["balance"], dtype=np.float64),
             sensor_lut=lut,
             vignetting_params=np.asarray(data["vignetting"]["params"], dtype=np.float64),
+            response_valid_min=np.asarray(
+                data["response"].get("valid_min", [0.0] * len(channels)), dtype=np.float64
+            ),
             parameters=data.get("parameters", {}),
             report=data.get("report", {}),
         )

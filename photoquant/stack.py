@@ -223,7 +223,16 @@ class ExposureStack:
             self._mean.append(denoise_mean(self.frames))
         return self._mean[0]
 
-    def saturated(self) -> np.ndarray:
-        """``(K, H, W, C)`` bool: any repeat reached the channel's saturation level."""
-        sat = np.asarray(self.saturation_level).reshape(1, 1, 1, 1, -1)
+    def saturated(self, saturation_level: np.ndarray | None = None) -> np.ndarray:
+        """``(K, H, W, C)`` bool: any repeat reached the channel's saturation level.
+
+        ``saturation_level`` (C,) overrides the stack's own (e.g. a camera
+        model's calibrated levels).
+        """
+        level = self.saturation_level if saturation_level is None else saturation_level
+        sat = np.asarray(level, dtype=np.float64).reshape(1, 1, 1, 1, -1)
         return np.any(self.frames >= sat, axis=0)
+
+    def dark_clipped(self, floor: float = 0.0) -> np.ndarray:
+        """``(K, H, W, C)`` bool: any repeat sits at the floor ``c_min`` (clipped dark)."""
+        return np.any(self.frames <= floor, axis=0)

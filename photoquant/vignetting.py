@@ -302,7 +302,9 @@ class VignettingFit:
         value, averaged over the image (from the residual variance and the
         Jacobian at the solution). A large value says the views do not
         constrain the model, e.g. a pure pan leaves the vertical profile
-        nearly free. ``None`` when not computed.
+        nearly free. Statistical only: it excludes systematic errors such as
+        misregistered correspondences, and as a linearisation it understates
+        the error of a badly constrained fit. ``None`` when not computed.
     """
 
     params: np.ndarray
@@ -590,6 +592,12 @@ def fit_vignetting_ExtendedGoldmanChen(
     usable = np.all(np.isfinite(values) & (values > 0), axis=1)
     n_dropped = int(m - np.count_nonzero(usable))
     dropped_note = f"{n_dropped} of {m} observations dropped for non-finite or non-positive values"
+    n_usable_views = int(np.unique(view[usable]).size)
+    if n_usable_views < 2:
+        raise CalibrationError(
+            f"vignetting fit needs usable observations in at least 2 views (view directions); "
+            f"got {n_usable_views} ({dropped_note})"
+        )
     a, b, pair_track = _pairs_within_tracks(track_index[usable], view[usable])
     # Keep only observations that take part in a pair, and re-index the pairs.
     used = np.unique(np.r_[a, b])
@@ -611,10 +619,6 @@ def fit_vignetting_ExtendedGoldmanChen(
             f"({dropped_note})"
         )
     n_views = int(np.unique(obs_view).size)
-    if n_views < 2:
-        raise CalibrationError(
-            f"vignetting fit needs usable observations in at least 2 views; got {n_views}"
-        )
     spread_x, spread_y = _spread(x_n), _spread(y_n)
     if min(spread_x, spread_y) < min_spread:
         raise CalibrationError(

@@ -4,8 +4,8 @@ No renderer is involved: each scene is a closed-form ``(H, W, C)`` array of
 true photoquantity ``l_pλ`` (eq. 1 of [PQ]) in an arbitrary unit, in which the
 white chart is 1. With the camera presets (``exposure_scale = 100 ·
 full_well``), ``l = 1`` fills the well in 10 ms, so the default exposure
-ladder 1–200 ms covers ``l`` from about 2.5·10⁻³ (dark patches at 200 ms) to
-about 3 (bright patches at 1 ms).
+ladder 1–200 ms covers ``l`` from 4·10⁻³ (the darkest patches, 8 % of the
+well at 200 ms) to 5 (the brightest, 50 % of the well at 1 ms).
 
 Public objects
 --------------
@@ -121,8 +121,8 @@ def scene_calibration_world(
     *,
     margin: int | None = None,
     patch_px: int | None = None,
-    l_min: float = 10**-2.6,
-    l_max: float = 10**0.5,
+    l_min: float = 10**-2.4,
+    l_max: float = 10**0.7,
     white_level: float = 1.0,
     chroma: float = 0.25,
     edge_px: int = 1,
@@ -149,7 +149,8 @@ def scene_calibration_world(
         Photoquantity of the white chart, the same in every channel.
     chroma : float
         Each patch channel is multiplied by ``exp(chroma · U(-1, 1))``
-        (0 gives grey patches).
+        (0 gives grey patches), except the darkest and brightest patches, which
+        stay grey so that every channel spans ``[l_min, l_max]``.
     edge_px : int
         Margin from patch edges for :attr:`AnalyticWorld.interior` (``>= 0``).
     channels : int
@@ -188,6 +189,7 @@ def scene_calibration_world(
     q = rng.permutation(np.linspace(0.0, 1.0, n))
     grey = lo_l * (hi_l / lo_l) ** q
     tint = np.exp(chroma * rng.uniform(-1.0, 1.0, size=(n, c)))
+    tint[[np.argmin(q), np.argmax(q)]] = 1.0  # grey extremes: every channel spans l_min..l_max
     colours = grey[:, None] * tint
     iy = np.arange(hw) // patch_px
     ix = np.arange(ww) // patch_px
@@ -227,8 +229,9 @@ def pan_shifts(n_views: int, pan_px: int) -> np.ndarray:
         ``V >= 1``.
     pan_px : int
         Radius of the circle in pixels (``>= 0``); view ``i >= 1`` is at angle
-        ``π/4 + 2π (i - 1) / (V - 1)``, so two views pan diagonally in
-        opposite directions and both axes of the vignetting are probed.
+        ``2π i / V``, so that with view 0 at the centre the shifts are never
+        collinear for ``V >= 3`` (pan *and* tilt): shifts along one line
+        leave the vignetting's shape across that line unconstrained.
 
     Returns
     -------
@@ -240,7 +243,7 @@ def pan_shifts(n_views: int, pan_px: int) -> np.ndarray:
             raise InputError(f"`{name}` must be an integer >= {lo}, got {v!r}")
     shifts = np.zeros((int(n_views), 2), dtype=np.int64)
     for i in range(1, int(n_views)):
-        a = math.pi / 4 + 2 * math.pi * (i - 1) / (n_views - 1)
+        a = 2 * math.pi * i / n_views
         shifts[i] = (round(pan_px * math.cos(a)), round(pan_px * math.sin(a)))
     return shifts
 
@@ -327,7 +330,7 @@ def views_by_pan(
     hw, ww = world.shape
     origins = s + np.asarray(world.view_origin, dtype=np.int64)
     for i, (ox, oy) in enumerate(origins):
-        if ox < 0 or oy < 0 or ox + w > ww or oy + h > hh(hw):
+        if ox < 0 or oy < 0 or ox + w > ww or oy + h > hw:
             raise InputError(
                 f"`shifts`[{i}] = {s[i].tolist()} moves the {w}x{h} view outside the "
                 f"{ww}x{hw} world (margin {world.margin} px)"
@@ -342,7 +345,11 @@ def views_by_pan(
     keep = (wx % stride == 0) & (wy % stride == 0)
     wx, wy = wx[keep], wy[keep]
     if max_tracks is not None:
-        if isinstance(max_tracks, bool) or not isinstance(max_tracks, int | np.integer) or max_tracks < 1:
+        if (
+            isinstance(max_tracks, bool)
+            or not isinstance(max_tracks, int | np.integer)
+            or max_tracks < 1
+        ):
             raise InputError(f"`max_tracks` must be a positive integer, got {max_tracks!r}")
         if wx.size > max_tracks:
             idx = np.unique(np.linspace(0, wx.size - 1, int(max_tracks)).round().astype(np.int64))
@@ -369,10 +376,6 @@ def views_by_pan(
         tracks=_readonly(tracks),
         white_rois=_readonly(np.asarray(rois, dtype=np.int64)),
     )
-
-
-def hh(x: int) -> int:  # pragma: no cover - replaced below
-    return x
 
 
 def scene_irradiance(
@@ -424,8 +427,8 @@ def scene_test_hdr(
     lamp_level : float
         Peak photoquantity of the lamp (warm: channel factors 1, 0.85, 0.6).
     shadow_level : float
-        Photoquantity of the deep shadow (cool: 0.8, 0.9, 1 of ``shadow_level``... up
-        to ``shadow_level`` in the last channel).
+        Photoquantity of the deep shadow in its brightest channel (cool: channel
+        factors 0.8, 0.9, 1).
     channels : int
         Number of channels ``C`` (tints repeat cyclically beyond 3).
 

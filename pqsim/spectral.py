@@ -434,7 +434,9 @@ def illuminant(name: str | Spectrum) -> Spectrum:
         )
     sd = colour.SDS_ILLUMINANTS[name]
     wl = np.asarray(sd.wavelengths, dtype=np.float64)
-    val = _resample(wl, np.asarray(sd.values, dtype=np.float64), np.asarray(WAVELENGTHS), extend="edge")
+    val = _resample(
+        wl, np.asarray(sd.values, dtype=np.float64), np.asarray(WAVELENGTHS), extend="edge"
+    )
     at560 = float(np.interp(560.0, WAVELENGTHS, val))
     return Spectrum(name, WAVELENGTHS, val / at560)
 
@@ -471,7 +473,9 @@ def colour_checker_reflectances(chart: str = "BabelColor Average") -> dict[str, 
     for name, sd in colour.SDS_COLOURCHECKERS[chart].items():
         wl = np.asarray(sd.wavelengths, dtype=np.float64)
         val = np.clip(np.asarray(sd.values, dtype=np.float64), 0.0, None)
-        out[name] = Spectrum(name, WAVELENGTHS, _resample(wl, val, np.asarray(WAVELENGTHS), extend="edge"))
+        out[name] = Spectrum(
+            name, WAVELENGTHS, _resample(wl, val, np.asarray(WAVELENGTHS), extend="edge")
+        )
     return out
 
 
@@ -552,7 +556,9 @@ def camera_photoquantity_exact(
     rows = []
     for s in _as_spectra(spectra):
         factors = [_on_grid(s, grid)] + ([] if illum is None else [illum])
-        rows.append([_exact_integral(grid, cam.values[:, c], *factors) for c in range(cam.n_channels)])
+        rows.append(
+            [_exact_integral(grid, cam.values[:, c], *factors) for c in range(cam.n_channels)]
+        )
     return np.array(rows)
 
 
@@ -657,15 +663,18 @@ def chart_reference_colours(
     spectra_list = _as_spectra(reflectances)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", colour.utilities.ColourWarning)
-        XYZ = np.asarray(
-            colour.msds_to_XYZ(
-                _msds(colour, spectra_list, grid),
-                cmfs=cmfs,
-                illuminant=sd_illum,
-                method="Integration",
-            ),
-            dtype=np.float64,
-        ).reshape(len(spectra_list), 3) / 100.0
+        XYZ = (
+            np.asarray(
+                colour.msds_to_XYZ(
+                    _msds(colour, spectra_list, grid),
+                    cmfs=cmfs,
+                    illuminant=sd_illum,
+                    method="Integration",
+                ),
+                dtype=np.float64,
+            ).reshape(len(spectra_list), 3)
+            / 100.0
+        )
     out = {"XYZ": XYZ}
     for key, space in (("CIE RGB", "CIE RGB"), ("sRGB linear", "sRGB")):
         M = np.asarray(colour.RGB_COLOURSPACES[space].matrix_XYZ_to_RGB, dtype=np.float64)

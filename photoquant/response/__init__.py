@@ -40,8 +40,8 @@ def recover_response(
 ) -> ResponseRecovery:
     """Recover the response of each channel from an :class:`ExposureStack`.
 
-    The stack is denoised (eq. 2) and values whose repeats reached the
-    saturation level are excluded. ``kwargs`` go to the method.
+    The stack is denoised (eq. 2) and values with a repeat clipped at the
+    saturation level or at the floor 0 are excluded. ``kwargs`` go to the method.
     """
     fn = RESPONSE_METHODS[validate_method(method, RESPONSE_METHODS, "response")]
     return fn(
@@ -49,6 +49,6 @@ def recover_response(
         stack.exposure_s,
         bit_depth=stack.bit_depth,
         saturation_level=np.asarray(stack.saturation_level),
-        saturated=stack.saturated(),
+        saturated=stack.saturated() | stack.dark_clipped(),
         **kwargs,
     )

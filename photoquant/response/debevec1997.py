@@ -76,7 +76,7 @@ __all__ = [
     "DEFAULT_SMOOTHNESS",
 ]
 
-DEFAULT_SMOOTHNESS = 300.0
+DEFAULT_SMOOTHNESS = 1000.0
 """Default β of eq. 7 (weights scaled to a peak of 1). The paper leaves β free."""
 
 
@@ -101,6 +101,12 @@ class ResponseRecovery:
         Root mean square of the weighted data residuals, in ln units.
     monotone_constrained : ndarray, shape (C,) of bool
         Whether the monotonicity constraint was active.
+    valid_min : ndarray, shape (C,)
+        Lowest level supported by data (at least ``min_support`` data
+        equations, counted with their interpolation weights). Below it ``g``
+        is extrapolated by the smoothness prior alone (for a response with
+        ``g → −∞`` at 0 that prior is biased), so the merge gives such values
+        no weight.
     smoothness : float
         The β used.
     """
@@ -113,6 +119,7 @@ class ResponseRecovery:
     residual_rms: np.ndarray
     monotone_constrained: np.ndarray
     smoothness: float
+    valid_min: np.ndarray
 
 
 def response_levels(bit_depth: int, max_levels: int = 1024) -> np.ndarray:
@@ -263,7 +270,9 @@ def _solve_channel(
     log_e = (rhs[n_g:] - n_ge.T @ g) / d
     resid = a[:n_data] @ np.concatenate([g, log_e]) - b_data
     rms = float(np.sqrt(np.mean(resid**2))) if n_data else float("nan")
-    return g, rms, constrained, n_data
+    support = np.bincount(i0, weights=1 - alpha, minlength=n_g + 1)[:n_g]
+    support += np.bincount(i0 + 1, weights=alpha, minlength=n_g + 1)[:n_g]
+    return g, rms, constrained, n_data, support
 
 
 def camera_response_Debevec1997(
@@ -279,6 +288,7 @@ def camera_response_Debevec1997(
     max_levels: int = 1024,
     rng: np.random.Generator | int | None = 0,
     c_min: float = 0.0,
+    min_support: float = 10.0,
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -306,6 +316,9 @@ def camera_response_Debevec1997(
         Randomness of the sample selection (an int seeds a new generator).
     c_min : float
         Lowest value the camera outputs.
+    min_support : float
+        Data equations a level needs to count as measured (see
+        :attr:`ResponseRecovery.valid_min`).
 
     Returns
     -------
@@ -347,6 +360,7 @@ def camera_response_Debevec1997(
     n_eq = np.zeros(n_ch, dtype=np.int64)
     rms = np.zeros(n_ch)
     constrained = np.zeros(n_ch, dtype=bool)
+    valid_min = np.zeros(n_ch)
     for ch in range(n_ch):
         vals = values[..., ch].reshape(k_count, -1)
         weights = wfun(vals, c_min, sat[ch])
@@ -363,7 +377,7 @@ def camera_response_Debevec1997(
         mid = 0.5 * (c_min + sat[ch])
         gauge = int(np.argmin(np.abs(levels[: top + 1] - mid)))
         smooth_w = wfun(levels, c_min, sat[ch])
-        g, rms[ch], constrained[ch], n_eq[ch] = _solve_channel(
+        g, rms[ch], constrained[ch], n_eq[ch], support = _solve_channel(
             vals[:, idx],
             valid[:, idx],
             np.where(valid[:, idx], weights[:, idx], 0.0),
@@ -374,6 +388,10 @@ def camera_response_Debevec1997(
             smoothness,
             gauge,
         )
+        # lowest measured level: below it g is extrapolated by the prior alone
+        # (gaps between measured levels are interpolated, which is fine)
+        measured = np.flatnonzero(support[: gauge + 1] >= min_support)
+        valid_min[ch] = levels[measured[0]] if measured.size else levels[gauge]
         g_all[ch, : top + 1] = g
         g_all[ch, top + 1 :] = g[-1]
         n_used[ch] = idx.size
@@ -387,4 +405,5 @@ def camera_response_Debevec1997(
         residual_rms=rms,
         monotone_constrained=constrained,
         smoothness=smoothness,
+        valid_min=valid_min,
     )

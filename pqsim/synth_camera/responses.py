@@ -74,6 +74,8 @@ __all__ = [
 
 def _exposure(e: Any, name: str = "e") -> np.ndarray:
     """Return ``e`` as a float64 array of finite or +inf, non-negative exposures."""
+    if np.size(e) == 0:  # an empty array evaluates to an empty array
+        return np.asarray(e, dtype=np.float64)
     arr = check_array(e, name, kind="iuf").astype(np.float64)
     if np.any(np.isnan(arr)):
         raise InputError(f"`{name}` contains NaN")
@@ -84,6 +86,8 @@ def _exposure(e: Any, name: str = "e") -> np.ndarray:
 
 def _output(F: Any, name: str = "F") -> np.ndarray:
     """Return ``F`` as a float64 array of values in ``[0, 1]``."""
+    if np.size(F) == 0:
+        return np.asarray(F, dtype=np.float64)
     arr = check_array(F, name, kind="iuf", finite=True).astype(np.float64)
     if np.any(arr < 0) or np.any(arr > 1):
         raise InputError(
@@ -142,16 +146,17 @@ def response_linear(e: Any, knee: float | None = None) -> np.ndarray:
     --------
     >>> response_linear([0.0, 0.5, 2.0]).tolist()
     [0.0, 0.5, 1.0]
-    >>> float(response_linear(1.0, knee=0.8))
-    0.99
+    >>> round(float(response_linear(1.0, knee=0.8)), 12)
+    0.95
     """
     e = _exposure(e)
     k = _knee(knee)
     if k is None:
         return np.minimum(e, 1.0)
     d = np.clip(e - k, 0.0, 2.0 * (1.0 - k))
-    shoulder = k + d - d * d / (4.0 * (1.0 - k))
-    return np.where(e <= k, e, shoulder)
+    shoulder = np.minimum(k + d - d * d / (4.0 * (1.0 - k)), 1.0)  # rounding may exceed 1
+    # exactly 1 from the saturation exposure 2 - k on (the same float as the inverse's)
+    return np.where(e <= k, e, np.where(e >= 2.0 - k, 1.0, shoulder))
 
 
 def response_linear_inverse(F: Any, knee: float | None = None) -> np.ndarray:
@@ -165,8 +170,8 @@ def response_linear_inverse(F: Any, knee: float | None = None) -> np.ndarray:
     if k is None:
         return F.copy()
     q = np.clip((F - k) / (1.0 - k), 0.0, 1.0)
-    shoulder = k + 2.0 * (1.0 - k) * (1.0 - np.sqrt(1.0 - q))
-    return np.where(F <= k, F, shoulder)
+    shoulder = np.minimum(k + 2.0 * (1.0 - k) * (1.0 - np.sqrt(1.0 - q)), 2.0 - k)
+    return np.where(F <= k, F, np.where(F >= 1.0, 2.0 - k, shoulder))
 
 
 # ---------------------------------------------------------------------------
@@ -243,7 +248,7 @@ def response_s_curve(e: Any, contrast: float = 1.5, pivot: float = 0.25) -> np.n
 
     Examples
     --------
-    >>> float(response_s_curve(0.25, contrast=1.5, pivot=0.25))
+    >>> round(float(response_s_curve(0.25, contrast=1.5, pivot=0.25)), 12)
     0.5
     """
     e = _exposure(e)
@@ -441,10 +446,9 @@ def numeric_inverse(
     forward: Callable[[np.ndarray], np.ndarray],
     F: Any,
     *,
-    iterations: int = 80,
     e_max: float = 2.0**20,
 ) -> np.ndarray:
-    """Invert a monotonic response numerically by vectorised bisection.
+    """Invert a monotonic response numerically by vectorised bisection on the float grid.
 
     Parameters
     ----------
@@ -452,20 +456,26 @@ def numeric_inverse(
         Non-decreasing ``F(e)`` on ``[0, ∞)``, vectorised.
     F : array_like
         Outputs to invert, in ``[0, 1]``.
-    iterations : int
-        Bisection steps after bracketing; 80 steps shrink the bracket by
-        ``2**-80``, below float64 resolution for any bracket found.
     e_max : float
         Largest exposure searched; outputs not reached below it are refused.
 
     Returns
     -------
     ndarray, float64
-        The smallest ``e`` with ``forward(e) >= F`` (to float64 resolution),
-        i.e. the exact inverse where ``forward`` is strictly increasing and the
+        The smallest float64 ``e`` with ``forward(e) >= F``: the exact inverse
+        where ``forward`` is strictly increasing (to one ulp of ``e``), the
         start of the saturated range where it is flat.
+
+    Notes
+    -----
+    The bisection runs on the integer bit patterns of non-negative float64
+    values, which are ordered like the values, so it ends with adjacent floats
+    after at most 64 steps whatever the scale of ``e`` (also for curves of
+    infinite slope at 0, such as ``e**0.25``).
     """
     F = _output(F)
+    if F.size == 0:
+        return F.copy()
     hi = np.ones_like(F)
     while True:
         low = forward(hi) < F
@@ -474,13 +484,15 @@ def numeric_inverse(
         if hi.max() >= e_max:
             raise InputError(f"`F`: values {np.unique(F[low])[:5].tolist()} are never reached")
         hi = np.where(low, hi * 2.0, hi)
-    lo = np.zeros_like(F)
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        below = forward(mid) < F
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-    return hi
+    lo_bits = np.zeros(F.shape, dtype=np.int64)
+    hi_bits = hi.view(np.int64).copy()
+    while np.any(hi_bits - lo_bits > 1):
+        mid_bits = lo_bits + (hi_bits - lo_bits) // 2
+        below = forward(mid_bits.view(np.float64)) < F
+        lo_bits = np.where(below, mid_bits, lo_bits)
+        hi_bits = np.where(below, hi_bits, mid_bits)
+    at_zero = forward(np.zeros_like(F)) >= F
+    return np.where(at_zero, 0.0, hi_bits.view(np.float64))
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_array
+from photoquant._checks import check_array, check_bit_depth
 from photoquant.errors import InputError
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import SensorNoise
@@ -478,7 +478,7 @@ def load_truth(folder: str | Path) -> TruthSet:
             vignetting_params=None if vp is None else tuple(tuple(float(m) for m in p) for p in vp),
             vignetting=_read_map(folder, cam["vignetting"], (h, w, c)),
             sensor_lut=_read_map(folder, cam["sensor_lut"], (h, w, c)),
-            bit_depth=int(cam["bit_depth"]),
+            bit_depth=check_bit_depth(cam["bit_depth"], "bit_depth"),
             exposure_scale=float(cam["exposure_scale"]),
             channels=tuple(cam["channels"]),
             prnu=dict(cam.get("prnu", {})),

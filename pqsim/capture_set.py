@@ -1,0 +1,291 @@
+"""Write a complete simulated calibration capture: frames, manifest and ground truth.
+
+:func:`write_capture_set` simulates the ``V + 1`` calibration scenes of §5.1.1
+of [PQ] — ``V`` panned views of a flat-patch world holding a white chart,
+and the irradiance scene on the bare sensor — plus a test scene, with a
+:class:`~pqsim.synth_camera.camera.SyntheticCamera`, and writes::
+
+    folder/
+      capture.json                 manifest, format "photoquant.captures/1"
+      views/v0/t0.001000_n0.png    frames of view 0 (exposure 1 ms, repeat 0), ...
+      views/v1/..., views/v2/...
+      irradiance/t0.001000_n0.png  the irradiance scene (no optics), ...
+      scene/t0.000250_n0.png       the test scene, ...
+      truth/truth.json, u.exr, v.exr, l_view0.exr, ..., l_irradiance.exr, l_scene.exr
+
+Frames are PNG (uint8 for 8 bits, uint16 above) or TIFF; the manifest is
+written last with :func:`photoquant.io.write_manifest`, so a folder without
+``capture.json`` is an unfinished capture.
+
+References
+----------
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §5.1 (image
+   acquisition), §6.1 (1–200 ms, ``N = 10, K = 8, V = 3``; ``N = K = 4`` suffice).
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from photoquant._checks import check_exposure_times, check_positive
+from photoquant.errors import InputError
+from pqsim.analytic import (
+    pan_shifts,
+    scene_calibration_world,
+    scene_irradiance,
+    scene_ramp,
+    scene_test_hdr,
+    views_by_pan,
+)
+from pqsim.synth_camera.camera import Capture, SyntheticCamera
+from pqsim.synth_camera.optics import check_shape
+from pqsim.synth_camera.truth import save_truth
+
+__all__ = [
+    "DEFAULT_EXPOSURES_S",
+    "DEFAULT_SCENE_EXPOSURES_S",
+    "MANIFEST_NAME",
+    "write_capture_set",
+]
+
+DEFAULT_EXPOSURES_S = np.geomspace(1e-3, 0.2, 8)
+"""Calibration exposures, 1–200 ms as in §6.1 of [PQ]. With the presets and the
+analytic world, the white chart (``l = 1``) is at 10–90 % of the well from 1 to
+9 ms, the darkest patches (``l = 4·10⁻³``) reach ~8 % of the well at 200 ms
+(before vignetting) and the brightest (``l = 5``) ~50 % at 1 ms."""
+
+DEFAULT_SCENE_EXPOSURES_S = np.geomspace(2.5e-4, 0.64, 10)
+"""Test-scene exposures: a ratio of 2560 for the ≥ 10⁴ dynamic range of
+:func:`~pqsim.analytic.scene_test_hdr` (lamp ~20 % of the well at 0.25 ms,
+shadow ~2 % at 0.64 s)."""
+
+MANIFEST_NAME = "capture.json"
+_OWNED = ("views", "irradiance", "scene", "truth", MANIFEST_NAME)
+
+
+def _frame_names(exposure_s: np.ndarray) -> list[str]:
+    """``t0.001000``-style names, unique; scientific notation if 6 decimals collide."""
+    names = [f"t{t:.6f}" for t in exposure_s]
+    if len(set(names)) != len(names):
+        names = [f"t{t:.6e}" for t in exposure_s]
+    if len(set(names)) != len(names):
+        names = [f"k{k:02d}" for k in range(len(exposure_s))]
+    return names
+
+
+def _write_frames(root: Path, sub: str, capture: Capture, ext: str) -> dict[str, Any]:
+    """Write one capture's frames under ``root/sub`` and return its manifest frame set."""
+    from photoquant import io as pqio
+
+    folder = root / sub
+    folder.mkdir(parents=True, exist_ok=True)
+    frames = []
+    for k, name in enumerate(_frame_names(capture.exposure_s)):
+        for n in range(capture.n_repeats):
+            rel = f"{sub}/{name}_n{n}.{ext}"
+            pqio.write_image(root / rel, capture.frames[n, k])
+            frames.append({"file": rel, "exposure_s": float(capture.exposure_s[k]), "repeat": n})
+    return {"frames": frames}
+
+
+def write_capture_set(
+    folder: str | Path,
+    camera: SyntheticCamera,
+    *,
+    shape: Sequence[int] = (48, 64),
+    exposure_s: Any = None,
+    n_repeats: int = 4,
+    n_views: int = 3,
+    pan_px: int | None = None,
+    seed: int = 0,
+    scene: str | np.ndarray = "hdr",
+    scene_exposure_s: Any = None,
+    irradiance_level: float = 1.0,
+    irradiance_nonuniformity: float = 0.0,
+    correspondence_stride: int = 2,
+    max_tracks: int | None = None,
+    frame_format: str = "png",
+    write_saturation_level: bool = False,
+    overwrite: bool = False,
+) -> Path:
+    """Simulate and write a calibration capture set with its ground truth.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Destination; created if missing. It must be empty unless ``overwrite``.
+    camera : SyntheticCamera
+        The camera (1 or 3 channels).
+    shape : (H, W)
+        Image shape; small by default so that tests stay fast.
+    exposure_s : array_like (K,), optional
+        Exposures of the views and the irradiance scene;
+        :data:`DEFAULT_EXPOSURES_S` (1–200 ms, ``K = 8``) by default.
+    n_repeats : int
+        ``N`` repeats of every exposure.
+    n_views : int
+        ``V`` views of the calibration world.
+    pan_px : int, optional
+        Pan radius in pixels (:func:`~pqsim.analytic.pan_shifts`);
+        ``min(H, W) // 4`` by default (views shifted by ±8 px diagonally for
+        48×64 images), which is also the world's margin.
+    seed : int
+        Master seed. A :class:`numpy.random.SeedSequence` of it is split into
+        independent streams: the world, each view, the irradiance scene and
+        the test scene (``V + 3`` children, in that order).
+    scene : {"hdr", "ramp"} or ndarray (H, W, C)
+        The test scene: :func:`~pqsim.analytic.scene_test_hdr`,
+        :func:`~pqsim.analytic.scene_ramp`, or a given photoquantity field.
+    scene_exposure_s : array_like (K',), optional
+        Exposures of the test scene; :data:`DEFAULT_SCENE_EXPOSURES_S` by default.
+    irradiance_level, irradiance_nonuniformity : float
+        Photoquantity and gradient of the irradiance scene
+        (:func:`~pqsim.analytic.scene_irradiance`); captured with ``optics=False``.
+    correspondence_stride, max_tracks : int
+        Density and cap of the correspondences (:func:`~pqsim.analytic.views_by_pan`).
+    frame_format : {"png", "tiff"}
+        Image format of the frames (uint8 for 8 bits, uint16 for 9–16 bits).
+    write_saturation_level : bool
+        Write the camera's true per-channel saturation values in the manifest
+        (like a raw file's white level). Off by default: the calibrator must
+        then detect them, as with most real frames.
+    overwrite : bool
+        Allow a non-empty ``folder``: the paths this function writes
+        (``views/``, ``irradiance/``, ``scene/``, ``truth/``, ``capture.json``)
+        are removed first; other files are left alone.
+
+    Returns
+    -------
+    Path
+        The manifest ``folder / "capture.json"``.
+
+    Raises
+    ------
+    InputError
+        For invalid arguments, or a non-empty ``folder`` without ``overwrite``.
+    """
+    from photoquant import io as pqio
+
+    if not isinstance(camera, SyntheticCamera):
+        raise InputError(f"`camera` must be a SyntheticCamera, got {type(camera).__name__}")
+    if camera.n_channels not in (1, 3):
+        raise InputError(
+            f"`camera` must have 1 or 3 channels for image files, got {camera.n_channels}"
+        )
+    h, w = check_shape(shape)
+    t = check_exposure_times(DEFAULT_EXPOSURES_S if exposure_s is None else exposure_s)
+    t_scene = check_exposure_times(
+        DEFAULT_SCENE_EXPOSURES_S if scene_exposure_s is None else scene_exposure_s,
+        "scene_exposure_s",
+    )
+    for name, v in (("n_repeats", n_repeats), ("n_views", n_views)):
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+            raise InputError(f"`{name}` must be a positive integer, got {v!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise InputError(f"`seed` must be a non-negative integer, got {seed!r}")
+    pan = min(h, w) // 4 if pan_px is None else pan_px
+    if isinstance(pan, bool) or not isinstance(pan, int | np.integer) or pan < 0:
+        raise InputError(f"`pan_px` must be a non-negative integer, got {pan_px!r}")
+    if pan >= min(h, w) // 2:
+        raise InputError(
+            f"`pan_px` must be below half the image size ({min(h, w) // 2}), got {pan}"
+        )
+    if n_views > 1 and pan == 0:
+        raise InputError("`pan_px` must be positive when `n_views` > 1 (the views would coincide)")
+    ext = {"png": "png", "tiff": "tif", "tif": "tif"}.get(str(frame_format).lower())
+    if ext is None:
+        raise InputError(f"`frame_format` must be 'png' or 'tiff', got {frame_format!r}")
+    check_positive(irradiance_level, "irradiance_level")
+    if isinstance(scene, str):
+        if scene not in ("hdr", "ramp"):
+            raise InputError(f"`scene` must be 'hdr', 'ramp' or an (H, W, C) array, got {scene!r}")
+        l_scene = (
+            scene_test_hdr((h, w), channels=camera.n_channels)
+            if scene == "hdr"
+            else scene_ramp((h, w), channels=camera.n_channels)
+        )
+        scene_name = scene
+    else:
+        l_scene = np.asarray(scene, dtype=np.float64)
+        if l_scene.shape != (h, w, camera.n_channels):
+            raise InputError(
+                f"`scene` must have shape {(h, w, camera.n_channels)}, got {l_scene.shape}"
+            )
+        scene_name = "array"
+
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"`folder` {str(folder)!r} exists and is not a folder")
+    non_empty = folder.is_dir() and any(folder.iterdir())
+    if non_empty and not overwrite:
+        raise InputError(
+            f"`folder` {str(folder)!r} is not empty; pass overwrite=True to replace its capture set"
+        )
+
+    # -- simulate everything in memory first -----------------------------------------
+    streams = np.random.SeedSequence(int(seed)).spawn(int(n_views) + 3)
+    gens = [np.random.default_rng(s) for s in streams]
+    world = scene_calibration_world((h, w), gens[0], margin=int(pan), channels=camera.n_channels)
+    shifts = pan_shifts(int(n_views), int(pan))
+    pv = views_by_pan(world, (h, w), shifts, stride=correspondence_stride, max_tracks=max_tracks)
+    views = [camera.capture(pv.l[i], t, n_repeats, gens[1 + i]) for i in range(int(n_views))]
+    l_irr = scene_irradiance(
+        (h, w), irradiance_level, irradiance_nonuniformity, channels=camera.n_channels
+    )
+    irr = camera.capture(l_irr, t, n_repeats, gens[n_views + 1], optics=False)
+    test = camera.capture(l_scene, t_scene, n_repeats, gens[n_views + 2])
+
+    # -- write frames, truth, then the manifest ----------------------------------------
+    if non_empty:  # only now that the simulation succeeded: remove our previous outputs
+        for name in _OWNED:
+            p = folder / name
+            if p.is_dir() and not p.is_symlink():
+                shutil.rmtree(p)
+            elif p.exists() or p.is_symlink():
+                p.unlink()
+    folder.mkdir(parents=True, exist_ok=True)
+    manifest: dict[str, Any] = {
+        "format": "photoquant.captures/1",
+        "bit_depth": camera.bit_depth,
+        "channels": list(camera.channels),
+        "views": [_write_frames(folder, f"views/v{i}", cap, ext) for i, cap in enumerate(views)],
+        "white_roi": [int(v) for v in pv.white_rois[0]],
+        "irradiance": _write_frames(folder, "irradiance", irr, ext),
+        "scene": _write_frames(folder, "scene", test, ext),
+    }
+    if pv.tracks.shape[0] and n_views > 1:
+        manifest["correspondences"] = pv.correspondences()
+    if write_saturation_level:
+        manifest["saturation_level"] = camera.saturation_dn.tolist()
+    manifest["truth"] = "truth/truth.json"
+    manifest["generator"] = {
+        "package": "pqsim",
+        "seed": int(seed),
+        "streams": "SeedSequence(seed).spawn(V + 3): world, views 0..V-1, irradiance, scene",
+        "scene": scene_name,
+    }
+    captures = {f"view{i}": cap.truth for i, cap in enumerate(views)}
+    captures["irradiance"] = irr.truth
+    captures["scene"] = test.truth
+    meta = {
+        "seed": int(seed),
+        "shape": [h, w],
+        "pan_shifts": shifts.tolist(),
+        "view_origins": pv.origins.tolist(),
+        "world_shape": list(world.shape),
+        "white_box_world": list(world.white_box),
+        "white_level": world.white_level,
+        "white_rois": pv.white_rois.tolist(),
+        "scene": scene_name,
+        "irradiance_level": float(irradiance_level),
+        "irradiance_nonuniformity": float(irradiance_nonuniformity),
+    }
+    save_truth(folder / "truth", views[0].truth.camera, captures, meta)
+    path = folder / MANIFEST_NAME
+    pqio.write_manifest(path, manifest)
+    return path
