@@ -69,8 +69,6 @@ LLVM_VARIANTS: tuple[str, ...] = ("llvm_ad_spectral", "llvm_spectral")
 VARIANT_ENV = "PQSIM_MITSUBA_VARIANT"
 #: Bumped whenever the rendering rules change, to invalidate cached images.
 _CACHE_SCHEMA = 1
-#: At most this many samples are traced at once in JIT variants (memory bound).
-_MAX_LANES = 1 << 24
 
 
 def _mitsuba() -> Any:
@@ -328,34 +326,6 @@ def _with_spp(scene: Mapping[str, Any], spp: int) -> dict[str, Any]:
     return out
 
 
-def _split_passes(mi: Any, scene: dict[str, Any], spp: int, variant: str) -> dict[str, Any]:
-    """Limit JIT variants to ``_MAX_LANES`` samples in flight (integrator ``samples_per_pass``).
-
-    LLVM and CUDA variants trace all samples of a pass at once, so memory grows
-    with width × height × spp. The pass size is the largest divisor of ``spp``
-    that fits and that the sampler accepts without rounding (multi-jittered
-    samplers round some counts up).
-    """
-    if not variant.startswith(("llvm", "cuda")):
-        return scene
-    sensor = next(v for v in scene.values() if isinstance(v, dict) and "film" in v)
-    film = sensor["film"]
-    pixels = int(film.get("width", 768)) * int(film.get("height", 576))
-    if pixels * spp <= _MAX_LANES:
-        return scene
-    kind = sensor["sampler"].get("type", "independent")
-
-    def accepted(n: int) -> bool:
-        return int(mi.load_dict({"type": kind, "sample_count": n}).sample_count()) == n
-
-    fits = [d for d in range(1, spp) if spp % d == 0 and pixels * d <= _MAX_LANES and accepted(d)]
-    out = dict(scene)
-    integrator = dict(out.get("integrator") or {"type": "path"})
-    integrator["samples_per_pass"] = max(fits) if fits else 1
-    out["integrator"] = integrator
-    return out
-
-
 def _check_sample_count(mi_scene: Any, spp: int) -> None:
     """Refuse an ``spp`` the sampler would silently round (e.g. ``multijitter``: 32 → 35)."""
     sampler = mi_scene.sensors()[0].sampler()
@@ -546,7 +516,6 @@ def render_photoquantity(
                 return (image, info) if return_info else image
 
     mi = _activate(variant)
-    prepared = _split_passes(mi, prepared, spp, variant)
     mi_scene = mi.load_dict(to_mitsuba_dict(prepared, variant))
     _check_sample_count(mi_scene, spp)
     with _progress(progress, f"render {width}x{height} @{spp}spp"):
@@ -636,7 +605,6 @@ def render_aov(
                 "rfilter": {"type": "box"},
             }
     mi = _activate(variant)
-    prepared = _split_passes(mi, prepared, spp, variant)
     mi_scene = mi.load_dict(to_mitsuba_dict(prepared, variant))
     _check_sample_count(mi_scene, spp)
     out = np.array(mi.render(mi_scene, spp=spp, seed=seed), dtype=np.float32)

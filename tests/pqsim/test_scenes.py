@@ -186,6 +186,20 @@ def test_tracks_follow_the_rotation_homography(views):
         np.testing.assert_allclose(back @ H, np.eye(3) * (back @ H)[2, 2], atol=1e-12)
 
 
+def test_tracks_conventions(views):
+    from photoquant.correspondences import tracks_to_observations
+
+    cont = np.array(views.tracks())
+    index = np.array(views.tracks("index"))
+    np.testing.assert_array_equal(cont, views.correspondences)
+    np.testing.assert_allclose(cont[..., 1:] - index[..., 1:], 0.5)
+    # photoquant reads them as manifest tracks (pixel-index coordinates).
+    view, xy, track = tracks_to_observations(views.tracks("index"))
+    assert view.size == xy.shape[0] == track.size == cont.shape[0] * views.n_views
+    with pytest.raises(InputError, match="`convention`"):
+        views.tracks("opencv")
+
+
 def test_view_rotation_directions(views):
     """Yaw pans right (points move left), pitch tilts up (points move down)."""
     d1 = views.correspondences[:, 1, 1:] - views.correspondences[:, 0, 1:]

@@ -1,0 +1,93 @@
+"""The ``photoquant`` command: calibrate, correct, info, demo; exit codes and one-line errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from photoquant.cli import main
+from photoquant.io import read_exr
+from photoquant.model import load_camera
+from pqsim.capture_set import write_capture_set
+from pqsim.synth_camera.presets import camera_from_preset
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cli") / "capture"
+    return write_capture_set(folder, camera_from_preset("ccd"), shape=(48, 64), n_repeats=2, seed=3)
+
+
+def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
+    cam = tmp_path / "cam"
+    assert main(["calibrate", str(capture), "-o", str(cam), "-q"]) == 0
+    out = capsys.readouterr().out
+    assert "correspondences used" in out and "balance:" in out and "time:" in out
+    model = load_camera(cam)
+    assert model.image_shape == (48, 64)
+
+    exr = tmp_path / "scene.exr"
+    assert main(["correct", str(capture), "--camera", str(cam), "-o", str(exr), "-q"]) == 0
+    img, channels = read_exr(exr)
+    assert channels == ("R", "G", "B") and img.dtype == np.float32 and img.shape == (48, 64, 3)
+    assert "photoquantity written" in capsys.readouterr().out
+
+    assert main(["info", str(cam), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["n_views"] == 3 and "report" in info
+
+
+def test_outputs_are_not_overwritten_without_the_flag(capture, tmp_path, capsys):
+    cam = tmp_path / "cam"
+    cam.mkdir()
+    (cam / "mine.txt").write_text("user data")
+    assert main(["calibrate", str(capture), "-o", str(cam), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "already exists" in err and "--overwrite" in err
+    assert (cam / "mine.txt").read_text() == "user data"
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["calibrate", "{missing}", "-o", "{out}"], "missing.json"),
+        (["info", "{out}"], "camera.json is missing"),
+        (["correct", "{capture}", "--camera", "{out}", "-o", "{tmp}/x.exr"], "camera.json is missing"),
+        (["correct", "{capture}", "--camera", "{out}", "-o", "{tmp}/x.png"], "OpenEXR"),
+    ],
+)
+def test_bad_input_exits_non_zero_with_one_line(capture, tmp_path, capsys, args, message):
+    fill = {"missing": str(tmp_path / "missing.json"), "out": str(tmp_path / "nocam"),
+            "capture": str(capture), "tmp": str(tmp_path)}
+    status = main([a.format(**fill) for a in args])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert "Traceback" not in err
+    errors = [line for line in err.splitlines() if line.startswith("photoquant: error: ")]
+    assert len(errors) == 1 and message in errors[0]
+    assert err.splitlines()[-1] == errors[0]
+
+
+def test_wrong_manifest_version_is_a_one_line_error(capture, tmp_path, capsys):
+    folder = tmp_path / "copy"
+    shutil.copytree(capture.parent, folder)
+    data = json.loads((folder / capture.name).read_text())
+    data["format"] = "photoquant.captures/2"
+    (folder / capture.name).write_text(json.dumps(data))
+    assert main(["calibrate", str(folder / capture.name), "-o", str(tmp_path / "c"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "photoquant.captures/2" in err and err.count("\n") == 1
+
+
+def test_demo_runs_and_keeps_its_files(tmp_path, capsys, monkeypatch):
+    import validation.demo as demo
+
+    monkeypatch.setattr(demo, "QUICK_SHAPE", (48, 64))
+    assert main(["demo", "-o", str(tmp_path / "d")]) == 0
+    out = capsys.readouterr().out
+    assert "vignetting map v" in out and "test scene photoquantity" in out
+    assert (tmp_path / "d" / "camera" / "camera.json").is_file()
+    assert (tmp_path / "d" / "scene.exr").is_file()
