@@ -167,6 +167,13 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return run_demo(output=args.output, seed=args.seed, quick=not args.full, overwrite=args.overwrite)
 
 
+def _cmd_validate(args: argparse.Namespace) -> int:
+    # the validation job drives the simulator, which photoquant itself never imports
+    from validation.cli import run_validate
+
+    return run_validate(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``photoquant`` command."""
     parser = argparse.ArgumentParser(
@@ -218,6 +225,18 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--full", action="store_true", help="paper-sized images (slower)")
     demo.add_argument("--overwrite", action="store_true")
     demo.set_defaults(func=_cmd_demo)
+
+    try:
+        from validation.cli import add_validate_arguments
+    except ImportError:  # pragma: no cover - the distribution ships it
+        add_validate_arguments = None
+    if add_validate_arguments is not None:
+        val = sub.add_parser(
+            "validate",
+            help="reproduce the paper's results against ground truth (report, regression check)",
+        )
+        add_validate_arguments(val)
+        val.set_defaults(func=_cmd_validate)
     return parser
 
 

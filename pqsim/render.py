@@ -342,33 +342,39 @@ def _check_sample_count(mi_scene: Any, spp: int) -> None:
 
 
 @contextlib.contextmanager
-def _progress(enabled: bool, description: str) -> Iterator[None]:
-    """Route Mitsuba's render progress to a tqdm bar; warnings go to :mod:`logging`."""
-    if not enabled:
-        yield
-        return
-    mi = _mitsuba()
-    from tqdm import tqdm
+def _mitsuba_log(progress: bool, description: str = "render") -> Iterator[None]:
+    """Route Mitsuba's log to :mod:`logging` (warnings) and its progress to tqdm.
 
-    bar = tqdm(total=100, desc=description, unit="%", leave=False)
+    Mitsuba's own appender prints to the terminal; while rendering it is
+    replaced by one that forwards warnings and errors to the ``pqsim.render``
+    logger and, when ``progress`` is true, drives a tqdm bar [1]_. The logger
+    is restored afterwards.
+    """
+    mi = _mitsuba()
+    bar: Any = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=100, desc=description, unit="%", leave=False)
 
     class _Appender(mi.Appender):  # type: ignore[misc, name-defined]
         def append(self, level: Any, text: str) -> None:
             if level >= mi.LogLevel.Warn:
                 _log.warning("mitsuba: %s", text)
 
-        def log_progress(self, progress: float, *_details: Any) -> None:
+        def log_progress(self, fraction: float, *_details: Any) -> None:
             # Mitsuba passes (progress, name, formatted, eta, ptr).
-            bar.n = min(100, int(round(100 * float(progress))))
-            bar.refresh()
+            if bar is not None:
+                bar.n = min(100, int(round(100 * float(fraction))))
+                bar.refresh()
 
     logger = mi.logger()
     old_level = logger.log_level()
     old_appenders = [logger.appender(i) for i in range(logger.appender_count())]
-    appender = _Appender()
     logger.clear_appenders()
-    logger.add_appender(appender)
-    logger.set_log_level(mi.LogLevel.Info)
+    logger.add_appender(_Appender())
+    # Progress is reported at the Info level only.
+    logger.set_log_level(mi.LogLevel.Info if progress else mi.LogLevel.Warn)
     try:
         yield
     finally:
@@ -376,8 +382,9 @@ def _progress(enabled: bool, description: str) -> Iterator[None]:
         logger.clear_appenders()
         for a in old_appenders:
             logger.add_appender(a)
-        bar.n = 100
-        bar.close()
+        if bar is not None:
+            bar.n = 100
+            bar.close()
 
 
 # ----------------------------------------------------------------------------- EXR cache
@@ -463,7 +470,8 @@ def render_photoquantity(
     cache_dir : path-like, optional
         Folder of cached renders (created if missing). The image is stored as
         a float32 OpenEXR file named by :func:`scene_key`; an identical later
-        request reads it and renders nothing.
+        request reads it and renders nothing [2]_. The file is written
+        atomically (temporary file, then :func:`os.replace`).
     progress : bool
         Show a progress bar (Mitsuba's progress, forwarded to tqdm).
     return_info : bool
@@ -516,9 +524,9 @@ def render_photoquantity(
                 return (image, info) if return_info else image
 
     mi = _activate(variant)
-    mi_scene = mi.load_dict(to_mitsuba_dict(prepared, variant))
-    _check_sample_count(mi_scene, spp)
-    with _progress(progress, f"render {width}x{height} @{spp}spp"):
+    with _mitsuba_log(progress, f"render {width}x{height} @{spp}spp"):
+        mi_scene = mi.load_dict(to_mitsuba_dict(prepared, variant))
+        _check_sample_count(mi_scene, spp)
         tensor = mi.render(mi_scene, spp=spp, seed=seed)
     image = np.array(tensor, dtype=np.float32, copy=True)
     if image.ndim != 3 or image.shape[2] != len(channels):
@@ -605,9 +613,10 @@ def render_aov(
                 "rfilter": {"type": "box"},
             }
     mi = _activate(variant)
-    mi_scene = mi.load_dict(to_mitsuba_dict(prepared, variant))
-    _check_sample_count(mi_scene, spp)
-    out = np.array(mi.render(mi_scene, spp=spp, seed=seed), dtype=np.float32)
+    with _mitsuba_log(False):
+        mi_scene = mi.load_dict(to_mitsuba_dict(prepared, variant))
+        _check_sample_count(mi_scene, spp)
+        out = np.array(mi.render(mi_scene, spp=spp, seed=seed), dtype=np.float32)
     # hdrfilm in "rgb" mode writes R, G, B (of the null radiance) first, then AOVs.
     result: dict[str, NDArray[np.float32]] = {}
     start = out.shape[2] - sum(_AOV_CHANNELS[a] for a in names)

@@ -91,3 +91,15 @@ def test_demo_runs_and_keeps_its_files(tmp_path, capsys, monkeypatch):
     assert "vignetting map v" in out and "test scene photoquantity" in out
     assert (tmp_path / "d" / "camera" / "camera.json").is_file()
     assert (tmp_path / "d" / "scene.exr").is_file()
+
+
+def test_pqsim_capture_feeds_photoquant_calibrate(tmp_path, capsys):
+    from pqsim.cli import main as pqsim_main
+
+    out = tmp_path / "cap"
+    assert pqsim_main(["capture", "-o", str(out), "--resolution", "64x48", "--repeats", "2",
+                       "--exposures", "6", "--seed", "5"]) == 0
+    assert main(["calibrate", str(out / "capture.json"), "-o", str(tmp_path / "cam"), "-q"]) == 0
+    assert pqsim_main(["capture", "-o", str(out)]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert pqsim_main(["capture", "-o", str(tmp_path / "x"), "--exposure-range", "0.1", "0.01"]) == 2
