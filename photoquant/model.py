@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from photoquant._checks import check_array, check_bit_depth
+from photoquant._json import to_json_value
 from photoquant.errors import CameraModelError, InputError, OutputExistsError
 from photoquant.io.atomic import write_text_atomic
 from photoquant.io.images import read_exr, write_exr
@@ -228,8 +229,8 @@ class CameraModel:
                 "log_inverse_response": self.log_inverse_response.tolist(),
             },
             "sensor_lut": {"file": _LUT_NAME, "normalisation": "mean 1 per channel"},
-            "parameters": _jsonable(self.parameters),
-            "report": _jsonable(self.report),
+            "parameters": to_json_value(self.parameters),
+            "report": to_json_value(self.report),
         }
 
     def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
@@ -262,25 +263,6 @@ class CameraModel:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
         return target
-
-
-def _jsonable(value: Any) -> Any:
-    """Convert numpy scalars/arrays and tuples inside ``value`` to JSON types."""
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.floating):
-        return float(value)
-    if isinstance(value, Path):
-        return str(value)
-    return value
 
 
 def load_camera(path: str | os.PathLike[str]) -> CameraModel:

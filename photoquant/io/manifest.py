@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from photoquant._json import to_json_value
 from photoquant.errors import ManifestError
 from photoquant.io.atomic import write_text_atomic
 from photoquant.io.images import exif_exposure_time, read_image
@@ -477,25 +478,6 @@ def _group_by_exposure(
     return ordered
 
 
-def _to_json_value(value: Any) -> Any:
-    """Convert numpy scalars and arrays, tuples and paths to plain JSON values."""
-    if isinstance(value, Mapping):
-        return {str(k): _to_json_value(v) for k, v in value.items()}
-    if isinstance(value, np.ndarray):
-        return _to_json_value(value.tolist())
-    if isinstance(value, list | tuple):
-        return [_to_json_value(v) for v in value]
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.floating):
-        return float(value)
-    if isinstance(value, PurePath):
-        return value.as_posix()
-    return value
-
-
 # --------------------------------------------------------------------------- public API
 
 
@@ -569,7 +551,7 @@ def write_manifest(path: PathLike, data: Mapping[str, Any], *, allow_outside: bo
         If the file cannot be written; an existing file is then left unchanged.
     """
     path = Path(path)
-    plain = _to_json_value(data)
+    plain = to_json_value(data)
     resolved = path.resolve()
     parser = _Parser(resolved, resolved.parent, check_files=False, allow_outside=allow_outside)
     parser.parse(plain)
