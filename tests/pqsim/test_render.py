@@ -276,6 +276,12 @@ def test_render_bad_arguments(kwargs, match):
         render.render_photoquantity(scene, **args)
 
 
+def test_render_aov_bad_names():
+    scene = _flat_scene("nikon_d5100", 0.3, width=8, height=6)
+    with pytest.raises(InputError, match="`aovs`"):
+        render.render_aov(scene, ("albedo",), variant=VARIANT)
+
+
 def test_render_rejects_non_spectral_films_and_objects():
     scene = _flat_scene("nikon_d5100", 0.3, width=8, height=6)
     scene["sensor"]["film"] = {"type": "hdrfilm", "width": 8, "height": 6}
@@ -288,6 +294,7 @@ def test_render_rejects_non_spectral_films_and_objects():
 
 
 def test_choose_variant_defaults_and_override(monkeypatch):
+    monkeypatch.delenv(render.VARIANT_ENV, raising=False)
     assert render.choose_variant(allow_llvm=False) == "scalar_spectral"
     monkeypatch.setenv(render.VARIANT_ENV, "scalar_spectral")
     assert render.choose_variant() == "scalar_spectral"

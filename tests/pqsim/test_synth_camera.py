@@ -553,6 +553,7 @@ def test_simulator_does_not_import_the_calibrator() -> None:
     allowed = {
         "photoquant",
         "photoquant._checks",
+        "photoquant._json",  # JSON conversion used by the file formats
         "photoquant.errors",
         "photoquant.stack",  # the ExposureStack container, imported by photoquant.io
     }

@@ -1,0 +1,244 @@
+"""Settings of the validation job: the quick default, the paper's full settings, seeds.
+
+A :class:`ValidationConfig` holds everything an experiment needs to know
+about *how* it is run (image size, repeats, exposures, views, sweeps) and the
+knobs that deliberately degrade the calibrator (for the regression check's
+own tests). Three configurations are built in:
+
+``quick`` (default)
+    320×240 images, ``N = 4`` repeats for the calibration captures, ``K = 8``
+    exposures 1–200 ms, ``V = 3`` views: every experiment of the paper runs
+    on 2 cores in about a minute.
+``full``
+    The paper's settings (§6.1 of [PQ]): 1024×768, ``N = 10``, ``K = 8``
+    (1–200 ms), ``V = 3``.
+``tiny``
+    96×72, for the test suite only.
+
+Seeds
+-----
+One master seed ``S`` (``--seed``) drives everything; each random stream
+(the capture set of a preset, a chart capture, a noise capture, a sweep
+draw, ...) gets its own integer seed from :func:`stream_seed`, a
+:class:`numpy.random.SeedSequence` of ``S`` and the stream's name, so that
+adding or removing an experiment never changes another's numbers, and no
+global random state is used.
+
+References
+----------
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §6.1
+   (acquisition settings) and §6.3 (``N = 4``; ``N = 1`` vs ``N = 10``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import zlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from photoquant.errors import PhotoquantError
+
+__all__ = [
+    "ValidationError",
+    "ValidationConfig",
+    "CONFIGS",
+    "QUICK",
+    "FULL",
+    "TINY",
+    "PAPER_EXPOSURES_S",
+    "get_config",
+    "stream_seed",
+]
+
+PAPER_EXPOSURES_S: tuple[float, ...] = tuple(float(t) for t in np.geomspace(1e-3, 0.2, 8))
+"""The calibration exposures of §6.1 of [PQ]: 1 ms to 200 ms, ``K = 8`` (geometric)."""
+
+
+class ValidationError(PhotoquantError):
+    """The validation job was asked for something it cannot do (bad option, baseline mismatch)."""
+
+
+@dataclass(frozen=True)
+class ValidationConfig:
+    """How the validation experiments are run.
+
+    Parameters
+    ----------
+    name : str
+        ``"quick"``, ``"full"``, ``"tiny"`` or a user name.
+    shape : (H, W)
+        Image size of every simulated capture.
+    n_repeats : int
+        ``N``: repeats of each exposure of the calibration captures.
+    exposure_s : tuple of float
+        The ``K`` calibration exposures in seconds (also used for the chart scenes).
+    n_views : int
+        ``V``: view directions of the calibration scene.
+    presets : tuple of str
+        Synthetic camera presets (:mod:`pqsim.synth_camera.presets`).
+    chart_repeats : int
+        ``N`` of the corrected ColorChecker captures (Table 1, Fig. 7).
+    ldr_exposure_s : float
+        Exposure of the uncorrected LDR image (20 ms in §6.3 of [PQ]).
+    chart_sensitivities : str
+        Spectral sensitivities for the chart's photoquantities
+        (:data:`pqsim.spectral.CAMERA_SENSITIVITIES`).
+    illuminants : tuple of (label, illuminant) pairs
+        Lighting of Table 1: ``("outdoor", "D65"), ("indoor", "A")``.
+    noise_repeats : tuple of int
+        ``N`` values of the noise experiment (must contain 1, 4 and 10).
+    noise_exposure_s : float
+        Exposure at which the denoised pixel value's standard deviation is
+        measured for the ``1/√N`` law (appendix A).
+    sweep_preset : str
+        Preset of the vignetting sweeps.
+    sweep_tracks : tuple of int
+        Numbers of correspondences of the vignetting sweep (§6.1 used 10).
+    sweep_draws : int
+        Random subsets of correspondences per number.
+    sweep_views : tuple of int
+        Numbers of views of the vignetting sweep (nested subsets of one capture).
+    n_samples : int
+        Pixels sampled for the response (photoquant's default, 2000).
+    calibrate_kwargs : mapping
+        Extra keyword arguments of :func:`photoquant.calibrate.calibrate`
+        (e.g. ``{"smoothness": 1e8}`` to break it on purpose).
+    skip_vignetting : bool
+        Calibrate from view 0 only, so that vignetting is left at 1 (a broken
+        calibrator for the regression check's tests).
+    """
+
+    name: str = "quick"
+    shape: tuple[int, int] = (240, 320)
+    n_repeats: int = 4
+    exposure_s: tuple[float, ...] = PAPER_EXPOSURES_S
+    n_views: int = 3
+    presets: tuple[str, ...] = ("ccd", "cmos")
+    chart_repeats: int = 4
+    ldr_exposure_s: float = 0.02
+    chart_sensitivities: str = "nikon_d5100"
+    illuminants: tuple[tuple[str, str], ...] = (("outdoor", "D65"), ("indoor", "A"))
+    noise_repeats: tuple[int, ...] = (1, 2, 4, 10)
+    noise_exposure_s: float = 0.02
+    sweep_preset: str = "ccd"
+    sweep_tracks: tuple[int, ...] = (10, 30, 100, 300, 1000)
+    sweep_draws: int = 3
+    sweep_views: tuple[int, ...] = (2, 3, 4, 5)
+    n_samples: int = 2000
+    calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    skip_vignetting: bool = False
+
+    def __post_init__(self) -> None:
+        h, w = (int(v) for v in self.shape)
+        if h < 48 or w < 64:
+            raise ValidationError(f"`shape` must be at least (48, 64), got {self.shape}")
+        for name in ("n_repeats", "n_views", "chart_repeats", "sweep_draws", "n_samples"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValidationError(f"`{name}` must be a positive integer, got {v!r}")
+        missing = {1, 4, 10} - set(self.noise_repeats)
+        if missing:
+            raise ValidationError(
+                f"`noise_repeats` must contain 1, 4 and 10 (§6.3), missing {sorted(missing)}"
+            )
+        if len(self.exposure_s) < 2:
+            raise ValidationError("`exposure_s` needs at least two exposures")
+        object.__setattr__(self, "shape", (h, w))
+        object.__setattr__(self, "exposure_s", tuple(float(t) for t in self.exposure_s))
+        object.__setattr__(self, "calibrate_kwargs", dict(self.calibrate_kwargs))
+
+    # ------------------------------------------------------------------ helpers
+
+    def replace(self, **changes: Any) -> ValidationConfig:
+        """A copy with some fields changed."""
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain JSON-ready values of every field."""
+        out = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, tuple):
+                v = [list(x) if isinstance(x, tuple) else x for x in v]
+            elif isinstance(v, Mapping):
+                v = dict(v)
+            out[f.name] = v
+        return out
+
+    def conditions(self) -> dict[str, Any]:
+        """The fields that define the experiments' conditions.
+
+        A stored baseline applies to runs with the same conditions. Left out:
+        the presets run (a subset only omits metrics) and the knobs that break
+        the calibrator on purpose (they are what a regression check must see).
+        """
+        d = self.as_dict()
+        for key in ("name", "presets", "calibrate_kwargs", "skip_vignetting"):
+            d.pop(key)
+        return d
+
+    @property
+    def is_degraded(self) -> bool:
+        """True when a knob deliberately changes the calibrator."""
+        return bool(self.calibrate_kwargs) or self.skip_vignetting
+
+    def describe(self) -> str:
+        """One line: image size, N, K, V."""
+        h, w = self.shape
+        t = self.exposure_s
+        return (
+            f"{w}x{h}, N = {self.n_repeats}, K = {len(t)} ({1e3 * min(t):g}–{1e3 * max(t):g} ms), "
+            f"V = {self.n_views}"
+        )
+
+
+QUICK = ValidationConfig()
+"""The default: the paper's experiments on 320×240 images with ``N = 4``."""
+
+FULL = ValidationConfig(name="full", shape=(768, 1024), n_repeats=10)
+"""The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``."""
+
+TINY = ValidationConfig(
+    name="tiny",
+    shape=(72, 96),
+    n_repeats=4,
+    sweep_tracks=(10, 100),
+    sweep_draws=2,
+    sweep_views=(2, 3),
+)
+"""For the test suite only: 96×72 images, short sweeps."""
+
+CONFIGS: dict[str, ValidationConfig] = {"quick": QUICK, "full": FULL, "tiny": TINY}
+
+
+def get_config(name: str) -> ValidationConfig:
+    """The built-in configuration ``name`` (``quick``, ``full``, ``tiny``)."""
+    try:
+        return CONFIGS[name]
+    except KeyError:
+        raise ValidationError(
+            f"unknown configuration {name!r}; valid: {sorted(CONFIGS)}"
+        ) from None
+
+
+def stream_seed(seed: int, *names: Any) -> int:
+    """An independent 32-bit seed for the random stream called ``names`` of master ``seed``.
+
+    ``SeedSequence([seed, crc32(name), ...])``: the same names always give the
+    same stream, different names independent ones.
+
+    Examples
+    --------
+    >>> stream_seed(0, "capture", "ccd") == stream_seed(0, "capture", "ccd")
+    True
+    >>> stream_seed(0, "capture", "ccd") != stream_seed(1, "capture", "ccd")
+    True
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValidationError(f"`seed` must be a non-negative integer, got {seed!r}")
+    words = [int(seed)] + [zlib.crc32(str(n).encode()) for n in names]
+    return int(np.random.SeedSequence(words).generate_state(1, dtype=np.uint32)[0])

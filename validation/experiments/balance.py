@@ -1,0 +1,96 @@
+"""Experiment 2 — colour balance factors (§5.3 of [PQ]) vs truth.
+
+The calibrated camera outputs *white-balanced* photoquantity: the white chart
+of the calibration scene comes out neutral. The balance factors ``a_λ``
+themselves are not comparable with the simulator's in-camera balance
+directly, because each recovered ``g_λ`` carries its own gauge constant
+(§5.2): what must hold is ``g_λ + ln a_λ = g_true,λ + K`` with one ``K`` for
+all channels. With ``c_λ`` the fitted gauge of channel λ
+(:func:`validation.experiments.response.gauge_offsets`), the factor the truth
+implies is ``a*_λ = exp(c_λ − c_G)`` (green is the reference, ``a_G = 1``);
+the error is ``a_λ / a*_λ − 1``.
+
+End to end, the HDR test scene is corrected and each channel's median ratio
+to the true photoquantity is compared with green's
+(:func:`validation.metrics.channel_scale_ratios`): a balanced camera gives 1.
+
+The paper gives no accuracy for the balance (only its time, 1 ms).
+
+References
+----------
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §5.3, §6.1
+   "Colour balancing".
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from validation.config import ValidationConfig
+from validation.experiments.base import ExperimentResult
+from validation.experiments.response import gauge_offsets
+from validation.experiments.shared import Shared
+
+__all__ = ["run", "TITLE"]
+
+TITLE = "Colour balance factors (§5.3)"
+
+
+def _signed_pct(values) -> str:
+    return " / ".join(f"{100 * v:+.2f} %" for v in values)
+
+
+def run(
+    config: ValidationConfig, seed: int, workdir: Path, *, shared: Shared | None = None
+) -> ExperimentResult:
+    """Compare the recovered balance with the truth, directly and on the corrected test scene."""
+    from validation.metrics import channel_scale_ratios
+
+    shared = shared or Shared(config, seed, workdir)
+    res = ExperimentResult("balance", TITLE, "§5.3, §6.1")
+    res.paper = {"note": "no accuracy given (time 1 ms)"}
+    for preset in config.presets:
+        cal = shared.calibration(preset)
+        model, cam = cal.model, cal.truth.camera
+        names = list(model.channels)
+        ref = 1 if len(names) > 1 else 0
+        a = np.asarray(model.balance, dtype=np.float64)
+        c = gauge_offsets(model, cam)
+        a_star = np.exp(c - c[ref])
+        err = a / a_star - 1
+        scene = cal.truth.captures["scene"]
+        corr = shared.scene_correction(preset)
+        ratios = channel_scale_ratios(scene.l, corr.photoquantity, corr.mask)
+        for ch, name in enumerate(names):
+            res.metric(f"{preset}.factor.{name}", a[ch], better="both", check=False,
+                       description=f"recovered a_{name}")
+            res.metric(f"{preset}.factor_truth.{name}", a_star[ch], better="both", check=False,
+                       description=f"a_{name} implied by the truth and the recovered gauge")
+            if ch != ref:
+                res.metric(f"{preset}.factor_abs_error.{name}", abs(err[ch]), unit="fraction",
+                           description=f"|a_{name} / a*_{name} − 1|")
+                res.metric(f"{preset}.scene_abs_error.{name}", abs(ratios[ch] - 1),
+                           unit="fraction",
+                           description=f"|median(l̂/l)_{name} / median(l̂/l)_G − 1| on the test scene")
+        others = [ch for ch in range(len(names)) if ch != ref]
+        lbl = "/".join(names[ch] for ch in others)
+        res.row(
+            f"{preset}: factors a {'/'.join(names)}",
+            " / ".join(f"{v:.4f}" for v in a),
+            "– (1 ms)",
+            "truth-implied " + " / ".join(f"{v:.4f}" for v in a_star),
+        )
+        res.row(
+            f"{preset}: factor error {lbl}",
+            _signed_pct(err[others]),
+            "–",
+            f"test scene channel error {lbl}: {_signed_pct(ratios[others] - 1)}",
+        )
+        res.notes.append(
+            f"{preset}: in-camera balance of the simulator a = "
+            + " / ".join(f"{v:g}" for v in cam.balance)
+            + "; the method's factors undo it together with each channel's gauge."
+        )
+    return res

@@ -1,0 +1,163 @@
+"""An analytic ColorChecker scene: 24 flat patches with exact camera photoquantities.
+
+The paper studies linearisation and colour correction on a photograph of a
+ColorChecker lit by daylight (§6.3, Fig. 6–7, Table 1). Here the chart is a
+closed-form photoquantity field, not a render: each patch's ``l_λ`` is the
+exact integral ``∫ r_λ(x) E(x) ρ(x) dx`` of the camera's spectral sensitivity,
+the illuminant and the patch reflectance
+(:func:`pqsim.spectral.camera_photoquantity_exact`), and the chart maker's
+reference values are the CIE RGB of the reflected light under D65
+(:func:`pqsim.spectral.chart_reference_colours`). The numpy synthetic camera
+then captures it — fast and exact (no Monte-Carlo noise, no blur at the
+patch edges).
+
+Layout: a 6 × 4 grid of square-ish patches in chart order (row 1 "dark skin"
+… row 4 "white 9.5" … "black 2"), on a black card (reflectance 0.04), on a
+grey background (reflectance 0.2), centred and covering 80 % × 70 % of the
+image.
+
+References
+----------
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §6.3, §6.4.
+.. [MCC] C. S. McCamy, H. Marcus, J. G. Davidson, "A color-rendition chart",
+   J. Appl. Photogr. Eng. 2(3), 1976 (the ColorChecker); spectral data:
+   BabelColor average, via colour-science.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ChartScene", "colour_checker_scene", "patch_means", "WHITE_PATCH"]
+
+WHITE_PATCH = 18
+"""Index of the chart's white patch, "white 9.5" (row 4, column 1)."""
+
+_CARD_REFLECTANCE = 0.04
+_BACKGROUND_REFLECTANCE = 0.2
+
+
+@dataclass(frozen=True, eq=False)
+class ChartScene:
+    """A ColorChecker scene and its references.
+
+    Attributes
+    ----------
+    l : ndarray, shape (H, W, 3)
+        True camera photoquantity of every pixel.
+    patch_l : ndarray, shape (24, 3)
+        True camera photoquantity of each patch.
+    cie_rgb : ndarray, shape (24, 3)
+        The chart maker's CIE RGB of each patch under D65 (white Y = 1).
+    boxes : ndarray, shape (24, 4), int
+        Each patch's sampling box ``[x0, y0, x1, y1]`` (end exclusive), one
+        pixel inside its edges.
+    names : tuple of str
+        Patch names in chart order.
+    illuminant : str
+        The scene's illuminant.
+    sensitivities : str
+        The camera's spectral sensitivity preset.
+    """
+
+    l: np.ndarray
+    patch_l: np.ndarray
+    cie_rgb: np.ndarray
+    boxes: np.ndarray
+    names: tuple[str, ...]
+    illuminant: str
+    sensitivities: str
+
+    @property
+    def white_index(self) -> int:
+        """Index of the white patch."""
+        return WHITE_PATCH
+
+
+def colour_checker_scene(
+    shape: Sequence[int],
+    illuminant: str = "D65",
+    sensitivities: str = "nikon_d5100",
+    *,
+    level: float = 1.0,
+) -> ChartScene:
+    """Build the analytic ColorChecker scene of ``shape`` (H, W) under ``illuminant``.
+
+    Parameters
+    ----------
+    shape : (H, W)
+        Image size (at least 48 × 64 so that every patch has interior pixels).
+    illuminant : str
+        ``"D65"`` (outdoor) or ``"A"`` (indoor), or any illuminant of
+        :func:`pqsim.spectral.illuminant`.
+    sensitivities : str
+        Camera spectral sensitivity preset.
+    level : float
+        Radiometric scale: the illuminant's spectral power at 560 nm. With
+        1, the white patch's green photoquantity is about 0.9, which saturates
+        the presets at 20 ms (as the paper's LDR image does above 230).
+
+    Returns
+    -------
+    ChartScene
+    """
+    from pqsim.spectral import (
+        camera_photoquantity_exact,
+        chart_reference_colours,
+        colour_checker_reflectances,
+        constant_spectrum,
+    )
+
+    h, w = (int(v) for v in shape)
+    refl = colour_checker_reflectances()
+    names = tuple(refl)
+    patch_l = level * camera_photoquantity_exact(sensitivities, refl, illuminant)
+    card, background = (
+        level * camera_photoquantity_exact(sensitivities, constant_spectrum(r), illuminant)[0]
+        for r in (_CARD_REFLECTANCE, _BACKGROUND_REFLECTANCE)
+    )
+    cie_rgb = chart_reference_colours(refl, "D65")["CIE RGB"]
+
+    l = np.empty((h, w, 3))
+    l[:] = background
+    cx0, cx1 = round(0.1 * w), round(0.9 * w)
+    cy0, cy1 = round(0.15 * h), round(0.85 * h)
+    l[cy0:cy1, cx0:cx1] = card
+    xs = np.linspace(cx0, cx1, 7)
+    ys = np.linspace(cy0, cy1, 5)
+    boxes = np.empty((24, 4), dtype=np.int64)
+    for i in range(24):
+        r, c = divmod(i, 6)
+        gx = 0.1 * (xs[1] - xs[0])
+        gy = 0.1 * (ys[1] - ys[0])
+        x0, x1 = round(xs[c] + gx), round(xs[c + 1] - gx)
+        y0, y1 = round(ys[r] + gy), round(ys[r + 1] - gy)
+        l[y0:y1, x0:x1] = patch_l[i]
+        boxes[i] = (x0 + 1, y0 + 1, x1 - 1, y1 - 1)
+    for arr in (l, patch_l, cie_rgb, boxes):
+        arr.setflags(write=False)
+    return ChartScene(
+        l=l,
+        patch_l=patch_l,
+        cie_rgb=cie_rgb,
+        boxes=boxes,
+        names=names,
+        illuminant=str(illuminant),
+        sensitivities=str(sensitivities),
+    )
+
+
+def patch_means(image: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """Mean of each channel over each box, ignoring NaN: ``(n_boxes, C)``."""
+    img = np.asarray(image, dtype=np.float64)
+    out = np.empty((len(boxes), img.shape[-1]))
+    for i, (x0, y0, x1, y1) in enumerate(np.asarray(boxes)):
+        patch = img[y0:y1, x0:x1].reshape(-1, img.shape[-1])
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(patch)
+            n = ok.sum(axis=0)
+            out[i] = np.where(n > 0, np.where(ok, patch, 0).sum(axis=0) / np.maximum(n, 1), np.nan)
+    return out

@@ -1,0 +1,254 @@
+"""State shared by the experiments of one run: calibrated cameras, charts, seeds.
+
+Most experiments look at the same calibration from a different side (its
+response, its balance, its LUT, its vignetting, its timings), so each preset
+is simulated and calibrated once per run by :meth:`Shared.calibration` and
+kept; the result depends only on the configuration, the preset and the
+master seed, never on which experiment asked first.
+
+The calibration goes through files exactly as with a real camera:
+:func:`pqsim.capture_set.write_capture_set` writes the frames, the manifest
+and the ground truth, and photoquant reads them back
+(:func:`photoquant.io.load_manifest`, :func:`photoquant.io.load_stack`)
+before :func:`photoquant.calibrate.calibrate` runs.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from validation.config import ValidationConfig, stream_seed
+
+__all__ = ["Calibration", "Shared", "merge_with_model"]
+
+Progress = Callable[[str], None]
+
+
+def _stderr(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def merge_with_model(stack: Any, model: Any) -> Any:
+    """Merge a stack with a calibrated model's (unbalanced) response, as calibration does.
+
+    This is :func:`photoquant.calibrate.merge_stack` with the model's levels,
+    ``g_λ``, saturation levels, lowest valid level and merge weighting: the
+    merge of step 2 of :func:`photoquant.calibrate.calibrate`.
+    """
+    from photoquant.calibrate import merge_stack
+
+    return merge_stack(
+        stack,
+        model.response_levels,
+        model.log_inverse_response,
+        model.saturation_level,
+        min_level=model.response_valid_min,
+        weighting=model.parameters.get("merge_weighting", "hat"),
+    )
+
+
+@dataclass(eq=False)
+class Calibration:
+    """One simulated and calibrated camera.
+
+    Attributes
+    ----------
+    preset : str
+        Camera preset.
+    camera : pqsim.synth_camera.camera.SyntheticCamera
+        The simulated camera.
+    manifest : Path
+        The capture set's manifest.
+    truth : pqsim.synth_camera.truth.TruthSet
+        Its ground truth.
+    model : photoquant.model.CameraModel
+        The calibrated camera.
+    capture_seed, calibrate_seed : int
+        Seeds of the capture set and of the response's sample selection.
+    simulate_s, load_s, calibrate_s : float
+        Wall times of writing the capture set, reading it, calibrating.
+    uniform_views : list of ndarray or None
+        ``merge / u`` of each view (the vignetting fit's input), kept for the
+        vignetting sweep's preset only.
+    tracks : list of ndarray or None
+        The manifest's correspondences (kept with ``uniform_views``).
+    """
+
+    preset: str
+    camera: Any
+    manifest: Path
+    truth: Any
+    model: Any
+    capture_seed: int
+    calibrate_seed: int
+    simulate_s: float
+    load_s: float
+    calibrate_s: float
+    uniform_views: list[np.ndarray] | None = None
+    tracks: list[np.ndarray] | None = None
+
+
+class Shared:
+    """Memoised calibrations, test-scene corrections and chart scenes of one run.
+
+    Parameters
+    ----------
+    config : ValidationConfig
+        The run's settings.
+    seed : int
+        Master seed.
+    workdir : Path
+        Folder for the capture sets (one sub-folder per preset).
+    progress : callable, optional
+        Receives step messages (standard error by default; pass
+        ``lambda _: None`` for silence).
+    """
+
+    def __init__(
+        self,
+        config: ValidationConfig,
+        seed: int,
+        workdir: str | Path,
+        progress: Progress | None = None,
+    ) -> None:
+        self.config = config
+        self.seed = int(seed)
+        self.workdir = Path(workdir)
+        self.say: Progress = progress or _stderr
+        self.seeds: dict[str, int] = {}
+        self._calibrations: dict[str, Calibration] = {}
+        self._scenes: dict[str, Any] = {}
+        self._charts: dict[str, Any] = {}
+        self.cache: dict[Any, Any] = {}
+        """Memo for results several experiments share (keys name their owner)."""
+
+    def stream(self, *names: Any) -> int:
+        """The seed of stream ``names`` (recorded in :attr:`seeds` for the report)."""
+        s = stream_seed(self.seed, *names)
+        self.seeds["/".join(str(n) for n in names)] = s
+        return s
+
+    # ------------------------------------------------------------------ calibration
+
+    def calibration(self, preset: str) -> Calibration:
+        """Simulate the capture set of ``preset`` and calibrate it (once per run)."""
+        if preset not in self._calibrations:
+            self._calibrations[preset] = self._calibrate(preset)
+        return self._calibrations[preset]
+
+    def _calibrate(self, preset: str) -> Calibration:
+        from photoquant.calibrate import calibrate
+        from photoquant.io import load_manifest, load_stack
+        from pqsim.capture_set import write_capture_set
+        from pqsim.synth_camera.presets import camera_from_preset
+        from pqsim.synth_camera.truth import load_truth
+
+        cfg = self.config
+        camera = camera_from_preset(preset)
+        capture_seed = self.stream("capture", preset)
+        calibrate_seed = self.stream("calibrate", preset)
+        folder = self.workdir / preset / "capture"
+        h, w = cfg.shape
+        self.say(
+            f"validate: simulating the '{preset}' camera's calibration captures "
+            f"({w}x{h}, N = {cfg.n_repeats}, K = {len(cfg.exposure_s)}, V = {cfg.n_views}) ..."
+        )
+        t0 = time.perf_counter()
+        manifest_path = write_capture_set(
+            folder,
+            camera,
+            shape=cfg.shape,
+            exposure_s=np.asarray(cfg.exposure_s),
+            n_repeats=cfg.n_repeats,
+            n_views=cfg.n_views,
+            seed=capture_seed,
+            overwrite=True,
+        )
+        simulate_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        manifest = load_manifest(manifest_path)
+        views = [load_stack(v, manifest) for v in manifest.views]
+        irradiance = load_stack(manifest.irradiance, manifest) if manifest.irradiance else None
+        tracks = list(manifest.correspondences) if manifest.correspondences else None
+        truth = load_truth(folder / "truth")
+        load_s = time.perf_counter() - t0
+        if cfg.skip_vignetting:
+            self.say("validate: (degraded on purpose) calibrating from view 0 only: no vignetting")
+        kwargs: dict[str, Any] = {"n_samples": cfg.n_samples, "seed": calibrate_seed}
+        kwargs.update(cfg.calibrate_kwargs)
+        self.say(f"validate: calibrating '{preset}' ...")
+        t0 = time.perf_counter()
+        model = calibrate(
+            views[:1] if cfg.skip_vignetting else views,
+            irradiance=irradiance,
+            white_roi=manifest.white_roi,
+            correspondences=None if cfg.skip_vignetting else tracks,
+            progress=lambda step: self.say(f"  {preset}: {step}"),
+            **kwargs,
+        )
+        calibrate_s = time.perf_counter() - t0
+        cal = Calibration(
+            preset=preset,
+            camera=camera,
+            manifest=manifest_path,
+            truth=truth,
+            model=model,
+            capture_seed=capture_seed,
+            calibrate_seed=calibrate_seed,
+            simulate_s=simulate_s,
+            load_s=load_s,
+            calibrate_s=calibrate_s,
+        )
+        if preset == cfg.sweep_preset and len(views) > 1 and tracks:
+            cal.uniform_views = [
+                merge_with_model(v, model).photoquantity() / model.sensor_lut for v in views
+            ]
+            cal.tracks = [np.asarray(t, dtype=np.float64) for t in tracks]
+        return cal
+
+    # ------------------------------------------------------------------ scenes
+
+    def scene_correction(self, preset: str) -> Any:
+        """The capture set's HDR test scene corrected with the calibrated camera (once)."""
+        if preset not in self._scenes:
+            from photoquant.correct import correct
+            from photoquant.io import load_manifest, load_stack
+
+            cal = self.calibration(preset)
+            manifest = load_manifest(cal.manifest)
+            stack = load_stack(manifest.scene, manifest)
+            t0 = time.perf_counter()
+            res = correct(stack, cal.model)
+            self._scenes[preset] = (res, time.perf_counter() - t0)
+        return self._scenes[preset][0]
+
+    def scene_correction_s(self, preset: str) -> float:
+        """Wall time of the correction in :meth:`scene_correction` (frames already read)."""
+        self.scene_correction(preset)
+        return self._scenes[preset][1]
+
+    def chart(self, illuminant: str) -> Any:
+        """The analytic ColorChecker scene under ``illuminant`` (once)."""
+        if illuminant not in self._charts:
+            from validation.experiments.chart import colour_checker_scene
+
+            self._charts[illuminant] = colour_checker_scene(
+                self.config.shape, illuminant, self.config.chart_sensitivities
+            )
+        return self._charts[illuminant]
+
+
+def have_colour_science() -> bool:
+    """Whether colour-science (spectral data of the chart) can be imported."""
+    try:
+        import colour  # noqa: F401
+    except ImportError:
+        return False
+    return True
