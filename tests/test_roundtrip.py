@@ -145,6 +145,22 @@ def test_photoquantity_error_at_n4(calibrated, scene):
     assert e[ok].mean() < MODEL_SLACK * pred[ok].mean() + CALIBRATION_BUDGET
 
 
+def test_paper_noise_claim_on_a_ccd_and_a_moderate_scene(calibrated):
+    """§6.3: "N = 4 was sufficient to obtain e_mean < 0.5 %", on the paper's kind of
+    camera (a CCD) and scene ("not very contrasted", §6.4: here one decade)."""
+    camera, _, truth, model = calibrated
+    if truth.camera.responses[0].kind != "linear":
+        pytest.skip("the claim is about the paper's CCD; the cmos preset's noise floor is higher")
+    rng = np.random.default_rng(5)
+    l = 10 ** np.kron(rng.uniform(-1, 0, (6, 8, 3)), np.ones((SHAPE[0] // 6, SHAPE[1] // 8, 1)))
+    t = truth.captures["view0"].exposure_s
+    res = correct(camera.capture(l, t, 4, rng=6).to_stack(), model)
+    e, stats, _ = relative_error_eq8(l, res.photoquantity, res.mask)
+    floor = _noise_floor(truth, None, 4, l=l, exposure_s=t)
+    assert floor.mean() < 0.004  # the physics leaves room for the claim ...
+    assert stats.e_mean < 0.005  # ... and the calibrated pipeline meets it
+
+
 def test_correct_manifest_flags_instead_of_guessing(calibrated):
     _, manifest, truth, model = calibrated
     res = correct_manifest(manifest, model)
@@ -169,3 +185,21 @@ def test_correct_of_capture_is_l_up_to_scale(calibrated, seed, decades):
     ok = np.isfinite(e) & np.isfinite(pred)
     assert ok.mean() > 0.95
     assert e[ok].mean() < MODEL_SLACK * pred[ok].mean() + CALIBRATION_BUDGET
+
+
+def test_correspondences_are_found_automatically_without_the_manifest_tracks(tmp_path):
+    """§5.5: without given tracks, SIFT + RANSAC homographies find them; the count is reported."""
+    import json
+
+    manifest = write_capture_set(
+        tmp_path / "cap", camera_from_preset("ccd"), shape=(192, 256), n_repeats=4, seed=2
+    )
+    data = json.loads(manifest.read_text())
+    del data["correspondences"]
+    (tmp_path / "cap" / "no_tracks.json").write_text(json.dumps(data))
+    model = calibrate_manifest(tmp_path / "cap" / "no_tracks.json")
+    vig = model.report["vignetting"]
+    assert vig["correspondence_source"].startswith("automatic")
+    assert vig["n_tracks"] >= 100
+    truth = load_truth(tmp_path / "cap" / "truth")
+    assert map_relative_error(truth.camera.vignetting, model.vignetting()).e_mean < 0.01

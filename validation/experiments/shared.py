@@ -124,6 +124,7 @@ class Shared:
         self.say: Progress = progress or _stderr
         self.seeds: dict[str, int] = {}
         self._calibrations: dict[str, Calibration] = {}
+        self._failures: dict[str, Exception] = {}
         self._scenes: dict[str, Any] = {}
         self._charts: dict[str, Any] = {}
         self.cache: dict[Any, Any] = {}
@@ -139,8 +140,16 @@ class Shared:
 
     def calibration(self, preset: str) -> Calibration:
         """Simulate the capture set of ``preset`` and calibrate it (once per run)."""
+        if preset in self._failures:
+            raise self._failures[preset]
         if preset not in self._calibrations:
-            self._calibrations[preset] = self._calibrate(preset)
+            from photoquant.errors import PhotoquantError
+
+            try:
+                self._calibrations[preset] = self._calibrate(preset)
+            except PhotoquantError as exc:  # remembered: the other experiments fail alike
+                self._failures[preset] = exc
+                raise
         return self._calibrations[preset]
 
     def _calibrate(self, preset: str) -> Calibration:
