@@ -17,6 +17,11 @@ Frames are PNG (uint8 for 8 bits, uint16 above) or TIFF; the manifest is
 written last with :func:`photoquant.io.write_manifest`, so a folder without
 ``capture.json`` is an unfinished capture.
 
+The file layout is shared with the Mitsuba-rendered capture sets of
+:mod:`pqsim.rendered_capture`: both call :func:`check_output_folder` and
+:func:`write_capture_folder`, which write the frames, the truth and the
+manifest in one place.
+
 References
 ----------
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §5.1 (image
@@ -26,7 +31,7 @@ References
 from __future__ import annotations
 
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -44,12 +49,15 @@ from pqsim.analytic import (
 )
 from pqsim.synth_camera.camera import Capture, SyntheticCamera
 from pqsim.synth_camera.optics import check_shape
-from pqsim.synth_camera.truth import save_truth
+from pqsim.synth_camera.truth import CaptureTruth, save_truth
 
 __all__ = [
     "DEFAULT_EXPOSURES_S",
     "DEFAULT_SCENE_EXPOSURES_S",
     "MANIFEST_NAME",
+    "check_output_folder",
+    "frame_extension",
+    "write_capture_folder",
     "write_capture_set",
 ]
 
@@ -65,7 +73,12 @@ DEFAULT_SCENE_EXPOSURES_S = np.geomspace(2.5e-4, 0.64, 10)
 shadow ~2 % at 0.64 s)."""
 
 MANIFEST_NAME = "capture.json"
-_OWNED = ("views", "irradiance", "scene", "truth", MANIFEST_NAME)
+#: Paths of a capture folder written by pqsim, removed before an overwrite.
+_OWNED = ("views", "irradiance", "scene", "colorchecker", "truth", MANIFEST_NAME)
+
+#: A capture, or a function simulating it when its frames are about to be written
+#: (so that only one capture's frames are in memory at a time).
+CaptureSource = Capture | Callable[[], Capture]
 
 
 def _frame_names(exposure_s: np.ndarray) -> list[str]:
@@ -91,6 +104,171 @@ def _write_frames(root: Path, sub: str, capture: Capture, ext: str) -> dict[str,
             pqio.write_image(root / rel, capture.frames[n, k])
             frames.append({"file": rel, "exposure_s": float(capture.exposure_s[k]), "repeat": n})
     return {"frames": frames}
+
+
+def frame_extension(frame_format: str) -> str:
+    """File extension of a frame format: ``"png"`` → ``png``, ``"tiff"``/``"tif"`` → ``tif``.
+
+    Raises
+    ------
+    InputError
+        For any other format (naming ``frame_format``).
+    """
+    ext = {"png": "png", "tiff": "tif", "tif": "tif"}.get(str(frame_format).lower())
+    if ext is None:
+        raise InputError(f"`frame_format` must be 'png' or 'tiff', got {frame_format!r}")
+    return ext
+
+
+def check_output_folder(folder: str | Path, overwrite: bool) -> tuple[Path, bool]:
+    """Check that a capture set may be written to ``folder``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Destination; it may be missing, or an empty folder, or any folder with
+        ``overwrite``.
+    overwrite : bool
+        Whether a non-empty folder may be written to.
+
+    Returns
+    -------
+    (Path, bool)
+        The folder and whether it is non-empty (then :func:`write_capture_folder`
+        removes the previous capture set's paths first).
+
+    Raises
+    ------
+    InputError
+        If ``folder`` is a file, or is not empty and ``overwrite`` is false.
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"`folder` {str(folder)!r} exists and is not a folder")
+    non_empty = folder.is_dir() and any(folder.iterdir())
+    if non_empty and not overwrite:
+        raise InputError(
+            f"`folder` {str(folder)!r} is not empty; pass overwrite=True to replace its capture set"
+        )
+    return folder, non_empty
+
+
+def _remove_owned(folder: Path) -> None:
+    for name in _OWNED:
+        p = folder / name
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        elif p.exists() or p.is_symlink():
+            p.unlink()
+
+
+def _resolve(source: CaptureSource) -> Capture:
+    capture = source() if callable(source) else source
+    if not isinstance(capture, Capture):
+        raise TypeError(f"a capture source returned {type(capture).__name__}, not a Capture")
+    return capture
+
+
+def write_capture_folder(
+    folder: Path,
+    camera: SyntheticCamera,
+    *,
+    views: Sequence[CaptureSource],
+    irradiance: CaptureSource | None,
+    scene: CaptureSource | None,
+    extra_sets: Mapping[str, tuple[CaptureSource, Mapping[str, Any]]] | None = None,
+    white_roi: Sequence[int] | None,
+    correspondences: list[Any] | None,
+    ext: str,
+    write_saturation_level: bool,
+    generator: Mapping[str, Any],
+    truth_meta: Mapping[str, Any],
+    remove_previous: bool,
+) -> Path:
+    """Write a capture set: frames, ground truth (``truth/``), then the manifest.
+
+    The one implementation of the capture-folder layout shared by
+    :func:`write_capture_set` (analytic scenes) and
+    :func:`pqsim.rendered_capture.write_rendered_capture_set` (Mitsuba). Each
+    capture is resolved (simulated, if given as a function) just before its
+    frames are written, and its frames are dropped afterwards; only its truth
+    is kept for ``truth/``.
+
+    Parameters
+    ----------
+    folder : Path
+        Destination, checked by :func:`check_output_folder`.
+    camera : SyntheticCamera
+        The camera of every capture (bit depth, channels, saturation values).
+    views : sequence of Capture or callable
+        The ``V`` calibration views, written to ``views/v<i>/``; truth ``view<i>``.
+    irradiance, scene : Capture or callable, optional
+        The irradiance scene (``irradiance/``) and the test scene (``scene/``).
+    extra_sets : mapping, optional
+        ``name → (capture, fields)``: more frame sets written to ``name/`` and
+        stored under the manifest key ``name`` as ``{"frames": [...], **fields}``
+        (photoquant keeps unknown keys); truth ``name``. Names must be listed in
+        the owned paths (currently ``colorchecker``).
+    white_roi : sequence of 4 int, optional
+        The white chart's box in view 0.
+    correspondences : list, optional
+        Manifest tracks ``[[view, x, y], ...]`` (pixel-index coordinates).
+    ext : str
+        Frame file extension (:func:`frame_extension`).
+    write_saturation_level : bool
+        Write the camera's true saturation values in the manifest.
+    generator : mapping
+        The manifest's ``generator`` record (how the set was made).
+    truth_meta : mapping
+        Free metadata of ``truth/truth.json``.
+    remove_previous : bool
+        Remove the owned paths of a previous capture set first.
+
+    Returns
+    -------
+    Path
+        The manifest ``folder / "capture.json"``, written last and atomically.
+    """
+    from photoquant import io as pqio
+
+    extra_sets = dict(extra_sets or {})
+    for name in extra_sets:
+        if name not in _OWNED or name in ("views", "irradiance", "scene", "truth", MANIFEST_NAME):
+            raise InputError(f"`extra_sets`: {name!r} is not an extra frame-set name of pqsim")
+    if remove_previous:
+        _remove_owned(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    truths: dict[str, CaptureTruth] = {}
+
+    def write(key: str, sub: str, source: CaptureSource) -> dict[str, Any]:
+        capture = _resolve(source)
+        truths[key] = capture.truth
+        return _write_frames(folder, sub, capture, ext)
+
+    manifest: dict[str, Any] = {
+        "format": "photoquant.captures/1",
+        "bit_depth": camera.bit_depth,
+        "channels": list(camera.channels),
+        "views": [write(f"view{i}", f"views/v{i}", v) for i, v in enumerate(views)],
+    }
+    if white_roi is not None:
+        manifest["white_roi"] = [int(v) for v in white_roi]
+    if irradiance is not None:
+        manifest["irradiance"] = write("irradiance", "irradiance", irradiance)
+    if scene is not None:
+        manifest["scene"] = write("scene", "scene", scene)
+    for name, (source, fields) in extra_sets.items():
+        manifest[name] = write(name, name, source) | dict(fields)
+    if correspondences:
+        manifest["correspondences"] = correspondences
+    if write_saturation_level:
+        manifest["saturation_level"] = camera.saturation_dn.tolist()
+    manifest["truth"] = "truth/truth.json"
+    manifest["generator"] = dict(generator)
+    save_truth(folder / "truth", truths["view0"].camera, truths, truth_meta)
+    path = folder / MANIFEST_NAME
+    pqio.write_manifest(path, manifest)
+    return path
 
 
 def write_capture_set(
@@ -155,9 +333,10 @@ def write_capture_set(
         (like a raw file's white level). Off by default: the calibrator must
         then detect them, as with most real frames.
     overwrite : bool
-        Allow a non-empty ``folder``: the paths this function writes
-        (``views/``, ``irradiance/``, ``scene/``, ``truth/``, ``capture.json``)
-        are removed first; other files are left alone.
+        Allow a non-empty ``folder``: the paths of a pqsim capture set
+        (``views/``, ``irradiance/``, ``scene/``, ``colorchecker/``, ``truth/``,
+        ``capture.json``) are removed first, once the simulation succeeded;
+        other files are left alone.
 
     Returns
     -------
@@ -169,8 +348,6 @@ def write_capture_set(
     InputError
         For invalid arguments, or a non-empty ``folder`` without ``overwrite``.
     """
-    from photoquant import io as pqio
-
     if not isinstance(camera, SyntheticCamera):
         raise InputError(f"`camera` must be a SyntheticCamera, got {type(camera).__name__}")
     if camera.n_channels not in (1, 3):
@@ -197,9 +374,7 @@ def write_capture_set(
         )
     if n_views > 1 and pan == 0:
         raise InputError("`pan_px` must be positive when `n_views` > 1 (the views would coincide)")
-    ext = {"png": "png", "tiff": "tif", "tif": "tif"}.get(str(frame_format).lower())
-    if ext is None:
-        raise InputError(f"`frame_format` must be 'png' or 'tiff', got {frame_format!r}")
+    ext = frame_extension(frame_format)
     check_positive(irradiance_level, "irradiance_level")
     if isinstance(scene, str):
         if scene not in ("hdr", "ramp"):
@@ -218,14 +393,7 @@ def write_capture_set(
             )
         scene_name = "array"
 
-    folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise InputError(f"`folder` {str(folder)!r} exists and is not a folder")
-    non_empty = folder.is_dir() and any(folder.iterdir())
-    if non_empty and not overwrite:
-        raise InputError(
-            f"`folder` {str(folder)!r} is not empty; pass overwrite=True to replace its capture set"
-        )
+    folder, non_empty = check_output_folder(folder, overwrite)
 
     # -- simulate everything in memory first -----------------------------------------
     streams = np.random.SeedSequence(int(seed)).spawn(int(n_views) + 3)
@@ -240,38 +408,6 @@ def write_capture_set(
     irr = camera.capture(l_irr, t, n_repeats, gens[n_views + 1], optics=False)
     test = camera.capture(l_scene, t_scene, n_repeats, gens[n_views + 2])
 
-    # -- write frames, truth, then the manifest ----------------------------------------
-    if non_empty:  # only now that the simulation succeeded: remove our previous outputs
-        for name in _OWNED:
-            p = folder / name
-            if p.is_dir() and not p.is_symlink():
-                shutil.rmtree(p)
-            elif p.exists() or p.is_symlink():
-                p.unlink()
-    folder.mkdir(parents=True, exist_ok=True)
-    manifest: dict[str, Any] = {
-        "format": "photoquant.captures/1",
-        "bit_depth": camera.bit_depth,
-        "channels": list(camera.channels),
-        "views": [_write_frames(folder, f"views/v{i}", cap, ext) for i, cap in enumerate(views)],
-        "white_roi": [int(v) for v in pv.white_rois[0]],
-        "irradiance": _write_frames(folder, "irradiance", irr, ext),
-        "scene": _write_frames(folder, "scene", test, ext),
-    }
-    if pv.tracks.shape[0] and n_views > 1:
-        manifest["correspondences"] = pv.correspondences()
-    if write_saturation_level:
-        manifest["saturation_level"] = camera.saturation_dn.tolist()
-    manifest["truth"] = "truth/truth.json"
-    manifest["generator"] = {
-        "package": "pqsim",
-        "seed": int(seed),
-        "streams": "SeedSequence(seed).spawn(V + 3): world, views 0..V-1, irradiance, scene",
-        "scene": scene_name,
-    }
-    captures = {f"view{i}": cap.truth for i, cap in enumerate(views)}
-    captures["irradiance"] = irr.truth
-    captures["scene"] = test.truth
     meta = {
         "seed": int(seed),
         "shape": [h, w],
@@ -285,7 +421,22 @@ def write_capture_set(
         "irradiance_level": float(irradiance_level),
         "irradiance_nonuniformity": float(irradiance_nonuniformity),
     }
-    save_truth(folder / "truth", views[0].truth.camera, captures, meta)
-    path = folder / MANIFEST_NAME
-    pqio.write_manifest(path, manifest)
-    return path
+    return write_capture_folder(
+        folder,
+        camera,
+        views=views,
+        irradiance=irr,
+        scene=test,
+        white_roi=pv.white_rois[0],
+        correspondences=pv.correspondences() if pv.tracks.shape[0] and n_views > 1 else None,
+        ext=ext,
+        write_saturation_level=write_saturation_level,
+        generator={
+            "package": "pqsim",
+            "seed": int(seed),
+            "streams": "SeedSequence(seed).spawn(V + 3): world, views 0..V-1, irradiance, scene",
+            "scene": scene_name,
+        },
+        truth_meta=meta,
+        remove_previous=non_empty,
+    )

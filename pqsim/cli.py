@@ -4,20 +4,54 @@
 with correspondences, the white chart's box, the optics-free irradiance scene
 and a test scene — as frames, a ``photoquant.captures/1`` manifest and the
 ground truth, ready for ``photoquant calibrate FOLDER/capture.json``.
+
+Two renderers make the scenes the synthetic camera sees:
+
+- ``mitsuba`` (default): spectral Mitsuba 3 renders of a desk scene, the
+  irradiance scene, a high-contrast scene and a ColorChecker
+  (:func:`pqsim.rendered_capture.write_rendered_capture_set`), 1024 × 768 by
+  default as the paper's camera (§6.1 of the photoquantity paper), renders
+  cached in ``--cache-dir``;
+- ``analytic``: numpy patch worlds (:func:`pqsim.capture_set.write_capture_set`),
+  320 × 240 by default, no extra dependency.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
 from photoquant.errors import PhotoquantError
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "default_cache_dir"]
+
+#: Default resolutions (H, W) per renderer.
+_DEFAULT_RESOLUTION = {"mitsuba": (768, 1024), "analytic": (240, 320)}
+#: Options that only the analytic renderer has (dest → flag).
+_ANALYTIC_ONLY = {"pan_px": "--pan-px", "scene": "--scene"}
+#: Options that only the Mitsuba renderer has (dest → flag).
+_MITSUBA_ONLY = {
+    "sensitivities": "--sensitivities",
+    "illuminant": "--illuminant",
+    "rotation_deg": "--rotation-deg",
+    "spp": "--spp",
+    "cache_dir": "--cache-dir",
+    "variant": "--variant",
+    "render_seed": "--render-seed",
+    "no_colorchecker": "--no-colorchecker",
+}
+
+
+def default_cache_dir() -> Path:
+    """The render cache: ``$PQSIM_CACHE`` if set, else ``~/.cache/pqsim``."""
+    env = os.environ.get("PQSIM_CACHE")
+    return Path(env).expanduser() if env else Path.home() / ".cache" / "pqsim"
 
 
 def _resolution(text: str) -> tuple[int, int]:
@@ -31,11 +65,22 @@ def _resolution(text: str) -> tuple[int, int]:
 
 
 def _cmd_capture(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from pqsim.capture_set import write_capture_set
     from pqsim.synth_camera.presets import camera_from_preset
 
+    renderer = args.renderer
+    other = _MITSUBA_ONLY if renderer == "analytic" else _ANALYTIC_ONLY
+    given = [flag for dest, flag in other.items() if getattr(args, dest) not in (None, False)]
+    if given:
+        raise PhotoquantError(f"{', '.join(given)} cannot be used with --renderer {renderer}")
+    if renderer == "mitsuba":
+        try:
+            import mitsuba  # noqa: F401
+        except ImportError:
+            raise PhotoquantError(
+                "--renderer mitsuba needs Mitsuba 3: pip install '.[render]' "
+                "(or use --renderer analytic)"
+            ) from None
+    resolution = args.resolution or _DEFAULT_RESOLUTION[renderer]
     out = Path(args.output)
     if out.exists() and any(out.iterdir()) and not args.overwrite:
         raise PhotoquantError(f"{out} is not empty (use --overwrite to replace its capture set)")
@@ -50,28 +95,89 @@ def _cmd_capture(args: argparse.Namespace) -> int:
         )
     exposures = np.geomspace(t_lo, t_hi, args.exposures)
     t0 = time.perf_counter()
-    print(
-        f"pqsim: simulating '{args.preset}' at {args.resolution[1]}x{args.resolution[0]}, "
-        f"K={args.exposures}, N={args.repeats}, V={args.views} ...",
-        file=sys.stderr,
-    )
-    manifest = write_capture_set(
-        args.output,
-        camera,
-        shape=args.resolution,
-        exposure_s=exposures,
-        n_repeats=args.repeats,
-        n_views=args.views,
-        pan_px=args.pan_px,
-        seed=args.seed,
-        scene=args.scene,
-        irradiance_nonuniformity=args.irradiance_nonuniformity,
-        frame_format=args.format,
-        overwrite=args.overwrite,
-    )
+    if renderer == "analytic":
+        from pqsim.capture_set import write_capture_set
+
+        print(
+            f"pqsim: simulating '{args.preset}' at {resolution[1]}x{resolution[0]}, "
+            f"K={args.exposures}, N={args.repeats}, V={args.views} ...",
+            file=sys.stderr,
+        )
+        manifest = write_capture_set(
+            args.output,
+            camera,
+            shape=resolution,
+            exposure_s=exposures,
+            n_repeats=args.repeats,
+            n_views=args.views,
+            pan_px=args.pan_px,
+            seed=args.seed,
+            scene=args.scene or "hdr",
+            irradiance_nonuniformity=args.irradiance_nonuniformity,
+            frame_format=args.format,
+            overwrite=args.overwrite,
+        )
+    else:
+        manifest = _capture_rendered(args, camera, resolution, exposures)
     print(f"capture set written: {manifest} ({time.perf_counter() - t0:.1f} s)")
     print(f"next: photoquant calibrate {manifest} -o camera")
     return 0
+
+
+def _capture_rendered(
+    args: argparse.Namespace, camera, resolution: tuple[int, int], exposures: np.ndarray
+) -> Path:
+    from pqsim import render
+    from pqsim.rendered_capture import DEFAULT_ROTATION_DEG, write_rendered_capture_set
+    from pqsim.synth_camera.presets import preset_sensitivities
+
+    variant = args.variant or render.choose_variant()
+    cache = Path(args.cache_dir).expanduser() if args.cache_dir else default_cache_dir()
+    sens = args.sensitivities or preset_sensitivities(args.preset)
+    print(
+        f"pqsim: rendering with Mitsuba ({variant}, {sens}, illuminant "
+        f"{args.illuminant or 'D65'}) and simulating '{args.preset}' at "
+        f"{resolution[1]}x{resolution[0]}, K={args.exposures}, N={args.repeats}, "
+        f"V={args.views}; render cache {cache}",
+        file=sys.stderr,
+    )
+    t_render = time.perf_counter()
+
+    def on_render(name: str, info) -> None:
+        what = "cached" if info.cache_hit else f"rendered at {info.spp} spp"
+        print(f"  {name}: {what} ({info.seconds:.1f} s)", file=sys.stderr)
+
+    def done_rendering(name: str, info) -> None:
+        on_render(name, info)
+        if name == ("colorchecker" if not args.no_colorchecker else "scene"):
+            print(
+                f"  renders done ({time.perf_counter() - t_render:.1f} s); "
+                "simulating the camera and writing frames ...",
+                file=sys.stderr,
+            )
+
+    return write_rendered_capture_set(
+        args.output,
+        camera,
+        sensitivities=sens,
+        illuminant=args.illuminant or "D65",
+        resolution=resolution,
+        exposure_s=exposures,
+        n_repeats=args.repeats,
+        n_views=args.views,
+        rotation_deg=DEFAULT_ROTATION_DEG if args.rotation_deg is None else args.rotation_deg,
+        spp=args.spp,
+        seed=args.seed,
+        render_seed=args.render_seed or 0,
+        cache_dir=cache,
+        variant=variant,
+        colorchecker=not args.no_colorchecker,
+        irradiance_nonuniformity=args.irradiance_nonuniformity,
+        frame_format=args.format,
+        progress=sys.stderr.isatty(),
+        on_render=done_rendering,
+        overwrite=args.overwrite,
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -80,8 +186,15 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     cap = sub.add_parser("capture", help="write a simulated capture set (frames, manifest, truth)")
     cap.add_argument("-o", "--output", required=True, help="folder to write (must be empty)")
+    cap.add_argument(
+        "--renderer", default="mitsuba", choices=["mitsuba", "analytic"],
+        help="scenes rendered spectrally by Mitsuba 3 (default) or analytic numpy scenes",
+    )
     cap.add_argument("--preset", default="ccd", help="camera preset: ccd or cmos")
-    cap.add_argument("--resolution", type=_resolution, default=(240, 320), help="WxH (320x240)")
+    cap.add_argument(
+        "--resolution", type=_resolution, default=None,
+        help="WxH (mitsuba: 1024x768, the paper's camera; analytic: 320x240)",
+    )
     cap.add_argument("--exposures", type=int, default=8, help="K exposure times (8)")
     cap.add_argument(
         "--exposure-range", type=float, nargs=2, default=(1e-3, 0.2), metavar=("MIN_S", "MAX_S"),
@@ -89,13 +202,46 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cap.add_argument("--repeats", type=int, default=10, help="N repeats per exposure (10)")
     cap.add_argument("--views", type=int, default=3, help="V calibration views (3)")
-    cap.add_argument("--pan-px", type=int, default=None, help="view shift in pixels")
-    cap.add_argument("--scene", default="hdr", choices=["hdr", "ramp"], help="test scene")
+    cap.add_argument("--pan-px", type=int, default=None, help="analytic: view shift in pixels")
+    cap.add_argument(
+        "--scene", default=None, choices=["hdr", "ramp"], help="analytic: test scene (hdr)"
+    )
+    cap.add_argument(
+        "--sensitivities", default=None,
+        help="mitsuba: spectral sensitivities, nikon_d5100 or sigma_sd_merrill (preset's)",
+    )
+    cap.add_argument(
+        "--illuminant", default=None, choices=["D65", "A"],
+        help="mitsuba: light of every scene, D65 (outdoor, default) or A (indoor)",
+    )
+    cap.add_argument(
+        "--rotation-deg", type=float, default=None,
+        help="mitsuba: rotation between views in degrees, pan and tilt (5)",
+    )
+    cap.add_argument(
+        "--spp", type=int, default=None,
+        help="mitsuba: samples per pixel, n*n or n*(n+1), e.g. 16, 64 (64)",
+    )
+    cap.add_argument(
+        "--cache-dir", default=None,
+        help="mitsuba: render cache folder ($PQSIM_CACHE or ~/.cache/pqsim)",
+    )
+    cap.add_argument(
+        "--variant", default=None,
+        help="mitsuba: variant, e.g. scalar_spectral (llvm when it works, else scalar_spectral;"
+        " $PQSIM_MITSUBA_VARIANT)",
+    )
+    cap.add_argument(
+        "--render-seed", type=int, default=None, help="mitsuba: seed of the renders (0)"
+    )
+    cap.add_argument(
+        "--no-colorchecker", action="store_true", help="mitsuba: skip the ColorChecker"
+    )
     cap.add_argument("--irradiance-nonuniformity", type=float, default=0.0,
                      help="relative illumination gradient of the irradiance scene (0)")
     cap.add_argument("--bit-depth", type=int, default=None, help="override the preset's bit depth")
     cap.add_argument("--format", default="png", choices=["png", "tiff"], help="frame file format")
-    cap.add_argument("--seed", type=int, default=0, help="seed: same seed, same files")
+    cap.add_argument("--seed", type=int, default=0, help="camera-noise seed: same seed, same files")
     cap.add_argument("--overwrite", action="store_true", help="replace a previous capture set")
     cap.set_defaults(func=_cmd_capture)
     return parser

@@ -58,6 +58,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 import scipy.sparse as sp
+from threadpoolctl import threadpool_limits
 
 from photoquant._checks import (
     check_array,
@@ -174,23 +175,33 @@ def select_samples_histogram(
     usable = np.flatnonzero(valid.sum(axis=0) >= 2)
     if usable.size <= n_samples:
         return usable
-    order = rng.permutation(usable)
     k_count = values.shape[0]
-    # rank[k, i]: position of pixel order[i] within its value bin at exposure k
-    ranks = np.full((k_count, order.size), np.iinfo(np.int64).max, dtype=np.int64)
-    for k in range(k_count):
-        ok = valid[k, order]
-        bins = np.minimum((values[k, order] / c_max * n_bins).astype(np.int64), n_bins - 1)
-        bins = np.where(ok, bins, n_bins)  # invalid values go to an overflow bin
-        sort = np.argsort(bins, kind="stable")
-        sorted_bins = bins[sort]
-        first = np.searchsorted(sorted_bins, sorted_bins, side="left")
-        rank = np.arange(sort.size) - first
-        rank = np.where(sorted_bins == n_bins, np.iinfo(np.int64).max, rank)
-        ranks[k, sort] = rank
-    best = ranks.min(axis=0)  # each pixel's best rank over exposures
-    chosen = np.argsort(best, kind="stable")[:n_samples]
-    return np.sort(order[chosen])
+    key = rng.random(usable.size)  # the random ranking
+    vals = values[:, usable]
+    ok = valid[:, usable]
+    bins = np.where(ok, np.minimum((vals / c_max * n_bins).astype(np.int64), n_bins - 1), n_bins)
+    counts = np.stack([np.bincount(b, minlength=n_bins + 1)[:n_bins] for b in bins])
+    n_cells = max(int(np.count_nonzero(counts)), 1)
+    per_cell = max(1, -(-4 * n_samples // n_cells))
+    big = np.iinfo(np.int64).max
+    while True:
+        # Only the per_cell lowest keys of each (exposure, bin) cell can be
+        # picked; they are the cell's members with key below per_cell/count
+        # (up to chance), so only those are ranked: no sort of every pixel.
+        best = np.full(usable.size, big, dtype=np.int64)
+        for k in range(k_count):
+            cnt = np.append(counts[k], 0)[bins[k]]
+            limit = np.where(cnt > 0, np.minimum(1.0, 2.0 * per_cell / np.maximum(cnt, 1)), 0.0)
+            cand = np.flatnonzero((bins[k] < n_bins) & (key < limit))
+            order = cand[np.lexsort((key[cand], bins[k, cand]))]
+            sorted_bins = bins[k, order]
+            rank = np.arange(order.size) - np.searchsorted(sorted_bins, sorted_bins, side="left")
+            np.minimum.at(best, order, rank)
+        if np.count_nonzero(best < big) >= n_samples or per_cell >= usable.size:
+            break
+        per_cell *= 2
+    chosen = np.lexsort((key, best))[:n_samples]
+    return np.sort(usable[chosen])
 
 
 def _solve_channel(
@@ -363,9 +374,10 @@ def camera_response_Debevec1997(
     valid_min = np.zeros(n_ch)
     for ch in range(n_ch):
         vals = values[..., ch].reshape(k_count, -1)
-        weights = wfun(vals, c_min, sat[ch])
-        valid = (weights > 0) & ~saturated[..., ch].reshape(k_count, -1)
+        valid = (vals > c_min) & (vals < sat[ch]) & ~saturated[..., ch].reshape(k_count, -1)
         idx = select_samples_histogram(vals, valid, sat[ch], int(n_samples), rng)
+        weights = wfun(vals[:, idx], c_min, sat[ch])
+        valid_idx = valid[:, idx] & (weights > 0)
         if idx.size < 2:
             raise CalibrationError(
                 f"channel {ch}: only {idx.size} pixels have two or more well-exposed "
@@ -377,17 +389,20 @@ def camera_response_Debevec1997(
         mid = 0.5 * (c_min + sat[ch])
         gauge = int(np.argmin(np.abs(levels[: top + 1] - mid)))
         smooth_w = wfun(levels, c_min, sat[ch])
-        g, rms[ch], constrained[ch], n_eq[ch], support = _solve_channel(
-            vals[:, idx],
-            valid[:, idx],
-            np.where(valid[:, idx], weights[:, idx], 0.0),
-            log_t,
-            vals[:, idx] / spacing,
-            top,
-            smooth_w,
-            smoothness,
-            gauge,
-        )
+        # the dense systems are small (≤ 1024²): one BLAS thread is fastest, and
+        # a multi-threaded BLAS on a loaded machine can be 100× slower
+        with threadpool_limits(limits=1, user_api="blas"):
+            g, rms[ch], constrained[ch], n_eq[ch], support = _solve_channel(
+                vals[:, idx],
+                valid_idx,
+                np.where(valid_idx, weights, 0.0),
+                log_t,
+                vals[:, idx] / spacing,
+                top,
+                smooth_w,
+                smoothness,
+                gauge,
+            )
         # lowest measured level: below it g is extrapolated by the prior alone
         # (gaps between measured levels are interpolated, which is fine)
         measured = np.flatnonzero(support[: gauge + 1] >= min_support)

@@ -16,11 +16,32 @@ slightly off the image centre, per-channel differences) and a PRNU of about
 1 % per-pixel plus 1 % smooth. ``exposure_scale = 100 · full_well``: a
 photoquantity of 1 (the analytic scenes' white chart) fills the well in 10 ms.
 
+Spectral sensitivities
+----------------------
+Each preset also names the spectral sensitivities ``r_λ`` (a key of
+:data:`pqsim.spectral.CAMERA_SENSITIVITIES`) with which Mitsuba renders its
+photoquantities (§3.3 of [PQ]); :func:`preset_sensitivities` reads it. It is
+not a :class:`SyntheticCamera` field: the numpy camera starts from
+photoquantities, the spectra only matter to the renderer.
+
+colour-science ships measured curves of two cameras only [NPL]_, both CMOS:
+the Nikon D5100 (Bayer colour filter array) and the Sigma SD Merrill (Foveon
+X3 stacked photodiodes, broad overlapping bands). Both presets use
+``"nikon_d5100"``: a Bayer camera's spectral sensitivity is set by its
+colour-filter dyes and the silicon's quantum efficiency, which a Bayer CCD
+such as the paper's mvBlueFox-121C shares with a Bayer CMOS sensor far more
+than with a Foveon sensor. The CCD/CMOS difference the paper discusses — and
+these presets model — is in the response curve, noise and vignetting, not in
+``r_λ``. The Foveon curves stay available for any preset
+(``pqsim capture --sensitivities sigma_sd_merrill``).
+
 References
 ----------
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §6.1, Fig. 3.
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021) — typical CCD/CMOS data sheets
    give full wells of 5–40 ke⁻ and read noise of 2–20 e⁻.
+.. [NPL] M. Darrodi et al., "Reference data set for camera spectral sensitivity
+   estimation", JOSA A 32(3), 2015 (``colour.MSDS_CAMERA_SENSITIVITIES``).
 """
 
 from __future__ import annotations
@@ -35,7 +56,12 @@ from pqsim.synth_camera.camera import SyntheticCamera
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import SensorNoise
 
-__all__ = ["CAMERA_PRESETS", "camera_from_preset"]
+__all__ = ["CAMERA_PRESETS", "DEFAULT_SENSITIVITIES", "camera_from_preset", "preset_sensitivities"]
+
+#: Spectral sensitivities of a camera that names none (see "Spectral sensitivities").
+DEFAULT_SENSITIVITIES = "nikon_d5100"
+#: Preset keys that are not :class:`SyntheticCamera` fields.
+_NON_CAMERA_KEYS = ("sensitivities",)
 
 _CCD: dict[str, Any] = {
     "responses": [{"kind": "linear", "params": {}}] * 3,
@@ -51,6 +77,7 @@ _CCD: dict[str, Any] = {
     "bit_depth": 8,
     "exposure_scale": 2.0e6,
     "prnu_seed": 1288,
+    "sensitivities": "nikon_d5100",
 }
 
 _CMOS: dict[str, Any] = {
@@ -71,10 +98,35 @@ _CMOS: dict[str, Any] = {
     "bit_depth": 8,
     "exposure_scale": 1.0e6,
     "prnu_seed": 2005,
+    "sensitivities": "nikon_d5100",
 }
 
 CAMERA_PRESETS: Mapping[str, Mapping[str, Any]] = MappingProxyType({"ccd": _CCD, "cmos": _CMOS})
-"""Preset name → field values of :class:`SyntheticCamera` (plain data)."""
+"""Preset name → field values of :class:`SyntheticCamera` (plain data), plus the
+name of the spectral sensitivities (``"sensitivities"``) used when rendering."""
+
+
+def preset_sensitivities(name: str) -> str:
+    """The spectral-sensitivity name of a preset (see "Spectral sensitivities").
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`CAMERA_PRESETS` (case-insensitive).
+
+    Returns
+    -------
+    str
+        A key of :data:`pqsim.spectral.CAMERA_SENSITIVITIES`;
+        :data:`DEFAULT_SENSITIVITIES` for a preset that names none.
+
+    Examples
+    --------
+    >>> preset_sensitivities("ccd")
+    'nikon_d5100'
+    """
+    key = validate_method(name, CAMERA_PRESETS, "camera preset")
+    return str(CAMERA_PRESETS[key].get("sensitivities", DEFAULT_SENSITIVITIES))
 
 
 def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
@@ -106,7 +158,7 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
     (12, [3481, 4095, 3071])
     """
     key = validate_method(name, CAMERA_PRESETS, "camera preset")
-    fields = dict(CAMERA_PRESETS[key])
+    fields = {k: v for k, v in CAMERA_PRESETS[key].items() if k not in _NON_CAMERA_KEYS}
     valid = set(SyntheticCamera.__dataclass_fields__)
     unknown = set(overrides) - valid
     if unknown:

@@ -70,7 +70,7 @@ def _stats_row(res, key, quantity, stats, paper, truth):
         res.metric(f"{key}.{k}", getattr(stats, k), unit="fraction",
                    description=f"{quantity}: {k} of eq. 8")
     res.row(
-        quantity + " e_max / e_mean / e_std",
+        quantity + ", e_max/mean/std",
         " / ".join(fmt_pct(getattr(stats, k)) for k in ("e_max", "e_mean", "e_std")),
         " / ".join(fmt_pct(paper[k], 1) for k in ("e_max", "e_mean", "e_std")) if paper else "–",
         truth,
@@ -104,7 +104,7 @@ def run(
         model, cam, camera = cal.model, cal.truth.camera, cal.camera
         if use_chart:
             l = shared.chart(config.illuminants[0][1]).l
-            scene_name = f"ColorChecker, {config.illuminants[0][1]}"
+            scene_name = f"chart, {config.illuminants[0][1]}"
         else:
             l = cal.truth.captures["view0"].l
             scene_name = "calibration view 0"
@@ -207,7 +207,7 @@ def run(
         okf = np.isfinite(floor) & np.isfinite(es)
         floor_mean = float(floor[okf].mean())
         _stats_row(res, f"{preset}.hdr_scene",
-                   f"{preset}: HDR test scene (N = {scene.n_repeats}) vs truth", ss, None,
+                   f"{preset}: HDR scene (N = {scene.n_repeats}) vs truth", ss, None,
                    f"physics floor e_mean {fmt_pct(floor_mean)}")
         res.metric(f"{preset}.hdr_scene.predicted_e_mean", floor_mean, unit="fraction",
                    check=False, description="physics floor of e_mean on the HDR test scene")

@@ -168,23 +168,24 @@ def run(
                 description=f"eq. 8 mean over the patches of {row} vs the camera photoquantity",
             )
         table[(preset, label)] = cell
-    heads = " | ".join(f"{p.upper()} {lab}" for p, lab in columns)
+    heads = "  ".join(f"{p.upper()}-{lab}" for p, lab in columns)
     paper_idx = [COLUMNS.index(c) for c in columns]
+    res.row("columns", heads, "(same)", "")
     for gt, gt_name in (("cie", "CIE RGB (D65)"), ("camera", "camera photoquantity")):
         for row in ("uncorrected", "corrected"):
             res.row(
-                f"{row} vs {gt_name}: r ({heads})",
+                f"r, {row} vs {gt_name}",
                 "  ".join(f"{table[c][f'{row}.r_{gt}']:.4f}" for c in columns),
                 "  ".join(f"{PAPER[row][i]:.2f}" for i in paper_idx) if gt == "cie" else "–",
-                ("eq. 8 e_mean vs camera: "
+                ("eq. 8 e_mean: "
                  + " ".join(fmt_pct(table[c][f'{row}.e_mean'], 1) for c in columns))
                 if gt == "camera" else "",
             )
         res.row(
-            f"Hugin vs {gt_name}",
+            f"r, Hugin vs {gt_name}",
             "missing",
             "  ".join(f"{PAPER['hugin'][i]:.2f}" for i in paper_idx) if gt == "cie" else "–",
-            "no alternative pipeline yet",
+            "no alternative pipeline yet (comparison issue)",
         )
     res.notes += [
         MISSING_HUGIN,

@@ -141,13 +141,14 @@ def _sweep_tracks(config, shared, res, preset) -> dict | None:
                    description=f"map e_mean with {n} correspondences (mean of {draws} draws)")
         res.metric(f"{preset}.sweep_tracks.{key}.e_max", x, unit="fraction",
                    description=f"map e_max with {n} correspondences (mean of {draws} draws)")
-        res.metric(f"{preset}.sweep_tracks.{key}.refused", bad / draws,
+        res.metric(f"{preset}.sweep_tracks.{key}.refused", bad / draws, check=n == total,
                    description=f"fraction of the {draws} fits with {n} tracks refused")
         res.row(
             f"{preset}: {n} correspondences{' (all)' if n == total else ''}, e_mean / e_max",
             f"{fmt_pct(m)} / {fmt_pct(x)}" + (f" ({bad}/{draws} refused)" if bad else ""),
             "1.6 % / 9 % (10 points)" if n == 10 else "",
             f"mean of {draws} random subsets" if draws > 1 else "",
+            detail=n not in (10, total),
         )
         xs.append(n)
         means.append(m)
@@ -200,7 +201,7 @@ def _sweep_views(config, shared, res, preset) -> dict | None:
                    description=f"map e_mean from {v} views")
         res.metric(f"{preset}.sweep_views.{key}.e_max", x, unit="fraction",
                    description=f"map e_max from {v} views")
-        res.metric(f"{preset}.sweep_views.{key}.refused", bad,
+        res.metric(f"{preset}.sweep_views.{key}.refused", bad, check=v >= 3,
                    description=f"the fit from {v} views was refused (1) or not (0)")
         res.row(
             f"{preset}: {v} views ({len(tracks)} correspondences), e_mean / e_max",
@@ -242,6 +243,7 @@ def run(
         )
         p_est = np.asarray(model.vignetting_params, dtype=np.float64)
         p_true = None if cam.vignetting_params is None else np.asarray(cam.vignetting_params)
+        g_ch = 1 if len(model.channels) > 1 else 0
         for ch, name in enumerate(model.channels):
             for k in range(6):
                 res.metric(f"{preset}.m{k + 1}.{name}", p_est[ch, k], better="both", check=False,
@@ -249,9 +251,10 @@ def run(
             res.row(
                 f"{preset}: m1…m6 {name}",
                 " ".join(f"{v:+.3f}" for v in p_est[ch]),
-                " ".join(f"{v:+.2f}" for v in PAPER["params"]) if ch == 0 else "",
+                " ".join(f"{v:+.2f}" for v in PAPER["params"]) if ch == g_ch else "",
                 "truth " + (" ".join(f"{v:+.3f}" for v in p_true[ch]) if p_true is not None
                             else "not in the model family"),
+                detail=ch != g_ch,
             )
         if cal.model.report.get("vignetting"):
             n_tracks = cal.model.report["vignetting"].get("n_tracks")

@@ -1,0 +1,316 @@
+"""Mitsuba-rendered capture sets (pqsim.rendered_capture, ``pqsim capture``).
+
+One tiny capture set (96 × 128 pixels, 16 samples per pixel, K = 5, N = 2,
+V = 3) is rendered once per module with ``scalar_spectral`` (bit-identical per
+seed) into a temporary render cache, then fed to ``photoquant calibrate`` and
+``photoquant correct``. Every tolerance is derived from the noise measured
+in the data (the Monte-Carlo noise of the renders, the camera noise after
+merging, as seen in the calibration's own residuals); the derivation is
+written next to each check.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from photoquant.errors import InputError
+
+pytest.importorskip("mitsuba")
+pytest.importorskip("colour")
+
+from photoquant.cli import main as photoquant_main  # noqa: E402
+from photoquant.correspondences import sample_image  # noqa: E402
+from photoquant.io import read_exr  # noqa: E402
+from photoquant.model import load_camera  # noqa: E402
+from pqsim.cli import main as pqsim_main  # noqa: E402
+from pqsim.rendered_capture import view_angles, write_rendered_capture_set  # noqa: E402
+from pqsim.synth_camera import load_truth  # noqa: E402
+
+pytestmark = pytest.mark.render
+
+VARIANT = "scalar_spectral"
+SHAPE = (96, 128)
+SPP = 16
+EXPOSURES = np.geomspace(1e-3, 0.1, 5)  # ratio ~3.2; white paper 10 %..100 % of the well
+N = 2
+K_SIGMA = 5.0  # a false failure is rarer than 1e-6 per Gaussian check
+KW = {
+    "resolution": SHAPE,
+    "spp": SPP,
+    "exposure_s": EXPOSURES,
+    "n_repeats": N,
+    "progress": False,
+}
+
+
+def _frames(folder):
+    """Relative path → bytes of every frame of a capture set."""
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for p in sorted(folder.rglob("*.png"))
+    }
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """One capture set, its render cache and what was rendered."""
+    root = tmp_path_factory.mktemp("rendered")
+    infos = {}
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PQSIM_MITSUBA_VARIANT", VARIANT)
+        manifest = write_rendered_capture_set(
+            root / "cap",
+            "ccd",
+            cache_dir=root / "cache",
+            seed=0,
+            on_render=lambda name, info: infos.__setitem__(name, info),
+            **KW,
+        )
+    return root, manifest, infos
+
+
+@pytest.fixture(autouse=True)
+def _scalar(monkeypatch):
+    monkeypatch.setenv("PQSIM_MITSUBA_VARIANT", VARIANT)
+
+
+# ---------------------------------------------------------------------------
+# Capture set contents
+# ---------------------------------------------------------------------------
+
+
+def test_manifest_and_truth(rendered):
+    root, manifest, infos = rendered
+    doc = json.loads(manifest.read_text())
+    assert doc["format"] == "photoquant.captures/1" and len(doc["views"]) == 3
+    assert {"white_roi", "irradiance", "scene", "correspondences", "colorchecker"} <= set(doc)
+    assert len(doc["colorchecker"]["patch_rois"]) == 24
+    assert len(doc["correspondences"]) > 500
+    assert set(infos) == {"view0", "view1", "view2", "irradiance", "scene", "colorchecker"}
+    assert not any(i.cache_hit for i in infos.values())
+    truth = load_truth(root / "cap" / "truth")
+    meta = truth.meta
+    assert meta["mitsuba_variant"] == VARIANT and meta["mitsuba_version"]
+    assert meta["sensitivities"] == "nikon_d5100" and meta["illuminant"] == "D65"
+    assert {r["spp"] for r in meta["renders"].values()} == {SPP}
+    assert truth.captures["irradiance"].optics is False
+    assert truth.captures["view1"].optics is True
+    # the truth's l is the render itself (float32 in the cache, float64 here)
+    cached, _ = read_exr(infos["view1"].cache_path)
+    np.testing.assert_array_equal(truth.captures["view1"].l, cached.astype(np.float64))
+    # the test scene spans more than 1e4 (positive pixels; a few see no light at all)
+    l_scene = truth.captures["scene"].l
+    positive = l_scene[l_scene > 0]
+    assert np.percentile(positive, 99.99) / np.percentile(positive, 1) > 1e4
+    # the white paper collects 10 % of the well at the shortest exposure (white_fill)
+    cam = truth.camera
+    white = np.asarray(meta["exposure"]["white_paper_photoquantity"])
+    fill = white.max() * EXPOSURES[0] * cam.exposure_scale / cam.noise.full_well_e
+    assert fill == pytest.approx(0.1)
+    # ColorChecker: the rendered patch means agree with the exact integrals within
+    # K_SIGMA standard errors of the mean (pixel std / sqrt(pixels))
+    cc = meta["colorchecker"]
+    l_cc = truth.captures["colorchecker"].l
+    for (x0, y0, x1, y1), exact in zip(cc["patch_rois"], cc["photoquantity_exact"], strict=True):
+        px = l_cc[y0:y1, x0:x1].reshape(-1, 3)
+        sem = px.std(axis=0, ddof=1) / np.sqrt(px.shape[0])
+        assert np.all(np.abs(px.mean(axis=0) - exact) <= K_SIGMA * sem + 1e-6 * np.abs(exact))
+    assert np.asarray(cc["reference_D65"]["sRGB linear"]).shape == (24, 3)
+
+
+def test_correspondences_land_on_the_same_scene_point(rendered):
+    """Tracks sample the same rendered radiance in every view, within MC noise.
+
+    The views share the centre of projection, so a track's three samples see
+    the same scene point and differ by Monte-Carlo noise only. That noise is
+    measured independently: view 0 rendered again with another seed and
+    sampled at the same points gives ``var(a − b) = 2 σ²``. Across views the
+    relative differences must then (1) average to 0 within K_SIGMA standard
+    errors, and (2) spread no more than the MC noise allows (a track off by
+    one pixel on a lighting gradient would add a misregistration term).
+    """
+    from pqsim import render
+    from pqsim.scenes import calibration_views
+
+    root, manifest, _ = rendered
+    doc = json.loads(manifest.read_text())
+    truth = load_truth(root / "cap" / "truth")
+    tracks = np.asarray(doc["correspondences"], dtype=np.float64)  # (T, V, 3)
+    samples = np.stack(
+        [
+            sample_image(truth.captures[f"view{v}"].l, tracks[:, v, 1:], radius=1)
+            for v in range(3)
+        ],
+        axis=1,
+    )  # (T, V, C)
+    assert np.all(np.isfinite(samples)) and np.all(samples > 0)
+    diff = samples[:, 1:] / samples[:, :1] - 1  # (T, 2, C)
+
+    cv = calibration_views(
+        width=SHAPE[1], height=SHAPE[0], view_angles_deg=view_angles(3, 5.0), track_step=2
+    )
+    again = render.render_photoquantity(cv.scenes[0], spp=SPP, seed=12345, progress=False)
+    other = sample_image(again, tracks[:, 0, 1:], radius=1)
+    mc = other / samples[:, 0] - 1  # same point, two seeds: variance 2 σ²
+
+    # (1) no bias: mean within K_SIGMA standard errors
+    se = diff.std(axis=0, ddof=1) / np.sqrt(diff.shape[0])
+    assert np.all(np.abs(diff.mean(axis=0)) <= K_SIGMA * se), (diff.mean(axis=0), se)
+    # (2) spread at the MC noise: the variance ratio of two samples of ~T values has
+    # a relative standard error sqrt(2/T) (~4 % here); 1.25 allows 5 of them
+    ratio = diff.var(axis=0) / mc.var(axis=0)
+    assert np.all(ratio < 1 + K_SIGMA * np.sqrt(2 / diff.shape[0])), ratio
+    # and the check has teeth: tracks shifted by one pixel in view 1 do spread more
+    shifted = sample_image(truth.captures["view1"].l, tracks[:, 1, 1:] + 1.0, radius=1)
+    ok = np.all(np.isfinite(shifted), axis=1)
+    bad = shifted[ok] / samples[ok, 0] - 1
+    assert np.all(bad.var(axis=0) > 2 * mc.var(axis=0))
+
+
+# ---------------------------------------------------------------------------
+# Determinism and the render cache
+# ---------------------------------------------------------------------------
+
+
+def test_cache_hit_same_seed_identical_new_seed_reuses_renders(rendered):
+    root, _, _ = rendered
+    first = _frames(root / "cap")
+    infos = {}
+    write_rendered_capture_set(
+        root / "again", "ccd", cache_dir=root / "cache", seed=0,
+        on_render=lambda n, i: infos.__setitem__(n, i), **KW,
+    )
+    assert len(infos) == 6 and all(i.cache_hit for i in infos.values())  # renders nothing
+    assert _frames(root / "again") == first  # same seed: bit-identical frames
+
+    infos.clear()
+    write_rendered_capture_set(
+        root / "seed1", "ccd", cache_dir=root / "cache", seed=1,
+        on_render=lambda n, i: infos.__setitem__(n, i), **KW,
+    )
+    assert all(i.cache_hit for i in infos.values())  # new noise, same renders
+    assert _frames(root / "seed1").keys() == first.keys()
+    assert _frames(root / "seed1") != first
+
+
+def test_same_seed_bit_identical_without_cache(rendered, tmp_path):
+    """Rendering again from scratch (no cache) gives the same files, bit for bit."""
+    root, _, _ = rendered
+    write_rendered_capture_set(tmp_path / "fresh", "ccd", seed=0, colorchecker=False, **KW)
+    fresh = _frames(tmp_path / "fresh")
+    first = _frames(root / "cap")
+    assert fresh == {k: v for k, v in first.items() if not k.startswith("colorchecker/")}
+
+
+# ---------------------------------------------------------------------------
+# photoquant calibrate / correct on the rendered set
+# ---------------------------------------------------------------------------
+
+
+def test_photoquant_calibrates_and_corrects_the_rendered_set(rendered, tmp_path, capsys):
+    root, manifest, _ = rendered
+    cam_dir, exr = tmp_path / "camera", tmp_path / "scene.exr"
+    assert photoquant_main(["calibrate", str(manifest), "-o", str(cam_dir), "-q"]) == 0
+    assert photoquant_main(
+        ["correct", str(manifest), "--camera", str(cam_dir), "-o", str(exr), "-q"]
+    ) == 0
+    capsys.readouterr()
+    model = load_camera(cam_dir)
+    truth = load_truth(root / "cap" / "truth")
+    vig = model.report["vignetting"]
+    assert vig["correspondence_source"] == "given" and vig["n_tracks"] > 500
+
+    # Vignetting. The fit's residual rms σ_r (relative, per pair of observations)
+    # measures all the noise the data carry: MC noise of the renders (~2 % per
+    # pixel at 16 spp), camera noise after merging, interpolation. A 6-parameter
+    # model fitted to n_pairs such residuals has a first-order map uncertainty
+    # σ_v = κ σ_r sqrt(6 / n_pairs), averaged over the image; κ ≈ 1.5–2 for this
+    # pan-and-tilt geometry (photoquant's own covariance estimate,
+    # VignettingFit.map_uncertainty, on these scenes). With κ = 2 and the mean
+    # |error| of a Gaussian being 0.8 σ, K_SIGMA σ_v bounds the mean map error.
+    v_true, v_est = truth.camera.vignetting, model.vignetting()
+    err = np.abs(v_est - v_true) / v_true
+    sigma_v = 2.0 * np.asarray(vig["residual_rms"]) * np.sqrt(6 / vig["n_pairs"])
+    assert np.all(err.mean(axis=(0, 1)) < K_SIGMA * sigma_v), (err.mean(axis=(0, 1)), sigma_v)
+
+    # Sensor LUT: below the PRNU it corrects (error of assuming u = 1).
+    u_true = truth.camera.sensor_lut
+    assert np.mean(np.abs(model.sensor_lut - u_true) / u_true) < np.mean(np.abs(u_true - 1))
+
+    # Balance. The white paper is spectrally flat, so a balanced camera measures
+    # l_λ / W_λ (W: the paper's true colour, render median over the white ROI):
+    # the corrected scene over the true one is W_G / W_λ per channel. The chart
+    # is divided by u·v as estimated, so the balance error is the relative error
+    # of v_λ / v_G over the ROI (the LUT averages out over the ROI) plus the
+    # noise of the chart's mean (tiny: ~2 % per pixel over hundreds of pixels).
+    # The corrected scene adds its own map error, channel against green.
+    l_scene = truth.captures["scene"].l
+    est, _ = read_exr(exr)
+    white = np.asarray(truth.meta["exposure"]["white_paper_photoquantity"])
+    ok = np.all(np.isfinite(est), axis=2) & np.all(l_scene > 0, axis=2)
+    med = np.array([np.median(est[..., c][ok] / l_scene[..., c][ok]) for c in range(3)])
+    got = (med / med[1]) / (white[1] / white)
+    x0, y0, x1, y1 = truth.meta["views"]["white_roi"]
+    e_roi = err[y0:y1, x0:x1].max(axis=(0, 1))
+    tol = e_roi + e_roi[1] + 2 * err.mean(axis=(0, 1)) + 2 * err.mean(axis=(0, 1))[1] + 0.002
+    assert np.all(np.abs(got - 1) <= tol), (got, tol)
+
+
+# ---------------------------------------------------------------------------
+# Arguments and the command line
+# ---------------------------------------------------------------------------
+
+
+def test_view_angles_pan_and_tilt():
+    a = np.asarray(view_angles(5, 4.0))
+    assert a.tolist() == [[0, 0], [4, 0], [0, 4], [-4, 0], [0, -4]]
+    (x1, y1), (x2, y2) = a[1], a[2]
+    assert x1 * y2 - x2 * y1 != 0  # never collinear
+    assert len({tuple(v) for v in view_angles(9, 2.0)}) == 9
+    with pytest.raises(InputError, match="`n_views`"):
+        view_angles(9, 15.0)  # 2θ > 20°
+    with pytest.raises(InputError, match="`rotation_deg`"):
+        view_angles(3, 0.0)
+
+
+def test_bad_arguments_name_themselves(tmp_path):
+    for kw, name in (
+        ({"illuminant": "F2"}, "`illuminant`"),
+        ({"sensitivities": "canon"}, "`sensitivities`"),
+        ({"camera": 3}, "`camera`"),
+        ({"white_fill": 2.0}, "`white_fill`"),
+        ({"n_repeats": 0}, "`n_repeats`"),
+    ):
+        args = {"camera": "ccd", **KW, **kw}
+        with pytest.raises(InputError, match=name):
+            write_rendered_capture_set(tmp_path / "x", **args)
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "f").write_text("x")
+    with pytest.raises(InputError, match="not empty"):
+        write_rendered_capture_set(tmp_path / "full", "ccd", **KW)
+
+
+def test_cli_mitsuba_capture_and_errors(rendered, tmp_path, capsys, monkeypatch):
+    root, _, _ = rendered
+    out = tmp_path / "cli"
+    argv = ["capture", "-o", str(out), "--resolution", "128x96", "--spp", str(SPP),
+            "--exposures", "5", "--exposure-range", "0.001", "0.1", "--repeats", str(N),
+            "--cache-dir", str(root / "cache")]
+    assert pqsim_main(argv) == 0
+    err = capsys.readouterr().err
+    assert err.count("cached") == 6  # the module's renders, reused
+    assert _frames(out) == _frames(root / "cap")
+    # options of the other renderer are refused
+    assert pqsim_main(["capture", "-o", str(tmp_path / "a"), "--pan-px", "3"]) == 2
+    assert "--pan-px cannot be used with --renderer mitsuba" in capsys.readouterr().err
+    assert pqsim_main(["capture", "-o", str(tmp_path / "b"), "--renderer", "analytic",
+                       "--spp", "4"]) == 2
+    assert "--spp" in capsys.readouterr().err
+    # without Mitsuba: one line naming the way out
+    monkeypatch.setitem(__import__("sys").modules, "mitsuba", None)
+    assert pqsim_main(["capture", "-o", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pip install '.[render]'" in err and "--renderer analytic" in err

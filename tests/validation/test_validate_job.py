@@ -1,0 +1,218 @@
+"""The validation job (``photoquant validate``): regression check, report, determinism.
+
+The stored baseline of the default configuration is checked with the real
+default (quick) configuration — one run of about half a minute on 2 cores,
+shared by the tests of this module. Everything else uses the ``tiny``
+configuration (96×72) or the quick one restricted to one preset and two
+experiments.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from photoquant.cli import main
+from validation.baseline import (
+    _NOT_CONDITIONS,
+    DEFAULT_BASELINE,
+    check_results,
+    load_baseline,
+    make_baseline,
+)
+from validation.config import QUICK, TINY, ValidationConfig, ValidationError, stream_seed
+from validation.experiments import EXPERIMENTS, run_validation
+from validation.report import results_json, write_report
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _quiet(_message: str) -> None:
+    pass
+
+
+def _results(run) -> dict:
+    return json.loads(results_json(run))
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    """The default job, checked against the stored baseline, with its report written."""
+    run = run_validation(QUICK, 0, progress=_quiet)
+    check = check_results(_results(run), load_baseline(DEFAULT_BASELINE), name="default.json")
+    folder = write_report(run, tmp_path_factory.mktemp("quick") / "report", check=check)
+    return run, check, folder
+
+
+@pytest.fixture(scope="module")
+def tiny_results():
+    return _results(run_validation(TINY, 0, progress=_quiet))
+
+
+# --------------------------------------------------------------------------- the default job
+
+
+@pytest.mark.slow
+def test_default_quick_job_passes_the_stored_baseline(quick):
+    _, check, _ = quick
+    assert check.ok, check.summary()
+    assert check.compared > 150
+    assert check.not_run == 0
+
+
+@pytest.mark.slow
+def test_report_files(quick):
+    run, _, folder = quick
+    report = (folder / "report.md").read_text(encoding="utf-8")
+    for name in EXPERIMENTS:
+        assert run.experiments[name].title in report, name
+        assert not run.experiments[name].skipped, (name, run.experiments[name].skipped)
+    for phrase in ("eq. 8", "global scale fit", "Hugin", "not a render", "Regression check"):
+        assert phrase in report, phrase
+    results = json.loads((folder / "results.json").read_text(encoding="utf-8"))
+    assert results["format"] == "photoquant.validation/1"
+    assert results["config"]["shape"] == [240, 320]
+    assert results["seed"] == 0 and results["seeds"]
+    assert results["versions"]["numpy"]
+    assert results["check"]["ok"] is True
+    assert set(results["metrics"]) == set(results["metric_info"])
+    figures = [p for e in results["experiments"].values() for p in e["figures"]]
+    assert len(figures) >= 7
+    from PIL import Image
+
+    for rel in figures:
+        path = folder / rel
+        assert path.read_bytes()[:8] == PNG_SIGNATURE, rel
+        with Image.open(path) as img:
+            img.verify()
+        assert f"]({rel})" in report
+    assert not list(folder.parent.glob(".report.*")), "temporary folders left behind"
+
+
+@pytest.mark.slow
+def test_quick_numbers_are_physical(quick):
+    """Sanity of the headline numbers, with bounds from the physics, not from a run."""
+    run, _, _ = quick
+    m = run.metrics
+    # the vignetting map within the method's 1 % budget (README, tests/test_roundtrip.py)
+    assert m["vignetting.ccd.e_mean"] < 0.01
+    # the LUT's error is its irradiance frames' noise (25 % slack of the first-order model)
+    assert m["sensor_lut.ccd.e_mean"] < 1.25 * m["sensor_lut.ccd.noise_floor"]
+    # appendix A: the fitted exponent of std ∝ N^α is −½ (4 points, ~10⁵ pixels each)
+    assert m["noise.ccd.sqrt_n.raw_exponent"] == pytest.approx(-0.5, abs=0.02)
+    # the corrected chart correlates better with the truth than the LDR frame (Table 1)
+    for col in ("ccd.outdoor", "ccd.indoor", "cmos.outdoor", "cmos.indoor"):
+        assert m[f"table1.{col}.corrected.r_camera"] > m[f"table1.{col}.uncorrected.r_camera"]
+
+
+# --------------------------------------------------------------------------- a broken calibrator
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("knobs", "experiments", "moved"),
+    [
+        ({"calibrate_kwargs": {"smoothness": 1e9}}, ["response"], "response.ccd.g_rms."),
+        ({"skip_vignetting": True}, ["vignetting"], "vignetting.ccd.e_mean"),
+    ],
+    ids=["absurd-smoothness", "vignetting-skipped"],
+)
+def test_broken_calibrator_fails_the_check_naming_the_metric(knobs, experiments, moved):
+    config = QUICK.replace(presets=("ccd",), **knobs)
+    run = run_validation(config, 0, experiments=experiments, progress=_quiet)
+    check = check_results(_results(run), load_baseline(DEFAULT_BASELINE), name="default.json")
+    assert not check.ok
+    names = [f.key for f in check.regressions]
+    assert any(k.startswith(moved) for k in names), names
+    assert moved in check.summary()
+    assert check.not_run > 0  # the cmos preset and the other experiments were not run
+
+
+# --------------------------------------------------------------------------- determinism, CLI
+
+
+def test_same_seed_same_metrics(tiny_results):
+    again = _results(run_validation(TINY, 0, progress=_quiet))
+    other = _results(run_validation(TINY, 1, experiments=["response"], progress=_quiet))
+
+    def untimed(results):
+        return {k: v for k, v in results["metrics"].items() if not k.startswith("timings.")}
+
+    assert untimed(again) == untimed(tiny_results)
+    assert again["seeds"] == tiny_results["seeds"]
+    key = "response.ccd.g_rms.G"
+    assert other["metrics"][key] != tiny_results["metrics"][key]
+
+
+def test_cli_check_names_a_regression_and_exits_1(tiny_results, tmp_path, capsys):
+    base = make_baseline([tiny_results, tiny_results])  # zero spread: only the floors
+    key = "sensor_lut.ccd.e_mean"
+    base["metrics"][key]["value"] *= 0.5  # the run is now twice as bad as the baseline
+    path = tmp_path / "tampered.json"
+    path.write_text(json.dumps(base), encoding="utf-8")
+    status = main(["validate", "--tiny", "-q", "--json", "-o", str(tmp_path / "r"),
+                   "--check", str(path)])
+    captured = capsys.readouterr()
+    assert status == 1
+    results = json.loads(captured.out)
+    # the same seed reproduces every other metric exactly
+    assert [f["key"] for f in results["check"]["regressions"]] == [key]
+    assert f"REGRESSION {key}" in captured.err
+    assert (tmp_path / "r" / "report.md").is_file()
+
+
+def test_cli_errors_are_one_line_exit_2(tmp_path, capsys):
+    (tmp_path / "exists").mkdir()
+    assert main(["validate", "--tiny", "-q", "-o", str(tmp_path / "exists")]) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert main(["validate", "--tiny", "-q", "-o", str(tmp_path / "a"),
+                 "--check", str(tmp_path / "none.json")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["validate", "--tiny", "-q", "-o", str(tmp_path / "b"),
+                 "--experiments", "nonsense"]) == 2
+    assert "unknown experiment" in capsys.readouterr().err
+
+
+def test_baseline_of_another_configuration_is_refused(tiny_results):
+    with pytest.raises(ValidationError, match="shape"):
+        check_results(tiny_results, load_baseline(DEFAULT_BASELINE))
+
+
+def test_stored_baseline_documents_its_tolerances():
+    base = load_baseline(DEFAULT_BASELINE)
+    assert base["conditions"] == QUICK.conditions()
+    assert len(base["seeds"]) >= 5 and base["seed"] == 0
+    for key, m in base["metrics"].items():
+        assert not key.startswith("timings."), key
+        assert m["tolerance"] >= base["tolerance_rule"]["k_sigma"] * m["spread"] * (1 - 1e-12)
+
+
+# --------------------------------------------------------------------------- configuration
+
+
+def test_conditions_leave_out_exactly_the_knobs():
+    assert set(_NOT_CONDITIONS) == set(QUICK.as_dict()) - set(QUICK.conditions())
+
+
+def test_config_checks_and_seed_streams():
+    with pytest.raises(ValidationError, match="noise_repeats"):
+        ValidationConfig(noise_repeats=(1, 2))
+    with pytest.raises(ValidationError, match="shape"):
+        ValidationConfig(shape=(10, 10))
+    assert stream_seed(3, "a", 1) == stream_seed(3, "a", 1) != stream_seed(3, "a", 2)
+    with pytest.raises(ValidationError):
+        stream_seed(-1, "a")
+
+
+def test_write_report_refuses_an_existing_folder(tmp_path):
+    from photoquant.errors import OutputExistsError
+    from validation.experiments import ValidationRun
+
+    run = ValidationRun(TINY, 0, {})
+    (tmp_path / "r").mkdir()
+    with pytest.raises(OutputExistsError):
+        write_report(run, tmp_path / "r")
+    out = write_report(run, tmp_path / "r", overwrite=True)
+    assert (out / "report.md").is_file() and isinstance(out, Path)

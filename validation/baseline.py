@@ -1,0 +1,370 @@
+"""Regression check of a validation run against a stored baseline (``--check``).
+
+A baseline (``validation/baselines/default.json`` for the default quick
+configuration) stores, for every checked metric, the value of the reference
+run (master seed 0), the direction that is better, and a tolerance derived
+from the seed-to-seed spread:
+
+    tolerance = max(K_SIGMA · s, REL_FLOOR · |value|, ABS_FLOOR)
+
+where ``s`` is the sample standard deviation of the metric over
+``n`` master seeds (each seed draws new noise, new calibration worlds and
+new subsets — everything random in the run), ``K_SIGMA = 5``. With ``n = 8``
+seeds, ``5 s`` exceeds ``2.5 σ`` with probability ≈ 0.97 even when ``s``
+underestimates ``σ`` (χ² with 7 degrees of freedom), so a run with *another*
+seed rarely trips a healthy metric, while a run with the baseline's own seed
+reproduces it exactly (the floors absorb floating-point differences between
+machines). A metric with a preferred direction (errors: lower; correlations:
+higher) fails only when it moves the wrong way by more than its tolerance;
+one with a target (a slope, an exponent) fails either way. A metric missing
+from the run (its experiment failed, or a fit that was trusted in the
+baseline is now refused) fails too. Timings are never compared.
+
+``python -m validation.baseline --config quick --seeds 0 1 2 3 4 5 6 7 -o
+validation/baselines/default.json`` regenerates the baseline.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from validation.config import ValidationError
+
+__all__ = [
+    "BASELINE_FORMAT",
+    "DEFAULT_BASELINE",
+    "K_SIGMA",
+    "Finding",
+    "CheckResult",
+    "make_baseline",
+    "load_baseline",
+    "check_results",
+    "main",
+]
+
+BASELINE_FORMAT = "photoquant.validation-baseline/1"
+DEFAULT_BASELINE = Path(__file__).resolve().parent / "baselines" / "default.json"
+"""The stored baseline of the default (quick) configuration."""
+
+K_SIGMA = 5.0
+"""Tolerance in seed-to-seed standard deviations."""
+REL_FLOOR = 1e-6
+"""Smallest tolerance relative to the value (floating-point differences between machines)."""
+ABS_FLOOR = 1e-9
+"""Smallest absolute tolerance."""
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One metric that moved (or is missing)."""
+
+    key: str
+    kind: str  # "regression", "missing", "improvement"
+    value: float | None
+    baseline: float | None
+    tolerance: float | None
+    better: str
+    description: str = ""
+
+    def message(self) -> str:
+        if self.kind == "missing":
+            why = "no value (fit refused)" if self.value is None else "not produced"
+            return f"{self.key}: {why}; baseline {_f(self.baseline)} — {self.description}"
+        delta = None if self.value is None or self.baseline is None else self.value - self.baseline
+        n_tol = (
+            f"{abs(delta) / self.tolerance:.1f}× tolerance"
+            if delta is not None and self.tolerance
+            else ""
+        )
+        return (
+            f"{self.key}: {_f(self.value)} vs baseline {_f(self.baseline)} "
+            f"(Δ {_f(delta, signed=True)}, tolerance ±{_f(self.tolerance)}, {n_tol}; "
+            f"{self.better} is better) — {self.description}"
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "key": self.key,
+            "kind": self.kind,
+            "value": self.value,
+            "baseline": self.baseline,
+            "tolerance": self.tolerance,
+            "better": self.better,
+            "description": self.description,
+        }
+
+
+def _f(v: float | None, signed: bool = False) -> str:
+    if v is None:
+        return "none"
+    return f"{v:+.4g}" if signed else f"{v:.4g}"
+
+
+@dataclass
+class CheckResult:
+    """Outcome of :func:`check_results`."""
+
+    baseline: str
+    regressions: list[Finding] = field(default_factory=list)
+    improvements: list[Finding] = field(default_factory=list)
+    compared: int = 0
+    not_run: int = 0
+    new: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not self.regressions
+
+    def summary(self) -> str:
+        """Human-readable lines: the verdict, then each regression by name."""
+        head = (
+            f"check against {self.baseline}: {self.compared} metrics compared, "
+            f"{len(self.regressions)} regression(s), {len(self.improvements)} improvement(s)"
+            + (f", {self.not_run} not run" if self.not_run else "")
+            + (f", {self.new} not in the baseline" if self.new else "")
+        )
+        lines = [("PASS — " if self.ok else "FAIL — ") + head]
+        lines += [f"  REGRESSION {f.message()}" for f in self.regressions]
+        if self.improvements:
+            lines.append(
+                "  improved beyond tolerance (consider regenerating the baseline): "
+                + ", ".join(f.key for f in self.improvements)
+            )
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "baseline": self.baseline,
+            "ok": self.ok,
+            "compared": self.compared,
+            "not_run": self.not_run,
+            "new": self.new,
+            "regressions": [f.as_dict() for f in self.regressions],
+            "improvements": [f.as_dict() for f in self.improvements],
+        }
+
+
+# ---------------------------------------------------------------------------- baseline
+
+
+def make_baseline(
+    runs: Sequence[Mapping[str, Any]],
+    *,
+    k_sigma: float = K_SIGMA,
+    rel_floor: float = REL_FLOOR,
+    abs_floor: float = ABS_FLOOR,
+) -> dict[str, Any]:
+    """Build a baseline from the ``results.json`` dicts of runs with different seeds.
+
+    The first run gives the values; all of them give the spread.
+    """
+    if len(runs) < 2:
+        raise ValidationError("a baseline needs runs with at least two seeds for the spread")
+    ref = runs[0]
+    cond = _conditions(ref)
+    for r in runs[1:]:
+        if _conditions(r) != cond:
+            raise ValidationError("the runs of a baseline must share their configuration")
+    metrics: dict[str, Any] = {}
+    for key, info in ref["metric_info"].items():
+        if not info.get("check", True):
+            continue
+        vals = [r["metrics"].get(key) for r in runs]
+        nums = np.array([v for v in vals if v is not None], dtype=np.float64)
+        value = ref["metrics"].get(key)
+        spread = float(nums.std(ddof=1)) if nums.size > 1 else 0.0
+        scale = abs(value) if value is not None else (float(np.abs(nums).max()) if nums.size else 0)
+        tol = max(k_sigma * spread, rel_floor * scale, abs_floor)
+        metrics[key] = {
+            "value": value,
+            "tolerance": tol,
+            "spread": spread,
+            "mean": float(nums.mean()) if nums.size else None,
+            "n_values": int(nums.size),
+            "allow_none": bool(any(v is None for v in vals)),
+            "better": info.get("better", "lower"),
+            "unit": info.get("unit", ""),
+            "description": info.get("description", ""),
+        }
+    return {
+        "format": BASELINE_FORMAT,
+        "config_name": ref["config"]["name"],
+        "conditions": cond,
+        "seed": ref["seed"],
+        "seeds": [r["seed"] for r in runs],
+        "tolerance_rule": {
+            "formula": "max(k_sigma * spread, rel_floor * |value|, abs_floor)",
+            "spread": "sample standard deviation over the seeds",
+            "k_sigma": k_sigma,
+            "rel_floor": rel_floor,
+            "abs_floor": abs_floor,
+        },
+        "versions": ref.get("versions", {}),
+        "metrics": dict(sorted(metrics.items())),
+    }
+
+
+def _conditions(results: Mapping[str, Any]) -> dict[str, Any]:
+    """The run's conditions (:meth:`validation.config.ValidationConfig.conditions`) from its results dict."""
+    cfg = dict(results["config"])
+    for key in _NOT_CONDITIONS:
+        cfg.pop(key, None)
+    return cfg
+
+
+_NOT_CONDITIONS = ("name", "presets", "calibrate_kwargs", "skip_vignetting")
+"""The fields :meth:`ValidationConfig.conditions` leaves out (a test keeps them in step)."""
+
+
+def load_baseline(path: str | Path) -> dict[str, Any]:
+    """Read and validate a baseline file."""
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ValidationError(f"baseline {p} does not exist") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValidationError(f"baseline {p} cannot be read: {exc}") from None
+    if not isinstance(data, dict) or data.get("format") != BASELINE_FORMAT:
+        raise ValidationError(
+            f"{p} is not a validation baseline (format {BASELINE_FORMAT!r} expected)"
+        )
+    if not isinstance(data.get("metrics"), dict) or not isinstance(data.get("conditions"), dict):
+        raise ValidationError(f"baseline {p} lacks `metrics` or `conditions`")
+    return data
+
+
+def _expected(key: str, results: Mapping[str, Any]) -> bool:
+    """Whether the run should have produced ``key``.
+
+    Not when its experiment was not selected, was skipped for a missing
+    optional dependency, or belongs to a preset that was not run; an
+    experiment that *failed* is expected (its metrics count as missing).
+    """
+    from pqsim.synth_camera.presets import CAMERA_PRESETS
+
+    parts = key.split(".")
+    if parts[0] not in results.get("experiments_run", []):
+        return False
+    skipped = (results.get("experiments", {}).get(parts[0]) or {}).get("skipped")
+    if skipped and not str(skipped).startswith("failed"):
+        return False
+    if len(parts) > 1 and parts[1] in CAMERA_PRESETS:
+        return parts[1] in results.get("presets", [])
+    return True
+
+
+def check_results(
+    results: Mapping[str, Any], baseline: Mapping[str, Any], *, name: str = "baseline"
+) -> CheckResult:
+    """Compare a run's ``results.json`` dict with a baseline.
+
+    Raises
+    ------
+    ValidationError
+        When the baseline was made under other conditions (image size,
+        repeats, exposures, sweeps, ...): its tolerances would not apply.
+    """
+    cond = _conditions(results)
+    if cond != baseline["conditions"]:
+        diff = sorted(
+            k for k in set(cond) | set(baseline["conditions"])
+            if cond.get(k) != baseline["conditions"].get(k)
+        )
+        raise ValidationError(
+            f"{name} was made for configuration {baseline.get('config_name')!r} and differs "
+            f"from this run ({results['config']['name']!r}) in {', '.join(diff)}"
+        )
+    out = CheckResult(baseline=name)
+    metrics = results["metrics"]
+    for key, ref in baseline["metrics"].items():
+        if key not in metrics:
+            if _expected(key, results):
+                out.regressions.append(
+                    Finding(key, "missing", None, ref["value"], ref["tolerance"], ref["better"],
+                            ref.get("description", ""))
+                )
+            else:
+                out.not_run += 1
+            continue
+        out.compared += 1
+        value, base, tol, better = metrics[key], ref["value"], ref["tolerance"], ref["better"]
+        desc = ref.get("description", "")
+        if value is None or base is None:
+            if value is None and base is not None and not ref.get("allow_none", False):
+                out.regressions.append(Finding(key, "missing", None, base, tol, better, desc))
+            elif value is not None and base is None:
+                out.improvements.append(Finding(key, "improvement", value, None, tol, better, desc))
+            continue
+        delta = value - base
+        if not math.isfinite(delta):
+            out.regressions.append(Finding(key, "regression", value, base, tol, better, desc))
+            continue
+        worse = (
+            delta > tol if better == "lower" else -delta > tol if better == "higher"
+            else abs(delta) > tol
+        )
+        better_by = (
+            -delta > tol if better == "lower" else delta > tol if better == "higher" else False
+        )
+        if worse:
+            out.regressions.append(Finding(key, "regression", value, base, tol, better, desc))
+        elif better_by:
+            out.improvements.append(Finding(key, "improvement", value, base, tol, better, desc))
+    out.new = sum(
+        1 for k, info in results.get("metric_info", {}).items()
+        if info.get("check", True) and k not in baseline["metrics"]
+    )
+    return out
+
+
+# ---------------------------------------------------------------------------- command
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m validation.baseline``: run several seeds and write a baseline file."""
+    from photoquant.io import write_text_atomic
+    from validation.config import get_config
+    from validation.experiments import run_validation
+    from validation.report import results_json
+
+    parser = argparse.ArgumentParser(
+        prog="python -m validation.baseline",
+        description="Run the validation with several seeds and store a regression baseline "
+        "(values of the first seed, tolerances from the spread over all).",
+    )
+    parser.add_argument("--config", default="quick", help="quick (default), full or tiny")
+    parser.add_argument("--seeds", type=int, nargs="+", default=list(range(8)))
+    parser.add_argument("-o", "--output", type=Path, default=DEFAULT_BASELINE)
+    parser.add_argument("--runs-dir", type=Path, help="also keep each run's results.json here")
+    args = parser.parse_args(argv)
+    cfg = get_config(args.config)
+    runs = []
+    for s in args.seeds:
+        t0 = time.perf_counter()
+        run = run_validation(cfg, s, progress=lambda _m: None)
+        text = results_json(run)
+        runs.append(json.loads(text))
+        if args.runs_dir:
+            args.runs_dir.mkdir(parents=True, exist_ok=True)
+            write_text_atomic(args.runs_dir / f"results_seed{s}.json", text)
+        print(f"seed {s}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+    base = make_baseline(runs)
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(args.output, json.dumps(base, indent=1, allow_nan=False) + "\n")
+    print(f"baseline with {len(base['metrics'])} metrics written to {args.output}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
