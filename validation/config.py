@@ -84,9 +84,10 @@ class ValidationConfig:
         ``N`` of the corrected ColorChecker captures (Table 1, Fig. 7).
     ldr_exposure_s : float
         Exposure of the uncorrected LDR image (20 ms in §6.3 of [PQ]).
-    chart_sensitivities : str
-        Spectral sensitivities for the chart's photoquantities
-        (:data:`pqsim.spectral.CAMERA_SENSITIVITIES`).
+    chart_sensitivities : str or None
+        Spectral sensitivities for the chart's photoquantities (a key of
+        :data:`pqsim.spectral.CAMERA_SENSITIVITIES`); ``None``: each preset's
+        own (:func:`pqsim.synth_camera.presets.preset_sensitivities`).
     illuminants : tuple of (label, illuminant) pairs
         Lighting of Table 1: ``("outdoor", "D65"), ("indoor", "A")``.
     noise_repeats : tuple of int
@@ -120,7 +121,7 @@ class ValidationConfig:
     presets: tuple[str, ...] = ("ccd", "cmos")
     chart_repeats: int = 4
     ldr_exposure_s: float = 0.02
-    chart_sensitivities: str = "nikon_d5100"
+    chart_sensitivities: str | None = None
     illuminants: tuple[tuple[str, str], ...] = (("outdoor", "D65"), ("indoor", "A"))
     noise_repeats: tuple[int, ...] = (1, 2, 4, 10)
     noise_exposure_s: float = 0.02

@@ -216,3 +216,21 @@ def test_write_report_refuses_an_existing_folder(tmp_path):
         write_report(run, tmp_path / "r")
     out = write_report(run, tmp_path / "r", overwrite=True)
     assert (out / "report.md").is_file() and isinstance(out, Path)
+
+
+def test_without_the_optional_packages(tiny_results, tmp_path, monkeypatch):
+    """No colour-science: the chart experiments are skipped, not failed; no matplotlib: no PNGs."""
+    import validation.report as report
+    from validation.experiments import fig7, noise, table1
+
+    for module in (noise, table1, fig7):
+        monkeypatch.setattr(module, "have_colour_science", lambda: False)
+    monkeypatch.setattr(report, "_have_matplotlib", lambda: False)
+    run = run_validation(TINY, 0, experiments=["noise", "table1", "fig7"], progress=_quiet)
+    for res in run.experiments.values():
+        assert res.skipped and "colour-science" in res.skipped
+    check = check_results(_results(run), make_baseline([tiny_results, tiny_results]))
+    assert check.ok and check.compared == 0 and check.not_run > 0
+    folder = write_report(run, tmp_path / "r")
+    assert "Not run: needs colour-science" in (folder / "report.md").read_text(encoding="utf-8")
+    assert not list((folder / "figures").iterdir())

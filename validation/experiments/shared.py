@@ -126,7 +126,7 @@ class Shared:
         self._calibrations: dict[str, Calibration] = {}
         self._failures: dict[str, Exception] = {}
         self._scenes: dict[str, Any] = {}
-        self._charts: dict[str, Any] = {}
+        self._charts: dict[tuple[str, str], Any] = {}
         self.cache: dict[Any, Any] = {}
         """Memo for results several experiments share (keys name their owner)."""
 
@@ -243,15 +243,22 @@ class Shared:
         self.scene_correction(preset)
         return self._scenes[preset][1]
 
-    def chart(self, illuminant: str) -> Any:
-        """The analytic ColorChecker scene under ``illuminant`` (once)."""
-        if illuminant not in self._charts:
+    def sensitivities(self, preset: str) -> str:
+        """The spectral sensitivities of ``preset``'s charts (the configuration's or its own)."""
+        if self.config.chart_sensitivities is not None:
+            return self.config.chart_sensitivities
+        from pqsim.synth_camera.presets import preset_sensitivities
+
+        return preset_sensitivities(preset)
+
+    def chart(self, illuminant: str, preset: str) -> Any:
+        """The analytic ColorChecker seen by ``preset`` under ``illuminant`` (once)."""
+        key = (illuminant, self.sensitivities(preset))
+        if key not in self._charts:
             from validation.experiments.chart import colour_checker_scene
 
-            self._charts[illuminant] = colour_checker_scene(
-                self.config.shape, illuminant, self.config.chart_sensitivities
-            )
-        return self._charts[illuminant]
+            self._charts[key] = colour_checker_scene(self.config.shape, *key)
+        return self._charts[key]
 
 
 def have_colour_science() -> bool:

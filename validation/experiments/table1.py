@@ -94,7 +94,7 @@ def chart_measurements(
     from validation.experiments.chart import patch_means
 
     cal = shared.calibration(preset)
-    chart = shared.chart(illuminant)
+    chart = shared.chart(illuminant, preset)
     camera, model = cal.camera, cal.model
     ldr_cap = camera.capture(
         chart.l, [config.ldr_exposure_s], 1, rng=shared.stream("chart_ldr", preset, label)
@@ -190,13 +190,15 @@ def run(
     res.notes += [
         MISSING_HUGIN,
         "The ColorChecker is an analytic flat chart, not a render: each patch's photoquantity "
-        "is the exact integral of the camera's spectral sensitivities "
-        f"({config.chart_sensitivities}), the illuminant and the patch reflectance (BabelColor "
-        "average), captured by the numpy synthetic camera.",
+        "is the exact integral of the camera's spectral sensitivities ("
+        + ", ".join(f"{p}: {shared.sensitivities(p)}" for p in config.presets)
+        + "), the illuminant and the patch reflectance (BabelColor average), captured by the "
+        "numpy synthetic camera.",
         "The corrected values are balanced on the chart's white patch (the paper's white chart "
         "lit by the scene's light, §5.3); the camera-photoquantity truth is balanced the same "
         "way. The CIE RGB truth is under D65 for both lightings, as the chart maker's values.",
-        "Both presets use the same spectral sensitivities (colour-science ships measured curves "
-        "of CMOS cameras only); CCD and CMOS differ in their response, noise and vignetting.",
+        "colour-science ships measured spectral sensitivities of CMOS cameras only; the CCD "
+        "and CMOS presets differ in their response, noise and vignetting "
+        "(pqsim.synth_camera.presets).",
     ]
     return res
