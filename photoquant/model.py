@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,8 +34,8 @@ import numpy as np
 
 from photoquant._checks import check_array, check_bit_depth
 from photoquant._json import to_json_value
-from photoquant.errors import CameraModelError, InputError, OutputExistsError
-from photoquant.io.atomic import write_text_atomic
+from photoquant.errors import CameraModelError, InputError
+from photoquant.io.atomic import atomic_directory, write_text_atomic
 from photoquant.io.images import read_exr, write_exr
 from photoquant.vignetting import IDENTITY_VIGNETTING, VIGNETTING_PARAMETER_NAMES, vignetting_map
 
@@ -239,30 +237,14 @@ class CameraModel:
         Raises :class:`OutputExistsError` when ``path`` exists and ``overwrite``
         is false.
         """
-        target = Path(path)
-        if target.exists() and not overwrite:
-            raise OutputExistsError(f"{target} already exists (pass overwrite=True to replace it)")
-        target.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp"))
-        try:
+        with atomic_directory(path, overwrite=overwrite) as tmp:
             write_exr(tmp / _LUT_NAME, self.sensor_lut, channels=self.channels)
             write_exr(
                 tmp / _VIGNETTING_NAME, self.vignetting().astype(np.float32), channels=self.channels
             )
             text = json.dumps(self.to_json_dict(), indent=1)
             write_text_atomic(tmp / _JSON_NAME, text + "\n")
-            os.chmod(tmp, 0o755)
-            if target.exists():
-                old = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.old."))
-                os.replace(target, old / "camera")
-                os.replace(tmp, target)
-                shutil.rmtree(old, ignore_errors=True)
-            else:
-                os.replace(tmp, target)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
-        return target
+        return Path(path)
 
 
 def load_camera(path: str | os.PathLike[str]) -> CameraModel:

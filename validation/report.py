@@ -18,8 +18,6 @@ import json
 import math
 import os
 import re
-import shutil
-import tempfile
 from collections.abc import Mapping
 from importlib import import_module
 from pathlib import Path
@@ -392,15 +390,14 @@ def write_report(
     """
     from photoquant.errors import OutputExistsError
     from photoquant.io import write_text_atomic
+    from photoquant.io.atomic import atomic_directory
 
     target = Path(folder)
     if target.exists() and not overwrite:
         raise OutputExistsError(f"{target} already exists (use --overwrite to replace it)")
     if target.exists() and not target.is_dir():
         raise OutputExistsError(f"{target} exists and is not a folder")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp"))
-    try:
+    with atomic_directory(target, overwrite=True) as tmp:
         figures = tmp / "figures"
         figures.mkdir()
         draw = _have_matplotlib()
@@ -416,15 +413,4 @@ def write_report(
                 res.figure_paths.append(rel)
         write_text_atomic(tmp / "results.json", results_json(run, check))
         write_text_atomic(tmp / "report.md", render_markdown(run, check))
-        os.chmod(tmp, 0o755)
-        if target.exists():
-            old = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.old."))
-            os.replace(target, old / "report")
-            os.replace(tmp, target)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, target)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return target

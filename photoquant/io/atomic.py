@@ -10,14 +10,15 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-from photoquant.errors import InputError
+from photoquant.errors import InputError, OutputExistsError
 
-__all__ = ["atomic_write", "write_text_atomic", "write_bytes_atomic"]
+__all__ = ["atomic_write", "atomic_directory", "write_text_atomic", "write_bytes_atomic"]
 
 _MODES = {"w": "w", "wt": "w", "wb": "wb"}
 _NEW_FILE_MODE = 0o644
@@ -137,3 +138,38 @@ def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:
     """
     with atomic_write(path, "wb") as f:
         f.write(data)
+
+
+@contextlib.contextmanager
+def atomic_directory(path: str | os.PathLike[str], *, overwrite: bool = False) -> Iterator[Path]:
+    """Build a folder next to ``path`` and move it into place when the block succeeds.
+
+    Yields the temporary folder to fill. On success it replaces ``path`` (an
+    existing folder is moved aside first and deleted after the swap); on any
+    exception the temporary folder is removed and ``path`` is untouched.
+
+    Raises
+    ------
+    OutputExistsError
+        If ``path`` exists and ``overwrite`` is false (checked before anything
+        is written).
+    """
+    target = Path(path)
+    if target.exists() and not overwrite:
+        raise OutputExistsError(f"{target} already exists (pass overwrite=True to replace it)")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp"))
+    try:
+        yield tmp
+        os.chmod(tmp, 0o755)
+        if target.exists():
+            old = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.old."))
+            os.replace(target, old / target.name)
+            os.replace(tmp, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, target)
+        _fsync_dir(target.parent)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
