@@ -54,7 +54,7 @@ def main() -> None:
     rows = [
         ("response (photoquant 2000 px, sparse)", lambda: camera_response_Debevec1997(values, t)),
         ("response (OpenCV 70 px, dense SVD)", lambda: cv2.createCalibrateDebevec().process(images, times)),
-        ("merge (photoquant)", lambda: merge_Debevec1997(values, t, rec.levels, rec.log_inverse_response)),
+        ("merge (photoquant)", lambda: merge_Debevec1997(frames, t, rec.levels, rec.log_inverse_response)),
         ("merge (OpenCV)", lambda: cv2.createMergeDebevec().process(images, times, cv_crf)),
     ]
     results = {name: _median_time(fn, args.repeat) for name, fn in rows}

@@ -67,8 +67,10 @@ def merge_stack(
     level, or at the floor 0; and when it lies below ``min_level``, where the
     response was not measured.
     """
+    # a single repeat stays integer: the merge then looks weights and g up in tables
+    values = stack.frames[0] if stack.n_repeats == 1 else stack.mean()
     return merge_Debevec1997(
-        stack.mean(),
+        values,
         stack.exposure_s,
         levels,
         log_inverse_response,

@@ -153,20 +153,50 @@ def merge_Debevec1997(
             [np.interp(levels + 0.5, levels, g[ch]) - np.interp(levels - 0.5, levels, g[ch])
              for ch in range(n_ch)]
         )
+    if values.dtype.kind in "iu":
+        # integer values (a single repeat): weights and g by table look-up
+        full = np.arange(int(levels[-1]) + 1, dtype=np.float64)
+        w_lut = np.empty((n_ch, full.size))
+        g_lut = np.empty((n_ch, full.size))
+        for ch in range(n_ch):
+            g_lut[ch] = np.interp(full, levels, g[ch])
+            if step_table is None:
+                w_lut[ch] = wfun(full, c_min, sat[ch])
+            else:
+                step = np.interp(full, levels, step_table[ch])
+                w_lut[ch] = wfun(full, c_min, sat[ch], log_step=step)
+            w_lut[ch, full >= sat[ch]] = 0.0
+            if min_level is not None:
+                w_lut[ch, full < min_level[ch]] = 0.0
+        offsets = np.arange(n_ch) * full.size
+        w_flat, g_flat = w_lut.ravel(), g_lut.ravel()
+
+        def weights_and_log(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            index = np.minimum(v, full.size - 1).astype(np.intp) + offsets
+            return w_flat[index], g_flat[index]
+    else:
+
+        def weights_and_log(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            if step_table is None:
+                w = wfun(v, c_min, sat)
+            else:
+                w = wfun(v, c_min, sat, log_step=apply_log_inverse_response(v, levels, step_table))
+            w = np.where(v >= sat, 0.0, w)
+            if min_level is not None:
+                w = np.where(v < min_level, 0.0, w)
+            return w, apply_log_inverse_response(v, levels, g)
+
     for k in range(k_count):
         v = values[k]
-        if step_table is None:
-            w = wfun(v, c_min, sat)
-        else:
-            w = wfun(v, c_min, sat, log_step=apply_log_inverse_response(v, levels, step_table))
-        clipped = v >= sat if saturated is None else (saturated[k] | (v >= sat))
-        w = np.where(clipped, 0.0, w)
+        w, gv = weights_and_log(v)
+        clipped = v >= sat
+        if saturated is not None:
+            clipped |= saturated[k]
+            w = np.where(saturated[k], 0.0, w)
         if dark_clipped is not None:
             w = np.where(dark_clipped[k], 0.0, w)
-        if min_level is not None:
-            w = np.where(v < min_level, 0.0, w)
         any_unsat |= ~clipped
-        num += w * (apply_log_inverse_response(v, levels, g) - log_t[k])
+        num += w * (gv - log_t[k])
         den += w
     mask = den <= 0
     with np.errstate(invalid="ignore", divide="ignore"):

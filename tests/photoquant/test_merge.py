@@ -113,3 +113,17 @@ def test_bad_input_is_named(args, match):
     kw = {k: base.pop(k) for k in list(base) if k == "saturation_level"}
     with pytest.raises(InputError, match=match):
         merge_Debevec1997(*base.values(), **kw)
+
+
+@pytest.mark.parametrize("weighting", ["hat", "hat-quantisation", "uniform"])
+def test_integer_fast_path_equals_the_float_path(rng, weighting):
+    frames = capture(log_uniform_scene(rng, (12, 14, 3)), EXPOSURES, balance=BALANCE)[0]
+    sat = np.round(np.array(BALANCE) * 255)
+    g = _true_table()
+    kw = {"saturation_level": sat, "min_level": np.array([3.0, 2.0, 4.0]), "weighting": weighting,
+          "dark_clipped": frames == 0}
+    a = merge_Debevec1997(frames, EXPOSURES, LEVELS, g, **kw)
+    b = merge_Debevec1997(frames.astype(np.float64), EXPOSURES, LEVELS, g, **kw)
+    np.testing.assert_array_equal(a.mask, b.mask)
+    np.testing.assert_array_equal(a.all_saturated, b.all_saturated)
+    np.testing.assert_allclose(a.log_photoquantity, b.log_photoquantity, rtol=0, atol=1e-12)
