@@ -411,6 +411,38 @@ def _read_cached(
 # ----------------------------------------------------------------------------- rendering
 
 
+def _emitter_order(mi_scene: Any) -> list[tuple]:
+    """A sortable key per emitter, in the scene's order: shapeless first, then by bounding box."""
+    keys = []
+    for emitter in mi_scene.emitters():
+        shape = emitter.get_shape()
+        if shape is None:
+            keys.append((0, type(emitter).__name__, (), ()))
+        else:
+            box = shape.bbox()
+            keys.append((1, "", tuple(box.min), tuple(box.max)))
+    return keys
+
+
+def _load_canonical(mi: Any, mitsuba_dict: dict[str, Any], max_loads: int = 256) -> Any:
+    """Load a scene whose emitters are in one canonical order.
+
+    Mitsuba 3.9 may list a scene's area emitters in a different order from
+    one load to the next, and emitter sampling, hence the Monte-Carlo noise of
+    a render with a fixed seed, follows that order. Loading takes about a
+    millisecond, so the scene is reloaded until its emitters come in sorted
+    order (at most ``max_loads`` times; otherwise the last load is used and a
+    warning is logged: the render is then correct but not bit-reproducible).
+    """
+    for _ in range(max_loads):
+        mi_scene = mi.load_dict(mitsuba_dict)
+        order = _emitter_order(mi_scene)
+        if order == sorted(order):
+            return mi_scene
+    _log.warning("emitters of the scene never loaded in canonical order; render not reproducible")
+    return mi_scene
+
+
 @dataclass(frozen=True)
 class RenderInfo:
     """What :func:`render_photoquantity` did.
@@ -525,7 +557,7 @@ def render_photoquantity(
 
     mi = _activate(variant)
     with _mitsuba_log(progress, f"render {width}x{height} @{spp}spp"):
-        mi_scene = mi.load_dict(to_mitsuba_dict(prepared, variant))
+        mi_scene = _load_canonical(mi, to_mitsuba_dict(prepared, variant))
         _check_sample_count(mi_scene, spp)
         tensor = mi.render(mi_scene, spp=spp, seed=seed)
     image = np.array(tensor, dtype=np.float32, copy=True)
@@ -614,7 +646,7 @@ def render_aov(
             }
     mi = _activate(variant)
     with _mitsuba_log(False):
-        mi_scene = mi.load_dict(to_mitsuba_dict(prepared, variant))
+        mi_scene = _load_canonical(mi, to_mitsuba_dict(prepared, variant))
         _check_sample_count(mi_scene, spp)
         out = np.array(mi.render(mi_scene, spp=spp, seed=seed), dtype=np.float32)
     # hdrfilm in "rgb" mode writes R, G, B (of the null radiance) first, then AOVs.

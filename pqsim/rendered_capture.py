@@ -27,7 +27,7 @@ ColorChecker's reference values.
 
 Renders are cached (:func:`pqsim.render.render_photoquantity`): their seeds
 come from ``render_seed`` only, so a re-capture with a new camera-noise
-``seed`` renders nothing.
+``seed`` renders nothing, and with the same ``seed`` gives the same files.
 
 References
 ----------
@@ -363,10 +363,15 @@ def write_rendered_capture_set(
     ``irradiance``, ``scene`` and ``"colorchecker": {"frames": [...],
     "patch_rois": [[x0, y0, x1, y1], ...], "patch_names": [...]}`` (a key
     photoquant keeps and ignores). The exposures (and so the frames) depend
-    on the rendered images through ``white_fill`` and :func:`scene_exposures`;
-    renders are bit-identical per seed in scalar variants, and LLVM variants
-    may differ in the last bits between fresh renders (a cached render is
-    reused as is).
+    on the rendered images through ``white_fill`` and :func:`scene_exposures`.
+
+    Given the same renders (e.g. from the cache) and ``seed``, the frame files
+    are bit-identical. Fresh renders are not always: LLVM variants accumulate
+    in a varying order, and Mitsuba 3.9 orders a scene's area emitters
+    differently from one ``load_dict`` to the next (even with
+    ``parallel=False``), which changes the Monte-Carlo realisation of the
+    scenes with several emitters (calibration views, test scene) in every
+    variant. Keep the cache to reproduce a capture set exactly.
     """
     from pqsim import render
     from pqsim.scenes import (

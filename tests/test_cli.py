@@ -97,7 +97,7 @@ def test_pqsim_capture_feeds_photoquant_calibrate(tmp_path, capsys):
     from pqsim.cli import main as pqsim_main
 
     out = tmp_path / "cap"
-    assert pqsim_main(["capture", "-o", str(out), "--resolution", "64x48", "--repeats", "2",
+    assert pqsim_main(["capture", "-o", str(out), "--renderer", "analytic", "--resolution", "64x48", "--repeats", "2",
                        "--exposures", "6", "--seed", "5"]) == 0
     assert main(["calibrate", str(out / "capture.json"), "-o", str(tmp_path / "cam"), "-q"]) == 0
     assert pqsim_main(["capture", "-o", str(out)]) == 2
