@@ -28,8 +28,8 @@ import numpy as np
 
 from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, FigureSpec
-from validation.experiments.shared import Shared, have_colour_science
-from validation.experiments.table1 import COLUMNS, chart_measurements
+from validation.experiments.shared import Shared
+from validation.experiments.table1 import chart_experiment, chart_measurements
 
 __all__ = ["run", "linear_fit", "PAPER", "TITLE"]
 
@@ -61,13 +61,9 @@ def run(
 ) -> ExperimentResult:
     """Regression lines per preset, lighting and ground truth; the Fig. 7 scatter plot."""
     shared = shared or Shared(config, seed, workdir)
-    res = ExperimentResult("fig7", TITLE, "§6.3, Fig. 6–7")
-    res.paper = PAPER
-    if not have_colour_science():
-        res.skipped = "needs colour-science for the spectral data: pip install '.[render]'"
+    res, lighting, columns = chart_experiment("fig7", TITLE, "§6.3, Fig. 6–7", PAPER, config)
+    if res.skipped:
         return res
-    lighting = dict(config.illuminants)
-    columns = [(p, lab) for p, lab in COLUMNS if p in config.presets and lab in lighting]
     panels = []
     for preset, label in columns:
         m = chart_measurements(config, shared, preset, label, lighting[label])

@@ -138,18 +138,31 @@ def _eq8_patches(reference: np.ndarray, estimate: np.ndarray) -> float:
     return stats.e_mean
 
 
+def chart_experiment(
+    name: str, title: str, where: str, paper: dict, config: ValidationConfig
+) -> tuple[ExperimentResult, dict, list[tuple[str, str]]]:
+    """The result of a ColorChecker experiment, its lighting and its (preset, lighting) columns.
+
+    The result is marked skipped when colour-science (the spectral data) is missing.
+    """
+    res = ExperimentResult(name, title, where)
+    res.paper = paper
+    lighting = dict(config.illuminants)
+    if not have_colour_science():
+        res.skipped = "needs colour-science for the spectral data: pip install colour-science"
+        return res, lighting, []
+    columns = [(p, lab) for p, lab in COLUMNS if p in config.presets and lab in lighting]
+    return res, lighting, columns
+
+
 def run(
     config: ValidationConfig, seed: int, workdir: Path, *, shared: Shared | None = None
 ) -> ExperimentResult:
     """Correlations of the uncorrected and corrected chart values with both ground truths."""
     shared = shared or Shared(config, seed, workdir)
-    res = ExperimentResult("table1", TITLE, "§6.3, §6.4, Table 1")
-    res.paper = PAPER
-    if not have_colour_science():
-        res.skipped = "needs colour-science for the spectral data: pip install '.[render]'"
+    res, lighting, columns = chart_experiment("table1", TITLE, "§6.3, §6.4, Table 1", PAPER, config)
+    if res.skipped:
         return res
-    lighting = dict(config.illuminants)
-    columns = [(p, lab) for p, lab in COLUMNS if p in config.presets and lab in lighting]
     table: dict[tuple[str, str], dict[str, float]] = {}
     for preset, label in columns:
         m = chart_measurements(config, shared, preset, label, lighting[label])
