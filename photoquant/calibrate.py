@@ -41,45 +41,15 @@ from photoquant.correspondences import (
 )
 from photoquant.errors import CalibrationError, InputError
 from photoquant.flatfield import sensor_lut_IrradianceScene
-from photoquant.merge import MergeResult, merge_Debevec1997
+from photoquant.merge import MergeResult, merge_stack
 from photoquant.model import CameraModel
 from photoquant.response import DEFAULT_SMOOTHNESS, recover_response
 from photoquant.stack import ExposureStack
 from photoquant.vignetting import IDENTITY_VIGNETTING, fit_vignetting, vignetting_map
 
-__all__ = ["calibrate", "calibrate_manifest", "merge_stack"]
+__all__ = ["calibrate", "calibrate_manifest"]
 
 Progress = Callable[[str], None]
-
-
-def merge_stack(
-    stack: ExposureStack,
-    levels: np.ndarray,
-    log_inverse_response: np.ndarray,
-    saturation_level: np.ndarray,
-    *,
-    min_level: np.ndarray | None = None,
-    weighting: str = "hat",
-) -> MergeResult:
-    """Denoise (eq. 2) and merge (eq. 6) a stack with a known response.
-
-    A value is left out when any of its repeats is clipped: at the saturation
-    level, or at the floor 0; and when it lies below ``min_level``, where the
-    response was not measured.
-    """
-    # a single repeat stays integer: the merge then looks weights and g up in tables
-    values = stack.frames[0] if stack.n_repeats == 1 else stack.mean()
-    return merge_Debevec1997(
-        values,
-        stack.exposure_s,
-        levels,
-        log_inverse_response,
-        saturation_level=np.asarray(saturation_level, dtype=np.float64),
-        saturated=stack.saturated(saturation_level),
-        dark_clipped=stack.dark_clipped(),
-        min_level=min_level,
-        weighting=weighting,
-    )
 
 
 def _check_views(views: Sequence[ExposureStack], irradiance: ExposureStack | None) -> None:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from photoquant.errors import InputError
+from photoquant.merge import merge_stack
 from photoquant.model import CameraModel
 from photoquant.stack import ExposureStack
 
@@ -55,9 +56,6 @@ def correct(stack: ExposureStack, model: CameraModel, *, weighting: str | None =
     -------
     Correction
     """
-    # imported here: photoquant.calibrate imports this module's siblings
-    from photoquant.calibrate import merge_stack
-
     if not isinstance(stack, ExposureStack):
         raise InputError(f"`stack` must be an ExposureStack, got {type(stack).__name__}")
     if not isinstance(model, CameraModel):

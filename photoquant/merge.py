@@ -22,9 +22,10 @@ import numpy as np
 
 from photoquant._checks import check_array, check_exposure_times
 from photoquant.errors import InputError
+from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
 
-__all__ = ["MergeResult", "merge_Debevec1997", "apply_log_inverse_response"]
+__all__ = ["MergeResult", "merge_Debevec1997", "merge_stack", "apply_log_inverse_response"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,4 +208,34 @@ def merge_Debevec1997(
         all_saturated=mask & ~any_unsat,
         all_dark=mask & any_unsat,
         weight_sum=den,
+    )
+
+
+def merge_stack(
+    stack: ExposureStack,
+    levels: np.ndarray,
+    log_inverse_response: np.ndarray,
+    saturation_level: np.ndarray,
+    *,
+    min_level: np.ndarray | None = None,
+    weighting: str = "hat",
+) -> MergeResult:
+    """Denoise (eq. 2) and merge (eq. 6) a stack with a known response.
+
+    A value is left out when any of its repeats is clipped: at the saturation
+    level, or at the floor 0; and when it lies below ``min_level``, where the
+    response was not measured.
+    """
+    # a single repeat stays integer: the merge then looks weights and g up in tables
+    values = stack.frames[0] if stack.n_repeats == 1 else stack.mean()
+    return merge_Debevec1997(
+        values,
+        stack.exposure_s,
+        levels,
+        log_inverse_response,
+        saturation_level=np.asarray(saturation_level, dtype=np.float64),
+        saturated=stack.saturated(saturation_level),
+        dark_clipped=stack.dark_clipped(),
+        min_level=min_level,
+        weighting=weighting,
     )

@@ -264,13 +264,20 @@ def _fig_response(plt, spec: FigureSpec):
     return fig
 
 
+def _panel_grid(plt, n_panels: int, ncols: int, panel_size: tuple[float, float]):
+    """A figure with ``n_panels`` axes on a grid of ``ncols`` columns; spare axes hidden."""
+    nrows = max(1, math.ceil(n_panels / ncols))
+    fig, axes = plt.subplots(
+        nrows, ncols, figsize=(panel_size[0] * ncols, panel_size[1] * nrows), squeeze=False
+    )
+    for ax in axes.ravel()[n_panels:]:
+        ax.axis("off")
+    return fig, axes
+
+
 def _fig_maps(plt, spec: FigureSpec):
     panels = spec.data["panels"]
-    ncols = int(spec.data.get("ncols", 3))
-    nrows = max(1, math.ceil(len(panels) / ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.4 * ncols, 3.4 * nrows), squeeze=False)
-    for ax in axes.ravel()[len(panels):]:
-        ax.axis("off")
+    fig, axes = _panel_grid(plt, len(panels), int(spec.data.get("ncols", 3)), (4.4, 3.4))
     for ax, p in zip(axes.ravel(), panels, strict=False):
         img = np.asarray(p["image"], dtype=float)
         im = ax.imshow(img, cmap=p.get("cmap", "viridis"), vmin=p.get("vmin"), vmax=p.get("vmax"),
@@ -318,11 +325,7 @@ def _fig_sweep(plt, spec: FigureSpec):
 
 def _fig_scatter(plt, spec: FigureSpec):
     panels = spec.data["panels"]
-    ncols = int(spec.data.get("ncols", 2))
-    nrows = max(1, math.ceil(len(panels) / ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(5.0 * ncols, 4.4 * nrows), squeeze=False)
-    for ax in axes.ravel()[len(panels):]:
-        ax.axis("off")
+    fig, axes = _panel_grid(plt, len(panels), int(spec.data.get("ncols", 2)), (5.0, 4.4))
     for ax, p in zip(axes.ravel(), panels, strict=False):
         x = np.asarray(p["x"], dtype=float)
         y = np.asarray(p["y"], dtype=float)

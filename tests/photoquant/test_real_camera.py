@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
-from photoquant.calibrate import calibrate_manifest, merge_stack
+from photoquant.calibrate import calibrate_manifest
 from photoquant.io import load_manifest, load_stack
-from photoquant.merge import apply_log_inverse_response
+from photoquant.merge import apply_log_inverse_response, merge_stack
 
 
 @pytest.fixture(scope="module")

@@ -42,7 +42,7 @@ def merge_with_model(stack: Any, model: Any) -> Any:
     ``g_λ``, saturation levels, lowest valid level and merge weighting: the
     merge of step 2 of :func:`photoquant.calibrate.calibrate`.
     """
-    from photoquant.calibrate import merge_stack
+    from photoquant.merge import merge_stack
 
     return merge_stack(
         stack,
