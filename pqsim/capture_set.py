@@ -31,11 +31,13 @@ References
 from __future__ import annotations
 
 import shutil
+from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from photoquant._checks import check_exposure_times, check_positive
 from photoquant.errors import InputError
@@ -47,7 +49,7 @@ from pqsim.analytic import (
     scene_test_hdr,
     views_by_pan,
 )
-from pqsim.synth_camera.camera import Capture, SyntheticCamera
+from pqsim.synth_camera.camera import Capture, SyntheticCamera, check_workers
 from pqsim.synth_camera.optics import check_shape
 from pqsim.synth_camera.truth import CaptureTruth, save_truth
 
@@ -91,18 +93,34 @@ def _frame_names(exposure_s: np.ndarray) -> list[str]:
     return names
 
 
-def _write_frames(root: Path, sub: str, capture: Capture, ext: str) -> dict[str, Any]:
-    """Write one capture's frames under ``root/sub`` and return its manifest frame set."""
+def _write_frames(
+    root: Path, sub: str, capture: Capture, ext: str, workers: int | None = None
+) -> dict[str, Any]:
+    """Write one capture's frames under ``root/sub`` and return its manifest frame set.
+
+    Frames are encoded and written by ``workers`` threads (OpenCV's and
+    tifffile's encoders release the GIL); the manifest lists them in capture
+    order whatever the order they finish in.
+    """
     from photoquant import io as pqio
 
     folder = root / sub
     folder.mkdir(parents=True, exist_ok=True)
     frames = []
+    jobs = []
     for k, name in enumerate(_frame_names(capture.exposure_s)):
         for n in range(capture.n_repeats):
             rel = f"{sub}/{name}_n{n}.{ext}"
-            pqio.write_image(root / rel, capture.frames[n, k])
+            jobs.append((root / rel, capture.frames[n, k]))
             frames.append({"file": rel, "exposure_s": float(capture.exposure_s[k]), "repeat": n})
+    n_workers = min(check_workers(workers), len(jobs))
+    if n_workers <= 1:
+        for path, image in jobs:
+            pqio.write_image(path, image)
+    else:
+        with ThreadPoolExecutor(max_workers=n_workers) as pool:
+            for _ in pool.map(lambda job: pqio.write_image(*job), jobs):
+                pass
     return {"frames": frames}
 
 
@@ -184,6 +202,8 @@ def write_capture_folder(
     generator: Mapping[str, Any],
     truth_meta: Mapping[str, Any],
     remove_previous: bool,
+    workers: int | None = None,
+    progress: bool = False,
 ) -> Path:
     """Write a capture set: frames, ground truth (``truth/``), then the manifest.
 
@@ -223,6 +243,10 @@ def write_capture_folder(
         Free metadata of ``truth/truth.json``.
     remove_previous : bool
         Remove the owned paths of a previous capture set first.
+    workers : int, optional
+        Threads encoding and writing frames (every CPU by default).
+    progress : bool
+        Show a progress bar over the frame sets (simulated and written).
 
     Returns
     -------
@@ -239,11 +263,16 @@ def write_capture_folder(
         _remove_owned(folder)
     folder.mkdir(parents=True, exist_ok=True)
     truths: dict[str, CaptureTruth] = {}
+    n_sets = len(views) + (irradiance is not None) + (scene is not None) + len(extra_sets)
+    bar = tqdm(total=n_sets, desc="capturing", unit="set", disable=not progress, leave=False)
 
     def write(key: str, sub: str, source: CaptureSource) -> dict[str, Any]:
+        bar.set_postfix_str(sub)
         capture = _resolve(source)
         truths[key] = capture.truth
-        return _write_frames(folder, sub, capture, ext)
+        frame_set = _write_frames(folder, sub, capture, ext, workers)
+        bar.update()
+        return frame_set
 
     manifest: dict[str, Any] = {
         "format": "photoquant.captures/1",
@@ -265,6 +294,7 @@ def write_capture_folder(
         manifest["saturation_level"] = camera.saturation_dn.tolist()
     manifest["truth"] = "truth/truth.json"
     manifest["generator"] = dict(generator)
+    bar.close()
     save_truth(folder / "truth", truths["view0"].camera, truths, truth_meta)
     path = folder / MANIFEST_NAME
     pqio.write_manifest(path, manifest)
@@ -290,6 +320,7 @@ def write_capture_set(
     frame_format: str = "png",
     write_saturation_level: bool = False,
     overwrite: bool = False,
+    workers: int | None = None,
 ) -> Path:
     """Simulate and write a calibration capture set with its ground truth.
 
@@ -338,6 +369,9 @@ def write_capture_set(
         ``capture.json``) are removed first, once the simulation succeeded;
         other files are left alone.
 
+    workers : int, optional
+        Threads simulating and writing frames (every CPU by default); the
+        files do not depend on it.
     Returns
     -------
     Path
@@ -401,12 +435,15 @@ def write_capture_set(
     world = scene_calibration_world((h, w), gens[0], margin=int(pan), channels=camera.n_channels)
     shifts = pan_shifts(int(n_views), int(pan))
     pv = views_by_pan(world, (h, w), shifts, stride=correspondence_stride, max_tracks=max_tracks)
-    views = [camera.capture(pv.l[i], t, n_repeats, gens[1 + i]) for i in range(int(n_views))]
+    views = [
+        camera.capture(pv.l[i], t, n_repeats, gens[1 + i], workers=workers)
+        for i in range(int(n_views))
+    ]
     l_irr = scene_irradiance(
         (h, w), irradiance_level, irradiance_nonuniformity, channels=camera.n_channels
     )
-    irr = camera.capture(l_irr, t, n_repeats, gens[n_views + 1], optics=False)
-    test = camera.capture(l_scene, t_scene, n_repeats, gens[n_views + 2])
+    irr = camera.capture(l_irr, t, n_repeats, gens[n_views + 1], optics=False, workers=workers)
+    test = camera.capture(l_scene, t_scene, n_repeats, gens[n_views + 2], workers=workers)
 
     meta = {
         "seed": int(seed),
@@ -439,4 +476,5 @@ def write_capture_set(
         },
         truth_meta=meta,
         remove_previous=non_empty,
+        workers=workers,
     )

@@ -116,6 +116,7 @@ def _cmd_capture(args: argparse.Namespace) -> int:
             irradiance_nonuniformity=args.irradiance_nonuniformity,
             frame_format=args.format,
             overwrite=args.overwrite,
+            workers=args.workers,
         )
     else:
         manifest = _capture_rendered(args, camera, resolution, exposures)
@@ -177,6 +178,7 @@ def _capture_rendered(
         progress=sys.stderr.isatty(),
         on_render=done_rendering,
         overwrite=args.overwrite,
+        workers=args.workers,
     )
 
 
@@ -243,6 +245,12 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument("--format", default="png", choices=["png", "tiff"], help="frame file format")
     cap.add_argument("--seed", type=int, default=0, help="camera-noise seed: same seed, same files")
     cap.add_argument("--overwrite", action="store_true", help="replace a previous capture set")
+    cap.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="threads simulating and writing frames (all CPUs); the files do not depend on it",
+    )
     cap.set_defaults(func=_cmd_capture)
     return parser
 

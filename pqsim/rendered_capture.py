@@ -261,6 +261,7 @@ def write_rendered_capture_set(
     progress: bool = True,
     on_render: Callable[[str, Any], None] | None = None,
     overwrite: bool = False,
+    workers: int | None = None,
 ) -> Path:
     """Render the calibration and test scenes and write a capture set with its truth.
 
@@ -333,7 +334,7 @@ def write_rendered_capture_set(
     write_saturation_level : bool
         Write the camera's true saturation values in the manifest.
     progress : bool
-        Show Mitsuba's render progress bars.
+        Show progress bars: Mitsuba's render progress, then the frame sets.
     on_render : callable, optional
         Called after each render as ``on_render(name, info)`` with a
         :class:`pqsim.render.RenderInfo` (cache hit or not, seconds);
@@ -341,6 +342,9 @@ def write_rendered_capture_set(
     overwrite : bool
         Allow a non-empty ``folder``: the paths of a pqsim capture set in it are
         removed once every render succeeded; other files are left alone.
+    workers : int, optional
+        Threads simulating and writing frames (every CPU by default); the
+        files do not depend on it.
 
     Returns
     -------
@@ -476,7 +480,9 @@ def write_rendered_capture_set(
 
     def capture(name: str, times: np.ndarray, gen: np.random.Generator, optics: bool = True):
         def run() -> Capture:
-            return camera.capture(images[name], times, n_repeats, gen, optics=optics)
+            return camera.capture(
+                images[name], times, n_repeats, gen, optics=optics, workers=workers
+            )
 
         return run
 
@@ -563,4 +569,6 @@ def write_rendered_capture_set(
         generator=generator,
         truth_meta=meta,
         remove_previous=non_empty,
+        workers=workers,
+        progress=progress,
     )

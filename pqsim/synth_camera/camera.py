@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import os
+from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -42,7 +44,24 @@ from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import SensorNoise
 from pqsim.synth_camera.truth import CameraTruth, CaptureTruth
 
-__all__ = ["SyntheticCamera", "Capture", "as_generator"]
+__all__ = ["SyntheticCamera", "Capture", "as_generator", "default_workers"]
+
+
+def default_workers() -> int:
+    """Threads a capture uses by default: the CPUs this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on every platform
+        return max(1, os.cpu_count() or 1)
+
+
+def check_workers(workers: Any) -> int:
+    """``workers`` as a positive int; ``None`` gives :func:`default_workers`."""
+    if workers is None:
+        return default_workers()
+    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
+        raise InputError(f"`workers` must be a positive int or None, got {workers!r}")
+    return int(workers)
 
 
 def as_generator(rng: Any, name: str = "rng") -> tuple[np.random.Generator, int | None]:
@@ -301,6 +320,7 @@ class SyntheticCamera:
         rng: np.random.Generator | int | None = None,
         *,
         optics: bool = True,
+        workers: int | None = None,
     ) -> Capture:
         """Simulate ``N`` repeats of ``K`` exposures of a static scene (eq. 1 of [PQ]).
 
@@ -320,6 +340,10 @@ class SyntheticCamera:
         optics : bool
             ``False`` simulates the irradiance scene of §5.4 of [PQ]: the sensor
             without its optics, so ``v = 1``.
+        workers : int, optional
+            Threads simulating frames in parallel (numpy's samplers and
+            ufuncs release the GIL); every CPU available by default. The
+            frames do not depend on it.
 
         Returns
         -------
@@ -328,8 +352,10 @@ class SyntheticCamera:
 
         Notes
         -----
-        Draws happen in the order ``for k: for n:`` one Poisson image then one
-        normal image (see :meth:`SensorNoise.sample_electrons`).
+        ``rng`` gives one ``(K, N)`` array of 63-bit seeds (a single
+        ``integers`` call); frame ``(n, k)`` draws its noise from
+        ``default_rng(seeds[k, n])`` (see :meth:`SensorNoise.sample_electrons`),
+        so frames are independent of the order or thread they are made in.
         """
         if rng is None:
             raise InputError("`rng` is required (a numpy.random.Generator or an int seed)")
@@ -355,12 +381,28 @@ class SyntheticCamera:
         cam_truth = self.truth(shape)
         gain = cam_truth.sensor_lut * cam_truth.vignetting if optics else cam_truth.sensor_lut
         photo_rate = gain * arr * self.exposure_scale  # photo-electrons per second
+        if not np.isfinite(float(photo_rate.max(initial=0.0)) * float(t.max())):
+            raise InputError("`l` is too large: its photo-electron counts overflow float64")
         n = int(n_repeats)
+        n_workers = check_workers(workers)
+        seeds = gen.integers(0, 2**63 - 1, size=(t.size, n), dtype=np.int64, endpoint=True)
         frames = np.empty((n, t.size, *arr.shape), dtype=self.dtype)
-        for k, tk in enumerate(t):
-            mu = photo_rate * tk
-            for i in range(n):
-                frames[i, k] = self._dn(self.noise.sample_electrons(mu, tk, gen))
+
+        def simulate(job: tuple[int, int]) -> None:
+            k, i = job
+            frame_rng = np.random.default_rng(int(seeds[k, i]))
+            mu = np.multiply(photo_rate, t[k])  # finite, >= 0: checked above
+            mu += self.noise.dark_current_e_per_s * t[k]
+            frames[i, k] = self._dn(self.noise.draw_electrons(mu, frame_rng))
+
+        jobs = [(k, i) for k in range(t.size) for i in range(n)]
+        if n_workers == 1 or len(jobs) == 1:
+            for job in jobs:
+                simulate(job)
+        else:
+            with ThreadPoolExecutor(max_workers=min(n_workers, len(jobs))) as pool:
+                for _ in pool.map(simulate, jobs):
+                    pass
         truth = CaptureTruth(
             l=arr,
             exposure_s=t,

@@ -289,6 +289,38 @@ def test_noise_free_capture_is_rounded_model() -> None:
     assert cap.frames[0, 1, 10, 20, 1] == round(min(x, 1.0) * 255)
 
 
+@pytest.mark.parametrize("threshold", [1000.0, None])
+@pytest.mark.parametrize("mean_e", [3.0, 999.0, 1001.0, 5e4])
+def test_electron_counts_have_poisson_moments(mean_e: float, threshold: float | None) -> None:
+    noise = SensorNoise(read_noise_e=0.0, dark_current_e_per_s=0.0, poisson_exact_below_e=threshold)
+    m = 200_000
+    n = noise.sample_electrons(np.full(m, mean_e), 0.01, np.random.default_rng(5))
+    exact = threshold is None or mean_e < threshold
+    # exact draws are whole electrons; the normal approximation is not
+    assert np.array_equal(n, np.rint(n)) == exact
+    # mean and variance are the Poisson ones in both regimes: 5 sigma of the
+    # sample mean (sqrt(μ/m)) and of the sample variance (μ sqrt(2/m), normal-like)
+    assert abs(n.mean() - mean_e) < 5 * math.sqrt(mean_e / m)
+    assert abs(n.var() / mean_e - 1.0) < 5 * math.sqrt(2.0 / m + 1.0 / (mean_e * m))
+    # the skewness 1/sqrt(μ) of a small count is kept (sd of the estimate sqrt(6/m))
+    skew = np.mean((n - n.mean()) ** 3) / n.std() ** 3
+    if exact:
+        assert abs(skew - 1.0 / math.sqrt(mean_e)) < 5 * math.sqrt(6.0 / m)
+    else:
+        assert abs(skew) < 5 * math.sqrt(6.0 / m)
+
+
+def test_capture_does_not_depend_on_workers() -> None:
+    cam = camera_from_preset("cmos")
+    lq = np.random.default_rng(3).uniform(0.0, 2.0, size=(*SHAPE, 3))
+    t = [1e-3, 4e-3, 1.6e-2]
+    one = cam.capture(lq, t, 3, rng=9, workers=1)
+    many = cam.capture(lq, t, 3, rng=9, workers=4)
+    assert np.array_equal(one.frames, many.frames)
+    with pytest.raises(InputError, match="`workers`"):
+        cam.capture(lq, t, 3, rng=9, workers=0)
+
+
 def test_sensor_noise_validation() -> None:
     with pytest.raises(InputError, match="`full_well_e`"):
         SensorNoise(full_well_e=0.0)
@@ -296,6 +328,8 @@ def test_sensor_noise_validation() -> None:
         SensorNoise(read_noise_e=-1.0)
     with pytest.raises(InputError, match="`shot_noise`"):
         SensorNoise(shot_noise="yes")
+    with pytest.raises(InputError, match="`poisson_exact_below_e`"):
+        SensorNoise(poisson_exact_below_e=-1.0)
     with pytest.raises(InputError, match="`rng`"):
         SensorNoise().sample_electrons(np.ones(3), 0.1, rng=0)
 
