@@ -58,7 +58,9 @@ def _resolution(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"resolution must be WxH, e.g. 320x240, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"resolution must be WxH, e.g. 320x240, got {text!r}"
+        ) from None
     if w < 8 or h < 8:
         raise argparse.ArgumentTypeError(f"resolution must be at least 8x8, got {text!r}")
     return h, w
@@ -189,17 +191,25 @@ def build_parser() -> argparse.ArgumentParser:
     cap = sub.add_parser("capture", help="write a simulated capture set (frames, manifest, truth)")
     cap.add_argument("-o", "--output", required=True, help="folder to write (must be empty)")
     cap.add_argument(
-        "--renderer", default="mitsuba", choices=["mitsuba", "analytic"],
+        "--renderer",
+        default="mitsuba",
+        choices=["mitsuba", "analytic"],
         help="scenes rendered spectrally by Mitsuba 3 (default) or analytic numpy scenes",
     )
     cap.add_argument("--preset", default="ccd", help="camera preset: ccd or cmos")
     cap.add_argument(
-        "--resolution", type=_resolution, default=None,
+        "--resolution",
+        type=_resolution,
+        default=None,
         help="WxH (mitsuba: 1024x768, the paper's camera; analytic: 320x240)",
     )
     cap.add_argument("--exposures", type=int, default=8, help="K exposure times (8)")
     cap.add_argument(
-        "--exposure-range", type=float, nargs=2, default=(1e-3, 0.2), metavar=("MIN_S", "MAX_S"),
+        "--exposure-range",
+        type=float,
+        nargs=2,
+        default=(1e-3, 0.2),
+        metavar=("MIN_S", "MAX_S"),
         help="shortest and longest exposure in seconds, geometric in between (0.001 0.2)",
     )
     cap.add_argument("--repeats", type=int, default=10, help="N repeats per exposure (10)")
@@ -209,27 +219,36 @@ def build_parser() -> argparse.ArgumentParser:
         "--scene", default=None, choices=["hdr", "ramp"], help="analytic: test scene (hdr)"
     )
     cap.add_argument(
-        "--sensitivities", default=None,
+        "--sensitivities",
+        default=None,
         help="mitsuba: spectral sensitivities, nikon_d5100 or sigma_sd_merrill (preset's)",
     )
     cap.add_argument(
-        "--illuminant", default=None, choices=["D65", "A"],
+        "--illuminant",
+        default=None,
+        choices=["D65", "A"],
         help="mitsuba: light of every scene, D65 (outdoor, default) or A (indoor)",
     )
     cap.add_argument(
-        "--rotation-deg", type=float, default=None,
+        "--rotation-deg",
+        type=float,
+        default=None,
         help="mitsuba: rotation between views in degrees, pan and tilt (5)",
     )
     cap.add_argument(
-        "--spp", type=int, default=None,
+        "--spp",
+        type=int,
+        default=None,
         help="mitsuba: samples per pixel, n*n or n*(n+1), e.g. 16, 64 (64)",
     )
     cap.add_argument(
-        "--cache-dir", default=None,
+        "--cache-dir",
+        default=None,
         help="mitsuba: render cache folder ($PQSIM_CACHE or ~/.cache/pqsim)",
     )
     cap.add_argument(
-        "--variant", default=None,
+        "--variant",
+        default=None,
         help="mitsuba: variant, e.g. scalar_spectral (llvm when it works, else scalar_spectral;"
         " $PQSIM_MITSUBA_VARIANT)",
     )
@@ -239,8 +258,12 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument(
         "--no-colorchecker", action="store_true", help="mitsuba: skip the ColorChecker"
     )
-    cap.add_argument("--irradiance-nonuniformity", type=float, default=0.0,
-                     help="relative illumination gradient of the irradiance scene (0)")
+    cap.add_argument(
+        "--irradiance-nonuniformity",
+        type=float,
+        default=0.0,
+        help="relative illumination gradient of the irradiance scene (0)",
+    )
     cap.add_argument("--bit-depth", type=int, default=None, help="override the preset's bit depth")
     cap.add_argument("--format", default="png", choices=["png", "tiff"], help="frame file format")
     cap.add_argument("--seed", type=int, default=0, help="camera-noise seed: same seed, same files")

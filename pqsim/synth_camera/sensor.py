@@ -96,7 +96,9 @@ class SensorNoise:
             object.__setattr__(
                 self,
                 "poisson_exact_below_e",
-                check_positive(self.poisson_exact_below_e, "poisson_exact_below_e", allow_zero=True),
+                check_positive(
+                    self.poisson_exact_below_e, "poisson_exact_below_e", allow_zero=True
+                ),
             )
 
     def mean_electrons(self, photo_electrons: Any, exposure_s: float) -> np.ndarray:
