@@ -222,7 +222,7 @@ def _conditions(results: Mapping[str, Any]) -> dict[str, Any]:
     return cfg
 
 
-_NOT_CONDITIONS = ("name", "presets", "calibrate_kwargs", "skip_vignetting")
+_NOT_CONDITIONS = ("name", "presets", "calibrate_kwargs", "skip_vignetting", "render_cache")
 """The fields :meth:`ValidationConfig.conditions` leaves out (a test keeps them in step)."""
 
 

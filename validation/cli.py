@@ -46,7 +46,8 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
     )
     mode.add_argument(
         "--full", dest="mode", action="store_const", const="full",
-        help="the paper's settings: 1024x768, N = 10, K = 8, V = 3 (several minutes)",
+        help="the paper's settings: 1024x768, N = 10, K = 8, V = 3, rendered chart "
+        "(several minutes)",
     )
     mode.add_argument("--tiny", dest="mode", action="store_const", const="tiny",
                       help=argparse.SUPPRESS)
@@ -74,6 +75,15 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
         "--workdir", type=Path, metavar="DIR",
         help="keep the simulated capture sets here (a temporary folder by default)",
     )
+    parser.add_argument(
+        "--chart", choices=("analytic", "rendered"),
+        help="the ColorChecker of Table 1 / Fig. 6-7: exact spectral integrals (quick's "
+        "default) or rendered by Mitsuba 3 (--full's default; needs photoquant[render])",
+    )
+    parser.add_argument(
+        "--cache-dir", metavar="DIR",
+        help="render cache of the rendered chart ($PQSIM_CACHE or ~/.cache/pqsim)",
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
 
 
@@ -88,6 +98,10 @@ def run_validate(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise ValidationError(f"--seed must be non-negative, got {args.seed}")
     config = get_config(args.mode)
+    if args.chart is not None:
+        config = config.replace(chart=args.chart)
+    if args.cache_dir is not None:
+        config = config.replace(render_cache=str(Path(args.cache_dir).expanduser()))
     out = Path(args.output)
     if out.exists() and not args.overwrite:
         raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")

@@ -11,7 +11,7 @@ own tests). Three configurations are built in:
     on 2 cores in about a minute.
 ``full``
     The paper's settings (§6.1 of [PQ]): 1024×768, ``N = 10``, ``K = 8``
-    (1–200 ms), ``V = 3``.
+    (1–200 ms), ``V = 3``, and the ColorChecker rendered by Mitsuba 3.
 ``tiny``
     96×72, for the test suite only.
 
@@ -50,9 +50,13 @@ __all__ = [
     "FULL",
     "TINY",
     "PAPER_EXPOSURES_S",
+    "CHART_SOURCES",
     "get_config",
     "stream_seed",
 ]
+
+CHART_SOURCES = ("analytic", "rendered")
+"""Where the ColorChecker's photoquantities come from (:attr:`ValidationConfig.chart`)."""
 
 PAPER_EXPOSURES_S: tuple[float, ...] = tuple(float(t) for t in np.geomspace(1e-3, 0.2, 8))
 """The calibration exposures of §6.1 of [PQ]: 1 ms to 200 ms, ``K = 8`` (geometric)."""
@@ -111,6 +115,16 @@ class ValidationConfig:
     skip_vignetting : bool
         Calibrate from view 0 only, so that vignetting is left at 1 (a broken
         calibrator for the regression check's tests).
+    chart : {"analytic", "rendered"}
+        The ColorChecker of Table 1, Fig. 6 and Fig. 7: ``"analytic"`` (exact
+        spectral integrals on a flat chart, no renderer needed) or
+        ``"rendered"`` (:func:`pqsim.scenes.colour_checker_scene` rendered
+        spectrally by Mitsuba 3, ``pip install '.[render]'``).
+    chart_spp : int
+        Samples per pixel of the rendered chart.
+    render_cache : str or None
+        Render cache folder of the rendered chart (``$PQSIM_CACHE`` or
+        ``~/.cache/pqsim`` when ``None``); not a condition of the results.
     """
 
     name: str = "quick"
@@ -132,12 +146,21 @@ class ValidationConfig:
     n_samples: int = 2000
     calibrate_kwargs: Mapping[str, Any] = field(default_factory=dict)
     skip_vignetting: bool = False
+    chart: str = "analytic"
+    chart_spp: int = 64
+    render_cache: str | None = None
 
     def __post_init__(self) -> None:
         h, w = (int(v) for v in self.shape)
         if h < 48 or w < 64:
             raise ValidationError(f"`shape` must be at least (48, 64), got {self.shape}")
-        for name in ("n_repeats", "n_views", "chart_repeats", "sweep_draws", "n_samples"):
+        if self.chart not in CHART_SOURCES:
+            raise ValidationError(
+                f"`chart` must be one of {list(CHART_SOURCES)}, got {self.chart!r}"
+            )
+        for name in (
+            "n_repeats", "n_views", "chart_repeats", "sweep_draws", "n_samples", "chart_spp"
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValidationError(f"`{name}` must be a positive integer, got {v!r}")
@@ -178,7 +201,7 @@ class ValidationConfig:
         the calibrator on purpose (they are what a regression check must see).
         """
         d = self.as_dict()
-        for key in ("name", "presets", "calibrate_kwargs", "skip_vignetting"):
+        for key in ("name", "presets", "calibrate_kwargs", "skip_vignetting", "render_cache"):
             d.pop(key)
         return d
 
@@ -200,8 +223,8 @@ class ValidationConfig:
 QUICK = ValidationConfig()
 """The default: the paper's experiments on 320×240 images with ``N = 4``."""
 
-FULL = ValidationConfig(name="full", shape=(768, 1024), n_repeats=10)
-"""The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``."""
+FULL = ValidationConfig(name="full", shape=(768, 1024), n_repeats=10, chart="rendered")
+"""The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``; the rendered chart."""
 
 TINY = ValidationConfig(
     name="tiny",

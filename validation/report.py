@@ -101,10 +101,13 @@ def format_table(run: ValidationRun, check: Any = None) -> str:
     for b in body:
         lines.append(fmt(b) if isinstance(b, tuple) else b)
     lines.append("")
+    chart = (
+        "rendered by Mitsuba 3" if run.config.chart == "rendered" else "analytic, not rendered"
+    )
     lines.append(
         "Relative errors: eq. 8 after one global scale fit (photoquantity is defined up to "
         "scale); maps (u, v) compared directly. Table 1's Hugin row is missing (no "
-        "alternative pipeline yet); the ColorChecker is analytic, not rendered."
+        f"alternative pipeline yet); the ColorChecker is {chart}."
     )
     if check is not None:
         lines.append("")

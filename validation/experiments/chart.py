@@ -1,4 +1,4 @@
-"""An analytic ColorChecker scene: 24 flat patches with exact camera photoquantities.
+"""The ColorChecker scene of the validation job: analytic or rendered.
 
 The paper studies linearisation and colour correction on a photograph of a
 ColorChecker lit by daylight (§6.3, Fig. 6–7, Table 1). Here the chart is a
@@ -16,6 +16,13 @@ Layout: a 6 × 4 grid of square-ish patches in chart order (row 1 "dark skin"
 grey background (reflectance 0.2), centred and covering 80 % × 70 % of the
 image.
 
+:func:`rendered_colour_checker_scene` gives the same :class:`ChartScene` from
+light transport instead: :func:`pqsim.scenes.colour_checker_scene` (40 mm
+patches on a black board under a uniform sky) rendered spectrally by Mitsuba 3
+through the camera's sensitivities (:func:`pqsim.render.render_photoquantity`,
+cached). Its truth is the rendered image itself — Monte-Carlo noise and the
+blur of the patch edges included, as it is what reached the sensor.
+
 References
 ----------
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §6.3, §6.4.
@@ -26,12 +33,21 @@ References
 
 from __future__ import annotations
 
+import importlib.util
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-__all__ = ["ChartScene", "colour_checker_scene", "patch_means", "WHITE_PATCH"]
+__all__ = [
+    "ChartScene",
+    "colour_checker_scene",
+    "rendered_colour_checker_scene",
+    "chart_scene",
+    "patch_means",
+    "WHITE_PATCH",
+]
 
 WHITE_PATCH = 18
 """Index of the chart's white patch, "white 9.5" (row 4, column 1)."""
@@ -61,6 +77,10 @@ class ChartScene:
         The scene's illuminant.
     sensitivities : str
         The camera's spectral sensitivity preset.
+    source : str
+        ``"analytic"`` or ``"rendered"``.
+    render : dict or None
+        How a rendered chart was made (variant, spp, seed, cache key, seconds).
     """
 
     l: np.ndarray
@@ -70,6 +90,12 @@ class ChartScene:
     names: tuple[str, ...]
     illuminant: str
     sensitivities: str
+    source: str = "analytic"
+    render: dict[str, Any] | None = None
+
+    def __post_init__(self) -> None:
+        for arr in (self.l, self.patch_l, self.cie_rgb, self.boxes):
+            arr.setflags(write=False)
 
     @property
     def white_index(self) -> int:
@@ -137,8 +163,6 @@ def colour_checker_scene(
         y0, y1 = round(ys[r] + gy), round(ys[r + 1] - gy)
         l[y0:y1, x0:x1] = patch_l[i]
         boxes[i] = (x0 + 1, y0 + 1, x1 - 1, y1 - 1)
-    for arr in (l, patch_l, cie_rgb, boxes):
-        arr.setflags(write=False)
     return ChartScene(
         l=l,
         patch_l=patch_l,
@@ -148,6 +172,123 @@ def colour_checker_scene(
         illuminant=str(illuminant),
         sensitivities=str(sensitivities),
     )
+
+
+def rendered_colour_checker_scene(
+    shape: Sequence[int],
+    illuminant: str = "D65",
+    sensitivities: str = "nikon_d5100",
+    *,
+    level: float = 1.0,
+    spp: int = 64,
+    render_seed: int = 0,
+    cache_dir: Any = None,
+    variant: str | None = None,
+) -> ChartScene:
+    """Render the ColorChecker of :func:`pqsim.scenes.colour_checker_scene` as a :class:`ChartScene`.
+
+    Parameters
+    ----------
+    shape : (H, W)
+        Image size (at least 48 × 64).
+    illuminant, sensitivities : str
+        As in :func:`colour_checker_scene`.
+    level : float
+        Radiometric scale, as in :func:`colour_checker_scene`: the render is
+        scaled so that a patch's exact photoquantity is ``level`` times the
+        integral of sensitivity × illuminant × reflectance, the analytic
+        chart's value, so that the same exposures suit both charts.
+    spp : int
+        Samples per pixel (64: 0.6–0.8 % Monte-Carlo noise per pixel, patch
+        means within 0.06 % of the exact integral at 1024 × 768).
+    render_seed : int
+        Seed of the render; the chart is part of the scene, the same for
+        every master seed of the job.
+    cache_dir : path-like, optional
+        Render cache (:func:`pqsim.render.render_photoquantity`); ``$PQSIM_CACHE``
+        or ``~/.cache/pqsim`` by default.
+    variant : str, optional
+        Mitsuba variant; :func:`pqsim.render.choose_variant` by default.
+
+    Returns
+    -------
+    ChartScene
+        ``l`` is the scaled render; ``patch_l`` its mean over each patch's
+        region (what reached the sensor); ``boxes`` the patch regions of
+        :func:`pqsim.scenes.colour_checker_scene`; ``cie_rgb`` the chart
+        maker's CIE RGB under D65.
+
+    Raises
+    ------
+    ValidationError
+        When Mitsuba 3 is not installed.
+    """
+    from validation.config import ValidationError
+
+    try:
+        from pqsim import render
+        from pqsim.cli import default_cache_dir
+        from pqsim.scenes import colour_checker_scene as mitsuba_chart
+    except ImportError as exc:  # pragma: no cover - the scene library needs no Mitsuba
+        raise ValidationError(f"the rendered chart needs pqsim's scene library: {exc}") from None
+    if importlib.util.find_spec("mitsuba") is None:
+        raise ValidationError(
+            "the rendered ColorChecker needs Mitsuba 3: pip install 'photoquant[render]', "
+            "or run with --chart analytic"
+        )
+    h, w = (int(v) for v in shape)
+    scene = mitsuba_chart(
+        camera=sensitivities, illuminant=illuminant, width=w, height=h, spp=int(spp)
+    )
+    cache = default_cache_dir() if cache_dir is None else cache_dir
+    image, info = render.render_photoquantity(
+        scene.scene,
+        spp=int(spp),
+        seed=int(render_seed),
+        variant=variant,
+        cache_dir=cache,
+        progress=False,
+        return_info=True,
+    )
+    l = np.asarray(image, dtype=np.float64) * (float(level) / scene.radiance_scale)
+    boxes = np.asarray(scene.patch_rois, dtype=np.int64)
+    patch_l = patch_means(l, boxes)
+    cie_rgb = np.asarray(scene.reference_D65["CIE RGB"], dtype=np.float64)
+    return ChartScene(
+        l=l,
+        patch_l=patch_l,
+        cie_rgb=cie_rgb,
+        boxes=boxes,
+        names=tuple(scene.patch_names),
+        illuminant=str(illuminant),
+        sensitivities=str(sensitivities),
+        source="rendered",
+        render={
+            "variant": info.variant,
+            "spp": info.spp,
+            "seed": info.seed,
+            "cache_key": info.key,
+            "cache_hit": info.cache_hit,
+            "seconds": info.seconds,
+        },
+    )
+
+
+def chart_scene(
+    source: str,
+    shape: Sequence[int],
+    illuminant: str = "D65",
+    sensitivities: str = "nikon_d5100",
+    **render_options: Any,
+) -> ChartScene:
+    """The ColorChecker from ``source``: ``"analytic"`` or ``"rendered"`` (render options passed on)."""
+    if source == "analytic":
+        return colour_checker_scene(shape, illuminant, sensitivities)
+    if source == "rendered":
+        return rendered_colour_checker_scene(shape, illuminant, sensitivities, **render_options)
+    from validation.config import ValidationError
+
+    raise ValidationError(f"unknown chart source {source!r}; valid: 'analytic', 'rendered'")
 
 
 def patch_means(image: np.ndarray, boxes: np.ndarray) -> np.ndarray:

@@ -1,8 +1,8 @@
 """Experiment 5 — noise (§6.3 and appendix A of [PQ]).
 
-On the ColorChecker scene of Fig. 6 (the analytic chart of
-:mod:`validation.experiments.chart`, daylight), captured with the
-calibration exposures:
+On the ColorChecker scene of Fig. 6 (the chart of
+:mod:`validation.experiments.chart`, analytic or rendered as configured,
+daylight), captured with the calibration exposures:
 
 1. ``N = 4`` against the noise-free truth: eq. 8 relative error of the
    corrected photoquantity (paper: ``e_max`` 2.4 %, ``e_mean`` 0.4 %,

@@ -252,12 +252,18 @@ class Shared:
         return preset_sensitivities(preset)
 
     def chart(self, illuminant: str, preset: str) -> Any:
-        """The analytic ColorChecker seen by ``preset`` under ``illuminant`` (once)."""
+        """The ColorChecker seen by ``preset`` under ``illuminant`` (once), analytic or rendered.
+
+        The configuration's ``chart`` chooses (:func:`validation.experiments.chart.chart_scene`).
+        """
         key = (illuminant, self.sensitivities(preset))
         if key not in self._charts:
-            from validation.experiments.chart import colour_checker_scene
+            from validation.experiments.chart import chart_scene
 
-            self._charts[key] = colour_checker_scene(self.config.shape, *key)
+            options = {}
+            if self.config.chart == "rendered":
+                options = {"spp": self.config.chart_spp, "cache_dir": self.config.render_cache}
+            self._charts[key] = chart_scene(self.config.chart, self.config.shape, *key, **options)
         return self._charts[key]
 
 

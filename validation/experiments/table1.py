@@ -1,9 +1,11 @@
 """Experiment 6 — Table 1 of [PQ]: correlation of output values with ground truth.
 
 For each camera preset (CCD, CMOS) and lighting — outdoor (CIE D65) and
-indoor (CIE A, a halogen lamp) — the analytic ColorChecker
-(:mod:`validation.experiments.chart`, *not rendered*: exact spectral
-integrals captured by the numpy synthetic camera) is measured three ways:
+indoor (CIE A, a halogen lamp) — the ColorChecker of
+:mod:`validation.experiments.chart` (``config.chart``: ``"analytic"``, exact
+spectral integrals on a flat chart, or ``"rendered"``, Mitsuba 3's spectral
+render of :func:`pqsim.scenes.colour_checker_scene`), captured by the numpy
+synthetic camera, is measured three ways:
 
 * **uncorrected**: one LDR frame as the camera outputs it (20 ms, §6.3),
   the mean pixel value of each patch;
@@ -17,8 +19,8 @@ integrals captured by the numpy synthetic camera) is measured three ways:
   pipeline, which the comparison issue is to provide.
 
 Each is compared, over the 24 patches × 3 channels, with two ground truths:
-the true camera photoquantity (exact ``∫ r_λ E ρ``, balanced on the white
-patch like the corrected row) and, as in the paper, the chart maker's CIE
+the true camera photoquantity (exact ``∫ r_λ E ρ``, or the rendered
+patch means, balanced on the white patch like the corrected row) and, as in the paper, the chart maker's CIE
 RGB values under D65 (for the indoor scene too: the maker gives D65 values
 only). The table entry is Pearson's correlation coefficient; the
 truth-based error is eq. 8's mean over the patches against the camera
@@ -131,6 +133,30 @@ def chart_measurements(
     return out
 
 
+def _chart_note(config: ValidationConfig, shared: Shared) -> str:
+    sens = ", ".join(f"{p}: {shared.sensitivities(p)}" for p in config.presets)
+    if config.chart == "rendered":
+        renders = {
+            (label, p): shared.chart(ill, p).render for label, ill in config.illuminants
+            for p in config.presets
+        }
+        variants = sorted({r["variant"] for r in renders.values()})
+        return (
+            "The ColorChecker is rendered by Mitsuba 3 (pqsim.scenes.colour_checker_scene: "
+            "40 mm patches on a black board under a uniform sky, BabelColor average "
+            f"reflectances) through the camera's spectral sensitivities ({sens}), "
+            f"{config.chart_spp} spp, variant {', '.join(variants)}, render seed 0; its "
+            "camera-photoquantity truth is the render's mean over each patch region, and "
+            "the numpy synthetic camera captures the rendered image."
+        )
+    return (
+        "The ColorChecker is an analytic flat chart, not a render: each patch's photoquantity "
+        f"is the exact integral of the camera's spectral sensitivities ({sens}), the "
+        "illuminant and the patch reflectance (BabelColor average), captured by the numpy "
+        "synthetic camera."
+    )
+
+
 def _eq8_patches(reference: np.ndarray, estimate: np.ndarray) -> float:
     from validation.metrics import relative_error_eq8
 
@@ -202,11 +228,7 @@ def run(
         )
     res.notes += [
         MISSING_HUGIN,
-        "The ColorChecker is an analytic flat chart, not a render: each patch's photoquantity "
-        "is the exact integral of the camera's spectral sensitivities ("
-        + ", ".join(f"{p}: {shared.sensitivities(p)}" for p in config.presets)
-        + "), the illuminant and the patch reflectance (BabelColor average), captured by the "
-        "numpy synthetic camera.",
+        _chart_note(config, shared),
         "The corrected values are balanced on the chart's white patch (the paper's white chart "
         "lit by the scene's light, §5.3); the camera-photoquantity truth is balanced the same "
         "way. The CIE RGB truth is under D65 for both lightings, as the chart maker's values.",
