@@ -67,6 +67,10 @@ def apply_log_inverse_response(
     return out
 
 
+_MAX_TABLE_SIZE = 1 << 22
+"""Largest integer value (per channel) for which the merge uses look-up tables."""
+
+
 def merge_Debevec1997(
     values: np.ndarray,
     exposure_s: np.ndarray,
@@ -79,13 +83,16 @@ def merge_Debevec1997(
     min_level: np.ndarray | None = None,
     weighting: str | WeightingFunction = "hat",
     c_min: float = 0.0,
+    repeats: int = 1,
 ) -> MergeResult:
     """Merge ``K`` exposures into log photoquantities (eq. 6 of [PQ]_).
 
     Parameters
     ----------
     values : ndarray, shape (K, H, W, C)
-        Denoised pixel values (eq. 2).
+        Denoised pixel values (eq. 2), or with ``repeats > 1`` the integer sums
+        of the ``N = repeats`` frames of each exposure (the mean is
+        ``values / repeats``).
     exposure_s : ndarray, shape (K,)
         Exposure times in seconds (positive, unique).
     levels : ndarray, shape (L,)
@@ -106,6 +113,8 @@ def merge_Debevec1997(
         Weighting function, the paper's hat by default.
     c_min : float
         Lowest value the camera outputs.
+    repeats : int
+        ``N`` when ``values`` are sums of ``N`` integer frames; 1 otherwise.
 
     Returns
     -------
@@ -115,6 +124,13 @@ def merge_Debevec1997(
     -----
     The result does not depend on the order of the exposures, and scaling
     every exposure time by ``s`` shifts ``ln c`` by ``−ln s``.
+
+    Integer ``values`` (single frames, or sums of ``N`` frames) take the
+    weight and ``g`` of every possible value from tables built once per
+    channel — the mean of ``N`` integer frames lies on the grid ``j / N`` —
+    instead of evaluating the weighting function and interpolating ``g`` per
+    pixel; the result is the same as for ``values / repeats`` in floating
+    point, to the last bit.
     """
     values = check_array(values, "values", ndim=4, kind="iuf", finite=True)
     t = check_exposure_times(exposure_s)
@@ -122,6 +138,13 @@ def merge_Debevec1997(
     if t.size != k_count:
         raise InputError(
             f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures"
+        )
+    if isinstance(repeats, bool) or not isinstance(repeats, int | np.integer) or repeats < 1:
+        raise InputError(f"`repeats` must be a positive int, got {repeats!r}")
+    repeats = int(repeats)
+    if repeats > 1 and values.dtype.kind not in "iu":
+        raise InputError(
+            f"`repeats` = {repeats} needs the integer sums of the frames, got {values.dtype} values"
         )
     levels = check_array(levels, "levels", ndim=1, kind="iuf", finite=True).astype(np.float64)
     if levels.size < 2 or np.any(np.diff(levels) <= 0):
@@ -144,60 +167,70 @@ def merge_Debevec1997(
         min_level = check_array(min_level, "min_level", shape=(n_ch,), kind="iuf").astype(float)
     wfun = weighting_function(weighting)
 
-    num = np.zeros(values.shape[1:], dtype=np.float64)
-    den = np.zeros(values.shape[1:], dtype=np.float64)
-    any_unsat = np.zeros(values.shape[1:], dtype=bool)
-    log_t = np.log(t)
     step_table = None
     if getattr(wfun, "uses_log_step", False):
         step_table = np.stack(
             [np.interp(levels + 0.5, levels, g[ch]) - np.interp(levels - 0.5, levels, g[ch])
              for ch in range(n_ch)]
         )
-    if values.dtype.kind in "iu":
-        # integer values (a single repeat): weights and g by table look-up
-        full = np.arange(int(levels[-1]) + 1, dtype=np.float64)
-        w_lut = np.empty((n_ch, full.size))
-        g_lut = np.empty((n_ch, full.size))
-        for ch in range(n_ch):
-            g_lut[ch] = np.interp(full, levels, g[ch])
-            if step_table is None:
-                w_lut[ch] = wfun(full, c_min, sat[ch])
-            else:
-                step = np.interp(full, levels, step_table[ch])
-                w_lut[ch] = wfun(full, c_min, sat[ch], log_step=step)
-            w_lut[ch, full >= sat[ch]] = 0.0
-            if min_level is not None:
-                w_lut[ch, full < min_level[ch]] = 0.0
-        offsets = np.arange(n_ch) * full.size
-        w_flat, g_flat = w_lut.ravel(), g_lut.ravel()
 
-        def weights_and_log(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            index = np.minimum(v, full.size - 1).astype(np.intp) + offsets
-            return w_flat[index], g_flat[index]
-    else:
+    def weights(v: np.ndarray, ch: int | slice) -> np.ndarray:
+        """Weights of (mean) values ``v`` of channel(s) ``ch``: none at saturation or below min."""
+        s = sat[ch]
+        if step_table is None:
+            w = wfun(v, c_min, s)
+        else:
+            step = apply_log_inverse_response(v, levels, step_table[ch]) if isinstance(ch, slice) \
+                else np.interp(v, levels, step_table[ch])
+            w = wfun(v, c_min, s, log_step=step)
+        w = np.where(v >= s, 0.0, w)
+        if min_level is not None:
+            w = np.where(v < min_level[ch], 0.0, w)
+        return w
 
-        def weights_and_log(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            if step_table is None:
-                w = wfun(v, c_min, sat)
-            else:
-                w = wfun(v, c_min, sat, log_step=apply_log_inverse_response(v, levels, step_table))
-            w = np.where(v >= sat, 0.0, w)
-            if min_level is not None:
-                w = np.where(v < min_level, 0.0, w)
-            return w, apply_log_inverse_response(v, levels, g)
+    log_t = np.log(t)
+    top = 0
+    if values.dtype.kind in "iu" and values.size:
+        lo, hi = int(values.min()), int(values.max())
+        top = max(hi, repeats * int(np.ceil(levels[-1]))) if lo >= 0 else -1
+    use_tables = values.dtype.kind in "iu" and 0 <= top < _MAX_TABLE_SIZE
+    if not use_tables and repeats > 1:
+        values, repeats = values / repeats, 1
 
+    num = np.zeros(values.shape[1:], dtype=np.float64)
+    den = np.zeros(values.shape[1:], dtype=np.float64)
+    any_unsat = np.zeros(values.shape[1:], dtype=bool)
+    if use_tables:
+        # every value 0..top of every channel, as the mean it stands for
+        grid = np.arange(top + 1, dtype=np.float64) / repeats
+        w_lut = np.stack([weights(grid, ch) for ch in range(n_ch)])
+        g_lut = np.stack([np.interp(grid, levels, g[ch]) for ch in range(n_ch)])
+        clip_lut = (grid[None, :] >= sat[:, None]).ravel()
+        w_flat = w_lut.ravel()
+        offsets = np.arange(n_ch, dtype=np.intp) * (top + 1)
     for k in range(k_count):
         v = values[k]
-        w, gv = weights_and_log(v)
-        clipped = v >= sat
+        if use_tables:
+            index = v.astype(np.intp)
+            index += offsets
+            w = w_flat.take(index)
+            term = (w_lut * (g_lut - log_t[k])).ravel().take(index)
+            clipped = clip_lut.take(index)
+        else:
+            w = weights(v, slice(None))
+            term = w * (apply_log_inverse_response(v, levels, g) - log_t[k])
+            clipped = v >= sat
+        excluded = None
         if saturated is not None:
             clipped |= saturated[k]
-            w = np.where(saturated[k], 0.0, w)
+            excluded = saturated[k]
         if dark_clipped is not None:
-            w = np.where(dark_clipped[k], 0.0, w)
+            excluded = dark_clipped[k] if excluded is None else excluded | dark_clipped[k]
+        if excluded is not None:
+            np.putmask(w, excluded, 0.0)
+            np.putmask(term, excluded, 0.0)
         any_unsat |= ~clipped
-        num += w * (gv - log_t[k])
+        num += term
         den += w
     mask = den <= 0
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -226,8 +259,8 @@ def merge_stack(
     level, or at the floor 0; and when it lies below ``min_level``, where the
     response was not measured.
     """
-    # a single repeat stays integer: the merge then looks weights and g up in tables
-    values = stack.frames[0] if stack.n_repeats == 1 else stack.mean()
+    # integer frames (one repeat) or their integer sums: weights and g come from tables
+    values = stack.frames[0] if stack.n_repeats == 1 else stack.repeat_sum()
     return merge_Debevec1997(
         values,
         stack.exposure_s,
@@ -238,4 +271,5 @@ def merge_stack(
         dark_clipped=stack.dark_clipped(),
         min_level=min_level,
         weighting=weighting,
+        repeats=stack.n_repeats,
     )

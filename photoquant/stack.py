@@ -133,6 +133,8 @@ class ExposureStack:
     saturation_level: np.ndarray | None = None
     channels: tuple[str, ...] = ("R", "G", "B")
     _mean: list = field(default_factory=list, init=False, repr=False)
+    _sum: list = field(default_factory=list, init=False, repr=False)
+    _extremes: list = field(default_factory=list, init=False, repr=False)
 
     def __post_init__(self) -> None:
         frames = check_array(self.frames, "frames", ndim=5, kind="iu")
@@ -218,10 +220,41 @@ class ExposureStack:
         return 2**self.bit_depth - 1
 
     def mean(self) -> np.ndarray:
-        """Denoised values ``(K, H, W, C)`` float64, eq. 2 (computed once)."""
+        """Denoised values ``(K, H, W, C)`` float64, eq. 2 (computed once).
+
+        Equal, to the last bit, to :func:`denoise_mean` of the frames
+        (``repeat_sum() / N``: the integer sums are exact).
+        """
         if not self._mean:
-            self._mean.append(denoise_mean(self.frames))
+            if self.n_repeats == 1:
+                self._mean.append(self.frames[0].astype(np.float64))
+            else:
+                self._mean.append(self.repeat_sum() / self.n_repeats)
         return self._mean[0]
+
+    def repeat_sum(self) -> np.ndarray:
+        """``(K, H, W, C)`` integer sums of the ``N`` repeats, exact (computed once).
+
+        The dtype is the smallest unsigned integer holding ``N · c_max``; the
+        merge looks weights and ``g`` up in tables on this grid
+        (:func:`photoquant.merge.merge_stack`).
+        """
+        if not self._sum:
+            top = self.n_repeats * self.c_max
+            dtype = np.uint16 if top <= np.iinfo(np.uint16).max else np.uint32
+            if top > np.iinfo(np.uint32).max:  # pragma: no cover - 65 536 repeats of 16 bits
+                dtype = np.uint64
+            self._sum.append(self.frames.sum(axis=0, dtype=dtype))
+        return self._sum[0]
+
+    def _repeat_extremes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per value, the lowest and highest of its ``N`` repeats (computed once)."""
+        if not self._extremes:
+            if self.n_repeats == 1:
+                self._extremes.append((self.frames[0], self.frames[0]))
+            else:
+                self._extremes.append((self.frames.min(axis=0), self.frames.max(axis=0)))
+        return self._extremes[0]
 
     def saturated(self, saturation_level: np.ndarray | None = None) -> np.ndarray:
         """``(K, H, W, C)`` bool: any repeat reached the channel's saturation level.
@@ -230,9 +263,10 @@ class ExposureStack:
         model's calibrated levels).
         """
         level = self.saturation_level if saturation_level is None else saturation_level
-        sat = np.asarray(level, dtype=np.float64).reshape(1, 1, 1, 1, -1)
-        return np.any(self.frames >= sat, axis=0)
+        level = check_array(level, "saturation_level", shape=(self.n_channels,), kind="iuf")
+        # frames are integers: c >= level  <=>  c >= ceil(level)
+        return self._repeat_extremes()[1] >= np.ceil(level.astype(np.float64)).astype(np.int64)
 
     def dark_clipped(self, floor: float = 0.0) -> np.ndarray:
         """``(K, H, W, C)`` bool: any repeat sits at the floor ``c_min`` (clipped dark)."""
-        return np.any(self.frames <= floor, axis=0)
+        return self._repeat_extremes()[0] <= floor

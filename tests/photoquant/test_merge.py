@@ -127,3 +127,39 @@ def test_integer_fast_path_equals_the_float_path(rng, weighting):
     np.testing.assert_array_equal(a.mask, b.mask)
     np.testing.assert_array_equal(a.all_saturated, b.all_saturated)
     np.testing.assert_allclose(a.log_photoquantity, b.log_photoquantity, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(2, 12),
+    weighting=st.sampled_from(["hat", "hat-quantisation", "uniform"]),
+    sat_offset=st.floats(-30.0, 0.0),
+)
+def test_merge_of_repeat_sums_is_the_merge_of_their_means_to_the_bit(seed, n, weighting, sat_offset):
+    """Sums of N integer frames with ``repeats=N`` (table path) = their means (float path)."""
+    rng = np.random.default_rng(seed)
+    frames = rng.integers(0, 256, size=(n, 4, 5, 6, 3))
+    sums = frames.sum(axis=0).astype(np.uint16)
+    sat = 255.0 + sat_offset
+    kw = {
+        "saturation_level": np.full(3, sat),
+        "saturated": np.any(frames >= sat, axis=0),
+        "dark_clipped": np.any(frames == 0, axis=0),
+        "min_level": np.array([3.0, 0.0, 7.5]),
+        "weighting": weighting,
+    }
+    g = _true_table()
+    t = EXPOSURES[:4]
+    a = merge_Debevec1997(sums, t, LEVELS, g, repeats=n, **kw)
+    b = merge_Debevec1997(frames.mean(axis=0), t, LEVELS, g, **kw)
+    for field in ("log_photoquantity", "mask", "all_saturated", "all_dark", "weight_sum"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)
+
+
+def test_repeats_needs_integer_sums():
+    g = np.zeros((1, 256))
+    with pytest.raises(InputError, match="integer sums"):
+        merge_Debevec1997(np.full((2, 1, 1, 1), 10.5), [1.0, 2.0], LEVELS, g, repeats=3)
+    with pytest.raises(InputError, match="`repeats`"):
+        merge_Debevec1997(np.full((2, 1, 1, 1), 10), [1.0, 2.0], LEVELS, g, repeats=0)

@@ -43,6 +43,27 @@ def test_saturated_means_any_repeat_clipped():
     assert stack.saturated()[0, 0, 0, 0]
 
 
+@pytest.mark.parametrize("bit_depth", [8, 12, 16])
+def test_sums_means_and_clip_flags_follow_their_definitions(rng, bit_depth):
+    """The memoised sums, means and clip flags equal their plain-numpy definitions."""
+    c_max = 2**bit_depth - 1
+    frames = rng.integers(0, c_max + 1, (7, 2, 5, 6, 3)).astype(
+        np.uint8 if bit_depth == 8 else np.uint16
+    )
+    frames[3, 0, 0, 0] = c_max  # one repeat clipped, the others not
+    frames[5, 1, 1, 1] = 0
+    stack = ExposureStack(frames, [0.1, 0.2], bit_depth=bit_depth)
+    sums = stack.repeat_sum()
+    assert sums.dtype.kind == "u" and np.array_equal(sums, frames.sum(axis=0, dtype=np.int64))
+    np.testing.assert_array_equal(stack.mean(), denoise_mean(frames))  # to the last bit
+    for level in ([c_max] * 3, [c_max - 10.5, c_max - 3, c_max]):
+        expected = np.any(frames >= np.asarray(level, dtype=float), axis=0)
+        np.testing.assert_array_equal(stack.saturated(np.asarray(level)), expected)
+    np.testing.assert_array_equal(stack.dark_clipped(), np.any(frames <= 0, axis=0))
+    with pytest.raises(InputError, match="saturation_level"):
+        stack.saturated(np.array([1, 2]))
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
