@@ -136,9 +136,7 @@ def merge_Debevec1997(
     t = check_exposure_times(exposure_s)
     k_count, _, _, n_ch = values.shape
     if t.size != k_count:
-        raise InputError(
-            f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures"
-        )
+        raise InputError(f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures")
     if isinstance(repeats, bool) or not isinstance(repeats, int | np.integer) or repeats < 1:
         raise InputError(f"`repeats` must be a positive int, got {repeats!r}")
     repeats = int(repeats)
@@ -170,8 +168,10 @@ def merge_Debevec1997(
     step_table = None
     if getattr(wfun, "uses_log_step", False):
         step_table = np.stack(
-            [np.interp(levels + 0.5, levels, g[ch]) - np.interp(levels - 0.5, levels, g[ch])
-             for ch in range(n_ch)]
+            [
+                np.interp(levels + 0.5, levels, g[ch]) - np.interp(levels - 0.5, levels, g[ch])
+                for ch in range(n_ch)
+            ]
         )
 
     def weights(v: np.ndarray, ch: int | slice) -> np.ndarray:
@@ -180,8 +180,11 @@ def merge_Debevec1997(
         if step_table is None:
             w = wfun(v, c_min, s)
         else:
-            step = apply_log_inverse_response(v, levels, step_table[ch]) if isinstance(ch, slice) \
+            step = (
+                apply_log_inverse_response(v, levels, step_table[ch])
+                if isinstance(ch, slice)
                 else np.interp(v, levels, step_table[ch])
+            )
             w = wfun(v, c_min, s, log_step=step)
         w = np.where(v >= s, 0.0, w)
         if min_level is not None:

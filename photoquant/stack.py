@@ -168,9 +168,7 @@ class ExposureStack:
                 self.saturation_level, "saturation_level", shape=(frames.shape[-1],), kind="iuf"
             ).astype(np.int64)
             if np.any(sat < 1) or np.any(sat > c_max):
-                raise InputError(
-                    f"`saturation_level` must lie in [1, {c_max}], got {sat.tolist()}"
-                )
+                raise InputError(f"`saturation_level` must lie in [1, {c_max}], got {sat.tolist()}")
         object.__setattr__(self, "frames", frames)
         object.__setattr__(self, "exposure_s", t)
         object.__setattr__(self, "bit_depth", bit_depth)

@@ -41,47 +41,67 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options of ``photoquant validate`` to ``parser``."""
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument(
-        "--quick", dest="mode", action="store_const", const="quick",
+        "--quick",
+        dest="mode",
+        action="store_const",
+        const="quick",
         help="the default: 320x240, N = 4, K = 8, V = 3 (about half a minute on 2 cores)",
     )
     mode.add_argument(
-        "--full", dest="mode", action="store_const", const="full",
+        "--full",
+        dest="mode",
+        action="store_const",
+        const="full",
         help="the paper's settings: 1024x768, N = 10, K = 8, V = 3, rendered chart "
         "(several minutes)",
     )
-    mode.add_argument("--tiny", dest="mode", action="store_const", const="tiny",
-                      help=argparse.SUPPRESS)
+    mode.add_argument(
+        "--tiny", dest="mode", action="store_const", const="tiny", help=argparse.SUPPRESS
+    )
     parser.set_defaults(mode="quick")
     parser.add_argument(
-        "-o", "--output", default=DEFAULT_REPORT_DIR, metavar="REPORT_DIR",
+        "-o",
+        "--output",
+        default=DEFAULT_REPORT_DIR,
+        metavar="REPORT_DIR",
         help=f"report folder (default: ./{DEFAULT_REPORT_DIR})",
     )
     parser.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
     parser.add_argument(
-        "--check", metavar="BASELINE.json", nargs="?", const="default",
+        "--check",
+        metavar="BASELINE.json",
+        nargs="?",
+        const="default",
         help="compare the metrics with a baseline and exit 1 naming each regression; "
         "without a file: the stored baseline of the default configuration",
     )
     parser.add_argument(
-        "--json", action="store_true",
+        "--json",
+        action="store_true",
         help="print results.json to standard output (the table goes to standard error)",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing report")
     parser.add_argument(
-        "--experiments", nargs="+", metavar="NAME",
+        "--experiments",
+        nargs="+",
+        metavar="NAME",
         help="run only these: response balance sensor_lut vignetting noise table1 fig7 timings",
     )
     parser.add_argument(
-        "--workdir", type=Path, metavar="DIR",
+        "--workdir",
+        type=Path,
+        metavar="DIR",
         help="keep the simulated capture sets here (a temporary folder by default)",
     )
     parser.add_argument(
-        "--chart", choices=("analytic", "rendered"),
+        "--chart",
+        choices=("analytic", "rendered"),
         help="the ColorChecker of Table 1 / Fig. 6-7: exact spectral integrals (quick's "
         "default) or rendered by Mitsuba 3 (--full's default; needs photoquant[render])",
     )
     parser.add_argument(
-        "--cache-dir", metavar="DIR",
+        "--cache-dir",
+        metavar="DIR",
         help="render cache of the rendered chart ($PQSIM_CACHE or ~/.cache/pqsim)",
     )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
@@ -109,8 +129,12 @@ def run_validate(args: argparse.Namespace) -> int:
     if args.check:
         path = DEFAULT_BASELINE if args.check == "default" else Path(args.check)
         baseline = (path, load_baseline(path))
-    if args.workdir is not None and args.workdir.exists() and any(args.workdir.iterdir()) \
-            and not args.overwrite:
+    if (
+        args.workdir is not None
+        and args.workdir.exists()
+        and any(args.workdir.iterdir())
+        and not args.overwrite
+    ):
         raise OutputExistsError(f"{args.workdir} is not empty (use --overwrite to reuse it)")
 
     def say(message: str) -> None:
@@ -129,8 +153,11 @@ def run_validate(args: argparse.Namespace) -> int:
     table = format_table(run, check)
     stream = sys.stderr if args.json else sys.stdout
     print(table, file=stream)
-    print(f"\nreport: {folder / 'report.md'} ({time.perf_counter() - t0:.0f} s in all)",
-          file=stream, flush=True)
+    print(
+        f"\nreport: {folder / 'report.md'} ({time.perf_counter() - t0:.0f} s in all)",
+        file=stream,
+        flush=True,
+    )
     if args.json:
         sys.stdout.write(results_json(run, check))
         sys.stdout.flush()

@@ -159,7 +159,12 @@ class ValidationConfig:
                 f"`chart` must be one of {list(CHART_SOURCES)}, got {self.chart!r}"
             )
         for name in (
-            "n_repeats", "n_views", "chart_repeats", "sweep_draws", "n_samples", "chart_spp"
+            "n_repeats",
+            "n_views",
+            "chart_repeats",
+            "sweep_draws",
+            "n_samples",
+            "chart_spp",
         ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -244,9 +249,7 @@ def get_config(name: str) -> ValidationConfig:
     try:
         return CONFIGS[name]
     except KeyError:
-        raise ValidationError(
-            f"unknown configuration {name!r}; valid: {sorted(CONFIGS)}"
-        ) from None
+        raise ValidationError(f"unknown configuration {name!r}; valid: {sorted(CONFIGS)}") from None
 
 
 def stream_seed(seed: int, *names: Any) -> int:

@@ -19,7 +19,9 @@ LEVELS = np.arange(256.0)
 
 def _true_table(gamma=2.2):
     # ln f⁻¹ at every level; level 0 maps to -inf: any finite value does (weight 0 there)
-    g = np.stack([true_g(np.maximum(LEVELS, 0.5), ch, gamma=gamma, balance=BALANCE) for ch in range(3)])
+    g = np.stack(
+        [true_g(np.maximum(LEVELS, 0.5), ch, gamma=gamma, balance=BALANCE) for ch in range(3)]
+    )
     return g
 
 
@@ -120,8 +122,12 @@ def test_integer_fast_path_equals_the_float_path(rng, weighting):
     frames = capture(log_uniform_scene(rng, (12, 14, 3)), EXPOSURES, balance=BALANCE)[0]
     sat = np.round(np.array(BALANCE) * 255)
     g = _true_table()
-    kw = {"saturation_level": sat, "min_level": np.array([3.0, 2.0, 4.0]), "weighting": weighting,
-          "dark_clipped": frames == 0}
+    kw = {
+        "saturation_level": sat,
+        "min_level": np.array([3.0, 2.0, 4.0]),
+        "weighting": weighting,
+        "dark_clipped": frames == 0,
+    }
     a = merge_Debevec1997(frames, EXPOSURES, LEVELS, g, **kw)
     b = merge_Debevec1997(frames.astype(np.float64), EXPOSURES, LEVELS, g, **kw)
     np.testing.assert_array_equal(a.mask, b.mask)
@@ -136,7 +142,9 @@ def test_integer_fast_path_equals_the_float_path(rng, weighting):
     weighting=st.sampled_from(["hat", "hat-quantisation", "uniform"]),
     sat_offset=st.floats(-30.0, 0.0),
 )
-def test_merge_of_repeat_sums_is_the_merge_of_their_means_to_the_bit(seed, n, weighting, sat_offset):
+def test_merge_of_repeat_sums_is_the_merge_of_their_means_to_the_bit(
+    seed, n, weighting, sat_offset
+):
     """Sums of N integer frames with ``repeats=N`` (table path) = their means (float path)."""
     rng = np.random.default_rng(seed)
     frames = rng.integers(0, 256, size=(n, 4, 5, 6, 3))

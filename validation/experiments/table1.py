@@ -106,7 +106,9 @@ def chart_measurements(
     ldr = patch_means(frame, chart.boxes)
     clipped = patch_means((frame >= sat).astype(np.float64), chart.boxes) > 0
     hdr_cap = camera.capture(
-        chart.l, np.asarray(config.exposure_s), config.chart_repeats,
+        chart.l,
+        np.asarray(config.exposure_s),
+        config.chart_repeats,
         rng=shared.stream("chart_hdr", preset, label),
     )
     stack = hdr_cap.to_stack()
@@ -137,7 +139,8 @@ def _chart_note(config: ValidationConfig, shared: Shared) -> str:
     sens = ", ".join(f"{p}: {shared.sensitivities(p)}" for p in config.presets)
     if config.chart == "rendered":
         renders = {
-            (label, p): shared.chart(ill, p).render for label, ill in config.illuminants
+            (label, p): shared.chart(ill, p).render
+            for label, ill in config.illuminants
             for p in config.presets
         }
         variants = sorted({r["variant"] for r in renders.values()})
@@ -196,13 +199,15 @@ def run(
         for row, values in (("uncorrected", m["ldr"]), ("corrected", m["hdr"])):
             for gt in ("camera", "cie"):
                 cell[f"{row}.r_{gt}"] = res.metric(
-                    f"{preset}.{label}.{row}.r_{gt}", correlation(m[f"truth_{gt}"], values),
+                    f"{preset}.{label}.{row}.r_{gt}",
+                    correlation(m[f"truth_{gt}"], values),
                     better="higher",
                     description=f"correlation of {row} patch values with the "
                     + ("true camera photoquantity" if gt == "camera" else "CIE RGB (D65)"),
                 )
             cell[f"{row}.e_mean"] = res.metric(
-                f"{preset}.{label}.{row}.e_mean", _eq8_patches(m["truth_camera"], values),
+                f"{preset}.{label}.{row}.e_mean",
+                _eq8_patches(m["truth_camera"], values),
                 unit="fraction",
                 description=f"eq. 8 mean over the patches of {row} vs the camera photoquantity",
             )
@@ -216,9 +221,12 @@ def run(
                 f"r, {row} vs {gt_name}",
                 "  ".join(f"{table[c][f'{row}.r_{gt}']:.4f}" for c in columns),
                 "  ".join(f"{PAPER[row][i]:.2f}" for i in paper_idx) if gt == "cie" else "–",
-                ("eq. 8 e_mean: "
-                 + " ".join(fmt_pct(table[c][f'{row}.e_mean'], 1) for c in columns))
-                if gt == "camera" else "",
+                (
+                    "eq. 8 e_mean: "
+                    + " ".join(fmt_pct(table[c][f"{row}.e_mean"], 1) for c in columns)
+                )
+                if gt == "camera"
+                else "",
             )
         res.row(
             f"r, Hugin vs {gt_name}",
