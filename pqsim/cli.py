@@ -45,6 +45,7 @@ _MITSUBA_ONLY = {
     "variant": "--variant",
     "render_seed": "--render-seed",
     "no_colorchecker": "--no-colorchecker",
+    "view_rendering": "--view-rendering",
 }
 
 
@@ -181,6 +182,7 @@ def _capture_rendered(
         on_render=done_rendering,
         overwrite=args.overwrite,
         workers=args.workers,
+        view_rendering=args.view_rendering or "reprojected",
     )
 
 
@@ -257,6 +259,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cap.add_argument(
         "--no-colorchecker", action="store_true", help="mitsuba: skip the ColorChecker"
+    )
+    cap.add_argument(
+        "--view-rendering",
+        default=None,
+        choices=["reprojected", "direct"],
+        help="mitsuba: views cut out of one wide 2x2-supersampled render (reprojected, "
+        "default) or rendered one by one (direct)",
     )
     cap.add_argument(
         "--irradiance-nonuniformity",

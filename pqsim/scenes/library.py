@@ -15,7 +15,9 @@ Scenes (paper §5.1.1, §6)
   room with objects of varied spectral reflectance, lit by a ceiling lamp, seen
   from ``V`` view directions (the camera rotated by a few degrees about its
   centre of projection), with exact pixel correspondences between views and the
-  white-chart region of view 0.
+  white-chart region of view 0. :meth:`CalibrationViews.wide_view` gives one
+  wider, supersampled view (a :class:`WideView`) holding the rays of all
+  ``V`` views, from which :func:`pqsim.reproject.resample_view` cuts each view.
 - :func:`colour_checker_scene` — the 24-patch ColorChecker under a uniform
   D65 ("outdoor") or illuminant A ("indoor") sky, with each patch's region and
   reference values (camera photoquantity; CIE XYZ, CIE RGB, linear sRGB under
@@ -50,6 +52,7 @@ References
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -73,6 +76,7 @@ __all__ = [
     "high_contrast_scene",
     "intrinsics",
     "SCENES",
+    "WideView",
 ]
 
 _EPS = 1e-9
@@ -365,6 +369,29 @@ def _perspective_sensor(
     }
 
 
+def _offset_perspective_sensor(
+    sensor: dict[str, Any], width: int, height: int, fov: float, offset: tuple[float, float]
+) -> dict[str, Any]:
+    """Copy of a :func:`_perspective_sensor` with another film size, fov and principal point.
+
+    Mitsuba's ``perspective`` sensor maps the film position ``p`` (in [0, 1]²,
+    ``y`` down) to the ray its centred twin sends through ``p + offset``, with
+    ``offset = (principal_point_offset_x, principal_point_offset_y)`` in
+    fractions of the film size, while ``fov`` (``fov_axis = "x"``) keeps
+    defining the focal length ``f = (W/2) / tan(fov/2)`` from the film width
+    alone [1]_: the principal point is at ``(W (1/2 − offset_x), H (1/2 − offset_y))``
+    pixels (verified against ``Sensor.sample_ray`` in Mitsuba 3.9).
+    """
+    out = copy.deepcopy(sensor)
+    out["fov"] = float(fov)
+    out["fov_axis"] = "x"
+    out["principal_point_offset_x"] = float(offset[0])
+    out["principal_point_offset_y"] = float(offset[1])
+    out["film"]["width"] = int(width)
+    out["film"]["height"] = int(height)
+    return out
+
+
 # ----------------------------------------------------------------------------- results
 
 
@@ -456,6 +483,210 @@ class CalibrationViews:
             [[int(v), float(x) - off, float(y) - off] for v, x, y in track]
             for track in self.correspondences
         ]
+
+    def wide_view(
+        self,
+        supersample: int = 2,
+        margin_px: float = 2.0,
+        views: Sequence[int] | None = None,
+    ) -> WideView:
+        """One wide, supersampled view seeing the rays of every view (a :class:`WideView`).
+
+        All views share the centre of projection, so each is a homography
+        resampling of a single image in view 0's orientation [3]_ that covers
+        them all. The wide sensor has view 0's origin and rotation ``R_0``, the
+        focal length ``s f`` (``s = supersample``), and a film and principal
+        point chosen so that the images of every view's four corners (a
+        homography maps lines to lines) lie inside it with ``margin_px`` view
+        pixels to spare, and so that view 0's sub-pixel sample positions
+        ``i + (k + 1/2)/s`` fall exactly on wide pixel centres: view 0 is then
+        the exact ``s × s`` box average of wide pixels.
+
+        Parameters
+        ----------
+        supersample : int
+            ``s`` in [1, 8]: wide pixels per view pixel along each axis.
+        margin_px : float
+            Border, in view pixels (``s · margin_px`` wide pixels), in [0, 64],
+            kept around the union of the views.
+        views : sequence of int, optional
+            Views to cover (view 0 always is); all of them by default.
+
+        Returns
+        -------
+        WideView
+
+        Raises
+        ------
+        InputError
+            On invalid arguments, if a view's corner lies behind view 0's image
+            plane, or if the wide film would exceed 16384 pixels.
+
+        Notes
+        -----
+        The scene dict is view 0's with only the sensor changed (film size,
+        ``fov``, ``principal_point_offset_x/y``): same shapes, emitters,
+        integrator and sampler. With Mitsuba's ``fov_axis = "x"``, ``fov``
+        gives the focal length from the film width whatever the principal point
+        offset, so ``fov = 2 atan(W_wide / (2 s f))``; the principal point is
+        ``(W_wide (1/2 − offset_x), H_wide (1/2 − offset_y))`` pixels.
+        """
+        s = _check_positive_int(supersample, "supersample")
+        if s > 8:
+            raise InputError(f"`supersample` must be an integer in [1, 8], got {supersample!r}")
+        try:
+            margin = float(margin_px)
+        except (TypeError, ValueError):
+            raise InputError(f"`margin_px` must be a number, got {margin_px!r}") from None
+        if not 0.0 <= margin <= 64.0:
+            raise InputError(f"`margin_px` must be in [0, 64] view pixels, got {margin_px!r}")
+        if views is None:
+            covered = tuple(range(self.n_views))
+        else:
+            given = list(views) if isinstance(views, Sequence | np.ndarray) else [None]
+            if not all(
+                isinstance(v, int | np.integer)
+                and not isinstance(v, bool)
+                and 0 <= v < self.n_views
+                for v in given
+            ):
+                raise InputError(
+                    f"`views` must be a sequence of view indices in [0, {self.n_views}), "
+                    f"got {views!r}"
+                )
+            covered = tuple(sorted({0, *(int(v) for v in given)}))
+
+        sensor0 = self.scenes[0]["sensor"]
+        width, height = int(sensor0["film"]["width"]), int(sensor0["film"]["height"])
+        corners = np.array(
+            [[0.0, 0.0, 1.0], [width, 0.0, 1.0], [width, height, 1.0], [0.0, height, 1.0]]
+        )
+        xy = [corners[:, :2]]
+        for v in covered[1:]:
+            p = corners @ self.homography(v, 0).T
+            if np.any(p[:, 2] <= _EPS):
+                raise InputError(
+                    f"view {v} sees directions behind view 0's image plane: no single "
+                    "perspective image holds both (reduce the view angles or the field of view)"
+                )
+            xy.append(p[:, :2] / p[:, 2:3])
+        pts = np.concatenate(xy, axis=0)
+        (xmin, ymin), (xmax, ymax) = pts.min(axis=0), pts.max(axis=0)
+        # Wide coordinates of view 0's continuous coordinates: s x + (ox, oy),
+        # (ox, oy) integral so that view 0's sub-pixel samples hit pixel centres.
+        ox = math.ceil(s * (margin - xmin) - 1e-9)
+        oy = math.ceil(s * (margin - ymin) - 1e-9)
+        w_wide = math.ceil(s * (xmax + margin) + ox - 1e-9)
+        h_wide = math.ceil(s * (ymax + margin) + oy - 1e-9)
+        if max(w_wide, h_wide) > 16384:
+            raise InputError(
+                f"the wide view would be {w_wide} x {h_wide} pixels (more than 16384): "
+                "reduce `supersample`, the image size or the view angles"
+            )
+        f = float(self.K[0, 0])
+        K_wide = np.array(
+            [
+                [s * f, 0.0, s * float(self.K[0, 2]) + ox],
+                [0.0, s * f, s * float(self.K[1, 2]) + oy],
+                [0.0, 0.0, 1.0],
+            ]
+        )
+        fov = math.degrees(2.0 * math.atan(0.5 * w_wide / (s * f)))
+        offset = (0.5 - K_wide[0, 2] / w_wide, 0.5 - K_wide[1, 2] / h_wide)
+        scene = copy.deepcopy(self.scenes[0])
+        scene["sensor"] = _offset_perspective_sensor(sensor0, w_wide, h_wide, fov, offset)
+        return WideView(
+            scene=scene,
+            K_wide=K_wide,
+            width=w_wide,
+            height=h_wide,
+            supersample=s,
+            margin_px=margin,
+            offset_px=(int(ox), int(oy)),
+            views=covered,
+            view_size=(width, height),
+            K=self.K.copy(),
+            rotations=self.rotations.copy(),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class WideView:
+    """One supersampled perspective view holding the rays of several rotated views.
+
+    Built by :meth:`CalibrationViews.wide_view`; render :attr:`scene` once
+    and cut each view out of it with :func:`pqsim.reproject.resample_view` and
+    :meth:`view_homography` (Hartley & Zisserman, §8.4.2 [3]_).
+
+    Attributes
+    ----------
+    scene : dict
+        Plain-data Mitsuba scene dict: view 0's, with a ``width × height``
+        film, the field of view of focal length ``s f`` and an off-centre
+        principal point.
+    K_wide : ndarray, shape (3, 3)
+        Intrinsics of the wide image (continuous pixel coordinates, pixel
+        centres at ``i + 0.5``), orientation ``R_0 = rotations[0]``:
+        ``[[s f, 0, s W/2 + ox], [0, s f, s H/2 + oy], [0, 0, 1]]``.
+    width, height : int
+        Size of the wide image in pixels.
+    supersample : int
+        ``s``: wide pixels per view pixel along each axis.
+    margin_px : float
+        Border kept around the views, in view pixels.
+    offset_px : (int, int)
+        ``(ox, oy)``: view 0's continuous pixel ``(x, y)`` is the wide
+        image's ``(s x + ox, s y + oy)``.
+    views : tuple of int
+        The views the wide image covers (view 0 among them).
+    view_size : (int, int)
+        ``(W, H)`` of the views.
+    K : ndarray, shape (3, 3)
+        Intrinsics of the views.
+    rotations : ndarray, shape (V, 3, 3)
+        Camera-to-world rotations of all views.
+    """
+
+    scene: dict[str, Any]
+    K_wide: NDArray[np.float64]
+    width: int
+    height: int
+    supersample: int
+    margin_px: float
+    offset_px: tuple[int, int]
+    views: tuple[int, ...]
+    view_size: tuple[int, int]
+    K: NDArray[np.float64]
+    rotations: NDArray[np.float64]
+
+    def view_homography(self, v: int) -> NDArray[np.float64]:
+        """Homography mapping continuous pixel coordinates of view ``v`` into the wide image.
+
+        ``H = K_wide R_0^T R_v K⁻¹`` [3]_, computed as ``A · (K R_0^T R_v K⁻¹)``
+        with ``A = [[s, 0, ox], [0, s, oy], [0, 0, 1]]`` exactly, and the
+        bracket taken as the identity for view 0: view 0's sub-pixel sample
+        positions map onto wide pixel centres without rounding error (for
+        ``s`` a power of two).
+
+        Parameters
+        ----------
+        v : int
+            A view index among :attr:`views`.
+
+        Returns
+        -------
+        ndarray, shape (3, 3)
+        """
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v not in self.views:
+            raise InputError(f"`v` must be one of the covered views {list(self.views)}, got {v!r}")
+        s = float(self.supersample)
+        A = np.array(
+            [[s, 0.0, float(self.offset_px[0])], [0.0, s, float(self.offset_px[1])], [0, 0, 1.0]]
+        )
+        if v == 0:
+            return A
+        Kinv = np.linalg.inv(self.K)
+        return A @ (self.K @ self.rotations[0].T @ self.rotations[v] @ Kinv)
 
 
 @dataclass(frozen=True, eq=False)

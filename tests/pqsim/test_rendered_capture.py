@@ -49,6 +49,9 @@ KW = {
     "exposure_s": EXPOSURES,
     "n_repeats": N,
     "progress": False,
+    # one render per view: these tests rely on independent noise per view
+    # (test_reproject.py covers the default, reprojected views)
+    "view_rendering": "direct",
 }
 
 
@@ -338,7 +341,7 @@ def test_cli_mitsuba_capture_and_errors(rendered, tmp_path, capsys, monkeypatch)
     out = tmp_path / "cli"
     argv = ["capture", "-o", str(out), "--resolution", "128x96", "--spp", str(SPP),
             "--exposures", "5", "--exposure-range", "0.001", "0.1", "--repeats", str(N),
-            "--cache-dir", str(root / "cache")]
+            "--cache-dir", str(root / "cache"), "--view-rendering", "direct"]
     assert pqsim_main(argv) == 0
     err = capsys.readouterr().err
     assert err.count("cached") == 6  # the module's renders, reused
