@@ -164,7 +164,30 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         from validation.demo import run_demo
     except ImportError as exc:  # pragma: no cover - the distribution ships it
         raise PhotoquantError(f"the demo needs the `validation` package: {exc}") from None
-    return run_demo(output=args.output, seed=args.seed, quick=not args.full, overwrite=args.overwrite)
+    return run_demo(
+        output=args.output, seed=args.seed, quick=not args.full, overwrite=args.overwrite
+    )
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    # the comparison reads the simulator's truth, which photoquant itself never imports
+    try:
+        from validation.compare import compare_with_truth, comparison_json, format_comparison
+    except ImportError as exc:  # pragma: no cover - the distribution ships it
+        raise PhotoquantError(f"compare needs the `validation` package: {exc}") from None
+    from photoquant.model import load_camera
+
+    model = load_camera(args.camera)
+    rep = compare_with_truth(args.manifest, model, allow_outside=args.allow_outside)
+    if args.json:
+        print(json.dumps(comparison_json(rep), indent=1))
+    else:
+        print(
+            format_comparison(
+                rep, model, f"photoquant compare — {args.manifest}, camera {args.camera}"
+            )
+        )
+    return 0
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -225,6 +248,18 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--full", action="store_true", help="paper-sized images (slower)")
     demo.add_argument("--overwrite", action="store_true")
     demo.set_defaults(func=_cmd_demo)
+
+    cmp_ = sub.add_parser(
+        "compare",
+        help="compare a calibrated camera with the ground truth of a synthetic capture set",
+    )
+    cmp_.add_argument("manifest", help="capture manifest written by `pqsim capture`")
+    cmp_.add_argument("--camera", required=True, help="camera folder from `photoquant calibrate`")
+    cmp_.add_argument("--json", action="store_true", help="machine-readable output")
+    cmp_.add_argument(
+        "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"
+    )
+    cmp_.set_defaults(func=_cmd_compare)
 
     try:
         from validation.cli import add_validate_arguments

@@ -19,6 +19,8 @@ from photoquant.io.manifest import (
     CaptureManifest,
     FrameRef,
     FrameSetRef,
+    extra_frameset,
+    extra_path,
     load_manifest,
     load_stack,
     write_manifest,
@@ -40,4 +42,6 @@ __all__ = [
     "load_manifest",
     "load_stack",
     "write_manifest",
+    "extra_frameset",
+    "extra_path",
 ]

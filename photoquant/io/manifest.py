@@ -67,6 +67,8 @@ __all__ = [
     "load_manifest",
     "load_stack",
     "write_manifest",
+    "extra_frameset",
+    "extra_path",
 ]
 
 CAPTURE_FORMAT = "photoquant.captures/1"
@@ -525,6 +527,40 @@ def load_manifest(path: PathLike, *, allow_outside: bool = False) -> CaptureMani
     resolved = path.resolve()
     parser = _Parser(resolved, resolved.parent, check_files=True, allow_outside=allow_outside)
     return parser.parse(data)
+
+
+def extra_frameset(
+    manifest: CaptureManifest, key: str, *, allow_outside: bool = False
+) -> FrameSetRef:
+    """A frame set stored under a key photoquant does not know (e.g. pqsim's ``colorchecker``).
+
+    It is validated as the ``scene`` is: a ``{"frames": [...]}`` object whose
+    files lie inside the manifest's folder (unless ``allow_outside``) and exist.
+
+    Raises
+    ------
+    ManifestError
+        If ``manifest.extra`` has no ``key`` or it is not a valid frame set.
+    """
+    if key not in manifest.extra:
+        raise ManifestError(f"manifest {manifest.path}: no `{key}` frame set")
+    parser = _Parser(manifest.path, manifest.root, check_files=True, allow_outside=allow_outside)
+    return parser.parse_frameset(manifest.extra[key], key)
+
+
+def extra_path(manifest: CaptureManifest, key: str, *, allow_outside: bool = False) -> Path:
+    """The file named by the string under ``key`` (e.g. ``"truth"``), resolved and confined.
+
+    Raises
+    ------
+    ManifestError
+        If the key is missing, not a path string, or leads outside the
+        manifest's folder (unless ``allow_outside``).
+    """
+    if key not in manifest.extra:
+        raise ManifestError(f"manifest {manifest.path}: no `{key}` entry")
+    parser = _Parser(manifest.path, manifest.root, check_files=False, allow_outside=allow_outside)
+    return parser.resolve_file(manifest.extra[key], key)
 
 
 def write_manifest(path: PathLike, data: Mapping[str, Any], *, allow_outside: bool = False) -> None:

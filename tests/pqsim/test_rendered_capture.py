@@ -301,6 +301,17 @@ def test_photoquant_calibrates_and_corrects_the_rendered_set(rendered, tmp_path,
     # and the balance error itself stays within the vignetting error's reach
     assert np.all(np.abs(got - 1) <= K_SIGMA * (sigma_v + sigma_v[1]) + tol), got
 
+    # `photoquant compare` reads the same truth through the manifest: the same
+    # vignetting error, and the ColorChecker (24 patches, rendered truth) is
+    # recovered to the patches' noise: r with the truth near 1, with the
+    # chart maker's CIE RGB (other primaries, D65) high but below it
+    from validation.compare import compare_with_truth
+
+    rep = compare_with_truth(manifest, model)
+    assert rep["vignetting"]["error"].e_mean == pytest.approx(float(err.mean()), rel=1e-12)
+    cc = rep["colorchecker"]
+    assert cc["r_camera"] > 0.99 and 0.8 < cc["r_cie_rgb"] < cc["r_camera"], cc
+
 
 # ---------------------------------------------------------------------------
 # Arguments and the command line

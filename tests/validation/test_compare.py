@@ -1,0 +1,91 @@
+"""``photoquant compare``: a calibrated camera against a synthetic capture set's truth."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from photoquant.calibrate import calibrate_manifest
+from photoquant.cli import main
+from photoquant.errors import InputError, ManifestError
+from photoquant.vignetting import IDENTITY_VIGNETTING
+from pqsim.capture_set import write_capture_set
+from pqsim.synth_camera.presets import camera_from_preset
+from pqsim.synth_camera.truth import load_truth
+from validation.compare import compare_with_truth, comparison_json, format_comparison
+from validation.metrics import map_relative_error
+from validation.truth_model import camera_model_from_truth
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("compare") / "capture"
+    manifest = write_capture_set(
+        folder, camera_from_preset("ccd"), shape=(48, 64), n_repeats=2, seed=4
+    )
+    return manifest, load_truth(folder / "truth")
+
+
+def test_the_true_model_scores_zero_map_errors(capture):
+    """Compared with itself, the truth has no map error and no response error."""
+    manifest, truth = capture
+    model = camera_model_from_truth(truth.camera)
+    rep = compare_with_truth(manifest, model)
+    assert rep["lut"]["error"].e_max == pytest.approx(0.0, abs=1e-6)  # float32 maps on disk
+    assert rep["vignetting"]["error"].e_max == pytest.approx(0.0, abs=1e-6)
+    assert max(r["rms"] for r in rep["response"]) < 1e-3
+    assert rep["lut"]["prnu_floor"] > 0.005  # what the LUT corrects: ~1 % PRNU
+    assert "colorchecker" not in rep  # the analytic set has none
+
+
+def test_a_calibrated_model_is_compared_with_the_right_maps(capture):
+    manifest, truth = capture
+    model = calibrate_manifest(manifest)
+    rep = compare_with_truth(manifest, model, truth)
+    expected = map_relative_error(truth.camera.vignetting, model.vignetting())
+    assert rep["vignetting"]["error"] == expected
+    # a camera without vignetting correction: the error is the vignetting itself
+    flat = dataclasses.replace(model, vignetting_params=np.tile(IDENTITY_VIGNETTING, (3, 1)))
+    worse = compare_with_truth(manifest, flat, truth)
+    assert worse["vignetting"]["error"] == map_relative_error(truth.camera.vignetting, np.ones(3))
+    assert worse["vignetting"]["error"].e_mean > 10 * rep["vignetting"]["error"].e_mean
+    text = format_comparison(rep, model, "title")
+    assert "vignetting map v" in text and "test scene photoquantity" in text
+    doc = json.loads(json.dumps(comparison_json(rep)))
+    assert doc["vignetting"]["error"]["e_mean"] == expected.e_mean
+    assert "photoquantity" not in doc["scene"]
+
+
+def test_cli_compare_and_its_errors(capture, tmp_path, capsys):
+    manifest, _ = capture
+    cam = tmp_path / "cam"
+    assert main(["calibrate", str(manifest), "-o", str(cam), "-q"]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(manifest), "--camera", str(cam), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert set(doc) >= {"response", "balance", "lut", "vignetting", "scene"}
+    assert np.isfinite(doc["scene"]["error"]["e_mean"])
+    # a manifest without a truth entry: one line, exit 2
+    data = json.loads(manifest.read_text())
+    data.pop("truth")
+    bare = manifest.parent / "bare.json"
+    bare.write_text(json.dumps(data))
+    assert main(["compare", str(bare), "--camera", str(cam)]) == 2
+    assert "no `truth` entry" in capsys.readouterr().err
+    with pytest.raises(ManifestError, match="truth"):
+        compare_with_truth(
+            bare, camera_model_from_truth(load_truth(manifest.parent / "truth").camera)
+        )
+
+
+def test_a_camera_of_another_size_is_refused(capture, tmp_path):
+    manifest, _ = capture
+    other = write_capture_set(
+        tmp_path / "other", camera_from_preset("ccd"), shape=(40, 56), n_repeats=1, seed=1
+    )
+    model = camera_model_from_truth(load_truth(other.parent / "truth").camera)
+    with pytest.raises(InputError, match="image size"):
+        compare_with_truth(manifest, model)

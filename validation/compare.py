@@ -1,0 +1,257 @@
+"""Compare a calibrated camera with the ground truth of a synthetic capture set.
+
+``photoquant compare MANIFEST --camera CAMERA`` runs :func:`compare_with_truth`:
+the capture set written by ``pqsim capture`` (rendered or analytic) names its
+ground truth (manifest key ``truth``), and every quantity the calibrator
+recovered is compared with it:
+
+* the response ``g`` per channel (rms and largest error in ln units where the
+  hat weight is at least 5 %, after removing the gauge);
+* the colour balance, as the per-channel scale of the corrected test scene
+  against its true photoquantity (green-referenced);
+* the sensor LUT ``u`` and the vignetting map ``v`` (eq. 8 per pixel, no scale
+  fitted), with the PRNU the LUT corrects and ``m1…m6`` against the truth;
+* the corrected test scene (eq. 8 after one global scale fit), beside the
+  noise floor the camera's physics predicts (:mod:`validation.noise_model`);
+* the ColorChecker, when the set has one (``pqsim capture`` writes it):
+  eq. 8 over the 24 patch means against the rendered truth and their
+  correlation, both balanced on the white patch, and the correlation with
+  the chart maker's CIE RGB values under D65 (Table 1 of the paper).
+
+The same comparison ends ``photoquant demo``.
+
+References
+----------
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 8 (relative
+   error), §6.2–6.4, Table 1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from photoquant.correct import correct, correct_manifest
+from photoquant.errors import InputError
+from photoquant.io import extra_frameset, extra_path, load_manifest, load_stack
+from photoquant.model import CameraModel
+from photoquant.weighting import weighting_hat_Debevec1997
+from validation.metrics import (
+    channel_scale_ratios,
+    map_relative_error,
+    relative_error_eq8,
+    response_error,
+)
+from validation.noise_model import predicted_log_error, predicted_relative_error
+
+__all__ = ["compare_with_truth", "format_comparison", "comparison_json"]
+
+#: Index of the ColorChecker's white patch ("white 9.5") in chart order.
+_WHITE_PATCH = 18
+
+
+def _patch_means(image: np.ndarray, rois: np.ndarray) -> np.ndarray:
+    from validation.experiments.chart import patch_means
+
+    return patch_means(image, rois)
+
+
+def _colour_checker(manifest: Any, model: CameraModel, truth: Any, allow_outside: bool) -> dict:
+    """Correct the ColorChecker frames; compare the patch means with the truth."""
+    cc = truth.captures["colorchecker"]
+    info = manifest.extra["colorchecker"]
+    rois = np.asarray(info.get("patch_rois"), dtype=np.int64)
+    if rois.shape != (24, 4):
+        raise InputError(f"manifest {manifest.path}: `colorchecker.patch_rois` must be 24 boxes")
+    stack = load_stack(
+        extra_frameset(manifest, "colorchecker", allow_outside=allow_outside), manifest
+    )
+    res = correct(stack, model)
+    # both balanced on the white patch (Table 1): the camera's balance makes the
+    # calibration chart neutral, not this chart's white under this light
+    measured = _patch_means(res.photoquantity, rois)
+    measured = measured / measured[_WHITE_PATCH]
+    true_l = _patch_means(cc.l, rois)
+    true_l = true_l / true_l[_WHITE_PATCH]
+    _, stats, _ = relative_error_eq8(true_l[:, None, :], measured[:, None, :])
+    ok = np.isfinite(measured) & np.isfinite(true_l)
+    out: dict[str, Any] = {
+        "error": stats,
+        "r_camera": float(np.corrcoef(measured[ok], true_l[ok])[0, 1]),
+    }
+    ref = (truth.meta.get("colorchecker") or {}).get("reference_D65", {}).get("CIE RGB")
+    if ref is not None:
+        ref = np.asarray(ref, dtype=np.float64)
+        ok = np.isfinite(measured) & np.isfinite(ref)
+        out["r_cie_rgb"] = float(np.corrcoef(measured[ok], ref[ok])[0, 1])
+    return out
+
+
+def compare_with_truth(
+    manifest: str | Path | Any,
+    model: CameraModel,
+    truth: Any = None,
+    *,
+    allow_outside: bool = False,
+) -> dict[str, Any]:
+    """Compare a calibrated camera and its corrections with a capture set's ground truth.
+
+    Parameters
+    ----------
+    manifest : str, Path or CaptureManifest
+        The capture set's manifest (``photoquant.captures/1``) with ``scene``
+        frames; unless ``truth`` is given, its ``truth`` key names the truth.
+    model : CameraModel
+        The camera calibrated from that set (or from another set of the same
+        synthetic camera).
+    truth : TruthSet, optional
+        :func:`pqsim.synth_camera.truth.load_truth`'s result; read from the
+        manifest's ``truth`` entry when not given.
+    allow_outside : bool
+        Allow the manifest's files (and its truth) outside its folder.
+
+    Returns
+    -------
+    dict
+        ``response`` (per channel ``rms``/``max``), ``balance`` (``factors``,
+        ``channel_error``), ``lut`` (``error``, ``prnu_floor``), ``vignetting``
+        (``error``, ``params``, ``true_params``), ``scene`` (``error``,
+        ``noise_floor_mean``, ``flagged``, ``photoquantity``) and, when the set
+        has a ColorChecker, ``colorchecker`` (``error``, ``r_camera``,
+        ``r_cie_rgb``). Errors are :class:`validation.metrics.ErrorStats`.
+
+    Raises
+    ------
+    InputError
+        If the manifest has no ``scene`` or no ``truth``, or the truth does not
+        match the camera (channels, image size).
+    """
+    from photoquant.io import CaptureManifest
+    from pqsim.synth_camera.truth import load_truth
+
+    if not isinstance(manifest, CaptureManifest):
+        manifest = load_manifest(manifest, allow_outside=allow_outside)
+    if truth is None:
+        truth = load_truth(extra_path(manifest, "truth", allow_outside=allow_outside))
+    cam = truth.camera
+    if tuple(cam.channels) != tuple(model.channels):
+        raise InputError(
+            f"the truth's channels {tuple(cam.channels)} differ from the camera's "
+            f"{tuple(model.channels)}"
+        )
+    if tuple(cam.sensor_lut.shape[:2]) != tuple(model.sensor_lut.shape[:2]):
+        raise InputError(
+            f"the truth's image size {cam.sensor_lut.shape[:2]} differs from the camera's "
+            f"{model.sensor_lut.shape[:2]}"
+        )
+    out: dict[str, Any] = {"response": [], "balance": {}, "lut": {}, "vignetting": {}}
+    for ch in range(cam.n_channels):
+        w = weighting_hat_Debevec1997(model.response_levels, 0, model.saturation_level[ch])
+        rms, worst = response_error(
+            model.log_inverse_response[ch],
+            cam.inverse_response_ln(model.response_levels, ch),
+            np.where(w >= 0.05, w, 0.0),
+        )
+        out["response"].append({"rms": rms, "max": worst})
+    res = correct_manifest(manifest, model, allow_outside=allow_outside)
+    scene = truth.captures["scene"]
+    ratios = channel_scale_ratios(scene.l, res.photoquantity, res.mask)
+    out["balance"] = {"factors": model.balance.tolist(), "channel_error": (ratios - 1).tolist()}
+    lut_err = map_relative_error(cam.sensor_lut, model.sensor_lut)
+    out["lut"] = {"error": lut_err, "prnu_floor": float(np.mean(np.abs(cam.sensor_lut - 1)))}
+    out["vignetting"] = {
+        "error": map_relative_error(cam.vignetting, model.vignetting()),
+        "params": model.vignetting_params,
+        "true_params": None if cam.vignetting_params is None else np.asarray(cam.vignetting_params),
+    }
+    e, stats, _ = relative_error_eq8(scene.l, res.photoquantity, res.mask)
+    bias, var = predicted_log_error(cam, scene.l, scene.exposure_s, scene.n_repeats)
+    floor = predicted_relative_error(scene.l, var, np.random.default_rng(0), log_bias=bias)
+    ok = np.isfinite(e) & np.isfinite(floor)
+    out["scene"] = {
+        "error": stats,
+        "noise_floor_mean": float(floor[ok].mean()),
+        "flagged": float(res.mask.any(axis=-1).mean()),
+        "photoquantity": res.photoquantity,
+    }
+    if "colorchecker" in truth.captures and "colorchecker" in manifest.extra:
+        out["colorchecker"] = _colour_checker(manifest, model, truth, allow_outside)
+    return out
+
+
+def format_comparison(rep: dict[str, Any], model: CameraModel, title: str) -> str:
+    """The comparison as a text table (the demo's and ``photoquant compare``'s output)."""
+    ch = model.channels
+    lines = [
+        "",
+        title,
+        "",
+        "quantity                      recovered vs truth",
+        "----------------------------  ---------------------------------------------",
+    ]
+    for name, r in zip(ch, rep["response"], strict=True):
+        lines.append(
+            f"response g_{name} (ln units)        rms {r['rms']:.4f}, max {r['max']:.4f} "
+            "(gauge removed)"
+        )
+    bal = ", ".join(
+        f"{n} {a:.4f} ({100 * e:+.2f} %)"
+        for n, a, e in zip(
+            ch, rep["balance"]["factors"], rep["balance"]["channel_error"], strict=True
+        )
+    )
+    lines.append(f"colour balance a               {bal}")
+    lut = rep["lut"]
+    lines.append(
+        f"sensor LUT u                   mean error {100 * lut['error'].e_mean:.3f} % "
+        f"(PRNU it corrects: {100 * lut['prnu_floor']:.2f} %), max {100 * lut['error'].e_max:.2f} %"
+    )
+    vig = rep["vignetting"]
+    lines.append(
+        f"vignetting map v               e_mean {100 * vig['error'].e_mean:.3f} %, "
+        f"e_max {100 * vig['error'].e_max:.3f} % (paper: 1.6 %, 9 %)"
+    )
+    if vig["params"] is not None and vig["true_params"] is not None:
+        for name, p, q in zip(ch, vig["params"], vig["true_params"], strict=True):
+            lines.append(
+                f"  m1..m6 {name}: "
+                + " ".join(f"{v:+.3f}" for v in p)
+                + "   truth "
+                + " ".join(f"{v:+.3f}" for v in q)
+            )
+    sc = rep["scene"]
+    lines.append(
+        f"test scene photoquantity (eq.8) e_mean {100 * sc['error'].e_mean:.3f} %, "
+        f"e_max {100 * sc['error'].e_max:.2f} %; noise floor {100 * sc['noise_floor_mean']:.3f} %; "
+        f"flagged {100 * sc['flagged']:.2f} %"
+    )
+    if "colorchecker" in rep:
+        cc = rep["colorchecker"]
+        cie = f", r vs CIE RGB (D65) {cc['r_cie_rgb']:.4f}" if "r_cie_rgb" in cc else ""
+        lines.append(
+            f"ColorChecker patches (eq.8)    e_mean {100 * cc['error'].e_mean:.3f} %, "
+            f"e_max {100 * cc['error'].e_max:.2f} %; r vs truth {cc['r_camera']:.5f}{cie}"
+        )
+    return "\n".join(lines)
+
+
+def comparison_json(rep: dict[str, Any]) -> dict[str, Any]:
+    """JSON-ready numbers of a comparison (the corrected image left out)."""
+
+    def clean(value: Any) -> Any:
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            return clean(dataclasses.asdict(value))
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items() if k != "photoquantity"}
+        if isinstance(value, list | tuple):
+            return [clean(v) for v in value]
+        if isinstance(value, np.ndarray):
+            return value.tolist()
+        if isinstance(value, np.generic):
+            return value.item()
+        return value
+
+    return clean(rep)
