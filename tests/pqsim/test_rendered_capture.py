@@ -309,6 +309,9 @@ def test_photoquant_calibrates_and_corrects_the_rendered_set(rendered, tmp_path,
 
     rep = compare_with_truth(manifest, model)
     assert rep["vignetting"]["error"].e_mean == pytest.approx(float(err.mean()), rel=1e-12)
+    # its balance error is the one measured above (the scene against the truth
+    # balanced on the paper's true colour), up to the masks of the medians
+    assert np.allclose(1 + np.asarray(rep["balance"]["channel_error"]), got, rtol=0, atol=tol)
     cc = rep["colorchecker"]
     assert cc["r_camera"] > 0.99 and 0.8 < cc["r_cie_rgb"] < cc["r_camera"], cc
 
