@@ -41,7 +41,7 @@ from photoquant._checks import check_array, check_bit_depth, check_exposure_time
 from photoquant.errors import InputError
 from pqsim.synth_camera.optics import check_shape, prnu_field, vignetting_extended_goldman_chen
 from pqsim.synth_camera.responses import ResponseCurve
-from pqsim.synth_camera.sensor import SensorNoise
+from pqsim.synth_camera.sensor import POISSON_MEAN_CAP_E, SensorNoise
 from pqsim.synth_camera.truth import CameraTruth, CaptureTruth
 
 __all__ = ["SyntheticCamera", "Capture", "as_generator", "default_workers"]
@@ -388,11 +388,15 @@ class SyntheticCamera:
         seeds = gen.integers(0, 2**63 - 1, size=(t.size, n), dtype=np.int64, endpoint=True)
         frames = np.empty((n, t.size, *arr.shape), dtype=self.dtype)
 
+        # the noise is drawn in float32; a mean beyond POISSON_MEAN_CAP_E electrons
+        # (~1e10 full wells) is saturated whatever it is, so capping it changes nothing
+        rate32 = np.minimum(photo_rate, POISSON_MEAN_CAP_E / float(t.min())).astype(np.float32)
+
         def simulate(job: tuple[int, int]) -> None:
             k, i = job
             frame_rng = np.random.default_rng(int(seeds[k, i]))
-            mu = np.multiply(photo_rate, t[k])  # finite, >= 0: checked above
-            mu += self.noise.dark_current_e_per_s * t[k]
+            mu = np.multiply(rate32, np.float32(t[k]))  # finite, >= 0: checked above
+            mu += np.float32(self.noise.dark_current_e_per_s * t[k])
             frames[i, k] = self._dn(self.noise.draw_electrons(mu, frame_rng))
 
         jobs = [(k, i) for k in range(t.size) for i in range(n)]

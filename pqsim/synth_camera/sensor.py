@@ -149,25 +149,28 @@ class SensorNoise:
     def draw_electrons(self, mean_e: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """:meth:`sample_electrons` without input checks, from the total mean.
 
-        ``mean_e`` (float64, finite, ``>= 0``) already includes the dark
-        current's mean; the caller has validated it. This is the hot path of
-        :meth:`SyntheticCamera.capture`.
+        ``mean_e`` (float32 or float64, finite, ``>= 0``) already includes the
+        dark current's mean; the caller has validated it. The result has its
+        dtype: :meth:`SyntheticCamera.capture` works in float32 (a third
+        faster; 24-bit mantissas resolve 1e-7 of a count, far below a DN at
+        16 bits).
         """
-        z = rng.standard_normal(mean_e.shape)
+        dtype = mean_e.dtype.type if mean_e.dtype in (np.float32, np.float64) else np.float64
+        z = rng.standard_normal(mean_e.shape, dtype=dtype)
         if not self.shot_noise:
-            z *= self.read_noise_e
+            z *= dtype(self.read_noise_e)
             z += mean_e
             return z
         limit = np.inf if self.poisson_exact_below_e is None else self.poisson_exact_below_e
         exact = mean_e < limit
         # normal approximation: shot and read noise together, N(μ, μ + σ_read²)
-        n = np.add(mean_e, self.read_noise_e**2)
+        n = np.add(mean_e, dtype(self.read_noise_e**2))
         np.sqrt(n, out=n)
         n *= z
         n += mean_e
         if np.any(exact):
             mu_x = np.minimum(mean_e[exact], POISSON_MEAN_CAP_E)
-            n[exact] = rng.poisson(mu_x) + self.read_noise_e * z[exact]
+            n[exact] = rng.poisson(mu_x) + dtype(self.read_noise_e) * z[exact]
         return n
 
     def to_dict(self) -> dict[str, Any]:

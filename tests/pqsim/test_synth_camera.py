@@ -289,12 +289,19 @@ def test_noise_free_capture_is_rounded_model() -> None:
     assert cap.frames[0, 1, 10, 20, 1] == round(min(x, 1.0) * 255)
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("threshold", [300.0, None])
 @pytest.mark.parametrize("mean_e", [3.0, 299.0, 301.0, 5e4])
-def test_electron_counts_have_poisson_moments(mean_e: float, threshold: float | None) -> None:
+def test_electron_counts_have_poisson_moments(
+    mean_e: float, threshold: float | None, dtype: type
+) -> None:
     noise = SensorNoise(read_noise_e=0.0, dark_current_e_per_s=0.0, poisson_exact_below_e=threshold)
     m = 200_000
-    n = noise.sample_electrons(np.full(m, mean_e), 0.01, np.random.default_rng(5))
+    # the public draw (float64) and the capture's hot path (float32)
+    mean = np.full(m, mean_e, dtype=dtype)
+    n = noise.draw_electrons(mean, np.random.default_rng(5))
+    assert n.dtype == dtype
+    n = n.astype(np.float64)
     exact = threshold is None or mean_e < threshold
     # exact draws are whole electrons; the normal approximation is not
     assert np.array_equal(n, np.rint(n)) == exact
