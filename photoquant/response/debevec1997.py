@@ -177,9 +177,18 @@ def select_samples_histogram(
         return usable
     k_count = values.shape[0]
     key = rng.random(usable.size)  # the random ranking
-    vals = values[:, usable]
-    ok = valid[:, usable]
-    bins = np.where(ok, np.minimum((vals / c_max * n_bins).astype(np.int64), n_bins - 1), n_bins)
+    if usable.size == values.shape[1]:
+        vals, ok = values, valid
+    else:
+        vals, ok = values[:, usable], valid[:, usable]
+    # bin = min(floor(v / c_max · n_bins), n_bins − 1) for valid values, n_bins
+    # otherwise; computed in place (valid values are positive: floor = truncation)
+    scaled = np.divide(vals, c_max, dtype=np.float64)
+    scaled *= n_bins
+    np.minimum(scaled, n_bins - 1, out=scaled)
+    bins = scaled.astype(np.int16)
+    del scaled
+    bins[~ok] = n_bins
     counts = np.stack([np.bincount(b, minlength=n_bins + 1)[:n_bins] for b in bins])
     n_cells = max(int(np.count_nonzero(counts)), 1)
     per_cell = max(1, -(-4 * n_samples // n_cells))
@@ -200,7 +209,11 @@ def select_samples_histogram(
         if np.count_nonzero(best < big) >= n_samples or per_cell >= usable.size:
             break
         per_cell *= 2
-    chosen = np.lexsort((key, best))[:n_samples]
+    # the n_samples lowest (rank, key): only ranked pixels can be among them
+    ranked = np.flatnonzero(best < big)
+    if ranked.size < n_samples:  # per_cell reached every pixel: rank them all
+        ranked = np.arange(usable.size)
+    chosen = ranked[np.lexsort((key[ranked], best[ranked]))[:n_samples]]
     return np.sort(usable[chosen])
 
 

@@ -174,3 +174,18 @@ def test_no_overlapping_exposures_is_a_clear_error():
     values[0] = 255.0
     with pytest.raises(CalibrationError, match="exposures do not overlap"):
         camera_response_Debevec1997(values, [1.0, 100.0])
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n_samples=st.integers(1, 300), p=st.integers(1, 400))
+def test_sample_selection_takes_usable_pixels_only(seed, n_samples, p):
+    """Selected pixels are unique, sorted, have >= 2 valid exposures; as many as asked or all."""
+    from photoquant.response import select_samples_histogram
+
+    rng = np.random.default_rng(seed)
+    vals = rng.uniform(0, 255, size=(5, p))
+    valid = rng.random((5, p)) < 0.5
+    usable = np.flatnonzero(valid.sum(axis=0) >= 2)
+    idx = select_samples_histogram(vals, valid, 255.0, n_samples, np.random.default_rng(seed))
+    assert np.array_equal(idx, np.unique(idx)) and np.isin(idx, usable).all()
+    assert idx.size == min(n_samples, usable.size)
