@@ -91,14 +91,19 @@ def _check_size(width: Any, height: Any) -> tuple[int, int]:
     return int(width), int(height)
 
 
-def _check_fov(fov_deg: Any) -> float:
+def _check_range(value: Any, name: str, lo: float, hi: float, unit: str = "") -> float:
+    """``value`` as a float in ``[lo, hi]``, or an InputError naming ``name``."""
     try:
-        fov = float(fov_deg)
+        x = float(value)
     except (TypeError, ValueError):
-        raise InputError(f"`fov_deg` must be a number, got {fov_deg!r}") from None
-    if not 1.0 <= fov <= 150.0:
-        raise InputError(f"`fov_deg` must be in [1, 150] degrees, got {fov_deg!r}")
-    return fov
+        raise InputError(f"`{name}` must be a number, got {value!r}") from None
+    if not lo <= x <= hi:  # NaN fails too
+        raise InputError(f"`{name}` must be in [{lo:g}, {hi:g}]{unit}, got {value!r}")
+    return x
+
+
+def _check_fov(fov_deg: Any) -> float:
+    return _check_range(fov_deg, "fov_deg", 1.0, 150.0, " degrees")
 
 
 _LIGHTING_ALIASES = {"outdoor": "D65", "indoor": "A"}
@@ -534,12 +539,7 @@ class CalibrationViews:
         s = _check_positive_int(supersample, "supersample")
         if s > 8:
             raise InputError(f"`supersample` must be an integer in [1, 8], got {supersample!r}")
-        try:
-            margin = float(margin_px)
-        except (TypeError, ValueError):
-            raise InputError(f"`margin_px` must be a number, got {margin_px!r}") from None
-        if not 0.0 <= margin <= 64.0:
-            raise InputError(f"`margin_px` must be in [0, 64] view pixels, got {margin_px!r}")
+        margin = _check_range(margin_px, "margin_px", 0.0, 64.0, " view pixels")
         if views is None:
             covered = tuple(range(self.n_views))
         else:
@@ -1055,12 +1055,7 @@ def calibration_views(
     track_step = _check_positive_int(track_step, "track_step")
     max_depth = _check_positive_int(max_depth, "max_depth", 2)
     spp = _check_positive_int(spp, "spp")
-    try:
-        margin = float(track_margin_px)
-    except (TypeError, ValueError):
-        raise InputError(f"`track_margin_px` must be a number, got {track_margin_px!r}") from None
-    if not 0.0 <= margin <= 64.0:
-        raise InputError(f"`track_margin_px` must be in [0, 64], got {track_margin_px!r}")
+    margin = _check_range(track_margin_px, "track_margin_px", 0.0, 64.0)
 
     cam = spectral.camera_sensitivities(camera)
     illum = _illuminant(illuminant)
