@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -66,7 +67,7 @@ from pqsim.capture_set import (
     frame_extension,
     write_capture_folder,
 )
-from pqsim.synth_camera.camera import Capture, SyntheticCamera
+from pqsim.synth_camera.camera import Capture, SyntheticCamera, check_workers
 from pqsim.synth_camera.optics import check_shape
 from pqsim.synth_camera.presets import (
     CAMERA_PRESETS,
@@ -524,10 +525,15 @@ def write_rendered_capture_set(
             on_render(name, info)
     if wide is not None:
         wide_image = images.pop("views")
-        for i in range(n_views):
-            images[f"view{i}"] = reproject.resample_view(
+
+        def cut(i: int) -> np.ndarray:
+            return reproject.resample_view(
                 wide_image, wide.view_homography(i), w, h, wide.supersample
             ).astype(np.float64)
+
+        with ThreadPoolExecutor(max_workers=min(check_workers(workers), n_views)) as pool:
+            for i, image in enumerate(pool.map(cut, range(n_views))):
+                images[f"view{i}"] = image
         del wide_image
     import mitsuba
 

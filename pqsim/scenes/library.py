@@ -1156,9 +1156,21 @@ def _white_roi(
 ) -> tuple[int, int, int, int] | None:
     """Pixels of a view lying entirely on the paper (all four corners on it)."""
     paper = next(i for i, p in enumerate(prims) if p.name == "paper")
-    cx, cy = np.meshgrid(np.arange(width + 1.0), np.arange(height + 1.0), indexing="xy")
+    # Only pixel corners inside the paper's projected bounding box can be on it
+    # (a planar rectangle in front of the camera projects to a quadrilateral).
+    gx0, gy0, gx1, gy1 = 0, 0, width, height
+    xy, front = _project(K, R, _corners(prims[paper]) - origin)
+    if np.all(front):
+        gx0 = int(np.clip(np.floor(xy[:, 0].min()) - 1, 0, width))
+        gx1 = int(np.clip(np.ceil(xy[:, 0].max()) + 1, 0, width))
+        gy0 = int(np.clip(np.floor(xy[:, 1].min()) - 1, 0, height))
+        gy1 = int(np.clip(np.ceil(xy[:, 1].max()) + 1, 0, height))
+    on = np.zeros((height + 1, width + 1), dtype=bool)
+    cx, cy = np.meshgrid(
+        np.arange(gx0, gx1 + 1.0), np.arange(gy0, gy1 + 1.0), indexing="xy"
+    )
     idx, _ = _cast(prims, origin, _pixel_rays(K, R, np.stack([cx.ravel(), cy.ravel()], axis=1)))
-    on = (idx == paper).reshape(height + 1, width + 1)
+    on[gy0 : gy1 + 1, gx0 : gx1 + 1] = (idx == paper).reshape(cy.shape)
     full = on[:-1, :-1] & on[1:, :-1] & on[:-1, 1:] & on[1:, 1:]
     rect = _largest_inner_rect(full)
     if rect is None:
