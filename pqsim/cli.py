@@ -241,7 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--spp",
         type=int,
         default=None,
-        help="mitsuba: samples per pixel, n*n or n*(n+1), e.g. 16, 64 (64)",
+        help="mitsuba: samples per pixel, r*m with r = floor(sqrt(spp)), m in [r, r+2], e.g. 16, 20, 64 (64)",
     )
     cap.add_argument(
         "--cache-dir",

@@ -331,11 +331,16 @@ def _check_sample_count(mi_scene: Any, spp: int) -> None:
     sampler = mi_scene.sensors()[0].sampler()
     actual = int(sampler.sample_count())
     if actual != spp:
+        from pqsim.reproject import multijitter_count
+
+        below = max((n for n in range(1, spp) if multijitter_count(n) == n), default=None)
+        nearest = f"{below} or {actual}" if below else f"{actual}"
         raise InputError(
             f"`spp` = {spp} is not a sample count the scene's sampler accepts; it would "
-            f"render {actual} samples. Multi-jittered samplers take n*n or n*(n+1) "
-            "samples, e.g. 16, 36, 64, 100, 144, 256."
+            f"render {actual} samples. Multi-jittered samplers take r * m samples with "
+            f"r = floor(sqrt(spp)) and m in [r, r + 2] (e.g. 16, 20, 24, 64); use {nearest}."
         )
+
 
 
 # ----------------------------------------------------------------------------- progress

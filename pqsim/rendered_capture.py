@@ -317,7 +317,8 @@ def write_rendered_capture_set(
     rotation_deg : float
         ``θ`` of :func:`view_angles`, in (0, 20] degrees.
     spp : int, optional
-        Samples per pixel of every render (``multijitter``: n² or n(n + 1),
+        Samples per pixel of every render (``multijitter``: ``r · m`` with
+        ``r = floor(√spp)``, ``m`` in ``[r, r + 2]``,
         e.g. 4, 16, 64); each scene's recommended count (64) by default. The
         reprojected views' wide render takes ``ceil(spp / s²)`` per wide pixel,
         rounded up to a ``multijitter`` count
