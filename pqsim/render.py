@@ -57,6 +57,7 @@ __all__ = [
     "render_aov",
     "to_mitsuba_dict",
     "scene_key",
+    "check_multijitter_spp",
 ]
 
 _log = logging.getLogger(__name__)
@@ -326,21 +327,48 @@ def _with_spp(scene: Mapping[str, Any], spp: int) -> dict[str, Any]:
     return out
 
 
+def _sample_count_error(spp: int, actual: int) -> InputError:
+    from pqsim.reproject import multijitter_count
+
+    below = max((n for n in range(1, spp) if multijitter_count(n) == n), default=None)
+    nearest = f"{below} or {actual}" if below else f"{actual}"
+    return InputError(
+        f"`spp` = {spp} is not a sample count the scene's sampler accepts; it would "
+        f"render {actual} samples. Multi-jittered samplers take r * m samples with "
+        f"r = floor(sqrt(spp)) and m in [r, r + 2] (e.g. 16, 20, 24, 64); use {nearest}."
+    )
+
+
+def check_multijitter_spp(spp: int) -> int:
+    """``spp`` if Mitsuba's ``multijitter`` sampler renders exactly that many samples.
+
+    Raises
+    ------
+    InputError
+        Naming the count it would render instead and the nearest accepted ones.
+    """
+    from pqsim.reproject import multijitter_count
+
+    actual = multijitter_count(spp)
+    if actual != spp:
+        raise _sample_count_error(spp, actual)
+    return spp
+
+
+def _precheck_sample_count(scene: Mapping[str, Any], spp: int) -> None:
+    """Refuse a ``multijitter`` count before Mitsuba loads the scene (and warns)."""
+    for val in scene.values():
+        if isinstance(val, dict) and "film" in val:
+            if (val.get("sampler") or {}).get("type") == "multijitter":
+                check_multijitter_spp(spp)
+
+
 def _check_sample_count(mi_scene: Any, spp: int) -> None:
     """Refuse an ``spp`` the sampler would silently round (e.g. ``multijitter``: 32 → 35)."""
     sampler = mi_scene.sensors()[0].sampler()
     actual = int(sampler.sample_count())
     if actual != spp:
-        from pqsim.reproject import multijitter_count
-
-        below = max((n for n in range(1, spp) if multijitter_count(n) == n), default=None)
-        nearest = f"{below} or {actual}" if below else f"{actual}"
-        raise InputError(
-            f"`spp` = {spp} is not a sample count the scene's sampler accepts; it would "
-            f"render {actual} samples. Multi-jittered samplers take r * m samples with "
-            f"r = floor(sqrt(spp)) and m in [r, r + 2] (e.g. 16, 20, 24, 64); use {nearest}."
-        )
-
+        raise _sample_count_error(spp, actual)
 
 
 # ----------------------------------------------------------------------------- progress
@@ -543,6 +571,7 @@ def render_photoquantity(
     channels = _film_channels(film)
     variant = _check_variant(variant) if variant is not None else choose_variant()
     prepared = _with_spp(scene, spp)
+    _precheck_sample_count(prepared, spp)
     key = scene_key(prepared, spp=spp, seed=seed, variant=variant)
     width, height = int(film.get("width", 768)), int(film.get("height", 576))
 
@@ -638,6 +667,7 @@ def render_aov(
         )
     variant = _check_variant(variant) if variant is not None else choose_variant()
     prepared = _with_spp(scene, spp)
+    _precheck_sample_count(prepared, spp)
     prepared["integrator"] = {"type": "aov", "aovs": ",".join(f"{a}:{a}" for a in names)}
     for val in prepared.values():
         if isinstance(val, dict) and "film" in val:

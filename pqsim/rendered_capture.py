@@ -452,7 +452,9 @@ def write_rendered_capture_set(
     angles = view_angles(n_views, rotation_deg)
     n_views = len(angles)
     if spp is not None:
-        spp = _check_int(spp, "spp", 1)
+        from pqsim.render import check_multijitter_spp
+
+        spp = check_multijitter_spp(_check_int(spp, "spp", 1))  # every scene is multijitter
     seed = _check_int(seed, "seed", 0)
     render_seed = _check_int(render_seed, "render_seed", 0)
     fill = None if white_fill is None else _check_float(white_fill, "white_fill", 0.0, 1.0)

@@ -340,6 +340,7 @@ def test_bad_arguments_name_themselves(tmp_path):
         ({"camera": 3}, "`camera`"),
         ({"white_fill": 2.0}, "`white_fill`"),
         ({"n_repeats": 0}, "`n_repeats`"),
+        ({"spp": 10}, "`spp` = 10 .* use 9 or 12"),  # refused before anything renders
     ):
         args = {"camera": "ccd", **KW, **kw}
         with pytest.raises(InputError, match=name):
