@@ -172,13 +172,25 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_compare(args: argparse.Namespace) -> int:
     # the comparison reads the simulator's truth, which photoquant itself never imports
     try:
-        from validation.compare import compare_with_truth, comparison_json, format_comparison
+        from validation.compare import (
+            compare_with_truth,
+            comparison_json,
+            format_comparison,
+            write_comparison_figures,
+        )
     except ImportError as exc:  # pragma: no cover - the distribution ships it
         raise PhotoquantError(f"compare needs the `validation` package: {exc}") from None
     from photoquant.model import load_camera
 
     model = load_camera(args.camera)
+    if args.figures is not None and Path(args.figures).exists() and not args.overwrite:
+        raise OutputExistsError(f"{args.figures} already exists (use --overwrite to replace it)")
     rep = compare_with_truth(args.manifest, model, allow_outside=args.allow_outside)
+    if args.figures is not None:
+        paths = write_comparison_figures(
+            rep, model.channels, args.figures, overwrite=args.overwrite
+        )
+        print(f"figures: {', '.join(str(p) for p in paths)}", file=sys.stderr)
     if args.json:
         print(json.dumps(comparison_json(rep), indent=1))
     else:
@@ -256,6 +268,10 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("manifest", help="capture manifest written by `pqsim capture`")
     cmp_.add_argument("--camera", required=True, help="camera folder from `photoquant calibrate`")
     cmp_.add_argument("--json", action="store_true", help="machine-readable output")
+    cmp_.add_argument(
+        "--figures", metavar="DIR", help="write error maps (v, u, test scene) as PNGs here"
+    )
+    cmp_.add_argument("--overwrite", action="store_true", help="replace an existing DIR")
     cmp_.add_argument(
         "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"
     )

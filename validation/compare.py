@@ -49,7 +49,13 @@ from validation.metrics import (
 from validation.noise_model import predicted_log_error, predicted_relative_error
 from validation.truth_model import white_reference
 
-__all__ = ["compare_with_truth", "format_comparison", "comparison_json"]
+__all__ = [
+    "compare_with_truth",
+    "format_comparison",
+    "comparison_json",
+    "comparison_figures",
+    "write_comparison_figures",
+]
 
 #: Index of the ColorChecker's white patch ("white 9.5") in chart order.
 _WHITE_PATCH = 18
@@ -183,12 +189,17 @@ def compare_with_truth(
     }
     lut_err = map_relative_error(cam.sensor_lut, model.sensor_lut)
     out["lut"] = {"error": lut_err, "prnu_floor": float(np.mean(np.abs(cam.sensor_lut - 1)))}
+    out["maps"] = {
+        "sensor_lut": (np.asarray(model.sensor_lut, float) - cam.sensor_lut) / cam.sensor_lut,
+        "vignetting": (np.asarray(model.vignetting(), float) - cam.vignetting) / cam.vignetting,
+    }
     out["vignetting"] = {
         "error": map_relative_error(cam.vignetting, model.vignetting()),
         "params": model.vignetting_params,
         "true_params": None if cam.vignetting_params is None else np.asarray(cam.vignetting_params),
     }
     e, stats, _ = relative_error_eq8(scene_l, res.photoquantity, res.mask)
+    out["maps"]["scene"] = e
     bias, var = predicted_log_error(cam, scene.l, scene.exposure_s, scene.n_repeats)
     floor = predicted_relative_error(scene.l, var, np.random.default_rng(0), log_bias=bias)
     ok = np.isfinite(e) & np.isfinite(floor)
@@ -260,13 +271,13 @@ def format_comparison(rep: dict[str, Any], model: CameraModel, title: str) -> st
 
 
 def comparison_json(rep: dict[str, Any]) -> dict[str, Any]:
-    """JSON-ready numbers of a comparison (the corrected image left out)."""
+    """JSON-ready numbers of a comparison (the corrected image and error maps left out)."""
 
     def clean(value: Any) -> Any:
         if dataclasses.is_dataclass(value) and not isinstance(value, type):
             return clean(dataclasses.asdict(value))
         if isinstance(value, dict):
-            return {k: clean(v) for k, v in value.items() if k != "photoquantity"}
+            return {k: clean(v) for k, v in value.items() if k not in ("photoquantity", "maps")}
         if isinstance(value, list | tuple):
             return [clean(v) for v in value]
         if isinstance(value, np.ndarray):
@@ -276,3 +287,71 @@ def comparison_json(rep: dict[str, Any]) -> dict[str, Any]:
         return value
 
     return clean(rep)
+
+
+def comparison_figures(rep: dict[str, Any], channels: tuple[str, ...]) -> list[Any]:
+    """Figures of a comparison: per-channel error maps of ``v`` and ``u``, the scene's eq. 8 map.
+
+    Returns :class:`validation.experiments.base.FigureSpec` objects for
+    :func:`validation.report.draw_figure`.
+    """
+    from validation.experiments.base import FigureSpec
+
+    maps = rep["maps"]
+    figs = []
+    for key, label, what in (
+        ("vignetting", "vignetting v", "vignetting_error"),
+        ("sensor_lut", "sensor LUT u", "sensor_lut_error"),
+    ):
+        err = 100 * np.asarray(maps[key], dtype=float)
+        lim = float(np.nanmax(np.abs(err))) or 1.0
+        panels = [
+            {
+                "title": f"{name}: recovered − true, e_mean {np.nanmean(np.abs(err[..., c])):.3f} %",
+                "image": err[..., c],
+                "cmap": "RdBu_r",
+                "vmin": -lim,
+                "vmax": lim,
+                "unit": "% of true",
+            }
+            for c, name in enumerate(channels)
+        ]
+        figs.append(
+            FigureSpec(what, "maps", f"{label}: relative error per pixel", "", {"panels": panels})
+        )
+    e = 100 * np.asarray(maps["scene"], dtype=float)  # (H, W): eq. 8 joins the channels
+    panels = [
+        {
+            "title": f"eq. 8 error per pixel, e_mean {np.nanmean(e):.2f} %",
+            "image": np.log10(np.maximum(e, 1e-3)),
+            "cmap": "magma",
+            "vmin": -2.0,
+            "vmax": 2.0,
+            "unit": "log10(error in %)",
+        }
+    ]
+    figs.append(
+        FigureSpec(
+            "scene_error",
+            "maps",
+            "test scene: eq. 8 relative error",
+            "",
+            {"panels": panels, "ncols": 1},
+        )
+    )
+    return figs
+
+
+def write_comparison_figures(
+    rep: dict[str, Any], channels: tuple[str, ...], folder: str | Path, *, overwrite: bool = False
+) -> list[Path]:
+    """Draw :func:`comparison_figures` as PNG files into a new ``folder`` (written atomically)."""
+    from photoquant.io.atomic import atomic_directory
+    from validation.report import draw_figure
+
+    specs = comparison_figures(rep, channels)
+    target = Path(folder)
+    with atomic_directory(target, overwrite=overwrite) as tmp:
+        for spec in specs:
+            draw_figure(spec, tmp / f"{spec.name}.png")
+    return [target / f"{spec.name}.png" for spec in specs]

@@ -68,6 +68,17 @@ def test_cli_compare_and_its_errors(capture, tmp_path, capsys):
     doc = json.loads(capsys.readouterr().out)
     assert set(doc) >= {"response", "balance", "lut", "vignetting", "scene"}
     assert np.isfinite(doc["scene"]["error"]["e_mean"])
+    # error maps as PNGs, in a new folder (an existing one needs --overwrite)
+    figs = tmp_path / "figs"
+    argv = ["compare", str(manifest), "--camera", str(cam), "--figures", str(figs)]
+    assert main(argv) == 0
+    names = sorted(f.name for f in figs.iterdir())
+    assert names == ["scene_error.png", "sensor_lut_error.png", "vignetting_error.png"]
+    assert all((figs / n).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for n in names)
+    capsys.readouterr()
+    assert main(argv) == 2 and "already exists" in capsys.readouterr().err
+    assert main([*argv, "--overwrite"]) == 0
+    capsys.readouterr()
     # a manifest without a truth entry: one line, exit 2
     data = json.loads(manifest.read_text())
     data.pop("truth")
