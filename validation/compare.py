@@ -150,6 +150,11 @@ def compare_with_truth(
     from photoquant.io import CaptureManifest
     from pqsim.synth_camera.truth import load_truth
 
+    if not isinstance(model, CameraModel):
+        raise InputError(
+            f"`model` must be a CameraModel (photoquant.model.load_camera), got "
+            f"{type(model).__name__}"
+        )
     if not isinstance(manifest, CaptureManifest):
         manifest = load_manifest(manifest, allow_outside=allow_outside)
     if truth is None:

@@ -100,3 +100,5 @@ def test_a_camera_of_another_size_is_refused(capture, tmp_path):
     model = camera_model_from_truth(load_truth(other.parent / "truth").camera)
     with pytest.raises(InputError, match="image size"):
         compare_with_truth(manifest, model)
+    with pytest.raises(InputError, match="`model` must be a CameraModel"):
+        compare_with_truth(manifest, str(tmp_path))
