@@ -6,6 +6,7 @@ names the offending argument, never a numpy traceback.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -14,6 +15,8 @@ import numpy as np
 from photoquant.errors import InputError
 
 __all__ = [
+    "check_workers",
+    "default_workers",
     "check_array",
     "check_exposure_times",
     "check_bit_depth",
@@ -117,3 +120,20 @@ def validate_method(method: str, methods: Mapping[str, Callable[..., Any]], what
             f"unknown {what} method {method!r}; valid methods are: {', '.join(sorted(methods))}"
         )
     return key
+
+
+def default_workers() -> int:
+    """Threads a capture uses by default: the CPUs this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on every platform
+        return max(1, os.cpu_count() or 1)
+
+
+def check_workers(workers: Any) -> int:
+    """``workers`` as a positive int; ``None`` gives :func:`default_workers`."""
+    if workers is None:
+        return default_workers()
+    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
+        raise InputError(f"`workers` must be a positive int or None, got {workers!r}")
+    return int(workers)

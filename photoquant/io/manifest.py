@@ -45,7 +45,9 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 from typing import Any
@@ -53,6 +55,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from photoquant._checks import check_workers
 from photoquant._json import to_json_value
 from photoquant.errors import ManifestError
 from photoquant.io.atomic import write_text_atomic
@@ -599,7 +602,11 @@ def write_manifest(path: PathLike, data: Mapping[str, Any], *, allow_outside: bo
 
 
 def load_stack(
-    frameset: FrameSetRef, manifest: CaptureManifest, *, progress: bool = False
+    frameset: FrameSetRef,
+    manifest: CaptureManifest,
+    *,
+    progress: bool = False,
+    workers: int | None = None,
 ) -> ExposureStack:
     """Read the frames of a frame set into an :class:`~photoquant.stack.ExposureStack`.
 
@@ -611,6 +618,9 @@ def load_stack(
         Supplies the bit depth, channel names and saturation levels.
     progress : bool
         Whether to show a tqdm progress bar while reading.
+    workers : int, optional
+        Threads decoding images (OpenCV releases the GIL); every CPU by
+        default. The result, and the first error reported, do not depend on it.
 
     Returns
     -------
@@ -661,30 +671,44 @@ def load_stack(
     stack: np.ndarray | None = None
     first: Path | None = None
     jobs = [(n, k, groups[t][n]) for k, t in enumerate(times) for n in range(n_rep)]
-    with tqdm(jobs, desc=f"reading {where}", unit="frame", disable=not progress) as bar:
-        for n, k, frame in bar:
-            img = read_image(frame.file)
-            if img.dtype != want_dtype:
-                raise error(_dtype_message(frame.file, img.dtype, bit_depth))
-            if img.shape[2] != n_channels:
-                raise error(
-                    f"{frame.file} has {img.shape[2]} channel(s) (shape {img.shape}) but the "
-                    f"manifest names {n_channels} channels {list(manifest.channels)}"
-                )
-            if stack is None:
-                stack = np.empty((n_rep, len(times), *img.shape), dtype=want_dtype)
-                first = frame.file
-            elif img.shape != stack.shape[2:]:
-                raise error(
-                    f"{frame.file} has shape {img.shape} but {first} has shape {stack.shape[2:]}"
-                )
-            top = int(img.max())
-            if top > c_max:
-                raise error(
-                    f"{frame.file} holds values up to {top}, above {c_max} = 2**{bit_depth} - 1; "
-                    f"is `bit_depth` {bit_depth} mislabelled?"
-                )
-            stack[n, k] = img
+    n_workers = min(check_workers(workers), len(jobs))
+    with (
+        ThreadPoolExecutor(max_workers=n_workers) as pool,
+        tqdm(total=len(jobs), desc=f"reading {where}", unit="frame", disable=not progress) as bar,
+    ):
+        # decoded in parallel, a bounded window ahead; checked in manifest order
+        window = 4 * n_workers
+        pending = deque(pool.submit(read_image, job[2].file) for job in jobs[:window])
+        try:
+            for i, (n, k, frame) in enumerate(jobs):
+                img = pending.popleft().result()  # the first error in manifest order wins
+                if i + window < len(jobs):
+                    pending.append(pool.submit(read_image, jobs[i + window][2].file))
+                bar.update()
+                if img.dtype != want_dtype:
+                    raise error(_dtype_message(frame.file, img.dtype, bit_depth))
+                if img.shape[2] != n_channels:
+                    raise error(
+                        f"{frame.file} has {img.shape[2]} channel(s) (shape {img.shape}) but the "
+                        f"manifest names {n_channels} channels {list(manifest.channels)}"
+                    )
+                if stack is None:
+                    stack = np.empty((n_rep, len(times), *img.shape), dtype=want_dtype)
+                    first = frame.file
+                elif img.shape != stack.shape[2:]:
+                    raise error(
+                        f"{frame.file} has shape {img.shape} but {first} has shape {stack.shape[2:]}"
+                    )
+                top = int(img.max())
+                if top > c_max:
+                    raise error(
+                        f"{frame.file} holds values up to {top}, above {c_max} = 2**{bit_depth} - 1; "
+                        f"is `bit_depth` {bit_depth} mislabelled?"
+                    )
+                stack[n, k] = img
+        finally:
+            for future in pending:  # nothing left to read after an error
+                future.cancel()
     assert stack is not None  # frame sets are never empty
     if manifest.white_roi is not None and frameset == manifest.views[0]:
         x0, y0, x1, y1 = manifest.white_roi

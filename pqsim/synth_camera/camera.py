@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -37,31 +36,21 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_array, check_bit_depth, check_exposure_times, check_positive
+from photoquant._checks import (
+    check_array,
+    check_bit_depth,
+    check_exposure_times,
+    check_positive,
+    check_workers,
+    default_workers,
+)
 from photoquant.errors import InputError
 from pqsim.synth_camera.optics import check_shape, prnu_field, vignetting_extended_goldman_chen
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import POISSON_MEAN_CAP_E, SensorNoise
 from pqsim.synth_camera.truth import CameraTruth, CaptureTruth
 
-__all__ = ["SyntheticCamera", "Capture", "as_generator", "default_workers"]
-
-
-def default_workers() -> int:
-    """Threads a capture uses by default: the CPUs this process may run on."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on every platform
-        return max(1, os.cpu_count() or 1)
-
-
-def check_workers(workers: Any) -> int:
-    """``workers`` as a positive int; ``None`` gives :func:`default_workers`."""
-    if workers is None:
-        return default_workers()
-    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
-        raise InputError(f"`workers` must be a positive int or None, got {workers!r}")
-    return int(workers)
+__all__ = ["SyntheticCamera", "Capture", "as_generator", "check_workers", "default_workers"]
 
 
 def as_generator(rng: Any, name: str = "rng") -> tuple[np.random.Generator, int | None]:

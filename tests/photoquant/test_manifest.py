@@ -694,3 +694,19 @@ def test_corrupt_frame_named(tmp_path):
     m = load_manifest(path)
     with pytest.raises(ImageReadError, match=r"f1\.png: not an image"):
         load_stack(m.views[0], m)
+
+
+@pytest.mark.parametrize("workers", [1, 2, 5])
+def test_frames_read_in_parallel_same_stack_first_error_in_order(capture, tmp_path, workers):
+    """Threads decode ahead; the stack and the error named do not depend on how many."""
+    m = load_manifest(capture[0])
+    np.testing.assert_array_equal(
+        load_stack(m.views[0], m, workers=workers).frames, load_stack(m.views[0], m).frames
+    )
+    images = [np.full((3, 3, 3), v, np.uint8) for v in range(7)]
+    path = _single_set(tmp_path, images)
+    (tmp_path / "f2.png").write_text("not a png")  # the first bad frame in manifest order
+    write_image(tmp_path / "f5.png", np.zeros((3, 3, 3), np.uint16))  # a later, other error
+    m = load_manifest(path)
+    with pytest.raises(ImageReadError, match=r"f2\.png: not an image"):
+        load_stack(m.views[0], m, workers=workers)
