@@ -85,7 +85,8 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
         "--experiments",
         nargs="+",
         metavar="NAME",
-        help="run only these: response balance sensor_lut vignetting noise table1 fig7 timings",
+        help="run only these: response balance sensor_lut vignetting noise table1 fig7 timings "
+        "rendered",
     )
     parser.add_argument(
         "--workdir",
@@ -104,6 +105,11 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="DIR",
         help="render cache of the rendered chart ($PQSIM_CACHE or ~/.cache/pqsim)",
     )
+    parser.add_argument(
+        "--rendered-capture",
+        action="store_true",
+        help="also calibrate each preset from a Mitsuba-rendered capture set (--full does)",
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
 
 
@@ -120,6 +126,8 @@ def run_validate(args: argparse.Namespace) -> int:
     config = get_config(args.mode)
     if args.chart is not None:
         config = config.replace(chart=args.chart)
+    if args.rendered_capture:
+        config = config.replace(rendered_capture=True)
     if args.cache_dir is not None:
         config = config.replace(render_cache=str(Path(args.cache_dir).expanduser()))
     out = Path(args.output)

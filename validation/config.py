@@ -11,7 +11,8 @@ own tests). Three configurations are built in:
     on 2 cores in about a minute.
 ``full``
     The paper's settings (§6.1 of [PQ]): 1024×768, ``N = 10``, ``K = 8``
-    (1–200 ms), ``V = 3``, and the ColorChecker rendered by Mitsuba 3.
+    (1–200 ms), ``V = 3``, the ColorChecker rendered by Mitsuba 3, and a
+    calibration from a whole Mitsuba-rendered capture set per preset.
 ``tiny``
     96×72, for the test suite only.
 
@@ -123,8 +124,12 @@ class ValidationConfig:
     chart_spp : int
         Samples per pixel of the rendered chart.
     render_cache : str or None
-        Render cache folder of the rendered chart (``$PQSIM_CACHE`` or
-        ``~/.cache/pqsim`` when ``None``); not a condition of the results.
+        Render cache folder of the rendered chart and capture sets
+        (``$PQSIM_CACHE`` or ``~/.cache/pqsim`` when ``None``); not a condition
+        of the results.
+    rendered_capture : bool
+        Run the ``rendered`` experiment: calibrate each preset from a capture
+        set of Mitsuba-rendered scenes (:mod:`validation.experiments.rendered`).
     """
 
     name: str = "quick"
@@ -149,6 +154,7 @@ class ValidationConfig:
     chart: str = "analytic"
     chart_spp: int = 64
     render_cache: str | None = None
+    rendered_capture: bool = False
 
     def __post_init__(self) -> None:
         h, w = (int(v) for v in self.shape)
@@ -228,8 +234,10 @@ class ValidationConfig:
 QUICK = ValidationConfig()
 """The default: the paper's experiments on 320×240 images with ``N = 4``."""
 
-FULL = ValidationConfig(name="full", shape=(768, 1024), n_repeats=10, chart="rendered")
-"""The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``; the rendered chart."""
+FULL = ValidationConfig(
+    name="full", shape=(768, 1024), n_repeats=10, chart="rendered", rendered_capture=True
+)
+"""The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``; rendered chart and captures."""
 
 TINY = ValidationConfig(
     name="tiny",

@@ -17,6 +17,7 @@ preset is simulated and calibrated once) and gathers every metric.
 | ``table1`` | correlation with ground truth | Table 1 |
 | ``fig7`` | linear regression | Fig. 7 |
 | ``timings`` | step times | §6.1 |
+| ``rendered`` | calibration from a Mitsuba-rendered capture set (``--full``) | §5, §6 |
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ EXPERIMENTS: dict[str, str] = {
     "table1": "validation.experiments.table1",
     "fig7": "validation.experiments.fig7",
     "timings": "validation.experiments.timings",
+    "rendered": "validation.experiments.rendered",
 }
 """Experiment key → module, in the order of the report (the paper's §6)."""
 
