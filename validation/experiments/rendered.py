@@ -120,55 +120,33 @@ def _record(res: ExperimentResult, preset: str, model, rep: dict, t_capture, t_c
     rms = [r["rms"] for r in rep["response"]]
     bal = np.abs(np.asarray(rep["balance"]["channel_error"], dtype=float))
     lut, vig, sc = rep["lut"]["error"], rep["vignetting"]["error"], rep["scene"]
-    res.metric(
-        f"{preset}.response_rms_max",
-        max(rms),
-        unit="ln",
-        check=False,
-        description="largest per-channel rms error of g (ln units, gauge removed)",
-    )
-    res.metric(
-        f"{preset}.balance_abs_error_max",
-        float(bal.max()),
-        unit="fraction",
-        check=False,
-        description="largest |channel scale / green − 1| on the corrected test scene",
-    )
-    res.metric(
-        f"{preset}.sensor_lut_e_mean",
-        lut.e_mean,
-        unit="fraction",
-        check=False,
-        description="mean |u_est − u| / u",
-    )
-    res.metric(
-        f"{preset}.vignetting_e_mean",
-        vig.e_mean,
-        unit="fraction",
-        check=False,
-        description="mean |v_est − v| / v",
-    )
-    res.metric(
-        f"{preset}.vignetting_e_max",
-        vig.e_max,
-        unit="fraction",
-        check=False,
-        description="max |v_est − v| / v",
-    )
-    res.metric(
-        f"{preset}.scene_e_mean",
-        sc["error"].e_mean,
-        unit="fraction",
-        check=False,
-        description="eq. 8 mean error of the corrected test scene",
-    )
-    res.metric(
-        f"{preset}.scene_noise_floor",
-        sc["noise_floor_mean"],
-        unit="fraction",
-        check=False,
-        description="the camera physics' prediction of that error",
-    )
+    cc = rep.get("colorchecker")
+    # (key, value, unit, better, description); reported, not checked (see the module notes)
+    metrics = [
+        ("response_rms_max", max(rms), "ln", "lower",
+         "largest per-channel rms error of g (ln units, gauge removed)"),
+        ("balance_abs_error_max", float(bal.max()), "fraction", "lower",
+         "largest |channel scale / green − 1| on the corrected test scene"),
+        ("sensor_lut_e_mean", lut.e_mean, "fraction", "lower", "mean |u_est − u| / u"),
+        ("vignetting_e_mean", vig.e_mean, "fraction", "lower", "mean |v_est − v| / v"),
+        ("vignetting_e_max", vig.e_max, "fraction", "lower", "max |v_est − v| / v"),
+        ("scene_e_mean", sc["error"].e_mean, "fraction", "lower",
+         "eq. 8 mean error of the corrected test scene"),
+        ("scene_noise_floor", sc["noise_floor_mean"], "fraction", "lower",
+         "the camera physics' prediction of that error"),
+        ("capture_s", t_capture, "s", "lower", "render (or cache) + synthetic camera + writing"),
+        ("calibrate_s", t_calibrate, "s", "lower", "photoquant calibrate on the written files"),
+    ]
+    if cc is not None:
+        metrics += [
+            ("colorchecker_e_mean", cc["error"].e_mean, "fraction", "lower",
+             "eq. 8 mean error of the 24 patch means"),
+            ("colorchecker_r_cie_rgb", cc.get("r_cie_rgb"), "", "higher",
+             "r of the balanced patches with CIE RGB (D65)"),
+        ]
+    for key, value, unit, better, description in metrics:
+        res.metric(f"{preset}.{key}", value, unit=unit, better=better, check=False,
+                   description=description)
     res.row(
         f"{preset}: g rms (ln) {'/'.join(names)}; balance error",
         " / ".join(f"{v:.4f}" for v in rms) + f"; ≤ {fmt_pct(float(bal.max()))}",
@@ -187,44 +165,13 @@ def _record(res: ExperimentResult, preset: str, model, rep: dict, t_capture, t_c
         "–",
         f"noise floor {fmt_pct(sc['noise_floor_mean'])}",
     )
-    if "colorchecker" in rep:
-        cc = rep["colorchecker"]
-        res.metric(
-            f"{preset}.colorchecker_e_mean",
-            cc["error"].e_mean,
-            unit="fraction",
-            check=False,
-            description="eq. 8 mean error of the 24 patch means",
-        )
-        res.metric(
-            f"{preset}.colorchecker_r_cie_rgb",
-            cc.get("r_cie_rgb"),
-            better="higher",
-            check=False,
-            description="r of the balanced patches with CIE RGB (D65)",
-        )
+    if cc is not None:
         res.row(
             f"{preset}: ColorChecker patches e_mean; r vs CIE RGB",
             f"{fmt_pct(cc['error'].e_mean)}; {cc.get('r_cie_rgb', float('nan')):.4f}",
             "–; 0.84–0.90 (Table 1)",
             "patch means vs the render",
         )
-    res.metric(
-        f"{preset}.capture_s",
-        t_capture,
-        unit="s",
-        better="lower",
-        check=False,
-        description="render (or cache) + synthetic camera + writing",
-    )
-    res.metric(
-        f"{preset}.calibrate_s",
-        t_calibrate,
-        unit="s",
-        better="lower",
-        check=False,
-        description="photoquant calibrate on the written files",
-    )
     res.row(
         f"{preset}: time capture / calibrate",
         f"{t_capture:.1f} s / {t_calibrate:.1f} s",
