@@ -24,6 +24,7 @@ References
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import sys
 import time
@@ -128,6 +129,11 @@ def run_validate(args: argparse.Namespace) -> int:
         config = config.replace(chart=args.chart)
     if args.rendered_capture:
         config = config.replace(rendered_capture=True)
+    if config.chart == "rendered" and importlib.util.find_spec("mitsuba") is None:
+        raise ValidationError(
+            f"the {config.name} job renders the ColorChecker with Mitsuba 3, which is not "
+            "installed: pip install 'photoquant[render]', or add --chart analytic"
+        )
     if args.cache_dir is not None:
         config = config.replace(render_cache=str(Path(args.cache_dir).expanduser()))
     out = Path(args.output)

@@ -329,3 +329,15 @@ def test_rendered_capture_experiment(tmp_path):
     assert m["rendered.ccd.vignetting_e_mean"] < 0.01
     assert m["rendered.ccd.colorchecker_r_cie_rgb"] > 0.9
     assert [f.name for f in res.figures] == ["rendered_vignetting_ccd"]
+
+
+def test_full_job_without_mitsuba_says_how_to_run(tmp_path, capsys, monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "mitsuba" else real(name, *a)
+    )
+    assert main(["validate", "--full", "-q", "-o", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert "Mitsuba 3" in err and "--chart analytic" in err and not (tmp_path / "r").exists()
