@@ -222,7 +222,14 @@ def _conditions(results: Mapping[str, Any]) -> dict[str, Any]:
     return cfg
 
 
-_NOT_CONDITIONS = ("name", "presets", "calibrate_kwargs", "skip_vignetting", "render_cache")
+_NOT_CONDITIONS = (
+    "name",
+    "presets",
+    "calibrate_kwargs",
+    "skip_vignetting",
+    "render_cache",
+    "rendered_capture",
+)
 """The fields :meth:`ValidationConfig.conditions` leaves out (a test keeps them in step)."""
 
 

@@ -208,11 +208,16 @@ class ValidationConfig:
         """The fields that define the experiments' conditions.
 
         A stored baseline applies to runs with the same conditions. Left out:
-        the presets run (a subset only omits metrics) and the knobs that break
-        the calibrator on purpose (they are what a regression check must see).
+        the presets run (a subset only omits metrics), the knobs that break
+        the calibrator on purpose (they are what a regression check must see),
+        the render cache, and the rendered-capture experiment (its metrics are
+        reported, never checked).
         """
         d = self.as_dict()
-        for key in ("name", "presets", "calibrate_kwargs", "skip_vignetting", "render_cache"):
+        for key in (
+            "name", "presets", "calibrate_kwargs", "skip_vignetting", "render_cache",
+            "rendered_capture",
+        ):
             d.pop(key)
         return d
 
