@@ -33,6 +33,7 @@ from typing import Any, Literal
 import numpy as np
 
 from photoquant import __version__
+from photoquant._checks import validate_method
 from photoquant.balance import colour_balance, white_chart_colour
 from photoquant.correspondences import (
     find_correspondences_homography,
@@ -41,7 +42,7 @@ from photoquant.correspondences import (
 )
 from photoquant.errors import CalibrationError, InputError
 from photoquant.flatfield import sensor_lut_IrradianceScene
-from photoquant.merge import MergeResult, merge_stack
+from photoquant.merge import MERGE_METHODS, MergeResult, merge_stack
 from photoquant.model import CameraModel
 from photoquant.response import DEFAULT_SMOOTHNESS, recover_response
 from photoquant.stack import ExposureStack
@@ -54,7 +55,9 @@ Progress = Callable[[str], None]
 
 def _check_views(views: Sequence[ExposureStack], irradiance: ExposureStack | None) -> None:
     if isinstance(views, ExposureStack):
-        raise InputError("`views` must be a sequence of ExposureStack (wrap a single view in a list)")
+        raise InputError(
+            "`views` must be a sequence of ExposureStack (wrap a single view in a list)"
+        )
     if len(views) == 0:
         raise InputError("`views` is empty: calibration needs at least one view")
     ref = views[0]
@@ -84,6 +87,7 @@ def calibrate(
     n_samples: int = 2000,
     weighting: str = "hat",
     merge_weighting: str = "hat-quantisation",
+    merge_method: str = "Debevec 1997",
     vignetting_method: str = "Extended Goldman-Chen",
     vignetting_normalise: Literal["track", "none"] = "track",
     sample_radius: int = 1,
@@ -116,6 +120,9 @@ def calibrate(
         where one DN is a coarse step in log exposure
         (:func:`photoquant.weighting.weighting_hat_quantisation`); ``"hat"``
         is the paper's exactly.
+    merge_method : str
+        HDR merge method, a key of :data:`photoquant.merge.MERGE_METHODS`,
+        stored in the model for the correction.
     vignetting_method, vignetting_normalise, sample_radius
         Vignetting fit (§5.5): method, residual normalisation, and the
         half-size of the window averaged at each correspondence.
@@ -135,6 +142,7 @@ def calibrate(
         raise InputError(
             f"`balance_stage` must be 'uniformised' or 'linearised', got {balance_stage!r}"
         )
+    merge_method = validate_method(merge_method, MERGE_METHODS, "merge")
     say = progress or (lambda _msg: None)
     ref = views[0]
     height, width = ref.image_shape
@@ -168,7 +176,13 @@ def calibrate(
 
     def merge(stack: ExposureStack) -> MergeResult:
         return merge_stack(
-            stack, levels, g, sat, min_level=resp.valid_min, weighting=merge_weighting
+            stack,
+            levels,
+            g,
+            sat,
+            min_level=resp.valid_min,
+            weighting=merge_weighting,
+            method=merge_method,
         )
 
     # 2. merge the views ------------------------------------------------------
@@ -271,6 +285,7 @@ def calibrate(
         "n_samples": int(n_samples),
         "weighting": weighting,
         "merge_weighting": merge_weighting,
+        "merge_method": merge_method,
         "vignetting_method": vignetting_method,
         "vignetting_normalise": vignetting_normalise,
         "sample_radius": int(sample_radius),

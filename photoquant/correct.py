@@ -40,7 +40,9 @@ class Correction:
     all_dark: np.ndarray
 
 
-def correct(stack: ExposureStack, model: CameraModel, *, weighting: str | None = None) -> Correction:
+def correct(
+    stack: ExposureStack, model: CameraModel, *, weighting: str | None = None
+) -> Correction:
     """Measure the photoquantity of a scene with a calibrated camera (§4 of the paper).
 
     Parameters
@@ -70,9 +72,7 @@ def correct(stack: ExposureStack, model: CameraModel, *, weighting: str | None =
             f"the scene has {stack.n_channels} channels, the camera {len(model.channels)}"
         )
     if stack.bit_depth != model.bit_depth:
-        raise InputError(
-            f"the scene has bit depth {stack.bit_depth}, the camera {model.bit_depth}"
-        )
+        raise InputError(f"the scene has bit depth {stack.bit_depth}, the camera {model.bit_depth}")
     weighting = weighting or model.parameters.get("merge_weighting", "hat")
     merged = merge_stack(
         stack,
@@ -81,6 +81,7 @@ def correct(stack: ExposureStack, model: CameraModel, *, weighting: str | None =
         model.saturation_level,
         min_level=model.response_valid_min,
         weighting=weighting,
+        method=model.parameters.get("merge_method", "Debevec 1997"),
     )
     with np.errstate(invalid="ignore"):
         photoquantity = np.exp(merged.log_photoquantity) * model.gain_map()
@@ -92,8 +93,9 @@ def correct(stack: ExposureStack, model: CameraModel, *, weighting: str | None =
     )
 
 
-def correct_manifest(manifest, model: CameraModel, *, allow_outside: bool = False,
-                     progress_bars: bool = False) -> Correction:
+def correct_manifest(
+    manifest, model: CameraModel, *, allow_outside: bool = False, progress_bars: bool = False
+) -> Correction:
     """Correct the ``scene`` of a capture manifest (a path or ``CaptureManifest``)."""
     from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
 

@@ -16,16 +16,23 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from photoquant._checks import check_array, check_exposure_times
+from photoquant._checks import check_array, check_exposure_times, validate_method
 from photoquant.errors import InputError
 from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
 
-__all__ = ["MergeResult", "merge_Debevec1997", "merge_stack", "apply_log_inverse_response"]
+__all__ = [
+    "MERGE_METHODS",
+    "MergeResult",
+    "merge_Debevec1997",
+    "merge_stack",
+    "apply_log_inverse_response",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -247,6 +254,13 @@ def merge_Debevec1997(
     )
 
 
+MERGE_METHODS: dict[str, Callable[..., MergeResult]] = {
+    "Debevec 1997": merge_Debevec1997,
+}
+"""HDR merge methods by name, with the signature of :func:`merge_Debevec1997`;
+:func:`merge_stack` dispatches (``method``)."""
+
+
 def merge_stack(
     stack: ExposureStack,
     levels: np.ndarray,
@@ -255,16 +269,19 @@ def merge_stack(
     *,
     min_level: np.ndarray | None = None,
     weighting: str = "hat",
+    method: str = "Debevec 1997",
 ) -> MergeResult:
     """Denoise (eq. 2) and merge (eq. 6) a stack with a known response.
 
     A value is left out when any of its repeats is clipped: at the saturation
     level, or at the floor 0; and when it lies below ``min_level``, where the
-    response was not measured.
+    response was not measured. ``method`` is a key of :data:`MERGE_METHODS`
+    (case-insensitive).
     """
+    fn = MERGE_METHODS[validate_method(method, MERGE_METHODS, "merge")]
     # integer frames (one repeat) or their integer sums: weights and g come from tables
     values = stack.frames[0] if stack.n_repeats == 1 else stack.repeat_sum()
-    return merge_Debevec1997(
+    return fn(
         values,
         stack.exposure_s,
         levels,

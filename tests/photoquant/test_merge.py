@@ -171,3 +171,38 @@ def test_repeats_needs_integer_sums():
         merge_Debevec1997(np.full((2, 1, 1, 1), 10.5), [1.0, 2.0], LEVELS, g, repeats=3)
     with pytest.raises(InputError, match="`repeats`"):
         merge_Debevec1997(np.full((2, 1, 1, 1), 10), [1.0, 2.0], LEVELS, g, repeats=0)
+
+
+def test_merge_methods_registry_dispatches_through_calibrate_and_correct(monkeypatch, rng):
+    """A merge method registered by name is used by merge_stack, stored by calibrate, used by correct."""
+    from photoquant import merge as merge_module
+    from photoquant.calibrate import calibrate
+    from photoquant.correct import correct
+    from photoquant.merge import MERGE_METHODS, merge_stack
+    from photoquant.stack import ExposureStack
+
+    assert MERGE_METHODS["Debevec 1997"] is merge_Debevec1997
+    frames = capture(log_uniform_scene(rng, (10, 12, 3)), EXPOSURES, balance=BALANCE)
+    stack = ExposureStack(frames.astype(np.uint8), EXPOSURES)
+    g = _true_table()
+    sat = stack.saturation_level
+    ref = merge_stack(stack, LEVELS, g, sat)
+    same = merge_stack(stack, LEVELS, g, sat, method="debevec 1997")  # case-insensitive
+    np.testing.assert_array_equal(ref.log_photoquantity, same.log_photoquantity)
+    with pytest.raises(InputError, match="unknown merge method 'nope'.*Debevec 1997"):
+        merge_stack(stack, LEVELS, g, sat, method="nope")
+
+    calls = []
+
+    def traced(*args, **kwargs):
+        calls.append(kwargs.get("repeats"))
+        return merge_Debevec1997(*args, **kwargs)
+
+    monkeypatch.setitem(merge_module.MERGE_METHODS, "Traced", traced)
+    model = calibrate([stack], merge_method="traced")
+    assert model.parameters["merge_method"] == "Traced" and calls
+    n_calls = len(calls)
+    correct(stack, model)
+    assert len(calls) == n_calls + 1
+    with pytest.raises(InputError, match="unknown merge method"):
+        calibrate([stack], merge_method="nope")
