@@ -18,6 +18,8 @@ import numpy as np
 
 from photoquant import __version__
 from photoquant.errors import OutputExistsError, PhotoquantError
+from photoquant.merge import MERGE_METHODS
+from photoquant.weighting import WEIGHTING_FUNCTIONS
 
 __all__ = ["main", "build_parser"]
 
@@ -66,6 +68,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         smoothness=args.smoothness,
         n_samples=args.samples,
         balance_stage=args.balance_stage,
+        merge_weighting=args.merge_weighting,
+        merge_method=args.merge_method,
         seed=args.seed,
         progress=step,
     )
@@ -228,6 +232,19 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["uniformised", "linearised"],
         default="uniformised",
         help="read the white chart after (default) or before the LUT and vignetting",
+    )
+    cal.add_argument(
+        "--merge-weighting",
+        choices=sorted(WEIGHTING_FUNCTIONS),
+        default="hat-quantisation",
+        help="weighting of the HDR merges, kept for the correction (default hat-quantisation; "
+        "hat is the paper's exactly)",
+    )
+    cal.add_argument(
+        "--merge-method",
+        choices=sorted(MERGE_METHODS),
+        default="Debevec 1997",
+        help="HDR merge method, kept for the correction (default: Debevec 1997)",
     )
     cal.add_argument("--seed", type=int, default=0, help="seed of the sample selection")
     cal.set_defaults(func=_cmd_calibrate)

@@ -38,6 +38,13 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     assert main(["info", str(cam), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["n_views"] == 3 and "report" in info
+    assert info["merge_weighting"] == "hat-quantisation" and info["merge_method"] == "Debevec 1997"
+
+    # the paper's plain hat, kept in the camera for the correction
+    paper = tmp_path / "paper"
+    assert main(["calibrate", str(capture), "-o", str(paper), "-q", "--merge-weighting", "hat"]) == 0
+    assert load_camera(paper).parameters["merge_weighting"] == "hat"
+    capsys.readouterr()
 
 
 def test_outputs_are_not_overwritten_without_the_flag(capture, tmp_path, capsys):
