@@ -198,10 +198,12 @@ def select_samples_histogram(
         # picked; they are the cell's members with key below per_cell/count
         # (up to chance), so only those are ranked: no sort of every pixel.
         best = np.full(usable.size, big, dtype=np.int64)
+        # per (exposure, bin) cell: the key below which its members are ranked
+        # (0 for empty cells and for the invalid bin n_bins: keys are >= 0)
+        cells = np.concatenate([counts, np.zeros((k_count, 1), counts.dtype)], axis=1)
+        limits = np.where(cells > 0, np.minimum(1.0, 2.0 * per_cell / np.maximum(cells, 1)), 0.0)
         for k in range(k_count):
-            cnt = np.append(counts[k], 0)[bins[k]]
-            limit = np.where(cnt > 0, np.minimum(1.0, 2.0 * per_cell / np.maximum(cnt, 1)), 0.0)
-            cand = np.flatnonzero((bins[k] < n_bins) & (key < limit))
+            cand = np.flatnonzero(key < limits[k].take(bins[k]))
             order = cand[np.lexsort((key[cand], bins[k, cand]))]
             sorted_bins = bins[k, order]
             rank = np.arange(order.size) - np.searchsorted(sorted_bins, sorted_bins, side="left")
