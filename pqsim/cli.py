@@ -186,6 +186,23 @@ def _capture_rendered(
     )
 
 
+def _cmd_preset(args: argparse.Namespace) -> int:
+    from photoquant.io import write_text_atomic
+    from pqsim.synth_camera.presets import camera_from_preset, preset_json
+
+    text = preset_json(args.name)
+    camera_from_preset(args.name)  # the preset must build a camera
+    if args.output is None:
+        sys.stdout.write(text)
+        return 0
+    out = Path(args.output)
+    if out.exists() and not args.overwrite:
+        raise PhotoquantError(f"{out} already exists (use --overwrite to replace it)")
+    write_text_atomic(out, text)
+    print(f"preset written: {out} (edit it, then: pqsim capture --preset {out} ...)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``pqsim`` command."""
     parser = argparse.ArgumentParser(prog="pqsim", description="Synthetic camera for photoquant.")
@@ -198,7 +215,11 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["mitsuba", "analytic"],
         help="scenes rendered spectrally by Mitsuba 3 (default) or analytic numpy scenes",
     )
-    cap.add_argument("--preset", default="ccd", help="camera preset: ccd or cmos")
+    cap.add_argument(
+        "--preset",
+        default="ccd",
+        help="camera preset: ccd, cmos or a preset file (.json; `pqsim preset ccd` prints one)",
+    )
     cap.add_argument(
         "--resolution",
         type=_resolution,
@@ -284,6 +305,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="threads simulating and writing frames (all CPUs); the files do not depend on it",
     )
     cap.set_defaults(func=_cmd_capture)
+    pre = sub.add_parser(
+        "preset", help="print a camera preset as a preset file (JSON) to edit and reuse"
+    )
+    pre.add_argument("name", help="ccd, cmos, or a preset file to check and normalise")
+    pre.add_argument("-o", "--output", default=None, help="write it here instead of stdout")
+    pre.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    pre.set_defaults(func=_cmd_preset)
     return parser
 
 

@@ -110,3 +110,25 @@ def test_pqsim_capture_feeds_photoquant_calibrate(tmp_path, capsys):
     assert pqsim_main(["capture", "-o", str(out)]) == 2
     assert "--overwrite" in capsys.readouterr().err
     assert pqsim_main(["capture", "-o", str(tmp_path / "x"), "--exposure-range", "0.1", "0.01"]) == 2
+
+
+def test_pqsim_preset_file_drives_a_capture(tmp_path, capsys):
+    from pqsim.cli import main as pqsim_main
+
+    assert pqsim_main(["preset", "cmos"]) == 0
+    text = capsys.readouterr().out
+    doc = json.loads(text)
+    doc["bit_depth"] = 12
+    mine = tmp_path / "mine.json"
+    assert pqsim_main(["preset", "cmos", "-o", str(mine)]) == 0
+    assert mine.read_text() == text
+    assert pqsim_main(["preset", "cmos", "-o", str(mine)]) == 2  # no silent overwrite
+    assert "already exists" in capsys.readouterr().err
+    mine.write_text(json.dumps(doc))
+    out = tmp_path / "cap"
+    argv = ["capture", "-o", str(out), "--renderer", "analytic", "--preset", str(mine),
+            "--resolution", "64x48", "--repeats", "1", "--exposures", "4"]
+    assert pqsim_main(argv) == 0
+    assert json.loads((out / "capture.json").read_text())["bit_depth"] == 12
+    assert pqsim_main(["preset", "nope"]) == 2
+    assert "unknown camera preset 'nope'" in capsys.readouterr().err

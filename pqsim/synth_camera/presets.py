@@ -5,6 +5,14 @@ fields (responses as ``{"kind", "params"}`` records), so that it can be read,
 printed and compared; :func:`camera_from_preset` builds the camera and applies
 overrides.
 
+Users add their own as JSON files (format ``pqsim.preset/1``): ``pqsim preset
+ccd > mine.json`` writes a built-in one to start from (:func:`preset_json`),
+and a path ending in ``.json`` is accepted wherever a preset name is
+(``pqsim capture --preset mine.json``, :func:`camera_from_preset`,
+:func:`preset_sensitivities`). Every field is optional except ``format``; the
+missing ones are the ``ccd`` preset's (``"base": "cmos"`` starts from the
+other). Unknown fields are refused, naming the valid ones.
+
 - ``"ccd"``: linear response with a hard clip (the paper's mvBlueFox-121C is a
   CCD with a quasi-linear response, §6.1 of [PQ]); full well 20 000 e⁻, read
   noise 8 e⁻, 8 bits, balance (0.85, 1.0, 0.75).
@@ -46,22 +54,39 @@ References
 
 from __future__ import annotations
 
+import json
+import os
 from collections.abc import Mapping
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
 from photoquant._checks import validate_method
+from photoquant._json import to_json_value
 from photoquant.errors import InputError
 from pqsim.synth_camera.camera import SyntheticCamera
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import SensorNoise
 
-__all__ = ["CAMERA_PRESETS", "DEFAULT_SENSITIVITIES", "camera_from_preset", "preset_sensitivities"]
+__all__ = [
+    "CAMERA_PRESETS",
+    "DEFAULT_SENSITIVITIES",
+    "PRESET_FORMAT",
+    "camera_from_preset",
+    "preset_fields",
+    "preset_json",
+    "preset_sensitivities",
+]
+
+PRESET_FORMAT = "pqsim.preset/1"
+"""Format of a preset file (JSON)."""
 
 #: Spectral sensitivities of a camera that names none (see "Spectral sensitivities").
 DEFAULT_SENSITIVITIES = "nikon_d5100"
 #: Preset keys that are not :class:`SyntheticCamera` fields.
 _NON_CAMERA_KEYS = ("sensitivities",)
+#: Keys of a preset file that are not preset fields.
+_FILE_KEYS = ("format", "base", "description")
 
 _CCD: dict[str, Any] = {
     "responses": [{"kind": "linear", "params": {}}] * 3,
@@ -112,7 +137,7 @@ def preset_sensitivities(name: str) -> str:
     Parameters
     ----------
     name : str
-        A key of :data:`CAMERA_PRESETS` (case-insensitive).
+        A key of :data:`CAMERA_PRESETS` (case-insensitive) or a preset file.
 
     Returns
     -------
@@ -125,8 +150,7 @@ def preset_sensitivities(name: str) -> str:
     >>> preset_sensitivities("ccd")
     'nikon_d5100'
     """
-    key = validate_method(name, CAMERA_PRESETS, "camera preset")
-    return str(CAMERA_PRESETS[key].get("sensitivities", DEFAULT_SENSITIVITIES))
+    return str(preset_fields(name).get("sensitivities", DEFAULT_SENSITIVITIES))
 
 
 def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
@@ -135,7 +159,8 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
     Parameters
     ----------
     name : str
-        A key of :data:`CAMERA_PRESETS` (case-insensitive).
+        A key of :data:`CAMERA_PRESETS` (case-insensitive), or the path of a
+        preset file (``.json``, format ``pqsim.preset/1``).
     **overrides
         Any :class:`SyntheticCamera` field, e.g. ``bit_depth=12``,
         ``balance=(1, 1, 1)``, ``vignetting_params=None``, ``prnu_seed=7``.
@@ -157,8 +182,7 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
     >>> cam.bit_depth, cam.saturation_dn.tolist()
     (12, [3481, 4095, 3071])
     """
-    key = validate_method(name, CAMERA_PRESETS, "camera preset")
-    fields = {k: v for k, v in CAMERA_PRESETS[key].items() if k not in _NON_CAMERA_KEYS}
+    fields = {k: v for k, v in preset_fields(name).items() if k not in _NON_CAMERA_KEYS}
     valid = set(SyntheticCamera.__dataclass_fields__)
     unknown = set(overrides) - valid
     if unknown:
@@ -182,3 +206,82 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
         for r in fields["responses"]
     )
     return SyntheticCamera(**fields)
+
+
+def _is_preset_file(name: str) -> bool:
+    return name.lower().endswith(".json") or "/" in name or "\\" in name
+
+
+def preset_fields(name: str | os.PathLike[str]) -> dict[str, Any]:
+    """The fields of a preset: a built-in one by name, or a preset file.
+
+    Parameters
+    ----------
+    name : str or path-like
+        A key of :data:`CAMERA_PRESETS` (case-insensitive), or the path of a
+        JSON file of format :data:`PRESET_FORMAT` (see the module notes).
+
+    Returns
+    -------
+    dict
+        :class:`SyntheticCamera` field values as plain data, plus ``"sensitivities"``.
+
+    Raises
+    ------
+    InputError
+        For an unknown name (listing the built-in presets), an unreadable or
+        invalid file (naming the problem), or an unknown field.
+    """
+    if isinstance(name, os.PathLike) or (isinstance(name, str) and _is_preset_file(name)):
+        return _read_preset_file(Path(name))
+    if not isinstance(name, str):
+        raise InputError(f"a camera preset is a name or a .json file, got {name!r}")
+    key = {k.lower(): k for k in CAMERA_PRESETS}.get(name.lower())
+    if key is None:
+        raise InputError(
+            f"unknown camera preset {name!r}: use one of {', '.join(sorted(CAMERA_PRESETS))} "
+            "or a preset file (.json; `pqsim preset ccd` prints one to start from)"
+        )
+    return dict(CAMERA_PRESETS[key])
+
+
+def _read_preset_file(path: Path) -> dict[str, Any]:
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"preset file {path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"preset file {path}: cannot read it ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(
+            f"preset file {path}: not valid JSON ({exc.msg} at line {exc.lineno})"
+        ) from None
+    if not isinstance(doc, dict) or doc.get("format") != PRESET_FORMAT:
+        got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        raise InputError(f"preset file {path}: `format` must be {PRESET_FORMAT!r}, got {got!r}")
+    valid = set(SyntheticCamera.__dataclass_fields__) | set(_NON_CAMERA_KEYS)
+    unknown = set(doc) - valid - set(_FILE_KEYS)
+    if unknown:
+        raise InputError(
+            f"preset file {path}: unknown field(s) {sorted(unknown)}; valid: {sorted(valid)}"
+        )
+    base = doc.get("base", "ccd")
+    if not isinstance(base, str) or _is_preset_file(base):
+        raise InputError(f"preset file {path}: `base` must name a built-in preset, got {base!r}")
+    try:
+        fields = dict(CAMERA_PRESETS[validate_method(base, CAMERA_PRESETS, "camera preset")])
+    except InputError as exc:
+        raise InputError(f"preset file {path}: `base`: {exc}") from None
+    fields.update({k: v for k, v in doc.items() if k not in _FILE_KEYS})
+    return fields
+
+
+def preset_json(name: str) -> str:
+    """A preset as the JSON of a preset file (format :data:`PRESET_FORMAT`), to edit and reuse."""
+    fields = preset_fields(name)
+    doc = {
+        "format": PRESET_FORMAT,
+        "description": f"pqsim camera preset (from {name!r}); every field is optional",
+        **{k: to_json_value(v) for k, v in fields.items()},
+    }
+    return json.dumps(doc, indent=1) + "\n"

@@ -575,10 +575,47 @@ def test_presets() -> None:
         u = cam.sensor_lut(SHAPE)
         assert 0.01 < u.std() < 0.02  # PRNU ~1 % per pixel and ~1 % smooth
     assert camera_from_preset("ccd", noise={"read_noise_e": 2.0}).noise.full_well_e == 20000.0
-    with pytest.raises(InputError, match="unknown camera preset method 'cmoss'.*ccd, cmos"):
+    with pytest.raises(InputError, match="unknown camera preset 'cmoss'.*ccd, cmos.*preset file"):
         camera_from_preset("cmoss")
     with pytest.raises(InputError, match="unknown camera field.*'iso'"):
         camera_from_preset("ccd", iso=100)
+
+
+def test_preset_files_round_trip_and_refuse_bad_fields(tmp_path) -> None:
+    """A preset exported as JSON builds the same camera; a partial file starts from its base."""
+    import dataclasses
+    import json
+
+    from pqsim.synth_camera.presets import preset_json, preset_sensitivities
+
+    for name in ("ccd", "cmos"):
+        path = tmp_path / f"{name}.json"
+        path.write_text(preset_json(name))
+        assert json.loads(path.read_text())["format"] == "pqsim.preset/1"
+        a, b = camera_from_preset(str(path)), camera_from_preset(name)
+        for f in dataclasses.fields(a):
+            assert getattr(a, f.name) == getattr(b, f.name), (name, f.name)
+        assert preset_sensitivities(path) == preset_sensitivities(name)
+    partial = tmp_path / "mine.json"
+    partial.write_text(json.dumps({"format": "pqsim.preset/1", "base": "cmos", "bit_depth": 12,
+                                   "noise": {"full_well_e": 5000.0}}))
+    cam = camera_from_preset(partial, prnu_seed=3)  # a path object works too; overrides apply
+    assert cam.bit_depth == 12 and cam.prnu_seed == 3 and cam.noise.full_well_e == 5000.0
+    assert cam.responses == camera_from_preset("cmos").responses
+    bad = [
+        ("{", "not valid JSON"),
+        (json.dumps({"bit_depth": 12}), "`format` must be 'pqsim.preset/1'"),
+        (json.dumps({"format": "pqsim.preset/1", "bitdepth": 12}), r"unknown field\(s\) \['bitdepth'\]"),
+        (json.dumps({"format": "pqsim.preset/1", "base": "tiny"}), "`base`"),
+        (json.dumps({"format": "pqsim.preset/1", "bit_depth": 20}), "bit_depth"),
+    ]
+    for i, (text, match) in enumerate(bad):
+        path = tmp_path / f"bad{i}.json"
+        path.write_text(text)
+        with pytest.raises(InputError, match=match):
+            camera_from_preset(str(path))
+    with pytest.raises(InputError, match="no such file"):
+        camera_from_preset(str(tmp_path / "missing.json"))
 
 
 def test_simulator_does_not_import_the_calibrator() -> None:
