@@ -15,6 +15,7 @@ import numpy as np
 from photoquant.errors import InputError
 
 __all__ = [
+    "check_int",
     "check_workers",
     "default_workers",
     "check_array",
@@ -108,6 +109,24 @@ def check_positive(value: Any, name: str, *, allow_zero: bool = False) -> float:
     return v
 
 
+def check_int(value: Any, name: str, lo: int | None = None, hi: int | None = None) -> int:
+    """``value`` as an int (not a bool, not a float) in ``[lo, hi]`` (either bound optional)."""
+    ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
+    if ok:
+        ok = (lo is None or value >= lo) and (hi is None or value <= hi)
+    if not ok:
+        if lo is not None and hi is not None:
+            where = f" in [{lo}, {hi}]"
+        elif lo is not None:
+            where = f" >= {lo}"
+        elif hi is not None:
+            where = f" <= {hi}"
+        else:
+            where = ""
+        raise InputError(f"`{name}` must be an integer{where}, got {value!r}")
+    return int(value)
+
+
 def validate_method(method: str, methods: Mapping[str, Callable[..., Any]], what: str) -> str:
     """Return the canonical key of ``method`` in ``methods`` (case-insensitive).
 
@@ -132,8 +151,4 @@ def default_workers() -> int:
 
 def check_workers(workers: Any) -> int:
     """``workers`` as a positive int; ``None`` gives :func:`default_workers`."""
-    if workers is None:
-        return default_workers()
-    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
-        raise InputError(f"`workers` must be a positive int or None, got {workers!r}")
-    return int(workers)
+    return default_workers() if workers is None else check_int(workers, "workers", 1)

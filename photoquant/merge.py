@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from photoquant._checks import check_array, check_exposure_times, validate_method
+from photoquant._checks import check_array, check_exposure_times, check_int, validate_method
 from photoquant.errors import InputError
 from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
@@ -144,9 +144,7 @@ def merge_Debevec1997(
     k_count, _, _, n_ch = values.shape
     if t.size != k_count:
         raise InputError(f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures")
-    if isinstance(repeats, bool) or not isinstance(repeats, int | np.integer) or repeats < 1:
-        raise InputError(f"`repeats` must be a positive int, got {repeats!r}")
-    repeats = int(repeats)
+    repeats = check_int(repeats, "repeats", 1)
     if repeats > 1 and values.dtype.kind not in "iu":
         raise InputError(
             f"`repeats` = {repeats} needs the integer sums of the frames, got {values.dtype} values"

@@ -58,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_exposure_times
+from photoquant._checks import check_exposure_times, check_int
 from photoquant.errors import InputError
 from pqsim import reproject
 from pqsim.capture_set import (
@@ -123,12 +123,6 @@ _MAX_ANGLE_DEG = 20.0
 _DIRECTIONS = ((1, 0), (0, 1), (-1, 0), (0, -1), (1, 1), (-1, 1), (1, -1), (-1, -1))
 
 
-def _check_int(value: Any, name: str, lo: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < lo:
-        raise InputError(f"`{name}` must be an integer >= {lo}, got {value!r}")
-    return int(value)
-
-
 def _check_float(value: Any, name: str, lo: float, hi: float, *, lo_open: bool = True) -> float:
     try:
         x = float(value)
@@ -171,7 +165,7 @@ def view_angles(n_views: int, rotation_deg: float) -> list[tuple[float, float]]:
     >>> view_angles(3, 5.0)
     [(0.0, 0.0), (5.0, 0.0), (0.0, 5.0)]
     """
-    n = _check_int(n_views, "n_views", 1)
+    n = check_int(n_views, "n_views", 1)
     theta = _check_float(rotation_deg, "rotation_deg", 0.0, _MAX_ANGLE_DEG)
     out = [(0.0, 0.0)]
     ring = 1
@@ -448,21 +442,21 @@ def write_rendered_capture_set(
         if scene_exposure_s is None
         else check_exposure_times(scene_exposure_s, "scene_exposure_s")
     )
-    n_repeats = _check_int(n_repeats, "n_repeats", 1)
+    n_repeats = check_int(n_repeats, "n_repeats", 1)
     angles = view_angles(n_views, rotation_deg)
     n_views = len(angles)
     if spp is not None:
         from pqsim.render import check_multijitter_spp
 
-        spp = check_multijitter_spp(_check_int(spp, "spp", 1))  # every scene is multijitter
-    seed = _check_int(seed, "seed", 0)
-    render_seed = _check_int(render_seed, "render_seed", 0)
+        spp = check_multijitter_spp(check_int(spp, "spp", 1))  # every scene is multijitter
+    seed = check_int(seed, "seed", 0)
+    render_seed = check_int(render_seed, "render_seed", 0)
     fill = None if white_fill is None else _check_float(white_fill, "white_fill", 0.0, 1.0)
     nonuni = _check_float(
         irradiance_nonuniformity, "irradiance_nonuniformity", 0.0, 0.5, lo_open=False
     )
     step = (
-        min(16, max(2, w // 64)) if track_step is None else _check_int(track_step, "track_step", 1)
+        min(16, max(2, w // 64)) if track_step is None else check_int(track_step, "track_step", 1)
     )
     ext = frame_extension(frame_format)
     if not isinstance(colorchecker, bool | np.bool_):
@@ -471,9 +465,7 @@ def write_rendered_capture_set(
         raise InputError(
             f"`view_rendering` must be one of {list(VIEW_RENDERINGS)}, got {view_rendering!r}"
         )
-    view_supersample = _check_int(view_supersample, "view_supersample", 1)
-    if view_supersample > 8:
-        raise InputError(f"`view_supersample` must be in [1, 8], got {view_supersample}")
+    view_supersample = check_int(view_supersample, "view_supersample", 1, 8)
     folder, non_empty = check_output_folder(folder, overwrite)
 
     # -- scenes --------------------------------------------------------------------------

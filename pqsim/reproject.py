@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from photoquant._checks import check_int
 from photoquant.errors import InputError
 
 __all__ = ["multijitter_count", "resample_view", "supersampled_spp"]
@@ -59,12 +60,6 @@ __all__ = ["multijitter_count", "resample_view", "supersampled_spp"]
 #: Mapped sample positions may leave the wide image's area by this much (wide
 #: pixels) before :func:`resample_view` refuses: float rounding only.
 _OUTSIDE_TOL = 1e-6
-
-
-def _check_int(value: Any, name: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not lo <= value <= hi:
-        raise InputError(f"`{name}` must be an integer in [{lo}, {hi}], got {value!r}")
-    return int(value)
 
 
 def multijitter_count(n: int) -> int:
@@ -84,7 +79,7 @@ def multijitter_count(n: int) -> int:
     int
         The count rendered (``n`` itself when ``n`` is accepted).
     """
-    n = _check_int(n, "n", 1, 1 << 20)
+    n = check_int(n, "n", 1, 1 << 20)
     r = math.isqrt(n)
     return r * (-(-n // r))
 
@@ -110,8 +105,8 @@ def supersampled_spp(spp: int, supersample: int) -> int:
     >>> supersampled_spp(64, 2), supersampled_spp(16, 2), supersampled_spp(100, 3)
     (16, 4, 12)
     """
-    spp = _check_int(spp, "spp", 1, 1 << 20)
-    s = _check_int(supersample, "supersample", 1, 64)
+    spp = check_int(spp, "spp", 1, 1 << 20)
+    s = check_int(supersample, "supersample", 1, 64)
     n = -(-spp // (s * s))
     while multijitter_count(n) != n:
         n += 1
@@ -198,9 +193,9 @@ def resample_view(
     if img.shape[0] < 1 or img.shape[1] < 1 or (img.ndim == 3 and img.shape[2] < 1):
         raise InputError(f"`wide_image` must not be empty, got shape {img.shape}")
     H = _check_homography(homography)
-    width = _check_int(width, "width", 1, 1 << 16)
-    height = _check_int(height, "height", 1, 1 << 16)
-    s = _check_int(supersample, "supersample", 1, 64)
+    width = check_int(width, "width", 1, 1 << 16)
+    height = check_int(height, "height", 1, 1 << 16)
+    s = check_int(supersample, "supersample", 1, 64)
     hw, ww = img.shape[:2]
     flat = img.reshape(hw * ww, -1)
 

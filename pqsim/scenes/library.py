@@ -61,6 +61,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from photoquant._checks import check_int
 from photoquant.errors import InputError
 from pqsim import spectral
 from pqsim.spectral import CameraSensitivities, Spectrum
@@ -536,9 +537,7 @@ class CalibrationViews:
         offset, so ``fov = 2 atan(W_wide / (2 s f))``; the principal point is
         ``(W_wide (1/2 − offset_x), H_wide (1/2 − offset_y))`` pixels.
         """
-        s = _check_positive_int(supersample, "supersample")
-        if s > 8:
-            raise InputError(f"`supersample` must be an integer in [1, 8], got {supersample!r}")
+        s = check_int(supersample, "supersample", 1, 8)
         margin = _check_range(margin_px, "margin_px", 0.0, 64.0, " view pixels")
         if views is None:
             covered = tuple(range(self.n_views))
@@ -972,12 +971,6 @@ def _check_view_angles(view_angles_deg: Any) -> NDArray:
     return a
 
 
-def _check_positive_int(value: Any, name: str, lo: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < lo:
-        raise InputError(f"`{name}` must be an integer >= {lo}, got {value!r}")
-    return int(value)
-
-
 def calibration_views(
     *,
     camera: str | CameraSensitivities = "nikon_d5100",
@@ -1052,9 +1045,9 @@ def calibration_views(
     width, height = _check_size(width, height)
     fov = _check_fov(fov_deg)
     angles = _check_view_angles(view_angles_deg)
-    track_step = _check_positive_int(track_step, "track_step")
-    max_depth = _check_positive_int(max_depth, "max_depth", 2)
-    spp = _check_positive_int(spp, "spp")
+    track_step = check_int(track_step, "track_step", 1)
+    max_depth = check_int(max_depth, "max_depth", 2)
+    spp = check_int(spp, "spp", 1)
     margin = _check_range(track_margin_px, "track_margin_px", 0.0, 64.0)
 
     cam = spectral.camera_sensitivities(camera)
@@ -1233,7 +1226,7 @@ def colour_checker_scene(
     """
     width, height = _check_size(width, height)
     fov = _check_fov(fov_deg)
-    spp = _check_positive_int(spp, "spp")
+    spp = check_int(spp, "spp", 1)
     try:
         frac = float(roi_fraction)
     except (TypeError, ValueError):
@@ -1357,7 +1350,7 @@ def irradiance_scene(
     IrradianceScene
     """
     width, height = _check_size(width, height)
-    spp = _check_positive_int(spp, "spp")
+    spp = check_int(spp, "spp", 1)
     try:
         u = float(nonuniformity)
         hx, hy = (float(h) for h in hotspot)
@@ -1483,8 +1476,8 @@ def high_contrast_scene(
     """
     width, height = _check_size(width, height)
     fov = _check_fov(fov_deg)
-    max_depth = _check_positive_int(max_depth, "max_depth", 2)
-    spp = _check_positive_int(spp, "spp")
+    max_depth = check_int(max_depth, "max_depth", 2)
+    spp = check_int(spp, "spp", 1)
     try:
         lamp_rel = float(lamp_radiance)
     except (TypeError, ValueError):
