@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import shutil
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 from photoquant._checks import check_exposure_times, check_positive
+from photoquant._threads import thread_map
 from photoquant.errors import InputError
 from pqsim.analytic import (
     pan_shifts,
@@ -49,7 +49,7 @@ from pqsim.analytic import (
     scene_test_hdr,
     views_by_pan,
 )
-from pqsim.synth_camera.camera import Capture, SyntheticCamera, check_workers
+from pqsim.synth_camera.camera import Capture, SyntheticCamera
 from pqsim.synth_camera.optics import check_shape
 from pqsim.synth_camera.truth import CaptureTruth, save_truth
 
@@ -113,14 +113,7 @@ def _write_frames(
             rel = f"{sub}/{name}_n{n}.{ext}"
             jobs.append((root / rel, capture.frames[n, k]))
             frames.append({"file": rel, "exposure_s": float(capture.exposure_s[k]), "repeat": n})
-    n_workers = min(check_workers(workers), len(jobs))
-    if n_workers <= 1:
-        for path, image in jobs:
-            pqio.write_image(path, image)
-    else:
-        with ThreadPoolExecutor(max_workers=n_workers) as pool:
-            for _ in pool.map(lambda job: pqio.write_image(*job), jobs):
-                pass
+    thread_map(lambda job: pqio.write_image(*job), jobs, workers)
     return {"frames": frames}
 
 

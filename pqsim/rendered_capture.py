@@ -52,13 +52,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from photoquant._checks import check_exposure_times, check_int
+from photoquant._threads import thread_map
 from photoquant.errors import InputError
 from pqsim import reproject
 from pqsim.capture_set import (
@@ -67,7 +67,7 @@ from pqsim.capture_set import (
     frame_extension,
     write_capture_folder,
 )
-from pqsim.synth_camera.camera import Capture, SyntheticCamera, check_workers
+from pqsim.synth_camera.camera import Capture, SyntheticCamera
 from pqsim.synth_camera.optics import check_shape
 from pqsim.synth_camera.presets import (
     CAMERA_PRESETS,
@@ -526,9 +526,8 @@ def write_rendered_capture_set(
                 wide_image, wide.view_homography(i), w, h, wide.supersample
             ).astype(np.float64)
 
-        with ThreadPoolExecutor(max_workers=min(check_workers(workers), n_views)) as pool:
-            for i, image in enumerate(pool.map(cut, range(n_views))):
-                images[f"view{i}"] = image
+        for i, image in enumerate(thread_map(cut, range(n_views), workers)):
+            images[f"view{i}"] = image
         del wide_image
     import mitsuba
 

@@ -30,7 +30,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,15 +41,15 @@ from photoquant._checks import (
     check_exposure_times,
     check_positive,
     check_workers,
-    default_workers,
 )
+from photoquant._threads import thread_map
 from photoquant.errors import InputError
 from pqsim.synth_camera.optics import check_shape, prnu_field, vignetting_extended_goldman_chen
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import POISSON_MEAN_CAP_E, SensorNoise
 from pqsim.synth_camera.truth import CameraTruth, CaptureTruth
 
-__all__ = ["SyntheticCamera", "Capture", "as_generator", "check_workers", "default_workers"]
+__all__ = ["SyntheticCamera", "Capture", "as_generator"]
 
 
 def as_generator(rng: Any, name: str = "rng") -> tuple[np.random.Generator, int | None]:
@@ -388,14 +387,7 @@ class SyntheticCamera:
             mu += np.float32(self.noise.dark_current_e_per_s * t[k])
             frames[i, k] = self._dn(self.noise.draw_electrons(mu, frame_rng))
 
-        jobs = [(k, i) for k in range(t.size) for i in range(n)]
-        if n_workers == 1 or len(jobs) == 1:
-            for job in jobs:
-                simulate(job)
-        else:
-            with ThreadPoolExecutor(max_workers=min(n_workers, len(jobs))) as pool:
-                for _ in pool.map(simulate, jobs):
-                    pass
+        thread_map(simulate, [(k, i) for k in range(t.size) for i in range(n)], n_workers)
         truth = CaptureTruth(
             l=arr,
             exposure_s=t,

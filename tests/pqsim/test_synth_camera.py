@@ -632,6 +632,7 @@ def test_simulator_does_not_import_the_calibrator() -> None:
         "photoquant",
         "photoquant._checks",
         "photoquant._json",  # JSON conversion used by the file formats
+        "photoquant._threads",  # the thread pool helper: no method code
         "photoquant.errors",
         "photoquant.stack",  # the ExposureStack container, imported by photoquant.io
     }
