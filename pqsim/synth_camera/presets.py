@@ -236,12 +236,13 @@ def preset_fields(name: str | os.PathLike[str]) -> dict[str, Any]:
         return _read_preset_file(Path(name))
     if not isinstance(name, str):
         raise InputError(f"a camera preset is a name or a .json file, got {name!r}")
-    key = {k.lower(): k for k in CAMERA_PRESETS}.get(name.lower())
-    if key is None:
+    try:
+        key = validate_method(name, CAMERA_PRESETS, "camera preset")
+    except InputError:
         raise InputError(
             f"unknown camera preset {name!r}: use one of {', '.join(sorted(CAMERA_PRESETS))} "
             "or a preset file (.json; `pqsim preset ccd` prints one to start from)"
-        )
+        ) from None
     return dict(CAMERA_PRESETS[key])
 
 
