@@ -40,8 +40,10 @@ from photoquant.errors import InputError
 from photoquant.io import extra_frameset, extra_path, load_manifest, load_stack
 from photoquant.model import CameraModel
 from photoquant.weighting import weighting_hat_Debevec1997
+from validation.experiments.chart import WHITE_PATCH, patch_means
 from validation.metrics import (
     channel_scale_ratios,
+    correlation,
     map_relative_error,
     relative_error_eq8,
     response_error,
@@ -57,16 +59,6 @@ __all__ = [
     "write_comparison_figures",
 ]
 
-#: Index of the ColorChecker's white patch ("white 9.5") in chart order.
-_WHITE_PATCH = 18
-
-
-def _patch_means(image: np.ndarray, rois: np.ndarray) -> np.ndarray:
-    from validation.experiments.chart import patch_means
-
-    return patch_means(image, rois)
-
-
 def _colour_checker(manifest: Any, model: CameraModel, truth: Any, allow_outside: bool) -> dict:
     """Correct the ColorChecker frames; compare the patch means with the truth."""
     cc = truth.captures["colorchecker"]
@@ -80,21 +72,15 @@ def _colour_checker(manifest: Any, model: CameraModel, truth: Any, allow_outside
     res = correct(stack, model)
     # both balanced on the white patch (Table 1): the camera's balance makes the
     # calibration chart neutral, not this chart's white under this light
-    measured = _patch_means(res.photoquantity, rois)
-    measured = measured / measured[_WHITE_PATCH]
-    true_l = _patch_means(cc.l, rois)
-    true_l = true_l / true_l[_WHITE_PATCH]
+    measured = patch_means(res.photoquantity, rois)
+    measured = measured / measured[WHITE_PATCH]
+    true_l = patch_means(cc.l, rois)
+    true_l = true_l / true_l[WHITE_PATCH]
     _, stats, _ = relative_error_eq8(true_l[:, None, :], measured[:, None, :])
-    ok = np.isfinite(measured) & np.isfinite(true_l)
-    out: dict[str, Any] = {
-        "error": stats,
-        "r_camera": float(np.corrcoef(measured[ok], true_l[ok])[0, 1]),
-    }
+    out: dict[str, Any] = {"error": stats, "r_camera": correlation(measured, true_l)}
     ref = (truth.meta.get("colorchecker") or {}).get("reference_D65", {}).get("CIE RGB")
     if ref is not None:
-        ref = np.asarray(ref, dtype=np.float64)
-        ok = np.isfinite(measured) & np.isfinite(ref)
-        out["r_cie_rgb"] = float(np.corrcoef(measured[ok], ref[ok])[0, 1])
+        out["r_cie_rgb"] = correlation(measured, ref)
     return out
 
 

@@ -30,6 +30,7 @@ __all__ = [
     "channel_scale_ratios",
     "response_error",
     "map_relative_error",
+    "correlation",
 ]
 
 
@@ -152,3 +153,11 @@ def map_relative_error(true_map: np.ndarray, est_map: np.ndarray) -> ErrorStats:
     t = np.asarray(true_map, dtype=np.float64)
     e = np.abs(np.asarray(est_map, dtype=np.float64) - t) / t
     return error_stats(e)
+
+
+def correlation(x: np.ndarray, y: np.ndarray) -> float:
+    """Pearson's correlation coefficient of the finite pairs of ``x`` and ``y``."""
+    x = np.asarray(x, dtype=np.float64).ravel()
+    y = np.asarray(y, dtype=np.float64).ravel()
+    ok = np.isfinite(x) & np.isfinite(y)
+    return float(np.corrcoef(x[ok], y[ok])[0, 1])

@@ -42,8 +42,9 @@ import numpy as np
 from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, fmt_pct
 from validation.experiments.shared import Shared, have_colour_science
+from validation.metrics import correlation
 
-__all__ = ["run", "chart_measurements", "correlation", "PAPER", "TITLE", "COLUMNS"]
+__all__ = ["run", "chart_measurements", "PAPER", "TITLE", "COLUMNS"]
 
 TITLE = "Table 1: correlation with ground truth"
 
@@ -61,14 +62,6 @@ MISSING_HUGIN = (
     "The paper's third row (Hugin) is missing: it needs an alternative calibration "
     "pipeline, which the comparison issue is to provide."
 )
-
-
-def correlation(x: np.ndarray, y: np.ndarray) -> float:
-    """Pearson's correlation coefficient of the finite pairs of ``x`` and ``y``."""
-    x = np.asarray(x, dtype=np.float64).ravel()
-    y = np.asarray(y, dtype=np.float64).ravel()
-    ok = np.isfinite(x) & np.isfinite(y)
-    return float(np.corrcoef(x[ok], y[ok])[0, 1])
 
 
 def chart_measurements(
