@@ -19,7 +19,6 @@ Two renderers make the scenes the synthetic camera sees:
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from collections.abc import Sequence
@@ -29,7 +28,7 @@ import numpy as np
 
 from photoquant.errors import PhotoquantError
 
-__all__ = ["main", "build_parser", "default_cache_dir"]
+__all__ = ["main", "build_parser"]
 
 #: Default resolutions (H, W) per renderer.
 _DEFAULT_RESOLUTION = {"mitsuba": (768, 1024), "analytic": (240, 320)}
@@ -49,12 +48,6 @@ _MITSUBA_ONLY = {
 }
 
 
-def default_cache_dir() -> Path:
-    """The render cache: ``$PQSIM_CACHE`` if set, else ``~/.cache/pqsim``."""
-    env = os.environ.get("PQSIM_CACHE")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "pqsim"
-
-
 def _resolution(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -68,6 +61,7 @@ def _resolution(text: str) -> tuple[int, int]:
 
 
 def _cmd_capture(args: argparse.Namespace) -> int:
+    from pqsim.render import mitsuba_available
     from pqsim.synth_camera.presets import camera_from_preset
 
     renderer = args.renderer
@@ -75,14 +69,11 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     given = [flag for dest, flag in other.items() if getattr(args, dest) not in (None, False)]
     if given:
         raise PhotoquantError(f"{', '.join(given)} cannot be used with --renderer {renderer}")
-    if renderer == "mitsuba":
-        try:
-            import mitsuba  # noqa: F401
-        except ImportError:
-            raise PhotoquantError(
-                "--renderer mitsuba needs Mitsuba 3: pip install '.[render]' "
-                "(or use --renderer analytic)"
-            ) from None
+    if renderer == "mitsuba" and not mitsuba_available():
+        raise PhotoquantError(
+            "--renderer mitsuba needs Mitsuba 3: pip install '.[render]' "
+            "(or use --renderer analytic)"
+        )
     resolution = args.resolution or _DEFAULT_RESOLUTION[renderer]
     out = Path(args.output)
     if out.exists() and any(out.iterdir()) and not args.overwrite:
@@ -136,7 +127,7 @@ def _capture_rendered(
     from pqsim.synth_camera.presets import preset_sensitivities
 
     variant = args.variant or render.choose_variant()
-    cache = Path(args.cache_dir).expanduser() if args.cache_dir else default_cache_dir()
+    cache = Path(args.cache_dir).expanduser() if args.cache_dir else render.default_cache_dir()
     sens = args.sensitivities or preset_sensitivities(args.preset)
     print(
         f"pqsim: rendering with Mitsuba ({variant}, {sens}, illuminant "

@@ -31,6 +31,7 @@ import copy
 import functools
 import glob
 import hashlib
+import importlib.util
 import json
 import logging
 import math
@@ -58,6 +59,8 @@ __all__ = [
     "to_mitsuba_dict",
     "scene_key",
     "check_multijitter_spp",
+    "default_cache_dir",
+    "mitsuba_available",
 ]
 
 _log = logging.getLogger(__name__)
@@ -70,6 +73,17 @@ LLVM_VARIANTS: tuple[str, ...] = ("llvm_ad_spectral", "llvm_spectral")
 VARIANT_ENV = "PQSIM_MITSUBA_VARIANT"
 #: Bumped whenever the rendering rules change, to invalidate cached images.
 _CACHE_SCHEMA = 1
+
+
+def mitsuba_available() -> bool:
+    """Whether Mitsuba 3 can be imported (``pip install 'photoquant[render]'``), without importing it."""
+    return importlib.util.find_spec("mitsuba") is not None
+
+
+def default_cache_dir() -> Path:
+    """The render cache: ``$PQSIM_CACHE`` if set, else ``~/.cache/pqsim``."""
+    env = os.environ.get("PQSIM_CACHE")
+    return Path(env).expanduser() if env else Path.home() / ".cache" / "pqsim"
 
 
 def _mitsuba() -> Any:

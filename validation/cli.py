@@ -24,7 +24,6 @@ References
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import sys
 import time
@@ -129,7 +128,9 @@ def run_validate(args: argparse.Namespace) -> int:
         config = config.replace(chart=args.chart)
     if args.rendered_capture:
         config = config.replace(rendered_capture=True)
-    if config.chart == "rendered" and importlib.util.find_spec("mitsuba") is None:
+    from pqsim.render import mitsuba_available
+
+    if config.chart == "rendered" and not mitsuba_available():
         raise ValidationError(
             f"the {config.name} job renders the ColorChecker with Mitsuba 3, which is not "
             "installed: pip install 'photoquant[render]', or add --chart analytic"

@@ -33,7 +33,6 @@ References
 
 from __future__ import annotations
 
-import importlib.util
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -227,11 +226,10 @@ def rendered_colour_checker_scene(
 
     try:
         from pqsim import render
-        from pqsim.cli import default_cache_dir
         from pqsim.scenes import colour_checker_scene as mitsuba_chart
     except ImportError as exc:  # pragma: no cover - the scene library needs no Mitsuba
         raise ValidationError(f"the rendered chart needs pqsim's scene library: {exc}") from None
-    if importlib.util.find_spec("mitsuba") is None:
+    if not render.mitsuba_available():
         raise ValidationError(
             "the rendered ColorChecker needs Mitsuba 3: pip install 'photoquant[render]', "
             "or run with --chart analytic"
@@ -240,7 +238,7 @@ def rendered_colour_checker_scene(
     scene = mitsuba_chart(
         camera=sensitivities, illuminant=illuminant, width=w, height=h, spp=int(spp)
     )
-    cache = default_cache_dir() if cache_dir is None else cache_dir
+    cache = render.default_cache_dir() if cache_dir is None else cache_dir
     image, info = render.render_photoquantity(
         scene.scene,
         spp=int(spp),

@@ -28,7 +28,6 @@ References
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import time
 from pathlib import Path
 
@@ -51,11 +50,12 @@ def run(
     if not config.rendered_capture:
         res.skipped = "not in this configuration (--full or --rendered-capture runs it)"
         return res
-    if importlib.util.find_spec("mitsuba") is None:
+    from pqsim.render import default_cache_dir, mitsuba_available
+
+    if not mitsuba_available():
         res.skipped = "needs Mitsuba 3: pip install 'photoquant[render]'"
         return res
     from photoquant.calibrate import calibrate_manifest
-    from pqsim.cli import default_cache_dir
     from pqsim.rendered_capture import write_rendered_capture_set
     from pqsim.synth_camera.truth import load_truth
     from validation.compare import compare_with_truth, comparison_figures
