@@ -53,15 +53,23 @@ def main() -> None:
     cv_crf = cv2.createCalibrateDebevec().process(images, times)
     rows = [
         ("response (photoquant 2000 px, sparse)", lambda: camera_response_Debevec1997(values, t)),
-        ("response (OpenCV 70 px, dense SVD)", lambda: cv2.createCalibrateDebevec().process(images, times)),
-        ("merge (photoquant)", lambda: merge_Debevec1997(frames, t, rec.levels, rec.log_inverse_response)),
+        (
+            "response (OpenCV 70 px, dense SVD)",
+            lambda: cv2.createCalibrateDebevec().process(images, times),
+        ),
+        (
+            "merge (photoquant)",
+            lambda: merge_Debevec1997(frames, t, rec.levels, rec.log_inverse_response),
+        ),
         ("merge (OpenCV)", lambda: cv2.createMergeDebevec().process(images, times, cv_crf)),
     ]
     results = {name: _median_time(fn, args.repeat) for name, fn in rows}
     print(f"{w}x{h}, K={t.size}, median of {args.repeat}")
     for name, sec in results.items():
         print(f"  {name:42s} {sec * 1e3:9.1f} ms")
-    print(f"  ratio merge photoquant/OpenCV: {results['merge (photoquant)'] / results['merge (OpenCV)']:.2f}")
+    print(
+        f"  ratio merge photoquant/OpenCV: {results['merge (photoquant)'] / results['merge (OpenCV)']:.2f}"
+    )
 
 
 if __name__ == "__main__":

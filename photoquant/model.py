@@ -138,7 +138,10 @@ class CameraModel:
             valid_min = np.zeros(n_ch)
         else:
             valid_min = check_array(
-                self.response_valid_min, "response_valid_min", shape=(n_ch,), kind="iuf",
+                self.response_valid_min,
+                "response_valid_min",
+                shape=(n_ch,),
+                kind="iuf",
                 finite=True,
             ).astype(np.float64)
         for name, value in [

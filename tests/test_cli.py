@@ -42,7 +42,9 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
 
     # the paper's plain hat, kept in the camera for the correction
     paper = tmp_path / "paper"
-    assert main(["calibrate", str(capture), "-o", str(paper), "-q", "--merge-weighting", "hat"]) == 0
+    assert (
+        main(["calibrate", str(capture), "-o", str(paper), "-q", "--merge-weighting", "hat"]) == 0
+    )
     assert load_camera(paper).parameters["merge_weighting"] == "hat"
     capsys.readouterr()
 
@@ -62,13 +64,20 @@ def test_outputs_are_not_overwritten_without_the_flag(capture, tmp_path, capsys)
     [
         (["calibrate", "{missing}", "-o", "{out}"], "missing.json"),
         (["info", "{out}"], "camera.json is missing"),
-        (["correct", "{capture}", "--camera", "{out}", "-o", "{tmp}/x.exr"], "camera.json is missing"),
+        (
+            ["correct", "{capture}", "--camera", "{out}", "-o", "{tmp}/x.exr"],
+            "camera.json is missing",
+        ),
         (["correct", "{capture}", "--camera", "{out}", "-o", "{tmp}/x.png"], "OpenEXR"),
     ],
 )
 def test_bad_input_exits_non_zero_with_one_line(capture, tmp_path, capsys, args, message):
-    fill = {"missing": str(tmp_path / "missing.json"), "out": str(tmp_path / "nocam"),
-            "capture": str(capture), "tmp": str(tmp_path)}
+    fill = {
+        "missing": str(tmp_path / "missing.json"),
+        "out": str(tmp_path / "nocam"),
+        "capture": str(capture),
+        "tmp": str(tmp_path),
+    }
     status = main([a.format(**fill) for a in args])
     err = capsys.readouterr().err
     assert status == 2
@@ -104,12 +113,32 @@ def test_pqsim_capture_feeds_photoquant_calibrate(tmp_path, capsys):
     from pqsim.cli import main as pqsim_main
 
     out = tmp_path / "cap"
-    assert pqsim_main(["capture", "-o", str(out), "--renderer", "analytic", "--resolution", "64x48", "--repeats", "2",
-                       "--exposures", "6", "--seed", "5"]) == 0
+    assert (
+        pqsim_main(
+            [
+                "capture",
+                "-o",
+                str(out),
+                "--renderer",
+                "analytic",
+                "--resolution",
+                "64x48",
+                "--repeats",
+                "2",
+                "--exposures",
+                "6",
+                "--seed",
+                "5",
+            ]
+        )
+        == 0
+    )
     assert main(["calibrate", str(out / "capture.json"), "-o", str(tmp_path / "cam"), "-q"]) == 0
     assert pqsim_main(["capture", "-o", str(out)]) == 2
     assert "--overwrite" in capsys.readouterr().err
-    assert pqsim_main(["capture", "-o", str(tmp_path / "x"), "--exposure-range", "0.1", "0.01"]) == 2
+    assert (
+        pqsim_main(["capture", "-o", str(tmp_path / "x"), "--exposure-range", "0.1", "0.01"]) == 2
+    )
 
 
 def test_pqsim_preset_file_drives_a_capture(tmp_path, capsys):
@@ -126,8 +155,21 @@ def test_pqsim_preset_file_drives_a_capture(tmp_path, capsys):
     assert "already exists" in capsys.readouterr().err
     mine.write_text(json.dumps(doc))
     out = tmp_path / "cap"
-    argv = ["capture", "-o", str(out), "--renderer", "analytic", "--preset", str(mine),
-            "--resolution", "64x48", "--repeats", "1", "--exposures", "4"]
+    argv = [
+        "capture",
+        "-o",
+        str(out),
+        "--renderer",
+        "analytic",
+        "--preset",
+        str(mine),
+        "--resolution",
+        "64x48",
+        "--repeats",
+        "1",
+        "--exposures",
+        "4",
+    ]
     assert pqsim_main(argv) == 0
     assert json.loads((out / "capture.json").read_text())["bit_depth"] == 12
     assert pqsim_main(["preset", "nope"]) == 2

@@ -170,7 +170,11 @@ def test_correct_manifest_flags_instead_of_guessing(calibrated):
     assert (res.mask == (res.all_saturated | res.all_dark)).all()
 
 
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@settings(
+    max_examples=6,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 @given(seed=st.integers(0, 2**31 - 1), decades=st.floats(0.5, 2.0))
 def test_correct_of_capture_is_l_up_to_scale(calibrated, seed, decades):
     """``correct(capture(l)) ≈ l`` up to one scale, within the noise bound."""

@@ -285,7 +285,8 @@ def check_results(
     cond = _conditions(results)
     if cond != baseline["conditions"]:
         diff = sorted(
-            k for k in set(cond) | set(baseline["conditions"])
+            k
+            for k in set(cond) | set(baseline["conditions"])
             if cond.get(k) != baseline["conditions"].get(k)
         )
         raise ValidationError(
@@ -298,8 +299,15 @@ def check_results(
         if key not in metrics:
             if _expected(key, results):
                 out.regressions.append(
-                    Finding(key, "missing", None, ref["value"], ref["tolerance"], ref["better"],
-                            ref.get("description", ""))
+                    Finding(
+                        key,
+                        "missing",
+                        None,
+                        ref["value"],
+                        ref["tolerance"],
+                        ref["better"],
+                        ref.get("description", ""),
+                    )
                 )
             else:
                 out.not_run += 1
@@ -318,7 +326,10 @@ def check_results(
             out.regressions.append(Finding(key, "regression", value, base, tol, better, desc))
             continue
         worse = (
-            delta > tol if better == "lower" else -delta > tol if better == "higher"
+            delta > tol
+            if better == "lower"
+            else -delta > tol
+            if better == "higher"
             else abs(delta) > tol
         )
         better_by = (
@@ -329,7 +340,8 @@ def check_results(
         elif better_by:
             out.improvements.append(Finding(key, "improvement", value, base, tol, better, desc))
     out.new = sum(
-        1 for k, info in results.get("metric_info", {}).items()
+        1
+        for k, info in results.get("metric_info", {}).items()
         if info.get("check", True) and k not in baseline["metrics"]
     )
     return out

@@ -59,6 +59,7 @@ __all__ = [
     "write_comparison_figures",
 ]
 
+
 def _colour_checker(manifest: Any, model: CameraModel, truth: Any, allow_outside: bool) -> dict:
     """Correct the ColorChecker frames; compare the patch means with the truth."""
     cc = truth.captures["colorchecker"]

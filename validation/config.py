@@ -215,7 +215,11 @@ class ValidationConfig:
         """
         d = self.as_dict()
         for key in (
-            "name", "presets", "calibrate_kwargs", "skip_vignetting", "render_cache",
+            "name",
+            "presets",
+            "calibrate_kwargs",
+            "skip_vignetting",
+            "render_cache",
             "rendered_capture",
         ):
             d.pop(key)

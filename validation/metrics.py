@@ -129,7 +129,9 @@ def channel_scale_ratios(reference: np.ndarray, estimate: np.ndarray, mask=None)
     ok = np.isfinite(est) & np.isfinite(ref) & (ref > 0)
     if mask is not None:
         ok &= ~np.asarray(mask, dtype=bool)
-    s = np.array([np.median(est[..., c][ok[..., c]] / ref[..., c][ok[..., c]]) for c in range(ref.shape[-1])])
+    s = np.array(
+        [np.median(est[..., c][ok[..., c]] / ref[..., c][ok[..., c]]) for c in range(ref.shape[-1])]
+    )
     return s / s[1 if s.size > 1 else 0]
 
 

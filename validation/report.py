@@ -101,9 +101,7 @@ def format_table(run: ValidationRun, check: Any = None) -> str:
     for b in body:
         lines.append(fmt(b) if isinstance(b, tuple) else b)
     lines.append("")
-    chart = (
-        "rendered by Mitsuba 3" if run.config.chart == "rendered" else "analytic, not rendered"
-    )
+    chart = "rendered by Mitsuba 3" if run.config.chart == "rendered" else "analytic, not rendered"
     lines.append(
         "Relative errors: eq. 8 after one global scale fit (photoquantity is defined up to "
         "scale); maps (u, v) compared directly. Table 1's Hugin row is missing (no "
@@ -182,8 +180,12 @@ def render_markdown(run: ValidationRun, check: Any = None) -> str:
         out += ["## Regression check", "", "```", check.summary(), "```", ""]
     out += ["## How errors are computed", "", ERROR_DEFINITION, ""]
     for i, (name, res) in enumerate(run.experiments.items(), 1):
-        out += [f"## {i}. {res.title}", "", f"*Paper: {res.reference}.* "
-                f"Experiment `{name}`, {res.elapsed_s:.1f} s.", ""]
+        out += [
+            f"## {i}. {res.title}",
+            "",
+            f"*Paper: {res.reference}.* Experiment `{name}`, {res.elapsed_s:.1f} s.",
+            "",
+        ]
         out += [_docstring_markdown(EXPERIMENTS[name]), ""]
         if res.skipped:
             out += [f"**Not run: {res.skipped}**", ""]
@@ -201,8 +203,10 @@ def render_markdown(run: ValidationRun, check: Any = None) -> str:
         for fig, path in zip(res.figures, res.figure_paths, strict=False):
             out += [f"![{fig.title}]({path})", "", f"*{fig.title}.* {fig.caption}", ""]
         if res.figures and not res.figure_paths:
-            out += ["*(figures not drawn: matplotlib is not installed — "
-                    "`pip install '.[plot]'`)*", ""]
+            out += [
+                "*(figures not drawn: matplotlib is not installed — `pip install '.[plot]'`)*",
+                "",
+            ]
         if res.notes:
             out += [f"- {n}" for n in res.notes]
             out.append("")
@@ -241,8 +245,12 @@ def _plt():
 def _fig_response(plt, spec: FigureSpec):
     presets = spec.data["presets"]
     fig, axes = plt.subplots(
-        2, len(presets), figsize=(5.2 * len(presets), 6.4), squeeze=False,
-        gridspec_kw={"height_ratios": [2.2, 1]}, sharex="col",
+        2,
+        len(presets),
+        figsize=(5.2 * len(presets), 6.4),
+        squeeze=False,
+        gridspec_kw={"height_ratios": [2.2, 1]},
+        sharex="col",
     )
     for j, (preset, d) in enumerate(presets.items()):
         top, bottom = axes[0, j], axes[1, j]
@@ -283,8 +291,13 @@ def _fig_maps(plt, spec: FigureSpec):
     fig, axes = _panel_grid(plt, len(panels), int(spec.data.get("ncols", 3)), (4.4, 3.4))
     for ax, p in zip(axes.ravel(), panels, strict=False):
         img = np.asarray(p["image"], dtype=float)
-        im = ax.imshow(img, cmap=p.get("cmap", "viridis"), vmin=p.get("vmin"), vmax=p.get("vmax"),
-                       interpolation="nearest")
+        im = ax.imshow(
+            img,
+            cmap=p.get("cmap", "viridis"),
+            vmin=p.get("vmin"),
+            vmax=p.get("vmax"),
+            interpolation="nearest",
+        )
         ax.set_title(p["title"], fontsize=9)
         ax.set_xlabel("px")
         ax.set_ylabel("py")
@@ -310,12 +323,24 @@ def _fig_sweep(plt, spec: FigureSpec):
         refused = np.asarray(p.get("refused", np.zeros(x.size)), dtype=float)
         if np.any(refused > 0):
             ylo = ax.get_ylim()[0]
-            ax.plot(x[refused > 0], np.full(int(np.sum(refused > 0)), ylo), "kx", ms=9,
-                    clip_on=False, label="fit refused (some or all draws)")
+            ax.plot(
+                x[refused > 0],
+                np.full(int(np.sum(refused > 0)), ylo),
+                "kx",
+                ms=9,
+                clip_on=False,
+                label="fit refused (some or all draws)",
+            )
         for h in p.get("hlines", []):
             ax.axhline(h["y"], color="grey", ls=":", lw=1.0)
-            ax.annotate(h["label"], (x.min(), h["y"]), fontsize=7, color="grey",
-                        xytext=(2, 2), textcoords="offset points")
+            ax.annotate(
+                h["label"],
+                (x.min(), h["y"]),
+                fontsize=7,
+                color="grey",
+                xytext=(2, 2),
+                textcoords="offset points",
+            )
         ax.set_xticks(x)
         ax.set_xticklabels([f"{v:g}" for v in x], fontsize=8)
         ax.set_xlabel(p["xlabel"])
@@ -344,8 +369,11 @@ def _fig_scatter(plt, spec: FigureSpec):
         xs = np.array([0.0, max(255.0, float(np.nanmax(x)))])
         ax.plot(xs, a * xs + b, "k-", lw=1.0)
         sign = "+" if b >= 0 else "−"
-        ax.set_title(f"{p['title']}\ny = {a:.2f}x {sign} {abs(b):.2f}, "
-                     f"residual norm {p['residual_norm']:.2f}", fontsize=9)
+        ax.set_title(
+            f"{p['title']}\ny = {a:.2f}x {sign} {abs(b):.2f}, "
+            f"residual norm {p['residual_norm']:.2f}",
+            fontsize=9,
+        )
         ax.set_xlabel(p["xlabel"], fontsize=8)
         ax.set_ylabel(p["ylabel"], fontsize=8)
         ax.grid(alpha=0.3)
@@ -353,8 +381,7 @@ def _fig_scatter(plt, spec: FigureSpec):
     return fig
 
 
-_DRAW = {"response": _fig_response, "maps": _fig_maps, "sweep": _fig_sweep,
-         "scatter": _fig_scatter}
+_DRAW = {"response": _fig_response, "maps": _fig_maps, "sweep": _fig_sweep, "scatter": _fig_scatter}
 
 
 def draw_figure(spec: FigureSpec, path: str | os.PathLike[str]) -> Path:

@@ -355,9 +355,7 @@ def camera_response_Debevec1997(
     bit_depth = check_bit_depth(bit_depth)
     k_count, height, width, n_ch = values.shape
     if t.size != k_count:
-        raise InputError(
-            f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures"
-        )
+        raise InputError(f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures")
     if k_count < 2:
         raise InputError("response recovery needs at least 2 exposure times, got 1")
     smoothness = check_positive(smoothness, "smoothness", allow_zero=True)

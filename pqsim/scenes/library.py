@@ -1159,9 +1159,7 @@ def _white_roi(
         gy0 = int(np.clip(np.floor(xy[:, 1].min()) - 1, 0, height))
         gy1 = int(np.clip(np.ceil(xy[:, 1].max()) + 1, 0, height))
     on = np.zeros((height + 1, width + 1), dtype=bool)
-    cx, cy = np.meshgrid(
-        np.arange(gx0, gx1 + 1.0), np.arange(gy0, gy1 + 1.0), indexing="xy"
-    )
+    cx, cy = np.meshgrid(np.arange(gx0, gx1 + 1.0), np.arange(gy0, gy1 + 1.0), indexing="xy")
     idx, _ = _cast(prims, origin, _pixel_rays(K, R, np.stack([cx.ravel(), cy.ravel()], axis=1)))
     on[gy0 : gy1 + 1, gx0 : gx1 + 1] = (idx == paper).reshape(cy.shape)
     full = on[:-1, :-1] & on[1:, :-1] & on[:-1, 1:] & on[1:, 1:]

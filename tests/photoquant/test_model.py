@@ -33,8 +33,14 @@ def test_save_and_load_round_trip(tmp_path, rng):
     model = _model(rng)
     model.save(tmp_path / "cam")
     back = load_camera(tmp_path / "cam")
-    for name in ("response_levels", "log_inverse_response", "saturation_level", "balance",
-                 "sensor_lut", "vignetting_params"):
+    for name in (
+        "response_levels",
+        "log_inverse_response",
+        "saturation_level",
+        "balance",
+        "sensor_lut",
+        "vignetting_params",
+    ):
         np.testing.assert_array_equal(getattr(back, name), getattr(model, name))
     assert back.image_shape == model.image_shape and back.channels == model.channels
     assert back.parameters == {"smoothness": 300.0} and back.report["n"] == 3
@@ -77,7 +83,9 @@ def test_wrong_version_and_broken_files_are_clear_errors(tmp_path, rng):
     data = json.loads(path.read_text())
     data["format"] = "photoquant.camera/9"
     path.write_text(json.dumps(data))
-    with pytest.raises(CameraModelError, match="'photoquant.camera/9'.*reads 'photoquant.camera/1'"):
+    with pytest.raises(
+        CameraModelError, match="'photoquant.camera/9'.*reads 'photoquant.camera/1'"
+    ):
         load_camera(tmp_path / "cam")
     path.write_text("{not json")
     with pytest.raises(CameraModelError, match="not readable JSON"):
@@ -106,6 +114,15 @@ def test_inconsistent_models_are_refused(rng):
 
 
 def _fields(model):
-    names = ["image_shape", "channels", "bit_depth", "response_levels", "log_inverse_response",
-             "saturation_level", "balance", "sensor_lut", "vignetting_params"]
+    names = [
+        "image_shape",
+        "channels",
+        "bit_depth",
+        "response_levels",
+        "log_inverse_response",
+        "saturation_level",
+        "balance",
+        "sensor_lut",
+        "vignetting_params",
+    ]
     return {n: getattr(model, n) for n in names}

@@ -149,7 +149,11 @@ def test_samples_cover_the_whole_range(rng):
         ({"smoothness": -1}, InputError, "smoothness"),
         ({"bit_depth": 7}, InputError, "bit_depth"),
         ({"n_samples": 1}, InputError, "n_samples"),
-        ({"weighting": "triangle"}, InputError, "valid methods are: hat, hat-quantisation, uniform"),
+        (
+            {"weighting": "triangle"},
+            InputError,
+            "valid methods are: hat, hat-quantisation, uniform",
+        ),
     ],
 )
 def test_bad_input_is_named(kwargs, error, match):

@@ -57,10 +57,7 @@ KW = {
 
 def _frames(folder):
     """Relative path → bytes of every frame of a capture set."""
-    return {
-        p.relative_to(folder).as_posix(): p.read_bytes()
-        for p in sorted(folder.rglob("*.png"))
-    }
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*.png"))}
 
 
 @pytest.fixture(scope="module")
@@ -205,16 +202,24 @@ def test_cache_hit_same_seed_identical_new_seed_reuses_renders(rendered):
     first = _frames(root / "cap")
     infos = {}
     write_rendered_capture_set(
-        root / "again", "ccd", cache_dir=root / "cache", seed=0,
-        on_render=lambda n, i: infos.__setitem__(n, i), **KW,
+        root / "again",
+        "ccd",
+        cache_dir=root / "cache",
+        seed=0,
+        on_render=lambda n, i: infos.__setitem__(n, i),
+        **KW,
     )
     assert len(infos) == 6 and all(i.cache_hit for i in infos.values())  # renders nothing
     assert _frames(root / "again") == first  # same seed: bit-identical frames
 
     infos.clear()
     write_rendered_capture_set(
-        root / "seed1", "ccd", cache_dir=root / "cache", seed=1,
-        on_render=lambda n, i: infos.__setitem__(n, i), **KW,
+        root / "seed1",
+        "ccd",
+        cache_dir=root / "cache",
+        seed=1,
+        on_render=lambda n, i: infos.__setitem__(n, i),
+        **KW,
     )
     assert all(i.cache_hit for i in infos.values())  # new noise, same renders
     assert _frames(root / "seed1").keys() == first.keys()
@@ -230,9 +235,10 @@ def test_photoquant_calibrates_and_corrects_the_rendered_set(rendered, tmp_path,
     root, manifest, _ = rendered
     cam_dir, exr = tmp_path / "camera", tmp_path / "scene.exr"
     assert photoquant_main(["calibrate", str(manifest), "-o", str(cam_dir), "-q"]) == 0
-    assert photoquant_main(
-        ["correct", str(manifest), "--camera", str(cam_dir), "-o", str(exr), "-q"]
-    ) == 0
+    assert (
+        photoquant_main(["correct", str(manifest), "--camera", str(cam_dir), "-o", str(exr), "-q"])
+        == 0
+    )
     capsys.readouterr()
     model = load_camera(cam_dir)
     truth = load_truth(root / "cap" / "truth")
@@ -354,9 +360,26 @@ def test_bad_arguments_name_themselves(tmp_path):
 def test_cli_mitsuba_capture_and_errors(rendered, tmp_path, capsys, monkeypatch):
     root, _, _ = rendered
     out = tmp_path / "cli"
-    argv = ["capture", "-o", str(out), "--resolution", "128x96", "--spp", str(SPP),
-            "--exposures", "5", "--exposure-range", "0.001", "0.1", "--repeats", str(N),
-            "--cache-dir", str(root / "cache"), "--view-rendering", "direct"]
+    argv = [
+        "capture",
+        "-o",
+        str(out),
+        "--resolution",
+        "128x96",
+        "--spp",
+        str(SPP),
+        "--exposures",
+        "5",
+        "--exposure-range",
+        "0.001",
+        "0.1",
+        "--repeats",
+        str(N),
+        "--cache-dir",
+        str(root / "cache"),
+        "--view-rendering",
+        "direct",
+    ]
     assert pqsim_main(argv) == 0
     err = capsys.readouterr().err
     assert err.count("cached") == 6  # the module's renders, reused
@@ -364,11 +387,15 @@ def test_cli_mitsuba_capture_and_errors(rendered, tmp_path, capsys, monkeypatch)
     # options of the other renderer are refused
     assert pqsim_main(["capture", "-o", str(tmp_path / "a"), "--pan-px", "3"]) == 2
     assert "--pan-px cannot be used with --renderer mitsuba" in capsys.readouterr().err
-    assert pqsim_main(["capture", "-o", str(tmp_path / "b"), "--renderer", "analytic",
-                       "--spp", "4"]) == 2
+    assert (
+        pqsim_main(["capture", "-o", str(tmp_path / "b"), "--renderer", "analytic", "--spp", "4"])
+        == 2
+    )
     assert "--spp" in capsys.readouterr().err
     # without Mitsuba: one line naming the way out
     monkeypatch.setitem(__import__("sys").modules, "mitsuba", None)
     assert pqsim_main(["capture", "-o", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "pip install '.[render]'" in err and "--renderer analytic" in err
+    assert (
+        err.count("\n") == 1 and "pip install '.[render]'" in err and "--renderer analytic" in err
+    )

@@ -597,15 +597,26 @@ def test_preset_files_round_trip_and_refuse_bad_fields(tmp_path) -> None:
             assert getattr(a, f.name) == getattr(b, f.name), (name, f.name)
         assert preset_sensitivities(path) == preset_sensitivities(name)
     partial = tmp_path / "mine.json"
-    partial.write_text(json.dumps({"format": "pqsim.preset/1", "base": "cmos", "bit_depth": 12,
-                                   "noise": {"full_well_e": 5000.0}}))
+    partial.write_text(
+        json.dumps(
+            {
+                "format": "pqsim.preset/1",
+                "base": "cmos",
+                "bit_depth": 12,
+                "noise": {"full_well_e": 5000.0},
+            }
+        )
+    )
     cam = camera_from_preset(partial, prnu_seed=3)  # a path object works too; overrides apply
     assert cam.bit_depth == 12 and cam.prnu_seed == 3 and cam.noise.full_well_e == 5000.0
     assert cam.responses == camera_from_preset("cmos").responses
     bad = [
         ("{", "not valid JSON"),
         (json.dumps({"bit_depth": 12}), "`format` must be 'pqsim.preset/1'"),
-        (json.dumps({"format": "pqsim.preset/1", "bitdepth": 12}), r"unknown field\(s\) \['bitdepth'\]"),
+        (
+            json.dumps({"format": "pqsim.preset/1", "bitdepth": 12}),
+            r"unknown field\(s\) \['bitdepth'\]",
+        ),
         (json.dumps({"format": "pqsim.preset/1", "base": "tiny"}), "`base`"),
         (json.dumps({"format": "pqsim.preset/1", "bit_depth": 20}), "bit_depth"),
     ]

@@ -154,8 +154,9 @@ def test_cli_check_names_a_regression_and_exits_1(tiny_results, tmp_path, capsys
     base["metrics"][key]["value"] *= 0.5  # the run is now twice as bad as the baseline
     path = tmp_path / "tampered.json"
     path.write_text(json.dumps(base), encoding="utf-8")
-    status = main(["validate", "--tiny", "-q", "--json", "-o", str(tmp_path / "r"),
-                   "--check", str(path)])
+    status = main(
+        ["validate", "--tiny", "-q", "--json", "-o", str(tmp_path / "r"), "--check", str(path)]
+    )
     captured = capsys.readouterr()
     assert status == 1
     results = json.loads(captured.out)
@@ -169,11 +170,25 @@ def test_cli_errors_are_one_line_exit_2(tmp_path, capsys):
     (tmp_path / "exists").mkdir()
     assert main(["validate", "--tiny", "-q", "-o", str(tmp_path / "exists")]) == 2
     assert "already exists" in capsys.readouterr().err
-    assert main(["validate", "--tiny", "-q", "-o", str(tmp_path / "a"),
-                 "--check", str(tmp_path / "none.json")]) == 2
+    assert (
+        main(
+            [
+                "validate",
+                "--tiny",
+                "-q",
+                "-o",
+                str(tmp_path / "a"),
+                "--check",
+                str(tmp_path / "none.json"),
+            ]
+        )
+        == 2
+    )
     assert "does not exist" in capsys.readouterr().err
-    assert main(["validate", "--tiny", "-q", "-o", str(tmp_path / "b"),
-                 "--experiments", "nonsense"]) == 2
+    assert (
+        main(["validate", "--tiny", "-q", "-o", str(tmp_path / "b"), "--experiments", "nonsense"])
+        == 2
+    )
     assert "unknown experiment" in capsys.readouterr().err
 
 
@@ -315,8 +330,9 @@ def test_rendered_capture_experiment_is_off_unless_asked():
 def test_rendered_capture_experiment(tmp_path):
     """Calibrating from rendered scenes recovers v, u and the chart: errors from the physics."""
     pytest.importorskip("mitsuba")
-    config = TINY.replace(rendered_capture=True, render_cache=str(tmp_path / "cache"),
-                          presets=("ccd",))
+    config = TINY.replace(
+        rendered_capture=True, render_cache=str(tmp_path / "cache"), presets=("ccd",)
+    )
     run = run_validation(config, 0, experiments=["rendered"], progress=_quiet)
     res = run.experiments["rendered"]
     assert not res.skipped, res.skipped

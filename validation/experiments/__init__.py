@@ -102,8 +102,15 @@ def package_versions() -> dict[str, str | None]:
     from importlib.metadata import PackageNotFoundError, version
 
     out: dict[str, str | None] = {}
-    for dist in ("photoquant", "numpy", "scipy", "opencv-python-headless", "OpenEXR",
-                 "matplotlib", "colour-science"):
+    for dist in (
+        "photoquant",
+        "numpy",
+        "scipy",
+        "opencv-python-headless",
+        "OpenEXR",
+        "matplotlib",
+        "colour-science",
+    ):
         try:
             out[dist] = version(dist)
         except PackageNotFoundError:

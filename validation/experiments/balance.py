@@ -64,16 +64,33 @@ def run(
         corr = shared.scene_correction(preset)
         ratios = channel_scale_ratios(scene.l, corr.photoquantity, corr.mask)
         for ch, name in enumerate(names):
-            res.metric(f"{preset}.factor.{name}", a[ch], better="both", check=False,
-                       description=f"recovered a_{name}")
-            res.metric(f"{preset}.factor_truth.{name}", a_star[ch], better="both", check=False,
-                       description=f"a_{name} implied by the truth and the recovered gauge")
+            res.metric(
+                f"{preset}.factor.{name}",
+                a[ch],
+                better="both",
+                check=False,
+                description=f"recovered a_{name}",
+            )
+            res.metric(
+                f"{preset}.factor_truth.{name}",
+                a_star[ch],
+                better="both",
+                check=False,
+                description=f"a_{name} implied by the truth and the recovered gauge",
+            )
             if ch != ref:
-                res.metric(f"{preset}.factor_abs_error.{name}", abs(err[ch]), unit="fraction",
-                           description=f"|a_{name} / a*_{name} − 1|")
-                res.metric(f"{preset}.scene_abs_error.{name}", abs(ratios[ch] - 1),
-                           unit="fraction",
-                           description=f"|median(l̂/l)_{name} / median(l̂/l)_G − 1| on the test scene")
+                res.metric(
+                    f"{preset}.factor_abs_error.{name}",
+                    abs(err[ch]),
+                    unit="fraction",
+                    description=f"|a_{name} / a*_{name} − 1|",
+                )
+                res.metric(
+                    f"{preset}.scene_abs_error.{name}",
+                    abs(ratios[ch] - 1),
+                    unit="fraction",
+                    description=f"|median(l̂/l)_{name} / median(l̂/l)_G − 1| on the test scene",
+                )
         others = [ch for ch in range(len(names)) if ch != ref]
         lbl = "/".join(names[ch] for ch in others)
         res.row(

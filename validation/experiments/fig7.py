@@ -79,32 +79,44 @@ def run(
                 a, b, r = linear_fit(x, y)
                 key = f"{preset}.{label}.{row}.{gt}"
                 res.metric(f"{key}.slope", a, better="both", description=f"slope, {row} vs {gt}")
-                res.metric(f"{key}.intercept", b, better="both",
-                           description=f"intercept (display units), {row} vs {gt}")
+                res.metric(
+                    f"{key}.intercept",
+                    b,
+                    better="both",
+                    description=f"intercept (display units), {row} vs {gt}",
+                )
                 res.metric(f"{key}.residual_norm", r, description=f"‖residual‖₂, {row} vs {gt}")
                 p = PAPER[row]
                 res.row(
                     f"{preset} {label}, {row} vs {gt_name}",
                     f"y = {a:.2f}x {'+' if b >= 0 else '−'} {abs(b):.2f}, residual norm {r:.2f}",
-                    (f"y = {p['slope']}x − {abs(p['intercept'])}, {p['residual_norm']}"
-                     if gt == "cie" and paper_case else "–"),
+                    (
+                        f"y = {p['slope']}x − {abs(p['intercept'])}, {p['residual_norm']}"
+                        if gt == "cie" and paper_case
+                        else "–"
+                    ),
                     "",
                     detail=not paper_case,
                 )
                 if paper_case:
-                    panels.append({
-                        "title": f"{preset.upper()} {label}: {name}",
-                        "xlabel": f"ground truth: {gt_name} (×255/max)",
-                        "ylabel": name,
-                        "x": x.ravel(),
-                        "y": np.asarray(y, dtype=np.float64).ravel(),
-                        "channel": channel.ravel(),
-                        "channels": ["R", "G", "B"][:n_ch],
-                        "clipped": (m["ldr_clipped"].ravel() if row == "uncorrected"
-                                    else np.zeros(x.size, dtype=bool)),
-                        "fit": [a, b],
-                        "residual_norm": r,
-                    })
+                    panels.append(
+                        {
+                            "title": f"{preset.upper()} {label}: {name}",
+                            "xlabel": f"ground truth: {gt_name} (×255/max)",
+                            "ylabel": name,
+                            "x": x.ravel(),
+                            "y": np.asarray(y, dtype=np.float64).ravel(),
+                            "channel": channel.ravel(),
+                            "channels": ["R", "G", "B"][:n_ch],
+                            "clipped": (
+                                m["ldr_clipped"].ravel()
+                                if row == "uncorrected"
+                                else np.zeros(x.size, dtype=bool)
+                            ),
+                            "fit": [a, b],
+                            "residual_norm": r,
+                        }
+                    )
     if panels:
         p0 = columns[0]
         res.figures.append(

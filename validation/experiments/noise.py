@@ -67,8 +67,12 @@ def power_law_exponent(n: np.ndarray, sigma: np.ndarray) -> float:
 
 def _stats_row(res, key, quantity, stats, paper, truth):
     for k in ("e_max", "e_mean", "e_std"):
-        res.metric(f"{key}.{k}", getattr(stats, k), unit="fraction",
-                   description=f"{quantity}: {k} of eq. 8")
+        res.metric(
+            f"{key}.{k}",
+            getattr(stats, k),
+            unit="fraction",
+            description=f"{quantity}: {k} of eq. 8",
+        )
     res.row(
         quantity + ", e_max/mean/std",
         " / ".join(fmt_pct(getattr(stats, k)) for k in ("e_max", "e_mean", "e_std")),
@@ -138,50 +142,97 @@ def run(
         p4 = predicted_relative_error(l, var[4], pred_rng, log_bias=bias4)
         ok4 = np.isfinite(p4) & np.isfinite(e4)
         p4_mean = float(p4[ok4].mean())
-        _stats_row(res, f"{preset}.n4", f"{preset}: N = 4 vs truth ({scene_name})", s4,
-                   PAPER["n4"], f"true model: e_mean {fmt_pct(s4t.e_mean)}; "
-                   f"physics prediction e_mean {fmt_pct(p4_mean)}")
+        _stats_row(
+            res,
+            f"{preset}.n4",
+            f"{preset}: N = 4 vs truth ({scene_name})",
+            s4,
+            PAPER["n4"],
+            f"true model: e_mean {fmt_pct(s4t.e_mean)}; "
+            f"physics prediction e_mean {fmt_pct(p4_mean)}",
+        )
         for k in ("e_max", "e_mean", "e_std"):
-            res.metric(f"{preset}.n4_true_model.{k}", getattr(s4t, k), unit="fraction",
-                       description=f"N = 4 vs truth with the true camera model: {k}")
-        res.metric(f"{preset}.n4.predicted_e_mean", p4_mean, unit="fraction", check=False,
-                   description="physics prediction of e_mean for a perfect calibration")
+            res.metric(
+                f"{preset}.n4_true_model.{k}",
+                getattr(s4t, k),
+                unit="fraction",
+                description=f"N = 4 vs truth with the true camera model: {k}",
+            )
+        res.metric(
+            f"{preset}.n4.predicted_e_mean",
+            p4_mean,
+            unit="fraction",
+            check=False,
+            description="physics prediction of e_mean for a perfect calibration",
+        )
         # 2. N = 1 against N = 10
         c1, c10 = corr_a[1], corr_a[10]
         e110, s110, _ = relative_error_eq8(c10.photoquantity, c1.photoquantity, c1.mask | c10.mask)
         p110 = predicted_relative_error(l, var[1] + var[10], pred_rng)
         ok110 = np.isfinite(p110) & np.isfinite(e110)
         p110_mean = float(p110[ok110].mean())
-        _stats_row(res, f"{preset}.n1_vs_n10", f"{preset}: N = 1 vs N = 10", s110,
-                   PAPER["n1_vs_n10"], f"physics prediction e_mean {fmt_pct(p110_mean)}")
-        res.metric(f"{preset}.n1_vs_n10.predicted_e_mean", p110_mean, unit="fraction",
-                   check=False, description="physics prediction of e_mean")
+        _stats_row(
+            res,
+            f"{preset}.n1_vs_n10",
+            f"{preset}: N = 1 vs N = 10",
+            s110,
+            PAPER["n1_vs_n10"],
+            f"physics prediction e_mean {fmt_pct(p110_mean)}",
+        )
+        res.metric(
+            f"{preset}.n1_vs_n10.predicted_e_mean",
+            p110_mean,
+            unit="fraction",
+            check=False,
+            description="physics prediction of e_mean",
+        )
         # 3. the 1/sqrt(N) law
         sig_raw = np.array(
             [np.std((raw_a[n] - raw_b[n])[valid_raw], ddof=1) / np.sqrt(2) for n in ns]
         )
-        sig_ln = np.array(
-            [np.std((ln_a[n] - ln_b[n])[valid_ln], ddof=1) / np.sqrt(2) for n in ns]
-        )
+        sig_ln = np.array([np.std((ln_a[n] - ln_b[n])[valid_ln], ddof=1) / np.sqrt(2) for n in ns])
         sig_pred = np.array([np.sqrt(np.mean(var[n][valid_ln])) for n in ns])
         slope_raw = power_law_exponent(np.array(ns), sig_raw)
         slope_ln = power_law_exponent(np.array(ns), sig_ln)
-        res.metric(f"{preset}.sqrt_n.raw_exponent", slope_raw, better="both",
-                   description="fitted α of std(c̄) ∝ N^α at one exposure (appendix A: −0.5)")
-        res.metric(f"{preset}.sqrt_n.merged_exponent", slope_ln, better="both",
-                   description="fitted α of std(ln l̂) ∝ N^α (−0.5)")
+        res.metric(
+            f"{preset}.sqrt_n.raw_exponent",
+            slope_raw,
+            better="both",
+            description="fitted α of std(c̄) ∝ N^α at one exposure (appendix A: −0.5)",
+        )
+        res.metric(
+            f"{preset}.sqrt_n.merged_exponent",
+            slope_ln,
+            better="both",
+            description="fitted α of std(ln l̂) ∝ N^α (−0.5)",
+        )
         for n, sr, sl, sp in zip(ns, sig_raw, sig_ln, sig_pred, strict=True):
-            res.metric(f"{preset}.sqrt_n.raw_sigma_ratio.{n}", sr * np.sqrt(n) / sig_raw[0],
-                       better="both", check=n != ns[0], description=f"std(c̄)·√N / std(c̄ at N={ns[0]}) at N = {n}")
-            res.metric(f"{preset}.sqrt_n.merged_sigma.{n}", sl, unit="ln",
-                       description=f"measured std of ln l̂ at N = {n}")
-            res.metric(f"{preset}.sqrt_n.predicted_sigma.{n}", sp, unit="ln", check=False,
-                       description=f"predicted std of ln l̂ at N = {n}")
+            res.metric(
+                f"{preset}.sqrt_n.raw_sigma_ratio.{n}",
+                sr * np.sqrt(n) / sig_raw[0],
+                better="both",
+                check=n != ns[0],
+                description=f"std(c̄)·√N / std(c̄ at N={ns[0]}) at N = {n}",
+            )
+            res.metric(
+                f"{preset}.sqrt_n.merged_sigma.{n}",
+                sl,
+                unit="ln",
+                description=f"measured std of ln l̂ at N = {n}",
+            )
+            res.metric(
+                f"{preset}.sqrt_n.predicted_sigma.{n}",
+                sp,
+                unit="ln",
+                check=False,
+                description=f"predicted std of ln l̂ at N = {n}",
+            )
         res.row(
             f"{preset}: std(c̄) ∝ N^α at {1e3 * t[k_raw]:.1f} ms, α",
             fmt_num(slope_raw, ".3f"),
             "−0.5 (appendix A)",
-            "std·√N / std(N=1): " + " ".join(
+            "std·√N / std(N=1): "
+            + " ".join(
                 f"{sr * np.sqrt(n) / sig_raw[0]:.3f}" for n, sr in zip(ns, sig_raw, strict=True)
             ),
         )
@@ -199,33 +250,57 @@ def run(
         floor = predicted_relative_error(scene.l, v, pred_rng, log_bias=b)
         okf = np.isfinite(floor) & np.isfinite(es)
         floor_mean = float(floor[okf].mean())
-        _stats_row(res, f"{preset}.hdr_scene",
-                   f"{preset}: HDR scene (N = {scene.n_repeats}) vs truth", ss, None,
-                   f"physics floor e_mean {fmt_pct(floor_mean)}")
-        res.metric(f"{preset}.hdr_scene.predicted_e_mean", floor_mean, unit="fraction",
-                   check=False, description="physics floor of e_mean on the HDR test scene")
+        _stats_row(
+            res,
+            f"{preset}.hdr_scene",
+            f"{preset}: HDR scene (N = {scene.n_repeats}) vs truth",
+            ss,
+            None,
+            f"physics floor e_mean {fmt_pct(floor_mean)}",
+        )
+        res.metric(
+            f"{preset}.hdr_scene.predicted_e_mean",
+            floor_mean,
+            unit="fraction",
+            check=False,
+            description="physics floor of e_mean on the HDR test scene",
+        )
         vmax = float(np.nanpercentile(100 * e110, 99.9))
         maps += [
-            {"title": f"{preset}: N = 4 vs truth, e_p", "image": 100 * e4, "cmap": "magma",
-             "vmin": 0.0, "vmax": vmax, "unit": "%"},
-            {"title": f"{preset}: N = 1 vs N = 10, e_p (Fig. 8)", "image": 100 * e110,
-             "cmap": "magma", "vmin": 0.0, "vmax": vmax, "unit": "%"},
+            {
+                "title": f"{preset}: N = 4 vs truth, e_p",
+                "image": 100 * e4,
+                "cmap": "magma",
+                "vmin": 0.0,
+                "vmax": vmax,
+                "unit": "%",
+            },
+            {
+                "title": f"{preset}: N = 1 vs N = 10, e_p (Fig. 8)",
+                "image": 100 * e110,
+                "cmap": "magma",
+                "vmin": 0.0,
+                "vmax": vmax,
+                "unit": "%",
+            },
         ]
         ref = sig_raw[0] * np.sqrt(ns[0]) / np.sqrt(np.array(ns, dtype=float))
-        law_panels.append({
-            "title": f"{preset}: temporal std vs N",
-            "xlabel": "repeats N",
-            "ylabel": "standard deviation",
-            "x": ns,
-            "series": [
-                {"label": f"c̄ at {1e3 * t[k_raw]:.0f} ms (DN)", "y": sig_raw.tolist()},
-                {"label": "σ(N=1)/√N", "y": ref.tolist(), "style": "--"},
-                {"label": "ln l̂ measured", "y": sig_ln.tolist()},
-                {"label": "ln l̂ predicted (physics)", "y": sig_pred.tolist(), "style": ":"},
-            ],
-            "logx": True,
-            "logy": True,
-        })
+        law_panels.append(
+            {
+                "title": f"{preset}: temporal std vs N",
+                "xlabel": "repeats N",
+                "ylabel": "standard deviation",
+                "x": ns,
+                "series": [
+                    {"label": f"c̄ at {1e3 * t[k_raw]:.0f} ms (DN)", "y": sig_raw.tolist()},
+                    {"label": "σ(N=1)/√N", "y": ref.tolist(), "style": "--"},
+                    {"label": "ln l̂ measured", "y": sig_ln.tolist()},
+                    {"label": "ln l̂ predicted (physics)", "y": sig_pred.tolist(), "style": ":"},
+                ],
+                "logx": True,
+                "logy": True,
+            }
+        )
     res.figures.append(
         FigureSpec(
             "fig8_noise",

@@ -123,30 +123,61 @@ def _record(res: ExperimentResult, preset: str, model, rep: dict, t_capture, t_c
     cc = rep.get("colorchecker")
     # (key, value, unit, better, description); reported, not checked (see the module notes)
     metrics = [
-        ("response_rms_max", max(rms), "ln", "lower",
-         "largest per-channel rms error of g (ln units, gauge removed)"),
-        ("balance_abs_error_max", float(bal.max()), "fraction", "lower",
-         "largest |channel scale / green − 1| on the corrected test scene"),
+        (
+            "response_rms_max",
+            max(rms),
+            "ln",
+            "lower",
+            "largest per-channel rms error of g (ln units, gauge removed)",
+        ),
+        (
+            "balance_abs_error_max",
+            float(bal.max()),
+            "fraction",
+            "lower",
+            "largest |channel scale / green − 1| on the corrected test scene",
+        ),
         ("sensor_lut_e_mean", lut.e_mean, "fraction", "lower", "mean |u_est − u| / u"),
         ("vignetting_e_mean", vig.e_mean, "fraction", "lower", "mean |v_est − v| / v"),
         ("vignetting_e_max", vig.e_max, "fraction", "lower", "max |v_est − v| / v"),
-        ("scene_e_mean", sc["error"].e_mean, "fraction", "lower",
-         "eq. 8 mean error of the corrected test scene"),
-        ("scene_noise_floor", sc["noise_floor_mean"], "fraction", "lower",
-         "the camera physics' prediction of that error"),
+        (
+            "scene_e_mean",
+            sc["error"].e_mean,
+            "fraction",
+            "lower",
+            "eq. 8 mean error of the corrected test scene",
+        ),
+        (
+            "scene_noise_floor",
+            sc["noise_floor_mean"],
+            "fraction",
+            "lower",
+            "the camera physics' prediction of that error",
+        ),
         ("capture_s", t_capture, "s", "lower", "render (or cache) + synthetic camera + writing"),
         ("calibrate_s", t_calibrate, "s", "lower", "photoquant calibrate on the written files"),
     ]
     if cc is not None:
         metrics += [
-            ("colorchecker_e_mean", cc["error"].e_mean, "fraction", "lower",
-             "eq. 8 mean error of the 24 patch means"),
-            ("colorchecker_r_cie_rgb", cc.get("r_cie_rgb"), "", "higher",
-             "r of the balanced patches with CIE RGB (D65)"),
+            (
+                "colorchecker_e_mean",
+                cc["error"].e_mean,
+                "fraction",
+                "lower",
+                "eq. 8 mean error of the 24 patch means",
+            ),
+            (
+                "colorchecker_r_cie_rgb",
+                cc.get("r_cie_rgb"),
+                "",
+                "higher",
+                "r of the balanced patches with CIE RGB (D65)",
+            ),
         ]
     for key, value, unit, better, description in metrics:
-        res.metric(f"{preset}.{key}", value, unit=unit, better=better, check=False,
-                   description=description)
+        res.metric(
+            f"{preset}.{key}", value, unit=unit, better=better, check=False, description=description
+        )
     res.row(
         f"{preset}: g rms (ln) {'/'.join(names)}; balance error",
         " / ".join(f"{v:.4f}" for v in rms) + f"; ≤ {fmt_pct(float(bal.max()))}",

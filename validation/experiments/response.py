@@ -81,19 +81,29 @@ def run(
             w = response_weights(model, ch)
             g_true = cam.inverse_response_ln(levels, ch)
             rms, worst = response_error(model.log_inverse_response[ch], g_true, w)
-            res.metric(f"{preset}.g_rms.{name}", rms, unit="ln",
-                       description=f"RMS of g_{name} − g_true after the gauge, hat-weighted")
-            res.metric(f"{preset}.g_max.{name}", worst, unit="ln",
-                       description=f"max |g_{name} − g_true| after the gauge")
+            res.metric(
+                f"{preset}.g_rms.{name}",
+                rms,
+                unit="ln",
+                description=f"RMS of g_{name} − g_true after the gauge, hat-weighted",
+            )
+            res.metric(
+                f"{preset}.g_max.{name}",
+                worst,
+                unit="ln",
+                description=f"max |g_{name} − g_true| after the gauge",
+            )
             rms_all.append(rms)
             max_all.append(worst)
             est.append(model.log_inverse_response[ch] + offsets[ch])
             true.append(np.where(np.isfinite(g_true), g_true, np.nan))
             valid.append(w > 0)
         sat_ok = np.array_equal(np.asarray(model.saturation_level), cam.saturation_dn)
-        res.metric(f"{preset}.saturation_levels_wrong",
-                   int(np.sum(np.asarray(model.saturation_level) != cam.saturation_dn)),
-                   description="channels whose detected clipping level differs from the truth")
+        res.metric(
+            f"{preset}.saturation_levels_wrong",
+            int(np.sum(np.asarray(model.saturation_level) != cam.saturation_dn)),
+            description="channels whose detected clipping level differs from the truth",
+        )
         ch_names = "/".join(model.channels)
         res.row(
             f"{preset}: g rms error {ch_names} (ln, gauge removed)",
@@ -105,7 +115,8 @@ def run(
             f"{preset}: g max error {ch_names} (ln)",
             " / ".join(f"{v:.4f}" for v in max_all),
             "–",
-            "clipping levels " + ("= truth" if sat_ok else "≠ truth")
+            "clipping levels "
+            + ("= truth" if sat_ok else "≠ truth")
             + f" ({', '.join(str(int(s)) for s in model.saturation_level)})",
         )
         curves[preset] = {

@@ -56,16 +56,38 @@ def run(
         irr = cal.truth.captures["irradiance"]
         var = predicted_log_variance(cam, irr.l, irr.exposure_s, irr.n_repeats, gain=u_true)
         noise = float(np.sqrt(2 / np.pi) * np.sqrt(var[np.isfinite(var)]).mean())
-        res.metric(f"{preset}.e_mean", stats.e_mean, unit="fraction",
-                   description="mean |u_est − u_true| / u_true")
-        res.metric(f"{preset}.e_max", stats.e_max, unit="fraction",
-                   description="max |u_est − u_true| / u_true")
-        res.metric(f"{preset}.e_std", stats.e_std, unit="fraction",
-                   description="std of |u_est − u_true| / u_true")
-        res.metric(f"{preset}.prnu_floor", prnu, unit="fraction", check=False,
-                   description="mean |u_true − 1|: the error without correction")
-        res.metric(f"{preset}.noise_floor", noise, unit="fraction", check=False,
-                   description="predicted mean error from the irradiance frames' noise")
+        res.metric(
+            f"{preset}.e_mean",
+            stats.e_mean,
+            unit="fraction",
+            description="mean |u_est − u_true| / u_true",
+        )
+        res.metric(
+            f"{preset}.e_max",
+            stats.e_max,
+            unit="fraction",
+            description="max |u_est − u_true| / u_true",
+        )
+        res.metric(
+            f"{preset}.e_std",
+            stats.e_std,
+            unit="fraction",
+            description="std of |u_est − u_true| / u_true",
+        )
+        res.metric(
+            f"{preset}.prnu_floor",
+            prnu,
+            unit="fraction",
+            check=False,
+            description="mean |u_true − 1|: the error without correction",
+        )
+        res.metric(
+            f"{preset}.noise_floor",
+            noise,
+            unit="fraction",
+            check=False,
+            description="predicted mean error from the irradiance frames' noise",
+        )
         res.row(
             f"{preset}: LUT error e_mean / e_max",
             f"{fmt_pct(stats.e_mean, 3)} / {fmt_pct(stats.e_max)}",
@@ -77,13 +99,30 @@ def run(
         lo = float(min(u_true[..., g].min(), u_est[..., g].min()))
         hi = float(max(u_true[..., g].max(), u_est[..., g].max()))
         panels += [
-            {"title": f"{preset}: true u (G)", "image": u_true[..., g], "cmap": "viridis",
-             "vmin": lo, "vmax": hi, "unit": ""},
-            {"title": f"{preset}: recovered u (G)", "image": u_est[..., g], "cmap": "viridis",
-             "vmin": lo, "vmax": hi, "unit": ""},
-            {"title": f"{preset}: |Δu|/u, mean of channels", "image": 100 * err,
-             "cmap": "magma", "vmin": 0.0, "vmax": float(np.percentile(100 * err, 99.5)),
-             "unit": "%"},
+            {
+                "title": f"{preset}: true u (G)",
+                "image": u_true[..., g],
+                "cmap": "viridis",
+                "vmin": lo,
+                "vmax": hi,
+                "unit": "",
+            },
+            {
+                "title": f"{preset}: recovered u (G)",
+                "image": u_est[..., g],
+                "cmap": "viridis",
+                "vmin": lo,
+                "vmax": hi,
+                "unit": "",
+            },
+            {
+                "title": f"{preset}: |Δu|/u, mean of channels",
+                "image": 100 * err,
+                "cmap": "magma",
+                "vmin": 0.0,
+                "vmax": float(np.percentile(100 * err, 99.5)),
+                "unit": "%",
+            },
         ]
     res.figures.append(
         FigureSpec(

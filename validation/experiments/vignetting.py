@@ -137,12 +137,24 @@ def _sweep_tracks(config, shared, res, preset) -> dict | None:
         key = "all" if n == total else str(n)
         m = float(np.mean(e_mean)) if e_mean else None
         x = float(np.mean(e_max)) if e_max else None
-        res.metric(f"{preset}.sweep_tracks.{key}.e_mean", m, unit="fraction",
-                   description=f"map e_mean with {n} correspondences (mean of {draws} draws)")
-        res.metric(f"{preset}.sweep_tracks.{key}.e_max", x, unit="fraction",
-                   description=f"map e_max with {n} correspondences (mean of {draws} draws)")
-        res.metric(f"{preset}.sweep_tracks.{key}.refused", bad / draws, check=n == total,
-                   description=f"fraction of the {draws} fits with {n} tracks refused")
+        res.metric(
+            f"{preset}.sweep_tracks.{key}.e_mean",
+            m,
+            unit="fraction",
+            description=f"map e_mean with {n} correspondences (mean of {draws} draws)",
+        )
+        res.metric(
+            f"{preset}.sweep_tracks.{key}.e_max",
+            x,
+            unit="fraction",
+            description=f"map e_max with {n} correspondences (mean of {draws} draws)",
+        )
+        res.metric(
+            f"{preset}.sweep_tracks.{key}.refused",
+            bad / draws,
+            check=n == total,
+            description=f"fraction of the {draws} fits with {n} tracks refused",
+        )
         res.row(
             f"{preset}: {n} correspondences{' (all)' if n == total else ''}, e_mean / e_max",
             f"{fmt_pct(m)} / {fmt_pct(x)}" + (f" ({bad}/{draws} refused)" if bad else ""),
@@ -177,7 +189,9 @@ def _sweep_views(config, shared, res, preset) -> dict | None:
     uniform = []
     for i in range(v_max):
         cap = camera.capture(
-            all_views.l[i], np.asarray(config.exposure_s), config.n_repeats,
+            all_views.l[i],
+            np.asarray(config.exposure_s),
+            config.n_repeats,
             rng=shared.stream("sweep_views", preset, "view", i),
         )
         uniform.append(merge_with_model(cap.to_stack(), model).photoquantity() / model.sensor_lut)
@@ -197,12 +211,24 @@ def _sweep_views(config, shared, res, preset) -> dict | None:
                 bad = 1
         else:
             bad = 1
-        res.metric(f"{preset}.sweep_views.{key}.e_mean", m, unit="fraction",
-                   description=f"map e_mean from {v} views")
-        res.metric(f"{preset}.sweep_views.{key}.e_max", x, unit="fraction",
-                   description=f"map e_max from {v} views")
-        res.metric(f"{preset}.sweep_views.{key}.refused", bad, check=v >= 3,
-                   description=f"the fit from {v} views was refused (1) or not (0)")
+        res.metric(
+            f"{preset}.sweep_views.{key}.e_mean",
+            m,
+            unit="fraction",
+            description=f"map e_mean from {v} views",
+        )
+        res.metric(
+            f"{preset}.sweep_views.{key}.e_max",
+            x,
+            unit="fraction",
+            description=f"map e_max from {v} views",
+        )
+        res.metric(
+            f"{preset}.sweep_views.{key}.refused",
+            bad,
+            check=v >= 3,
+            description=f"the fit from {v} views was refused (1) or not (0)",
+        )
         res.row(
             f"{preset}: {v} views ({len(tracks)} correspondences), e_mean / e_max",
             "refused (not trustworthy)" if bad else f"{fmt_pct(m)} / {fmt_pct(x)}",
@@ -233,8 +259,12 @@ def run(
         v_est = np.asarray(model.vignetting(), dtype=np.float64)
         stats = map_relative_error(v_true, v_est)
         for k in ("e_max", "e_mean", "e_std"):
-            res.metric(f"{preset}.{k}", getattr(stats, k), unit="fraction",
-                       description=f"{k} of |v_est − v_true| / v_true over pixels and channels")
+            res.metric(
+                f"{preset}.{k}",
+                getattr(stats, k),
+                unit="fraction",
+                description=f"{k} of |v_est − v_true| / v_true over pixels and channels",
+            )
         res.row(
             f"{preset}: map error e_max / e_mean / e_std",
             " / ".join(fmt_pct(getattr(stats, k), 3) for k in ("e_max", "e_mean", "e_std")),
@@ -246,31 +276,62 @@ def run(
         g_ch = 1 if len(model.channels) > 1 else 0
         for ch, name in enumerate(model.channels):
             for k in range(6):
-                res.metric(f"{preset}.m{k + 1}.{name}", p_est[ch, k], better="both", check=False,
-                           description=f"recovered m{k + 1} of channel {name}")
+                res.metric(
+                    f"{preset}.m{k + 1}.{name}",
+                    p_est[ch, k],
+                    better="both",
+                    check=False,
+                    description=f"recovered m{k + 1} of channel {name}",
+                )
             res.row(
                 f"{preset}: m1…m6 {name}",
                 " ".join(f"{v:+.3f}" for v in p_est[ch]),
                 " ".join(f"{v:+.2f}" for v in PAPER["params"]) if ch == g_ch else "",
-                "truth " + (" ".join(f"{v:+.3f}" for v in p_true[ch]) if p_true is not None
-                            else "not in the model family"),
+                "truth "
+                + (
+                    " ".join(f"{v:+.3f}" for v in p_true[ch])
+                    if p_true is not None
+                    else "not in the model family"
+                ),
                 detail=ch != g_ch,
             )
         if cal.model.report.get("vignetting"):
             n_tracks = cal.model.report["vignetting"].get("n_tracks")
-            res.metric(f"{preset}.n_tracks", n_tracks, better="both", check=False,
-                       description="correspondences the calibration used")
+            res.metric(
+                f"{preset}.n_tracks",
+                n_tracks,
+                better="both",
+                check=False,
+                description="correspondences the calibration used",
+            )
         err = np.mean(np.abs(v_est - v_true) / v_true, axis=-1)
         g = 1 if v_true.shape[-1] > 1 else 0
         lo = float(min(v_true[..., g].min(), v_est[..., g].min()))
         panels += [
-            {"title": f"{preset}: (a) model v (G)", "image": v_est[..., g], "cmap": "viridis",
-             "vmin": lo, "vmax": 1.0, "unit": ""},
-            {"title": f"{preset}: (b) true v (G)", "image": v_true[..., g], "cmap": "viridis",
-             "vmin": lo, "vmax": 1.0, "unit": ""},
-            {"title": f"{preset}: (c) |Δv|/v, mean of channels", "image": 100 * err,
-             "cmap": "magma", "vmin": 0.0, "vmax": max(float(err.max()) * 100, 1e-6),
-             "unit": "%"},
+            {
+                "title": f"{preset}: (a) model v (G)",
+                "image": v_est[..., g],
+                "cmap": "viridis",
+                "vmin": lo,
+                "vmax": 1.0,
+                "unit": "",
+            },
+            {
+                "title": f"{preset}: (b) true v (G)",
+                "image": v_true[..., g],
+                "cmap": "viridis",
+                "vmin": lo,
+                "vmax": 1.0,
+                "unit": "",
+            },
+            {
+                "title": f"{preset}: (c) |Δv|/v, mean of channels",
+                "image": 100 * err,
+                "cmap": "magma",
+                "vmin": 0.0,
+                "vmax": max(float(err.max()) * 100, 1e-6),
+                "unit": "%",
+            },
         ]
     res.figures.append(
         FigureSpec(
@@ -296,21 +357,25 @@ def run(
         ):
             if data is None:
                 continue
-            sweep_panels.append({
-                "title": f"{preset}: map error vs {name}",
-                "xlabel": xlabel,
-                "ylabel": "relative error of v",
-                "x": data["x"],
-                "series": [
-                    {"label": "e_mean", "y": data["e_mean"]},
-                    {"label": "e_max", "y": data["e_max"]},
-                ],
-                "refused": data["refused"],
-                "logx": name == "correspondences",
-                "logy": True,
-                "hlines": [{"y": PAPER["e_mean"], "label": "paper e_mean (1.6 %)"},
-                           {"y": PAPER["e_max"], "label": "paper e_max (9 %)"}],
-            })
+            sweep_panels.append(
+                {
+                    "title": f"{preset}: map error vs {name}",
+                    "xlabel": xlabel,
+                    "ylabel": "relative error of v",
+                    "x": data["x"],
+                    "series": [
+                        {"label": "e_mean", "y": data["e_mean"]},
+                        {"label": "e_max", "y": data["e_max"]},
+                    ],
+                    "refused": data["refused"],
+                    "logx": name == "correspondences",
+                    "logy": True,
+                    "hlines": [
+                        {"y": PAPER["e_mean"], "label": "paper e_mean (1.6 %)"},
+                        {"y": PAPER["e_max"], "label": "paper e_max (9 %)"},
+                    ],
+                }
+            )
     if sweep_panels:
         res.figures.append(
             FigureSpec(
