@@ -3,7 +3,93 @@
 Calibrate a camera once (response per channel, colour balance, sensor
 non-uniformity, vignetting) and then measure the photoquantity of any static
 scene from a few exposures, following the reference paper
-(``shared/reference/paper.txt``).
+(``shared/reference/paper.txt``)::
+
+    import photoquant as pq
+
+    m = pq.load_manifest("capture/capture.json")
+    model = pq.calibrate_manifest(m)                      # profile="photoquant" (or "paper")
+    model.save("camera")
+    result = pq.correct(pq.load_stack(m.scene, m), pq.load_camera("camera"))
+
+Every step is a plug-in: :data:`REGISTRIES` holds one registry per step
+(:data:`STEPS`), :func:`register_method` adds a method at run time and the
+entry-point group ``photoquant.methods`` adds those of other distributions.
+
+The names below are loaded on first use, so that ``import photoquant.io``
+(the file formats, which the simulator uses) does not load the methods.
 """
 
-__version__ = "0.1.0"
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__version__ = "0.2.0"
+
+_EXPORTS: dict[str, str] = {
+    # pipeline
+    "calibrate": "photoquant.calibration",
+    "calibrate_manifest": "photoquant.calibration",
+    "CalibrationResult": "photoquant.calibration",
+    "CalibrationIntermediates": "photoquant.calibration",
+    "resolve_steps": "photoquant.calibration",
+    "fit_sensor_lut": "photoquant.calibration",
+    "find_correspondences": "photoquant.calibration",
+    "fit_vignetting_step": "photoquant.calibration",
+    "fit_balance": "photoquant.calibration",
+    "correct": "photoquant.correction",
+    "correct_manifest": "photoquant.correction",
+    "Correction": "photoquant.correction",
+    "fit_response": "photoquant.response",
+    # data and models
+    "ExposureStack": "photoquant.stack",
+    "CameraModel": "photoquant.model",
+    "load_camera": "photoquant.model",
+    "ResponseModel": "photoquant.response",
+    "MergeModel": "photoquant.merge",
+    "MergeResult": "photoquant.merge",
+    "BalanceModel": "photoquant.balance",
+    "BalanceData": "photoquant.balance",
+    "SensorLUTModel": "photoquant.flatfield",
+    "VignettingModel": "photoquant.vignetting",
+    "VignettingData": "photoquant.vignetting",
+    "ExtendedGoldmanChenVignetting": "photoquant.vignetting",
+    "load_manifest": "photoquant.io",
+    "load_stack": "photoquant.io",
+    "read_exr": "photoquant.io",
+    "write_exr": "photoquant.io",
+    # registries and plug-ins
+    "STEPS": "photoquant.methods",
+    "REGISTRIES": "photoquant.methods",
+    "Method": "photoquant.methods",
+    "StepFit": "photoquant.methods",
+    "register_method": "photoquant.methods",
+    "registry": "photoquant.methods",
+    "RESPONSE_METHODS": "photoquant.response",
+    "MERGE_METHODS": "photoquant.merge",
+    "BALANCE_METHODS": "photoquant.balance",
+    "SENSOR_LUT_METHODS": "photoquant.flatfield",
+    "VIGNETTING_METHODS": "photoquant.vignetting",
+    "CORRESPONDENCE_METHODS": "photoquant.correspondences",
+    "WEIGHTING_FUNCTIONS": "photoquant.weighting",
+    "PROFILES": "photoquant.profiles",
+    "DEVIATIONS": "photoquant.profiles",
+    "PhotoquantError": "photoquant.errors",
+}
+
+__all__ = ["__version__", *_EXPORTS]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'photoquant' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+

@@ -13,18 +13,26 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_array, validate_method
+from photoquant._checks import check_array, check_int
 from photoquant.errors import CalibrationError, InputError
+from photoquant.methods import REGISTRIES, Method, StepFit, options_from_mapping
 
 __all__ = [
     "check_roi",
     "white_chart_colour",
     "colour_balance_WhiteChart",
     "colour_balance_none",
+    "BalanceModel",
+    "BalanceData",
+    "WhiteChartOptions",
+    "characterise_balance_WhiteChart",
+    "characterise_balance_None",
     "BALANCE_METHODS",
     "colour_balance",
     "fold_balance",
@@ -110,16 +118,168 @@ def colour_balance_none(linear: np.ndarray, roi=None, **_kwargs) -> np.ndarray: 
     return np.ones(np.asarray(linear).shape[-1])
 
 
-BALANCE_METHODS: dict[str, Callable[..., np.ndarray]] = {
-    "White Chart": colour_balance_WhiteChart,
-    "None": colour_balance_none,
-}
+# ---------------------------------------------------------------------------
+# The "balance" step: model, data, methods
+# ---------------------------------------------------------------------------
 
 
-def colour_balance(linear: np.ndarray, roi, method: str = "White Chart", **kwargs) -> np.ndarray:
-    """Dispatch to a colour balance method of :data:`BALANCE_METHODS`."""
-    fn = BALANCE_METHODS[validate_method(method, BALANCE_METHODS, "colour balance")]
-    return fn(linear, roi, **kwargs)
+@dataclass(frozen=True, eq=False)
+class BalanceModel:
+    """Colour balance factors ``a_λ`` (one per channel), the result of every balance method.
+
+    Parameters
+    ----------
+    method : str
+        The method that produced them.
+    factors : ndarray, shape (C,)
+        Positive, finite factors; the corrected value is ``a_λ`` times the linear one.
+    params : dict
+        The method's own parameters (for the record).
+    """
+
+    method: str
+    factors: np.ndarray
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        a = check_array(self.factors, "balance factors", ndim=1, kind="iuf", finite=True)
+        a = a.astype(np.float64)
+        if a.size < 1 or np.any(a <= 0):
+            raise InputError(f"balance factors must be positive, got {a.tolist()}")
+        object.__setattr__(self, "factors", a)
+        object.__setattr__(self, "params", dict(self.params))
+
+    @classmethod
+    def identity(cls, n_channels: int) -> BalanceModel:
+        """No balance (every factor 1)."""
+        return cls("None", np.ones(n_channels))
+
+    def apply(self, linear: np.ndarray) -> np.ndarray:
+        """``a_λ · linear`` for an image ``(..., C)``."""
+        return np.asarray(linear) * self.factors
+
+    def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return {"factors": self.factors.tolist(), "method_params": self.params}, {}
+
+    @classmethod
+    def from_params(
+        cls, method: str, params: dict[str, Any], images: dict[str, np.ndarray]
+    ) -> BalanceModel:
+        del images
+        factors = params["factors"]
+        if not isinstance(factors, list) or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in factors
+        ):
+            raise InputError(f"balance `factors` must be a list of numbers, got {factors!r}")
+        return cls(
+            method, np.asarray(factors, dtype=np.float64), dict(params.get("method_params") or {})
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class BalanceData:
+    """What a balance method sees: the white chart, before and after ``÷ u·v``.
+
+    Attributes
+    ----------
+    linearised : ndarray, shape (H, W, C)
+        ``exp`` of the merge of view 0 (the paper reads the chart here).
+    uniformised : ndarray, shape (H, W, C)
+        ``linearised / (u·v)``: the chart after the LUT and the vignetting.
+    roi : tuple of 4 int
+        The white chart's box ``[x0, y0, x1, y1]``.
+    mask : ndarray, shape (H, W, C) of bool
+        Pixels without a valid exposure.
+    """
+
+    linearised: np.ndarray
+    uniformised: np.ndarray
+    roi: tuple[int, int, int, int]
+    mask: np.ndarray
+
+
+@dataclass(frozen=True)
+class WhiteChartOptions:
+    """Options of the ``"White Chart"`` balance (§5.3).
+
+    Attributes
+    ----------
+    stage : {"uniformised", "linearised"}
+        Read the chart after the LUT and vignetting (default: the chart comes
+        out exactly neutral) or from the linearised view as the paper does.
+    reference_channel : int
+        The channel whose factor is 1 (green, index 1).
+    """
+
+    stage: str = "uniformised"
+    reference_channel: int = 1
+
+    def __post_init__(self) -> None:
+        if self.stage not in ("uniformised", "linearised"):
+            raise InputError(f"`stage` must be 'uniformised' or 'linearised', got {self.stage!r}")
+        check_int(self.reference_channel, "reference_channel", 0)
+
+
+def characterise_balance_WhiteChart(
+    data: BalanceData, options: WhiteChartOptions | None = None
+) -> StepFit[BalanceModel]:
+    """The ``"balance"`` step from a white chart (§5.3 of [PQ]_), green-referenced."""
+    opts = options or WhiteChartOptions()
+    linear = data.uniformised if opts.stage == "uniformised" else data.linearised
+    factors = colour_balance_WhiteChart(
+        linear, data.roi, mask=data.mask, reference_channel=opts.reference_channel
+    )
+    model = BalanceModel("White Chart", factors)
+    return StepFit(
+        model,
+        {"stage": opts.stage, "white_colour": white_chart_colour(linear, data.roi, data.mask)},
+    )
+
+
+def characterise_balance_None(data: BalanceData, options: None = None) -> StepFit[BalanceModel]:
+    """No colour balance: every factor 1."""
+    del options
+    return StepFit(BalanceModel.identity(data.linearised.shape[-1]))
+
+
+BALANCE_METHODS = REGISTRIES["balance"]
+"""Colour balance methods by name: ``function(data: BalanceData, options) -> StepFit``."""
+
+BALANCE_METHODS.add(
+    Method(
+        "balance",
+        "White Chart",
+        characterise_balance_WhiteChart,
+        options=WhiteChartOptions,
+        model=BalanceModel,
+        reference="[PQ] §5.3",
+    ),
+    replace=True,
+)
+BALANCE_METHODS.add(
+    Method("balance", "None", characterise_balance_None, model=BalanceModel), replace=True
+)
+
+
+def colour_balance(
+    linear: np.ndarray, roi: Sequence[int], method: str = "White Chart", **kwargs: Any
+) -> np.ndarray:
+    """Balance factors ``(C,)`` of a linear image's white chart by the named method.
+
+    ``kwargs``: ``mask`` and the method's options (``reference_channel``).
+    """
+    linear = check_array(linear, "linear", ndim=3, kind="f")
+    mask = kwargs.pop("mask", None)
+    box = check_roi(roi, linear.shape[:2])
+    data = BalanceData(
+        linear,
+        linear,
+        box,
+        np.zeros(linear.shape, bool) if mask is None else np.asarray(mask, bool),
+    )
+    entry = BALANCE_METHODS[method]
+    fit = entry.function(data, options_from_mapping(entry, kwargs))
+    return fit.model.factors
 
 
 def fold_balance(log_inverse_response: np.ndarray, balance: np.ndarray) -> np.ndarray:

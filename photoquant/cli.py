@@ -1,4 +1,8 @@
-"""Command line interface: ``photoquant calibrate | correct | info | demo``.
+"""Command line interface: ``photoquant calibrate | correct | info | methods`` (+ plug-in commands).
+
+``validate``, ``demo`` and ``compare`` are added by the ``validation`` package
+through the entry-point group ``photoquant.commands``: photoquant itself
+never imports the simulator or its consumers.
 
 Every failure caused by the input ends with a non-zero exit status and one
 line on standard error saying why; nothing already on disk is overwritten
@@ -13,13 +17,12 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from photoquant import __version__
-from photoquant.errors import OutputExistsError, PhotoquantError
-from photoquant.merge import MERGE_METHODS
-from photoquant.weighting import WEIGHTING_FUNCTIONS
+from photoquant.errors import InputError, OutputExistsError, PhotoquantError
 
 __all__ = ["main", "build_parser"]
 
@@ -49,29 +52,83 @@ def _step_logger(args: argparse.Namespace):
     return step, done
 
 
-def _fmt(values) -> str:
-    return "[" + ", ".join(f"{v:.4g}" for v in np.asarray(values, dtype=float).ravel()) + "]"
+def _fmt(values: Any) -> str:
+    """Numbers as ``[a, b, c]``; anything else (an untrusted camera's report) as its repr."""
+    try:
+        arr = np.asarray(values, dtype=float).ravel()
+    except (TypeError, ValueError):
+        return repr(values)[:80]
+    return "[" + ", ".join(f"{v:.4g}" for v in arr) + "]"
+
+
+def _parse_value(text: str) -> Any:
+    """A command-line option value: JSON when it parses (numbers, true/false, lists), else text."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def step_specs(args: argparse.Namespace) -> dict[str, Any]:
+    """Per-step specs for :func:`photoquant.calibrate` from ``--method``, ``--option`` and shortcuts."""
+    from photoquant.methods import STEPS
+
+    names: dict[str, str] = {}
+    options: dict[str, dict[str, Any]] = {}
+    for item in args.method or []:
+        step, sep, name = item.partition("=")
+        if not sep or step not in STEPS or not name:
+            raise InputError(
+                f"--method takes STEP=NAME with STEP one of {', '.join(STEPS)}, got {item!r}"
+            )
+        names[step] = name
+    for item in args.option or []:
+        key, sep, value = item.partition("=")
+        step, dot, name = key.partition(".")
+        if not sep or not dot or step not in STEPS or not name:
+            raise InputError(
+                f"--option takes STEP.NAME=VALUE with STEP one of {', '.join(STEPS)}, got {item!r}"
+            )
+        options.setdefault(step, {})[name] = _parse_value(value)
+    shortcuts = {
+        ("response", "smoothness"): args.smoothness,
+        ("response", "n_samples"): args.samples,
+        ("merge", "weighting"): args.merge_weighting,
+        ("balance", "stage"): args.balance_stage,
+    }
+    for (step, name), value in shortcuts.items():
+        if value is not None:
+            options.setdefault(step, {}).setdefault(name, value)
+    if args.merge_method is not None:
+        names.setdefault("merge", args.merge_method)
+    specs: dict[str, Any] = {}
+    for step in STEPS:
+        if step in names:
+            specs[step] = (names[step], options.get(step, {}))
+        elif step in options:
+            specs[step] = options[step]
+    if "correspondences" in specs:
+        specs["correspondence_finder"] = specs.pop("correspondences")
+    return specs
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from photoquant.calibrate import calibrate_manifest
+    from photoquant.calibration import calibrate_manifest
 
     out = Path(args.output)
     if out.exists() and not args.overwrite:
         raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
+    specs = step_specs(args)
     step, done = _step_logger(args)
     step("loading frames")
     model = calibrate_manifest(
         args.manifest,
         allow_outside=args.allow_outside,
         progress_bars=not args.quiet,
-        smoothness=args.smoothness,
-        n_samples=args.samples,
-        balance_stage=args.balance_stage,
-        merge_weighting=args.merge_weighting,
-        merge_method=args.merge_method,
+        profile=args.profile,
         seed=args.seed,
         progress=step,
+        **specs,
     )
     done()
     model.save(out, overwrite=args.overwrite)
@@ -79,43 +136,70 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_summary(model, where: Path | None = None) -> None:
-    rep = model.report
+def _section(report: dict[str, Any], key: str) -> dict[str, Any]:
+    value = report.get(key)
+    return value if isinstance(value, dict) else {}
+
+
+def _print_summary(model: Any, where: Path | None = None) -> None:
+    """What a camera holds, from its models and (defensively) its report."""
+    rep = model.report if isinstance(model.report, dict) else {}
     lines = []
     if where is not None:
-        lines.append(f"camera written to {where}")
+        lines.append(f"camera written to {printable(where)}")
     h, w = model.image_shape
-    lines.append(f"image {w}x{h}, {model.bit_depth}-bit, channels {''.join(model.channels)}")
-    resp = rep.get("response", {})
-    if resp:
+    lines.append(f"image {w}x{h}, {model.bit_depth}-bit, channels {' '.join(model.channels)}")
+    profile = model.parameters.get("profile")
+    if isinstance(profile, str):
+        lines.append(f"profile: {profile}")
+    lines.append("methods: " + ", ".join(f"{k} {m.method}" for k, m in model.steps().items()))
+    resp = _section(rep, "response")
+    line = f"response: saturation {_fmt(model.response.saturation_level)}"
+    line += f", valid from {_fmt(model.response.valid_min)}"
+    if "n_samples" in resp:
+        line += f", samples {_fmt(resp['n_samples'])}"
+    if "residual_rms" in resp:
+        line += f", residual rms (ln) {_fmt(resp['residual_rms'])}"
+    lines.append(line)
+    lines.append(f"balance: {_fmt(model.balance.factors)}")
+    lut = _section(rep, "sensor_lut")
+    if "prnu_std" in lut:
         lines.append(
-            f"response: {resp.get('method')}, samples {_fmt(resp.get('n_samples', []))}, "
-            f"residual rms (ln) {_fmt(resp.get('residual_rms', []))}, "
-            f"saturation {_fmt(model.saturation_level)}"
+            f"sensor LUT: PRNU std {_fmt(lut['prnu_std'])}, flagged {lut.get('n_flagged')}"
         )
-    lines.append(f"balance: {_fmt(model.balance)}")
-    lut = rep.get("sensor_lut")
-    if lut:
-        lines.append(f"sensor LUT: PRNU std {_fmt(lut['prnu_std'])}, flagged {lut['n_flagged']}")
-    vig = rep.get("vignetting")
-    if vig:
+    vig = _section(rep, "vignetting")
+    if "n_tracks" in vig:
         lines.append(
-            f"vignetting: {vig['n_tracks']} correspondences used of {vig['n_tracks_given']} "
-            f"({vig['correspondence_source']}), {vig['n_pairs']} pairs, residual rms "
-            f"{_fmt(vig['residual_rms'])}"
+            f"vignetting: {vig.get('n_tracks')} correspondences used of "
+            f"{vig.get('n_tracks_given')} ({vig.get('correspondence_source')}), "
+            f"{vig.get('n_pairs')} pairs, residual rms {_fmt(vig.get('residual_rms'))}"
         )
-        for name, params in zip(model.channels, model.vignetting_params, strict=True):
-            lines.append(f"  {name}: m1..m6 = {_fmt(params)}")
-    for note in rep.get("notes", []):
+    params = getattr(model.vignetting, "params", None)
+    if (
+        isinstance(params, np.ndarray)
+        and params.ndim == 2
+        and params.shape[0] == len(model.channels)
+    ):
+        for name, row in zip(model.channels, params, strict=True):
+            lines.append(f"  {name}: {model.vignetting.method} {_fmt(row)}")
+    notes = rep.get("notes", [])
+    for note in notes if isinstance(notes, list) else []:
         lines.append(f"note: {note}")
-    timings = rep.get("timings_s", {})
+    timings = _section(rep, "timings_s")
     if timings:
-        lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()))
+        lines.append("time: " + ", ".join(f"{k} {_fmt(v)} s" for k, v in timings.items()))
     print("\n".join(lines))
 
 
+def printable(path: Any) -> str:
+    """A path as text that any terminal encoding can print (undecodable bytes escaped)."""
+    text = str(path)
+    encoding = getattr(sys.stdout, "encoding", None) or "utf-8"
+    return text.encode(encoding, "backslashreplace").decode(encoding, "replace")
+
+
 def _cmd_correct(args: argparse.Namespace) -> int:
-    from photoquant.correct import correct_manifest
+    from photoquant.correction import correct_manifest
     from photoquant.io.images import write_exr
     from photoquant.model import load_camera
 
@@ -156,65 +240,80 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
     model = load_camera(args.camera)
     if args.json:
-        print(json.dumps(model.to_json_dict()["parameters"] | {"report": model.report}, indent=1))
+        data = model.to_json_dict()
+        print(
+            json.dumps(
+                {k: data[k] for k in ("parameters", "report")}
+                | {"steps": {k: v["method"] for k, v in data["steps"].items()}},
+                indent=1,
+            )
+        )
     else:
         _print_summary(model)
     return 0
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    # the demo drives the simulator, which photoquant itself never imports
-    try:
-        from validation.demo import run_demo
-    except ImportError as exc:  # pragma: no cover - the distribution ships it
-        raise PhotoquantError(f"the demo needs the `validation` package: {exc}") from None
-    return run_demo(
-        output=args.output, seed=args.seed, quick=not args.full, overwrite=args.overwrite
-    )
+def _cmd_methods(args: argparse.Namespace) -> int:
+    import dataclasses
 
+    from photoquant.methods import STEPS, registry
+    from photoquant.profiles import PROFILES
 
-def _cmd_compare(args: argparse.Namespace) -> int:
-    # the comparison reads the simulator's truth, which photoquant itself never imports
-    try:
-        from validation.compare import (
-            compare_with_truth,
-            comparison_json,
-            format_comparison,
-            write_comparison_figures,
-        )
-    except ImportError as exc:  # pragma: no cover - the distribution ships it
-        raise PhotoquantError(f"compare needs the `validation` package: {exc}") from None
-    from photoquant.model import load_camera
-
-    model = load_camera(args.camera)
-    if args.figures is not None and Path(args.figures).exists() and not args.overwrite:
-        raise OutputExistsError(f"{args.figures} already exists (use --overwrite to replace it)")
-    rep = compare_with_truth(args.manifest, model, allow_outside=args.allow_outside)
-    if args.figures is not None:
-        paths = write_comparison_figures(
-            rep, model.channels, args.figures, overwrite=args.overwrite
-        )
-        print(f"figures: {', '.join(str(p) for p in paths)}", file=sys.stderr)
+    out: dict[str, Any] = {}
+    for step in STEPS:
+        out[step] = {}
+        for name, method in registry(step).items():
+            opts = {}
+            if method.options is not None:
+                opts = {
+                    f.name: method.options().__dict__[f.name]
+                    for f in dataclasses.fields(method.options)
+                }
+            out[step][name] = {
+                "options": opts,
+                "reference": method.reference,
+                "module": method.function.__module__,
+                "in profiles": [p for p, steps in PROFILES.items() if steps[step][0] == name],
+            }
     if args.json:
-        print(json.dumps(comparison_json(rep), indent=1))
-    else:
-        print(
-            format_comparison(
-                rep, model, f"photoquant compare — {args.manifest}, camera {args.camera}"
-            )
-        )
+        print(json.dumps(out, indent=1, default=str))
+        return 0
+    for step, methods in out.items():
+        print(f"{step}:")
+        for name, info in methods.items():
+            tag = f" (profiles: {', '.join(info['in profiles'])})" if info["in profiles"] else ""
+            print(f"  {name}{tag} — {info['module']}")
+            if info["options"]:
+                print("    options: " + ", ".join(f"{k}={v!r}" for k, v in info["options"].items()))
     return 0
 
 
-def _cmd_validate(args: argparse.Namespace) -> int:
-    # the validation job drives the simulator, which photoquant itself never imports
-    from validation.cli import run_validate
+COMMAND_ENTRY_POINTS = "photoquant.commands"
+"""Entry-point group of sub-commands other distributions add (``validate``,
+``demo`` and ``compare`` come from the ``validation`` package this way):
+each names a callable ``register(subparsers)`` that adds its sub-parser and
+sets ``func``."""
 
-    return run_validate(args)
+
+def _add_plugin_commands(sub: Any) -> None:
+    from importlib import metadata
+
+    for ep in sorted(metadata.entry_points(group=COMMAND_ENTRY_POINTS), key=lambda e: e.name):
+        try:
+            register = ep.load()
+        except Exception as exc:  # noqa: BLE001 - a broken plug-in must not break the CLI
+            print(
+                f"photoquant: warning: command {ep.name!r} could not load: {exc}", file=sys.stderr
+            )
+            continue
+        register(sub)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``photoquant`` command."""
+    from photoquant.profiles import DEFAULT_PROFILE, PROFILES
+    from photoquant.weighting import WEIGHTING_FUNCTIONS
+
     parser = argparse.ArgumentParser(
         prog="photoquant",
         description="Radiometric camera calibration and photoquantity measurement.",
@@ -225,27 +324,40 @@ def build_parser() -> argparse.ArgumentParser:
     cal = sub.add_parser("calibrate", help="calibrate a camera from a capture manifest")
     cal.add_argument("manifest", help="capture manifest (photoquant.captures/1 JSON)")
     cal.add_argument("-o", "--output", required=True, help="camera folder to write")
-    cal.add_argument("--smoothness", type=float, default=None, help="β of the response fit")
-    cal.add_argument("--samples", type=int, default=2000, help="pixels sampled per channel")
+    cal.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        default=DEFAULT_PROFILE,
+        help="the methods and options of every step: the paper's, or photoquant's (default)",
+    )
+    cal.add_argument(
+        "--method",
+        action="append",
+        metavar="STEP=NAME",
+        help="the method of a step (repeatable; `photoquant methods` lists them), "
+        "e.g. --method vignetting=None",
+    )
+    cal.add_argument(
+        "--option",
+        action="append",
+        metavar="STEP.NAME=VALUE",
+        help="an option of a step's method (repeatable; VALUE is JSON or text), "
+        "e.g. --option response.smoothness=300",
+    )
+    cal.add_argument("--smoothness", type=float, help="same as --option response.smoothness=B")
+    cal.add_argument("--samples", type=int, help="same as --option response.n_samples=N")
     cal.add_argument(
         "--balance-stage",
         choices=["uniformised", "linearised"],
-        default="uniformised",
-        help="read the white chart after (default) or before the LUT and vignetting",
+        help="same as --option balance.stage=S: read the white chart after (photoquant) or "
+        "before (paper) the LUT and vignetting",
     )
     cal.add_argument(
         "--merge-weighting",
         choices=sorted(WEIGHTING_FUNCTIONS),
-        default="hat-quantisation",
-        help="weighting of the HDR merges, kept for the correction (default hat-quantisation; "
-        "hat is the paper's exactly)",
+        help="same as --option merge.weighting=W (hat is the paper's exactly)",
     )
-    cal.add_argument(
-        "--merge-method",
-        choices=sorted(MERGE_METHODS),
-        default="Debevec 1997",
-        help="HDR merge method, kept for the correction (default: Debevec 1997)",
-    )
+    cal.add_argument("--merge-method", help="same as --method merge=NAME")
     cal.add_argument("--seed", type=int, default=0, help="seed of the sample selection")
     cal.set_defaults(func=_cmd_calibrate)
 
@@ -269,60 +381,25 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--json", action="store_true", help="machine-readable output")
     info.set_defaults(func=_cmd_info)
 
-    demo = sub.add_parser(
-        "demo", help="simulate a camera, calibrate it, correct a scene, compare with the truth"
-    )
-    demo.add_argument("-o", "--output", default=None, help="keep the capture set in this folder")
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--full", action="store_true", help="paper-sized images (slower)")
-    demo.add_argument("--overwrite", action="store_true")
-    demo.set_defaults(func=_cmd_demo)
+    meth = sub.add_parser("methods", help="list the methods of every step and their options")
+    meth.add_argument("--json", action="store_true", help="machine-readable output")
+    meth.set_defaults(func=_cmd_methods)
 
-    cmp_ = sub.add_parser(
-        "compare",
-        help="compare a calibrated camera with the ground truth of a synthetic capture set",
-    )
-    cmp_.add_argument("manifest", help="capture manifest written by `pqsim capture`")
-    cmp_.add_argument("--camera", required=True, help="camera folder from `photoquant calibrate`")
-    cmp_.add_argument("--json", action="store_true", help="machine-readable output")
-    cmp_.add_argument(
-        "--figures", metavar="DIR", help="write error maps (v, u, test scene) as PNGs here"
-    )
-    cmp_.add_argument("--overwrite", action="store_true", help="replace an existing DIR")
-    cmp_.add_argument(
-        "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"
-    )
-    cmp_.set_defaults(func=_cmd_compare)
-
-    try:
-        from validation.cli import add_validate_arguments
-    except ImportError:  # pragma: no cover - the distribution ships it
-        add_validate_arguments = None
-    if add_validate_arguments is not None:
-        val = sub.add_parser(
-            "validate",
-            help="reproduce the paper's results against ground truth (report, regression check)",
-        )
-        add_validate_arguments(val)
-        val.set_defaults(func=_cmd_validate)
+    _add_plugin_commands(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``photoquant`` command; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "smoothness", 0) is None:
-        from photoquant.response import DEFAULT_SMOOTHNESS
-
-        args.smoothness = DEFAULT_SMOOTHNESS
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
         return int(args.func(args) or 0)
     except PhotoquantError as exc:
-        print(f"photoquant: error: {exc}", file=sys.stderr)
+        print(f"photoquant: error: {printable(exc)}", file=sys.stderr)
         return EXIT_INPUT
     except OSError as exc:
-        print(f"photoquant: error: {exc}", file=sys.stderr)
+        print(f"photoquant: error: {printable(exc)}", file=sys.stderr)
         return EXIT_IO
     except KeyboardInterrupt:
         print("photoquant: interrupted", file=sys.stderr)

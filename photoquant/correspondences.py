@@ -48,14 +48,18 @@ import cv2
 import numpy as np
 from scipy.ndimage import maximum_filter
 
-from photoquant._checks import check_array, check_positive
+from photoquant._checks import check_array, check_int, check_positive
 from photoquant.errors import CalibrationError, InputError
+from photoquant.methods import REGISTRIES, Method
 
 __all__ = [
     "Correspondences",
     "tracks_to_observations",
     "sample_image",
     "find_correspondences_homography",
+    "HomographyOptions",
+    "find_correspondences_SIFTHomography",
+    "CORRESPONDENCE_METHODS",
 ]
 
 
@@ -510,3 +514,64 @@ def find_correspondences_homography(
         inliers=tuple(inliers),
         source=source,
     )
+
+
+# ---------------------------------------------------------------------------
+# The "correspondences" step
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class HomographyOptions:
+    """Options of the ``"SIFT Homography"`` correspondence finder.
+
+    See :func:`find_correspondences_homography` for each field.
+    """
+
+    reference: int = 0
+    max_points: int = 1500
+    margin: float = 0.05
+    max_gradient: float = 0.02
+    ratio: float = 0.75
+    min_inliers: int = 20
+    ransac_threshold: float = 2.0
+
+    def __post_init__(self) -> None:
+        check_int(self.reference, "reference", 0)
+        check_int(self.max_points, "max_points", 1)
+        check_int(self.min_inliers, "min_inliers", 4)
+        for name in ("margin", "max_gradient", "ratio", "ransac_threshold"):
+            check_positive(getattr(self, name), name, allow_zero=True)
+
+
+def find_correspondences_SIFTHomography(
+    uniform_views: Sequence[np.ndarray], options: HomographyOptions | None = None
+) -> list[np.ndarray]:
+    """The ``"correspondences"`` step: tracks ``[view, x, y]`` by SIFT + RANSAC homographies."""
+    opts = options or HomographyOptions()
+    found = find_correspondences_homography(
+        uniform_views,
+        reference=opts.reference,
+        max_points=opts.max_points,
+        margin=opts.margin,
+        max_gradient=opts.max_gradient,
+        ratio=opts.ratio,
+        min_inliers=opts.min_inliers,
+        ransac_threshold=opts.ransac_threshold,
+    )
+    return list(found.tracks)
+
+
+CORRESPONDENCE_METHODS = REGISTRIES["correspondences"]
+"""Correspondence finders by name: ``function(uniform_views, options) -> list of tracks``."""
+
+CORRESPONDENCE_METHODS.add(
+    Method(
+        "correspondences",
+        "SIFT Homography",
+        find_correspondences_SIFTHomography,
+        options=HomographyOptions,
+        reference="Lowe 2004, doi:10.1023/B:VISI.0000029664.99615.94; Fischler & Bolles 1981",
+    ),
+    replace=True,
+)

@@ -16,20 +16,27 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_array, check_exposure_times, check_int, validate_method
+from photoquant._checks import check_array, check_exposure_times, check_int
 from photoquant.errors import InputError
+from photoquant.methods import REGISTRIES, Method, options_from_mapping, options_to_dict
+from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
 
 __all__ = [
     "MERGE_METHODS",
+    "DebevecMergeOptions",
+    "MergeModel",
     "MergeResult",
     "merge_Debevec1997",
+    "merge_stack_Debevec1997",
     "merge_stack",
     "apply_log_inverse_response",
 ]
@@ -252,11 +259,128 @@ def merge_Debevec1997(
     )
 
 
-MERGE_METHODS: dict[str, Callable[..., MergeResult]] = {
-    "Debevec 1997": merge_Debevec1997,
-}
-"""HDR merge methods by name, with the signature of :func:`merge_Debevec1997`;
-:func:`merge_stack` dispatches (``method``)."""
+@dataclass(frozen=True)
+class DebevecMergeOptions:
+    """Options of the ``"Debevec 1997"`` merge (eq. 6).
+
+    Attributes
+    ----------
+    weighting : str
+        A weighting function of :data:`photoquant.weighting.WEIGHTING_FUNCTIONS`:
+        ``"hat-quantisation"`` (default, the hat reduced where one DN is a
+        coarse step in ``ln`` exposure) or ``"hat"`` (the paper's).
+    exclude_below_valid_min : bool
+        Give no weight to values below the response's ``valid_min``, where
+        the response fit had no data (default); the paper uses every value.
+    """
+
+    weighting: str = "hat-quantisation"
+    exclude_below_valid_min: bool = True
+
+    def __post_init__(self) -> None:
+        weighting_function(self.weighting)
+        if not isinstance(self.exclude_below_valid_min, bool):
+            raise InputError(
+                "`exclude_below_valid_min` must be true or false, "
+                f"got {self.exclude_below_valid_min!r}"
+            )
+
+
+def merge_stack_Debevec1997(
+    stack: ExposureStack, response: ResponseModel, options: DebevecMergeOptions | None = None
+) -> MergeResult:
+    """The ``"merge"`` step by eq. 6 of [PQ]_: denoise (eq. 2) and merge a stack with ``response``.
+
+    A value is left out when any of its repeats is clipped (at the response's
+    saturation level, or at the dark floor) and, with
+    ``exclude_below_valid_min``, when it lies below the response's
+    ``valid_min``. The merge works on the integer sums of the ``N`` repeats
+    through look-up tables (:func:`merge_Debevec1997`), which is exactly the
+    merge of the denoised means.
+    """
+    opts = options or DebevecMergeOptions()
+    values = stack.frames[0] if stack.n_repeats == 1 else stack.repeat_sum()
+    return merge_Debevec1997(
+        values,
+        stack.exposure_s,
+        response.levels,
+        response.log_inverse_response,
+        saturation_level=response.saturation_level,
+        saturated=stack.saturated(response.saturation_level),
+        dark_clipped=stack.dark_clipped(),
+        min_level=response.valid_min if opts.exclude_below_valid_min else None,
+        weighting=opts.weighting,
+        c_min=float(np.min(response.black_level)),
+        repeats=stack.n_repeats,
+    )
+
+
+MERGE_METHODS = REGISTRIES["merge"]
+"""HDR merge methods by name: ``function(stack, response, options) -> MergeResult``."""
+
+MERGE_METHODS.add(
+    Method(
+        "merge",
+        "Debevec 1997",
+        merge_stack_Debevec1997,
+        options=DebevecMergeOptions,
+        reference="Debevec & Malik 1997, eq. 6; [PQ] eq. 6",
+    ),
+    replace=True,
+)
+
+
+@dataclass(frozen=True)
+class MergeModel:
+    """The merge a camera uses: a method of :data:`MERGE_METHODS` and its options.
+
+    Stored in the camera so that :func:`photoquant.correction` merges a scene
+    exactly as calibration merged the views.
+    """
+
+    method: str = "Debevec 1997"
+    options: Any = None
+
+    def __post_init__(self) -> None:
+        entry = MERGE_METHODS[self.method]
+        options = self.options
+        if options is None or isinstance(options, Mapping):
+            options = options_from_mapping(entry, dict(options or {}))
+        elif entry.options is not None and not isinstance(options, entry.options):
+            raise InputError(
+                f"merge method {entry.name!r} takes {entry.options.__name__}, "
+                f"got {type(options).__name__}"
+            )
+        object.__setattr__(self, "method", entry.name)
+        object.__setattr__(self, "options", options)
+
+    def merge(self, stack: ExposureStack, response: ResponseModel) -> MergeResult:
+        """Merge ``stack`` (any ``N``, any exposure times) with ``response``."""
+        if not isinstance(stack, ExposureStack):
+            raise InputError(f"`stack` must be an ExposureStack, got {type(stack).__name__}")
+        if stack.n_channels != response.n_channels:
+            raise InputError(
+                f"the stack has {stack.n_channels} channels, the response {response.n_channels}"
+            )
+        result = MERGE_METHODS[self.method].function(stack, response, self.options)
+        if not isinstance(result, MergeResult):
+            raise InputError(
+                f"merge method {self.method!r} must return a MergeResult, got {type(result).__name__}"
+            )
+        return result
+
+    def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return {"options": options_to_dict(self.options)}, {}
+
+    @classmethod
+    def from_params(
+        cls, method: str, params: dict[str, Any], images: dict[str, np.ndarray]
+    ) -> MergeModel:
+        del images
+        options = params.get("options", {})
+        if not isinstance(options, dict):
+            raise InputError(f"the merge's `options` must be an object, got {options!r}")
+        return cls(method, options)
 
 
 def merge_stack(
@@ -269,25 +393,26 @@ def merge_stack(
     weighting: str = "hat",
     method: str = "Debevec 1997",
 ) -> MergeResult:
-    """Denoise (eq. 2) and merge (eq. 6) a stack with a known response.
+    """Denoise (eq. 2) and merge (eq. 6) a stack with a response given as arrays.
 
-    A value is left out when any of its repeats is clipped: at the saturation
-    level, or at the floor 0; and when it lies below ``min_level``, where the
-    response was not measured. ``method`` is a key of :data:`MERGE_METHODS`
-    (case-insensitive).
+    A convenience over :class:`MergeModel` for a response that is not a
+    :class:`ResponseModel`: values are left out when any repeat is clipped,
+    and below ``min_level`` (when given). ``method`` is a key of
+    :data:`MERGE_METHODS` (case-insensitive); ``weighting`` is passed to
+    methods that have that option.
     """
-    fn = MERGE_METHODS[validate_method(method, MERGE_METHODS, "merge")]
-    # integer frames (one repeat) or their integer sums: weights and g come from tables
-    values = stack.frames[0] if stack.n_repeats == 1 else stack.repeat_sum()
-    return fn(
-        values,
-        stack.exposure_s,
-        levels,
-        log_inverse_response,
-        saturation_level=np.asarray(saturation_level, dtype=np.float64),
-        saturated=stack.saturated(saturation_level),
-        dark_clipped=stack.dark_clipped(),
-        min_level=min_level,
-        weighting=weighting,
-        repeats=stack.n_repeats,
+    entry = MERGE_METHODS[method]
+    response = ResponseModel(
+        method="given",
+        levels=levels,
+        log_inverse_response=log_inverse_response,
+        saturation_level=saturation_level,
+        valid_min=min_level,
     )
+    options: dict[str, Any] = {}
+    names = set() if entry.options is None else {f.name for f in dataclasses.fields(entry.options)}
+    if "weighting" in names:
+        options["weighting"] = weighting
+    if "exclude_below_valid_min" in names:
+        options["exclude_below_valid_min"] = min_level is not None
+    return MergeModel(entry.name, options).merge(stack, response)

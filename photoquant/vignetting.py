@@ -45,15 +45,15 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 from scipy.optimize import least_squares
 
-from photoquant._checks import check_array, validate_method
+from photoquant._checks import check_array, check_int, check_positive
 from photoquant.errors import CalibrationError, InputError
+from photoquant.methods import REGISTRIES, Method, StepFit
 
 __all__ = [
     "VIGNETTING_PARAMETER_NAMES",
@@ -63,6 +63,11 @@ __all__ = [
     "vignetting_map",
     "VignettingFit",
     "fit_vignetting_ExtendedGoldmanChen",
+    "VignettingModel",
+    "ExtendedGoldmanChenVignetting",
+    "VignettingData",
+    "ExtendedGoldmanChenOptions",
+    "characterise_vignetting_ExtendedGoldmanChen",
     "VIGNETTING_METHODS",
     "fit_vignetting",
 ]
@@ -703,10 +708,230 @@ def fit_vignetting_ExtendedGoldmanChen(
     )
 
 
-VIGNETTING_METHODS: dict[str, Callable[..., VignettingFit]] = {
-    "Extended Goldman-Chen": fit_vignetting_ExtendedGoldmanChen,
-}
-"""Vignetting calibration methods, by name (see :func:`fit_vignetting`)."""
+# ---------------------------------------------------------------------------
+# The "vignetting" step: models, data, methods
+# ---------------------------------------------------------------------------
+
+
+class VignettingModel:
+    """Base of the vignetting models: ``v`` per channel as a function of the pixel position.
+
+    A subclass is a frozen dataclass with a ``method`` name and implements
+    :meth:`map`, :meth:`to_params` and :meth:`from_params`. ``v`` is 1 where
+    the model has no fall-off and must be positive over the image.
+    """
+
+    method: str
+
+    def map(self, image_shape: tuple[int, int]) -> np.ndarray:
+        """``v`` on the pixel grid, ``(H, W, C)`` float64."""
+        raise NotImplementedError
+
+    def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        raise NotImplementedError
+
+    @classmethod
+    def from_params(
+        cls, method: str, params: dict[str, Any], images: dict[str, np.ndarray]
+    ) -> VignettingModel:
+        raise NotImplementedError
+
+    def check_positive(self, image_shape: tuple[int, int]) -> None:
+        """Raise :class:`InputError` unless ``v`` is finite and positive over the image."""
+        v = self.map(image_shape)
+        if not np.all(np.isfinite(v)) or np.any(v <= 0):
+            raise InputError(
+                f"the {self.method!r} vignetting map is not positive over the image "
+                f"(min {np.nanmin(v):.3g}): it cannot be divided out"
+            )
+
+
+@dataclass(frozen=True, eq=False)
+class ExtendedGoldmanChenVignetting(VignettingModel):
+    """The paper's extended Goldman–Chen model (§5.5): ``m1 … m6`` per channel.
+
+    Parameters
+    ----------
+    method : str
+        The method that fitted it.
+    params : ndarray, shape (C, 6)
+        ``(m1, m2, m3, m4, m5, m6)`` per channel on normalised coordinates
+        (see :func:`vignetting_ExtendedGoldmanChen`).
+    """
+
+    method: str
+    params: np.ndarray
+
+    def __post_init__(self) -> None:
+        p = check_array(self.params, "vignetting params", ndim=2, kind="iuf", finite=True)
+        if p.shape[1] != _N_PARAMS:
+            raise InputError(
+                f"the extended Goldman-Chen model has {_N_PARAMS} parameters per channel "
+                f"({', '.join(VIGNETTING_PARAMETER_NAMES)}), got shape {p.shape}"
+            )
+        object.__setattr__(self, "params", p.astype(np.float64))
+
+    @classmethod
+    def identity(cls, n_channels: int) -> ExtendedGoldmanChenVignetting:
+        """``v ≡ 1``."""
+        return cls("None", np.tile(IDENTITY_VIGNETTING, (n_channels, 1)))
+
+    def map(self, image_shape: tuple[int, int]) -> np.ndarray:
+        return vignetting_map(self.params, image_shape)
+
+    def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return (
+            {
+                "model": "Extended Goldman-Chen",
+                "parameter_names": list(VIGNETTING_PARAMETER_NAMES),
+                "coordinates": "x_n = (x + 0.5) / W, y_n = (y + 0.5) / H",
+                "params": self.params.tolist(),
+            },
+            {},
+        )
+
+    @classmethod
+    def from_params(
+        cls, method: str, params: dict[str, Any], images: dict[str, np.ndarray]
+    ) -> ExtendedGoldmanChenVignetting:
+        del images
+        values = params["params"]
+        if not isinstance(values, list):
+            raise InputError(f"vignetting `params` must be a list of lists, got {values!r}")
+        try:
+            arr = np.asarray(values, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError("vignetting `params` must be numbers (C rows of 6)") from None
+        return cls(method, arr)
+
+
+@dataclass(frozen=True, eq=False)
+class VignettingData:
+    """What a vignetting method sees.
+
+    Attributes
+    ----------
+    uniform_views : list of ndarray, each (H, W, C)
+        ``exp(merge) / u`` of every view: linear, sensor-uniformised; NaN
+        where flagged.
+    tracks : list of ndarray, each (n, 3)
+        Correspondences ``[view, x, y]`` (pixels): one scene point per track.
+    image_shape : tuple of int
+        ``(H, W)``.
+    """
+
+    uniform_views: list[np.ndarray]
+    tracks: list[np.ndarray]
+    image_shape: tuple[int, int]
+
+
+@dataclass(frozen=True)
+class ExtendedGoldmanChenOptions:
+    """Options of the ``"Extended Goldman-Chen"`` vignetting fit (§5.5).
+
+    Attributes
+    ----------
+    normalise : {"track", "none"}
+        Residuals divided by their track's mean (default) or in value units
+        (the paper's).
+    scale_invariant : bool
+        Divide the residuals by the RMS of ``v`` (default): the gauge fix that
+        stops the fit from shrinking ``v`` towards 0; the paper's objective
+        taken literally has no such fix.
+    sample_radius : int
+        Half-size of the window averaged at each correspondence.
+    min_pairs, min_spread, max_uncertainty, max_nfev
+        See :func:`fit_vignetting_ExtendedGoldmanChen`.
+    """
+
+    normalise: str = "track"
+    scale_invariant: bool = True
+    sample_radius: int = 1
+    min_pairs: int = 30
+    min_spread: float = 0.25
+    max_uncertainty: float = 0.02
+    max_nfev: int = 2000
+
+    def __post_init__(self) -> None:
+        if self.normalise not in ("track", "none"):
+            raise InputError(f"`normalise` must be 'track' or 'none', got {self.normalise!r}")
+        if not isinstance(self.scale_invariant, bool):
+            raise InputError(
+                f"`scale_invariant` must be true or false, got {self.scale_invariant!r}"
+            )
+        check_int(self.sample_radius, "sample_radius", 0, 64)
+        check_int(self.min_pairs, "min_pairs", 1)
+        check_int(self.max_nfev, "max_nfev", 1)
+        for name in ("min_spread", "max_uncertainty"):
+            check_positive(getattr(self, name), name, allow_zero=True)
+
+
+def characterise_vignetting_ExtendedGoldmanChen(
+    data: VignettingData, options: ExtendedGoldmanChenOptions | None = None
+) -> StepFit[ExtendedGoldmanChenVignetting]:
+    """The ``"vignetting"`` step by the extended Goldman–Chen model (§5.5 of [PQ]_).
+
+    Samples every view at the correspondences (a ``(2r+1)²`` window mean)
+    and fits ``m1 … m6`` per channel by Levenberg–Marquardt
+    (:func:`fit_vignetting_ExtendedGoldmanChen`). A fit that cannot be
+    trusted is a :class:`CalibrationError`, never a number.
+    """
+    from photoquant.correspondences import sample_image, tracks_to_observations
+
+    opts = options or ExtendedGoldmanChenOptions()
+    n_views = len(data.uniform_views)
+    view_idx, xy, track_idx = tracks_to_observations(data.tracks)
+    if view_idx.size and (view_idx.min() < 0 or view_idx.max() >= n_views):
+        raise InputError(
+            f"a correspondence names view {int(view_idx.max())}, there are {n_views} views"
+        )
+    n_ch = data.uniform_views[0].shape[-1]
+    values = np.full((view_idx.size, n_ch), np.nan)
+    for v in range(n_views):
+        sel = view_idx == v
+        if np.any(sel):
+            values[sel] = sample_image(data.uniform_views[v], xy[sel], radius=opts.sample_radius)
+    fit = fit_vignetting_ExtendedGoldmanChen(
+        values,
+        xy,
+        view_idx,
+        track_idx,
+        data.image_shape,
+        normalise=opts.normalise,  # type: ignore[arg-type]
+        scale_invariant=opts.scale_invariant,
+        min_pairs=opts.min_pairs,
+        min_spread=opts.min_spread,
+        max_uncertainty=opts.max_uncertainty,
+        max_nfev=opts.max_nfev,
+    )
+    if not np.all(fit.converged):
+        raise CalibrationError(f"the vignetting fit cannot be trusted: {fit.message}")
+    report = {
+        "n_tracks_given": len(data.tracks),
+        "n_tracks": fit.n_tracks,
+        "n_pairs": fit.n_pairs,
+        "n_observations": fit.n_observations,
+        "residual_rms": fit.residual_rms,
+        "map_uncertainty": fit.map_uncertainty,
+        "message": fit.message,
+    }
+    return StepFit(ExtendedGoldmanChenVignetting("Extended Goldman-Chen", fit.params), report)
+
+
+VIGNETTING_METHODS = REGISTRIES["vignetting"]
+"""Vignetting methods by name: ``function(data: VignettingData, options) -> StepFit``."""
+
+VIGNETTING_METHODS.add(
+    Method(
+        "vignetting",
+        "Extended Goldman-Chen",
+        characterise_vignetting_ExtendedGoldmanChen,
+        options=ExtendedGoldmanChenOptions,
+        model=ExtendedGoldmanChenVignetting,
+        reference="[PQ] §5.5; Goldman & Chen 2005, doi:10.1109/ICCV.2005.249",
+    ),
+    replace=True,
+)
 
 
 def fit_vignetting(
@@ -719,27 +944,46 @@ def fit_vignetting(
     method: Literal["Extended Goldman-Chen"] | str = "Extended Goldman-Chen",
     **kwargs: Any,
 ) -> VignettingFit:
-    """Fit a vignetting model with the named method of :data:`VIGNETTING_METHODS`.
+    """Fit the extended Goldman–Chen model to observations (array level).
 
     Parameters
     ----------
     values, xy, view, track, image_shape
         See :func:`fit_vignetting_ExtendedGoldmanChen`.
     method : str
-        Name of the method, case-insensitive.
+        Must name the ``"Extended Goldman-Chen"`` method (the only one with
+        this array-level interface); the step-level entry point for any
+        registered method is :func:`photoquant.calibration.fit_vignetting_step`.
     **kwargs
-        Keyword arguments of the method.
+        Keyword arguments of :func:`fit_vignetting_ExtendedGoldmanChen`.
 
     Returns
     -------
     VignettingFit
-
-    Raises
-    ------
-    InputError
-        Unknown method (the message lists the valid ones) or bad arguments.
-    CalibrationError
-        The data cannot constrain the model.
     """
-    key = validate_method(method, VIGNETTING_METHODS, "vignetting")
-    return VIGNETTING_METHODS[key](values, xy, view, track, image_shape, **kwargs)
+    entry = VIGNETTING_METHODS[method]
+    if entry.function is not characterise_vignetting_ExtendedGoldmanChen:
+        raise InputError(
+            f"fit_vignetting works on observations for 'Extended Goldman-Chen' only, not "
+            f"{entry.name!r}"
+        )
+    return fit_vignetting_ExtendedGoldmanChen(values, xy, view, track, image_shape, **kwargs)
+
+
+def characterise_vignetting_None(
+    data: VignettingData, options: None = None
+) -> StepFit[ExtendedGoldmanChenVignetting]:
+    """No vignetting correction: ``v = 1``."""
+    del options
+    return StepFit(ExtendedGoldmanChenVignetting.identity(data.uniform_views[0].shape[-1]))
+
+
+VIGNETTING_METHODS.add(
+    Method(
+        "vignetting",
+        "None",
+        characterise_vignetting_None,
+        model=ExtendedGoldmanChenVignetting,
+    ),
+    replace=True,
+)

@@ -37,15 +37,17 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
 
     assert main(["info", str(cam), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
-    assert info["n_views"] == 3 and "report" in info
-    assert info["merge_weighting"] == "hat-quantisation" and info["merge_method"] == "Debevec 1997"
+    assert info["parameters"]["n_views"] == 3 and "report" in info
+    merge = info["parameters"]["steps"]["merge"]
+    assert merge["options"]["weighting"] == "hat-quantisation" and merge["method"] == "Debevec 1997"
+    assert info["steps"]["vignetting"] == "Extended Goldman-Chen"
 
     # the paper's plain hat, kept in the camera for the correction
     paper = tmp_path / "paper"
     assert (
         main(["calibrate", str(capture), "-o", str(paper), "-q", "--merge-weighting", "hat"]) == 0
     )
-    assert load_camera(paper).parameters["merge_weighting"] == "hat"
+    assert load_camera(paper).merge.options.weighting == "hat"
     capsys.readouterr()
 
 

@@ -13,8 +13,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from photoquant.calibrate import calibrate_manifest
-from photoquant.correct import correct, correct_manifest
+from photoquant.calibration import calibrate_manifest
+from photoquant.correction import correct, correct_manifest
 from photoquant.weighting import weighting_hat_Debevec1997
 from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera.presets import camera_from_preset
@@ -48,14 +48,16 @@ def calibrated(request, tmp_path_factory):
 def test_response_matches_truth(calibrated):
     _, _, truth, model = calibrated
     for ch in range(3):
-        levels = model.response_levels
-        w = weighting_hat_Debevec1997(levels, 0, model.saturation_level[ch])
+        levels = model.response.levels
+        w = weighting_hat_Debevec1997(levels, 0, model.response.saturation_level[ch])
         g_true = truth.camera.inverse_response_ln(levels, ch)
-        rms, _ = response_error(model.log_inverse_response[ch], g_true, np.where(w >= 0.05, w, 0))
+        rms, _ = response_error(
+            model.response.log_inverse_response[ch], g_true, np.where(w >= 0.05, w, 0)
+        )
         # an error δ in g is a relative error δ in every photoquantity merged
         # from that level: the method's 0.5 % budget bounds it
         assert rms < 0.005, (ch, rms)
-    np.testing.assert_array_equal(model.saturation_level, truth.camera.saturation_dn)
+    np.testing.assert_array_equal(model.response.saturation_level, truth.camera.saturation_dn)
 
 
 def test_balance_within_one_percent(calibrated):
@@ -71,7 +73,7 @@ def test_balance_within_one_percent(calibrated):
 def test_sensor_lut_below_the_prnu_floor_and_at_its_noise(calibrated):
     _, _, truth, model = calibrated
     u_true = truth.camera.sensor_lut
-    err = np.abs(model.sensor_lut - u_true) / u_true
+    err = np.abs(model.sensor_lut.lut - u_true) / u_true
     prnu_floor = np.mean(np.abs(u_true - 1))  # the error of assuming u = 1
     assert err.mean() < prnu_floor
     # the LUT is a merged irradiance image: its error is that image's noise,
@@ -84,7 +86,7 @@ def test_sensor_lut_below_the_prnu_floor_and_at_its_noise(calibrated):
 
 def test_vignetting_map_within_one_percent(calibrated):
     _, _, truth, model = calibrated
-    stats = map_relative_error(truth.camera.vignetting, model.vignetting())
+    stats = map_relative_error(truth.camera.vignetting, model.vignetting_map())
     assert stats.e_mean < 0.01, stats
     assert model.report["vignetting"]["n_tracks"] >= 100
 
@@ -206,4 +208,4 @@ def test_correspondences_are_found_automatically_without_the_manifest_tracks(tmp
     assert vig["correspondence_source"].startswith("automatic")
     assert vig["n_tracks"] >= 100
     truth = load_truth(tmp_path / "cap" / "truth")
-    assert map_relative_error(truth.camera.vignetting, model.vignetting()).e_mean < 0.01
+    assert map_relative_error(truth.camera.vignetting, model.vignetting_map()).e_mean < 0.01

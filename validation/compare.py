@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from photoquant.correct import correct, correct_manifest
+from photoquant.correction import correct, correct_manifest
 from photoquant.errors import InputError
 from photoquant.io import extra_frameset, extra_path, load_manifest, load_stack
 from photoquant.model import CameraModel
@@ -152,17 +152,17 @@ def compare_with_truth(
             f"the truth's channels {tuple(cam.channels)} differ from the camera's "
             f"{tuple(model.channels)}"
         )
-    if tuple(cam.sensor_lut.shape[:2]) != tuple(model.sensor_lut.shape[:2]):
+    if tuple(cam.sensor_lut.shape[:2]) != tuple(model.image_shape):
         raise InputError(
             f"the truth's image size {cam.sensor_lut.shape[:2]} differs from the camera's "
-            f"{model.sensor_lut.shape[:2]}"
+            f"{tuple(model.image_shape)}"
         )
     out: dict[str, Any] = {"response": [], "balance": {}, "lut": {}, "vignetting": {}}
     for ch in range(cam.n_channels):
-        w = weighting_hat_Debevec1997(model.response_levels, 0, model.saturation_level[ch])
+        w = weighting_hat_Debevec1997(model.response.levels, 0, model.response.saturation_level[ch])
         rms, worst = response_error(
-            model.log_inverse_response[ch],
-            cam.inverse_response_ln(model.response_levels, ch),
+            model.response.log_inverse_response[ch],
+            cam.inverse_response_ln(model.response.levels, ch),
             np.where(w >= 0.05, w, 0.0),
         )
         out["response"].append({"rms": rms, "max": worst})
@@ -175,19 +175,20 @@ def compare_with_truth(
     scene_l = white_reference(scene.l, white / white[min(1, white.size - 1)])
     ratios = channel_scale_ratios(scene_l, res.photoquantity, res.mask)
     out["balance"] = {
-        "factors": model.balance.tolist(),
+        "factors": model.balance.factors.tolist(),
         "channel_error": (ratios - 1).tolist(),
         "white_chart_truth": white.tolist(),
     }
-    lut_err = map_relative_error(cam.sensor_lut, model.sensor_lut)
+    lut_err = map_relative_error(cam.sensor_lut, model.sensor_lut.lut)
     out["lut"] = {"error": lut_err, "prnu_floor": float(np.mean(np.abs(cam.sensor_lut - 1)))}
     out["maps"] = {
-        "sensor_lut": (np.asarray(model.sensor_lut, float) - cam.sensor_lut) / cam.sensor_lut,
-        "vignetting": (np.asarray(model.vignetting(), float) - cam.vignetting) / cam.vignetting,
+        "sensor_lut": (np.asarray(model.sensor_lut.lut, float) - cam.sensor_lut) / cam.sensor_lut,
+        "vignetting": (np.asarray(model.vignetting_map(), float) - cam.vignetting) / cam.vignetting,
     }
     out["vignetting"] = {
-        "error": map_relative_error(cam.vignetting, model.vignetting()),
-        "params": model.vignetting_params,
+        "error": map_relative_error(cam.vignetting, model.vignetting_map()),
+        "method": model.vignetting.method,
+        "params": getattr(model.vignetting, "params", None),
         "true_params": None if cam.vignetting_params is None else np.asarray(cam.vignetting_params),
     }
     e, stats, _ = relative_error_eq8(scene_l, res.photoquantity, res.mask)

@@ -111,8 +111,8 @@ class ValidationConfig:
     n_samples : int
         Pixels sampled for the response (photoquant's default, 2000).
     calibrate_kwargs : mapping
-        Extra keyword arguments of :func:`photoquant.calibrate.calibrate`
-        (e.g. ``{"smoothness": 1e8}`` to break it on purpose).
+        Extra keyword arguments of :func:`photoquant.calibration.calibrate`
+        (per-step specs, e.g. ``{"response": {"smoothness": 1e8}}`` to break it on purpose, or ``{"profile": "paper"}``).
     skip_vignetting : bool
         Calibrate from view 0 only, so that vignetting is left at 1 (a broken
         calibrator for the regression check's tests).

@@ -16,7 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from photoquant.calibrate import calibrate_manifest
+from photoquant.calibration import calibrate_manifest
 from photoquant.errors import OutputExistsError
 from photoquant.io import write_exr
 from pqsim.capture_set import write_capture_set

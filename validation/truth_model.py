@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from photoquant.balance import BalanceModel
+from photoquant.flatfield import SensorLUTModel
+from photoquant.merge import MergeModel
 from photoquant.model import CameraModel
-from photoquant.response import response_levels
-from photoquant.vignetting import IDENTITY_VIGNETTING
+from photoquant.response import ResponseModel, response_levels
+from photoquant.vignetting import IDENTITY_VIGNETTING, ExtendedGoldmanChenVignetting
 
 __all__ = ["camera_model_from_truth", "white_reference"]
 
@@ -37,13 +40,20 @@ def camera_model_from_truth(camera, *, weighting: str = "hat-quantisation") -> C
         image_shape=camera.image_shape,
         channels=camera.channels,
         bit_depth=camera.bit_depth,
-        response_levels=levels,
-        log_inverse_response=g,
-        saturation_level=np.asarray(camera.saturation_dn, dtype=np.float64),
-        balance=np.ones(camera.n_channels),
-        sensor_lut=np.asarray(camera.sensor_lut, dtype=np.float32),
-        vignetting_params=vig,
-        parameters={"merge_weighting": weighting, "source": "ground truth"},
+        response=ResponseModel(
+            "ground truth",
+            levels,
+            g,
+            np.asarray(camera.saturation_dn, dtype=np.float64),
+            valid_min=np.zeros(camera.n_channels),
+        ),
+        merge=MergeModel(
+            "Debevec 1997", {"weighting": weighting, "exclude_below_valid_min": False}
+        ),
+        balance=BalanceModel("ground truth", np.ones(camera.n_channels)),
+        sensor_lut=SensorLUTModel("ground truth", np.asarray(camera.sensor_lut, np.float32)),
+        vignetting=ExtendedGoldmanChenVignetting("ground truth", vig),
+        parameters={"source": "ground truth"},
     )
 
 

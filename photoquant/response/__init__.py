@@ -1,54 +1,104 @@
 """Camera response recovery: ``g_λ = ln f_λ⁻¹`` per channel.
 
-``RESPONSE_METHODS`` maps method names to functions with the signature of
-:func:`camera_response_Debevec1997`; :func:`recover_response` dispatches.
+Every response method takes an :class:`~photoquant.stack.ExposureStack`, its
+options and a random generator, and returns a
+:class:`~photoquant.methods.StepFit` holding a :class:`ResponseModel` (the
+one result type of the step) and a report. :data:`RESPONSE_METHODS` is the
+step's registry; :func:`recover_response` dispatches.
+
+Methods
+-------
+- ``"Debevec 1997"``: :func:`characterise_response_Debevec1997` (eq. 7 of the paper).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
-from photoquant._checks import validate_method
+from photoquant.errors import InputError
+from photoquant.methods import REGISTRIES, Method, StepFit, resolve_method
 from photoquant.response.debevec1997 import (
     DEFAULT_SMOOTHNESS,
+    SAMPLING_METHODS,
+    DebevecResponseOptions,
     ResponseRecovery,
     camera_response_Debevec1997,
+    characterise_response_Debevec1997,
     response_levels,
     select_samples_histogram,
+    select_samples_random,
 )
+from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
 __all__ = [
     "DEFAULT_SMOOTHNESS",
     "RESPONSE_METHODS",
+    "SAMPLING_METHODS",
+    "DebevecResponseOptions",
+    "ResponseModel",
     "ResponseRecovery",
     "camera_response_Debevec1997",
+    "characterise_response_Debevec1997",
     "recover_response",
+    "fit_response",
     "response_levels",
     "select_samples_histogram",
+    "select_samples_random",
 ]
 
-RESPONSE_METHODS: dict[str, Callable[..., ResponseRecovery]] = {
-    "Debevec 1997": camera_response_Debevec1997,
-}
+RESPONSE_METHODS = REGISTRIES["response"]
+"""Response methods by name (:class:`~photoquant.methods.MethodRegistry`)."""
+
+RESPONSE_METHODS.add(
+    Method(
+        "response",
+        "Debevec 1997",
+        characterise_response_Debevec1997,
+        options=DebevecResponseOptions,
+        model=ResponseModel,
+        reference="Debevec & Malik 1997, doi:10.1145/258734.258884",
+    ),
+    replace=True,
+)
+
+
+def fit_response(
+    stack: ExposureStack,
+    spec: Any = None,
+    *,
+    rng: np.random.Generator | int | None = 0,
+) -> StepFit[ResponseModel]:
+    """Run the response step: the method of ``spec`` (a name, ``(name, options)``, …).
+
+    ``spec=None`` is the default method with its default options; see
+    :func:`photoquant.methods.resolve_method` for the accepted specs.
+    """
+    method, options = resolve_method("response", spec, ("Debevec 1997", {}))
+    if not isinstance(stack, ExposureStack):
+        raise InputError(f"`stack` must be an ExposureStack, got {type(stack).__name__}")
+    fit = method.function(stack, options, rng)
+    if not isinstance(fit, StepFit) or not isinstance(fit.model, ResponseModel):
+        raise InputError(
+            f"response method {method.name!r} must return StepFit(ResponseModel, report), "
+            f"got {type(fit).__name__}"
+        )
+    return fit
 
 
 def recover_response(
-    stack: ExposureStack, method: str = "Debevec 1997", **kwargs
-) -> ResponseRecovery:
-    """Recover the response of each channel from an :class:`ExposureStack`.
+    stack: ExposureStack,
+    method: str = "Debevec 1997",
+    *,
+    rng: np.random.Generator | int | None = 0,
+    **options: Any,
+) -> ResponseModel:
+    """Recover the response of each channel of ``stack`` with the named method.
 
-    The stack is denoised (eq. 2) and values with a repeat clipped at the
-    saturation level or at the floor 0 are excluded. ``kwargs`` go to the method.
+    ``options`` are the method's options (e.g. ``smoothness=`` for
+    ``"Debevec 1997"``). Returns the :class:`ResponseModel`; use
+    :func:`fit_response` for the report as well.
     """
-    fn = RESPONSE_METHODS[validate_method(method, RESPONSE_METHODS, "response")]
-    return fn(
-        stack.mean(),
-        stack.exposure_s,
-        bit_depth=stack.bit_depth,
-        saturation_level=np.asarray(stack.saturation_level),
-        saturated=stack.saturated() | stack.dark_clipped(),
-        **kwargs,
-    )
+    return fit_response(stack, (method, options), rng=rng).model

@@ -64,9 +64,14 @@ from photoquant._checks import (
     check_array,
     check_bit_depth,
     check_exposure_times,
+    check_int,
     check_positive,
+    validate_method,
 )
 from photoquant.errors import CalibrationError, InputError
+from photoquant.methods import StepFit
+from photoquant.response.model import ResponseModel
+from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
 
 __all__ = [
@@ -74,6 +79,10 @@ __all__ = [
     "response_levels",
     "select_samples_histogram",
     "camera_response_Debevec1997",
+    "select_samples_random",
+    "SAMPLING_METHODS",
+    "DebevecResponseOptions",
+    "characterise_response_Debevec1997",
     "DEFAULT_SMOOTHNESS",
 ]
 
@@ -219,6 +228,35 @@ def select_samples_histogram(
     return np.sort(usable[chosen])
 
 
+def select_samples_random(
+    values: np.ndarray,
+    valid: np.ndarray,
+    c_max: float,
+    n_samples: int,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Choose ``n_samples`` pixels uniformly at random among those with two valid exposures.
+
+    The selection of [Debevec1997]_ and [PQ]_ ("a subset of the set of image
+    points"); same arguments and result as :func:`select_samples_histogram`
+    (``c_max`` is unused).
+    """
+    del c_max
+    usable = np.flatnonzero(valid.sum(axis=0) >= 2)
+    if usable.size <= n_samples:
+        return usable
+    del values
+    return np.sort(rng.choice(usable, size=n_samples, replace=False))
+
+
+SAMPLING_METHODS = {
+    "histogram": select_samples_histogram,
+    "random": select_samples_random,
+}
+"""Pixel selections for the response fit, by name (``sampling`` of
+:func:`camera_response_Debevec1997`)."""
+
+
 def _solve_channel(
     values: np.ndarray,
     valid: np.ndarray,
@@ -315,6 +353,7 @@ def camera_response_Debevec1997(
     rng: np.random.Generator | int | None = 0,
     c_min: float = 0.0,
     min_support: float = 10.0,
+    sampling: str = "histogram",
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -345,6 +384,12 @@ def camera_response_Debevec1997(
     min_support : float
         Data equations a level needs to count as measured (see
         :attr:`ResponseRecovery.valid_min`).
+    sampling : {"histogram", "random"}
+        How the pixels ``P⁻`` are chosen: from every value bin of every
+        exposure (:func:`select_samples_histogram`, default), or uniformly at
+        random among the pixels with two usable exposures
+        (:func:`select_samples_random`, the paper's "subset of the set of
+        image points").
 
     Returns
     -------
@@ -372,6 +417,7 @@ def camera_response_Debevec1997(
     else:
         saturated = check_array(saturated, "saturated", shape=values.shape, kind="b")
     wfun = weighting_function(weighting)
+    sampler = SAMPLING_METHODS[validate_method(sampling, SAMPLING_METHODS, "sampling")]
     if not isinstance(rng, np.random.Generator):
         rng = np.random.default_rng(rng)
 
@@ -388,7 +434,7 @@ def camera_response_Debevec1997(
     for ch in range(n_ch):
         vals = values[..., ch].reshape(k_count, -1)
         valid = (vals > c_min) & (vals < sat[ch]) & ~saturated[..., ch].reshape(k_count, -1)
-        idx = select_samples_histogram(vals, valid, sat[ch], int(n_samples), rng)
+        idx = sampler(vals, valid, sat[ch], int(n_samples), rng)
         weights = wfun(vals[:, idx], c_min, sat[ch])
         valid_idx = valid[:, idx] & (weights > 0)
         if idx.size < 2:
@@ -435,3 +481,107 @@ def camera_response_Debevec1997(
         smoothness=smoothness,
         valid_min=valid_min,
     )
+
+
+# ---------------------------------------------------------------------------
+# The method as a plug-in of the "response" step
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DebevecResponseOptions:
+    """Options of the ``"Debevec 1997"`` response method (see :func:`camera_response_Debevec1997`).
+
+    Attributes
+    ----------
+    smoothness : float
+        β of eq. 7 (weights scaled to a peak of 1).
+    n_samples : int
+        Pixels sampled per channel (the paper used 500).
+    weighting : str
+        Weighting function of the data and smoothness terms (the paper's hat).
+    sampling : {"histogram", "random"}
+        Pixel selection (:data:`SAMPLING_METHODS`).
+    max_levels : int
+        Most unknowns per channel (levels are binned above it).
+    min_support : float
+        Data equations a level needs to count as measured.
+    """
+
+    smoothness: float = DEFAULT_SMOOTHNESS
+    n_samples: int = 2000
+    weighting: str = "hat"
+    sampling: str = "histogram"
+    max_levels: int = 1024
+    min_support: float = 10.0
+
+    def __post_init__(self) -> None:
+        check_positive(self.smoothness, "smoothness", allow_zero=True)
+        check_int(self.n_samples, "n_samples", 2)
+        check_int(self.max_levels, "max_levels", 16)
+        check_positive(self.min_support, "min_support", allow_zero=True)
+        weighting_function(self.weighting)
+        validate_method(self.sampling, SAMPLING_METHODS, "sampling")
+
+
+def characterise_response_Debevec1997(
+    stack: ExposureStack,
+    options: DebevecResponseOptions | None = None,
+    rng: np.random.Generator | int | None = 0,
+) -> StepFit[ResponseModel]:
+    """Recover the response of a stack by [Debevec1997]_ (the ``"response"`` step's signature).
+
+    The stack is denoised (eq. 2); values with a repeat clipped at the
+    saturation level or at the dark floor are excluded.
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        One view at ``K ≥ 2`` exposure times.
+    options : DebevecResponseOptions, optional
+        The method's options (defaults when not given).
+    rng : numpy.random.Generator or int or None
+        Randomness of the sample selection.
+
+    Returns
+    -------
+    StepFit
+        A :class:`~photoquant.response.model.ResponseModel` and the fit's
+        diagnostics (samples, equations, residuals, monotonicity).
+    """
+    opts = options or DebevecResponseOptions()
+    black = getattr(stack, "black_level", None)
+    c_min = 0.0 if black is None else float(np.min(black))
+    rec = camera_response_Debevec1997(
+        stack.mean(),
+        stack.exposure_s,
+        bit_depth=stack.bit_depth,
+        saturation_level=np.asarray(stack.saturation_level),
+        saturated=stack.saturated() | stack.dark_clipped(),
+        smoothness=opts.smoothness,
+        n_samples=opts.n_samples,
+        weighting=opts.weighting,
+        sampling=opts.sampling,
+        max_levels=opts.max_levels,
+        min_support=opts.min_support,
+        rng=rng,
+        c_min=c_min,
+    )
+    model = ResponseModel(
+        method="Debevec 1997",
+        levels=rec.levels,
+        log_inverse_response=rec.log_inverse_response,
+        saturation_level=rec.saturation_level,
+        valid_min=rec.valid_min,
+        black_level=None if black is None else black,
+        params={"smoothness": rec.smoothness},
+    )
+    report = {
+        "n_samples": rec.n_samples,
+        "n_equations": rec.n_equations,
+        "residual_rms": rec.residual_rms,
+        "monotone_constrained": rec.monotone_constrained,
+        "saturation_level": rec.saturation_level,
+        "valid_min": rec.valid_min,
+    }
+    return StepFit(model, report)

@@ -173,15 +173,20 @@ def test_repeats_needs_integer_sums():
         merge_Debevec1997(np.full((2, 1, 1, 1), 10), [1.0, 2.0], LEVELS, g, repeats=0)
 
 
-def test_merge_methods_registry_dispatches_through_calibrate_and_correct(monkeypatch, rng):
-    """A merge method registered by name is used by merge_stack, stored by calibrate, used by correct."""
-    from photoquant import merge as merge_module
-    from photoquant.calibrate import calibrate
-    from photoquant.correct import correct
-    from photoquant.merge import MERGE_METHODS, merge_stack
+def test_merge_methods_registry_dispatches_through_calibrate_and_correct(rng, tmp_path):
+    """A merge method registered by name is used by merge_stack, stored by calibrate, used by correct.
+
+    The method receives the stack (denoised means and N through the stack) and
+    the response model, never integer sums with a repeat count to honour.
+    """
+    from photoquant.calibration import calibrate
+    from photoquant.correction import correct
+    from photoquant.merge import MERGE_METHODS, merge_stack, merge_stack_Debevec1997
+    from photoquant.methods import register_method
+    from photoquant.model import load_camera
     from photoquant.stack import ExposureStack
 
-    assert MERGE_METHODS["Debevec 1997"] is merge_Debevec1997
+    assert MERGE_METHODS["Debevec 1997"].function is merge_stack_Debevec1997
     frames = capture(log_uniform_scene(rng, (10, 12, 3)), EXPOSURES, balance=BALANCE)
     stack = ExposureStack(frames.astype(np.uint8), EXPOSURES)
     g = _true_table()
@@ -194,15 +199,20 @@ def test_merge_methods_registry_dispatches_through_calibrate_and_correct(monkeyp
 
     calls = []
 
-    def traced(*args, **kwargs):
-        calls.append(kwargs.get("repeats"))
-        return merge_Debevec1997(*args, **kwargs)
+    def traced(stack, response, options):
+        calls.append((stack.n_repeats, response.method))
+        return merge_stack_Debevec1997(stack, response, None)
 
-    monkeypatch.setitem(merge_module.MERGE_METHODS, "Traced", traced)
-    model = calibrate([stack], merge_method="traced")
-    assert model.parameters["merge_method"] == "Traced" and calls
-    n_calls = len(calls)
-    correct(stack, model)
-    assert len(calls) == n_calls + 1
-    with pytest.raises(InputError, match="unknown merge method"):
-        calibrate([stack], merge_method="nope")
+    register_method("merge", "Traced", traced)
+    try:
+        model = calibrate([stack], merge="traced")
+        assert model.parameters["steps"]["merge"]["method"] == "Traced" and calls
+        n_calls = len(calls)
+        correct(stack, model)
+        assert len(calls) == n_calls + 1
+        model.save(tmp_path / "cam")
+        assert load_camera(tmp_path / "cam").merge.method == "Traced"
+        with pytest.raises(InputError, match="unknown merge method"):
+            calibrate([stack], merge="nope")
+    finally:
+        MERGE_METHODS.remove("Traced")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.stats import spearmanr
 
-from photoquant.calibrate import calibrate_manifest
+from photoquant.calibration import calibrate_manifest
 from photoquant.io import load_manifest, load_stack
 from photoquant.merge import apply_log_inverse_response, merge_stack
 
@@ -48,12 +48,12 @@ def test_real_bracket_calibrates_and_merges(frobisher):
     notes = " ".join(model.report["notes"])
     assert "sensor LUT left at 1" in notes and "vignetting left at 1" in notes
     assert "colour balance left at 1" in notes
-    g = model.log_inverse_response
+    g = model.response.log_inverse_response
     assert np.all(np.diff(g, axis=1) >= 0), "response must be monotonic in every channel"
 
     m = load_manifest(frobisher)
     stack = load_stack(m.views[0], m)
-    merged = merge_stack(stack, model.response_levels, g, model.saturation_level)
+    merged = merge_stack(stack, model.response.levels, g, model.response.saturation_level)
     assert merged.mask.mean() < 0.05  # a normal outdoor bracket: few pixels unmeasurable
     values = stack.mean()
     for k, t in enumerate(stack.exposure_s):
@@ -67,6 +67,6 @@ def test_real_bracket_calibrates_and_merges(frobisher):
         # JPEG value c of a gamma ~2.2 tone curve is known to ±0.5 DN, i.e.
         # 2.2·0.5/c in ln; at the typical c ~ 75 that is 1.5 %; two frames
         # disagree by up to twice that, and the median must stay within it.
-        own = apply_log_inverse_response(v, model.response_levels, g) - np.log(t)
+        own = apply_log_inverse_response(v, model.response.levels, g) - np.log(t)
         diff = np.abs(merged.log_photoquantity - own)[well]
         assert np.median(diff) < 2 * 2.2 * 0.5 / 75

@@ -255,7 +255,7 @@ def test_photoquant_calibrates_and_corrects_the_rendered_set(rendered, tmp_path,
     # c = 1.5 for the correlation of the observations: tracks 2 px apart sampled
     # over 3 × 3 windows share each rendered pixel's noise ~(3/2)² times. The
     # mean |error| is about σ_v (measured over 12 render seeds: 0.4–1.2 σ_v).
-    v_true, v_est = truth.camera.vignetting, model.vignetting()
+    v_true, v_est = truth.camera.vignetting, model.vignetting_map()
     err = np.abs(v_est - v_true) / v_true
     e_mean = err.mean(axis=(0, 1))
     sigma_v = 3.0 * 1.5 * np.asarray(vig["residual_rms"]) * np.sqrt(6 / vig["n_pairs"])
@@ -269,7 +269,7 @@ def test_photoquant_calibrates_and_corrects_the_rendered_set(rendered, tmp_path,
     l_irr = truth.captures["irradiance"].l
     seen = u_true * l_irr / l_irr.mean(axis=(0, 1))
     seen /= seen.mean(axis=(0, 1))
-    lut_err = np.mean(np.abs(model.sensor_lut - seen) / seen, axis=(0, 1))
+    lut_err = np.mean(np.abs(model.sensor_lut.lut - seen) / seen, axis=(0, 1))
     assert np.all(lut_err < np.mean(np.abs(seen - 1), axis=(0, 1))), lut_err
 
     # Colour balance. The paper is spectrally flat, so a balanced camera measures

@@ -462,7 +462,7 @@ def test_capture_sets_in_both_modes_calibrate(tmp_path, monkeypatch, mode):
     """A tiny capture set in each mode: truth meta, tracks, and photoquant calibrates it."""
     pytest.importorskip("mitsuba")
     pytest.importorskip("colour")
-    from photoquant.calibrate import calibrate_manifest
+    from photoquant.calibration import calibrate_manifest
     from pqsim.rendered_capture import write_rendered_capture_set
     from pqsim.synth_camera import load_truth
 
@@ -501,7 +501,7 @@ def test_capture_sets_in_both_modes_calibrate(tmp_path, monkeypatch, mode):
     doc = json.loads(manifest.read_text())
     assert len(doc["views"]) == 3 and len(doc["correspondences"]) > 100
     model = calibrate_manifest(manifest)
-    assert np.all(np.isfinite(model.vignetting()))
+    assert np.all(np.isfinite(model.vignetting_map()))
     assert model.report["vignetting"]["n_tracks"] > 100
 
 

@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from photoquant.calibrate import calibrate_manifest
+from photoquant.calibration import calibrate_manifest
 from photoquant.cli import main
 from photoquant.errors import InputError, ManifestError
-from photoquant.vignetting import IDENTITY_VIGNETTING
+from photoquant.vignetting import ExtendedGoldmanChenVignetting
 from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera.presets import camera_from_preset
 from pqsim.synth_camera.truth import load_truth
@@ -45,10 +45,10 @@ def test_a_calibrated_model_is_compared_with_the_right_maps(capture):
     manifest, truth = capture
     model = calibrate_manifest(manifest)
     rep = compare_with_truth(manifest, model, truth)
-    expected = map_relative_error(truth.camera.vignetting, model.vignetting())
+    expected = map_relative_error(truth.camera.vignetting, model.vignetting_map())
     assert rep["vignetting"]["error"] == expected
     # a camera without vignetting correction: the error is the vignetting itself
-    flat = dataclasses.replace(model, vignetting_params=np.tile(IDENTITY_VIGNETTING, (3, 1)))
+    flat = dataclasses.replace(model, vignetting=ExtendedGoldmanChenVignetting.identity(3))
     worse = compare_with_truth(manifest, flat, truth)
     assert worse["vignetting"]["error"] == map_relative_error(truth.camera.vignetting, np.ones(3))
     assert worse["vignetting"]["error"].e_mean > 10 * rep["vignetting"]["error"].e_mean

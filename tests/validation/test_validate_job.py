@@ -116,7 +116,11 @@ def test_quick_numbers_are_physical(quick):
 @pytest.mark.parametrize(
     ("knobs", "experiments", "moved"),
     [
-        ({"calibrate_kwargs": {"smoothness": 1e9}}, ["response"], "response.ccd.g_rms."),
+        (
+            {"calibrate_kwargs": {"response": {"smoothness": 1e9}}},
+            ["response"],
+            "response.ccd.g_rms.",
+        ),
         ({"skip_vignetting": True}, ["vignetting"], "vignetting.ccd.e_mean"),
     ],
     ids=["absurd-smoothness", "vignetting-skipped"],

@@ -56,7 +56,7 @@ def run(
         model, cam = cal.model, cal.truth.camera
         names = list(model.channels)
         ref = 1 if len(names) > 1 else 0
-        a = np.asarray(model.balance, dtype=np.float64)
+        a = np.asarray(model.balance.factors, dtype=np.float64)
         c = gauge_offsets(model, cam)
         a_star = np.exp(c - c[ref])
         err = a / a_star - 1

@@ -85,7 +85,7 @@ def run(
     config: ValidationConfig, seed: int, workdir: Path, *, shared: Shared | None = None
 ) -> ExperimentResult:
     """The three noise studies per preset, with the physics prediction beside each."""
-    from photoquant.correct import correct
+    from photoquant.correction import correct
     from validation.metrics import relative_error_eq8
     from validation.noise_model import predicted_log_error, predicted_relative_error
     from validation.truth_model import camera_model_from_truth
@@ -107,7 +107,7 @@ def run(
         scene_name = f"chart, {config.illuminants[0][1]}"
         shared.say(f"validate: noise captures of '{preset}' (N = {', '.join(map(str, ns))}) ...")
         raw_a, raw_b, ln_a, ln_b, corr_a, valid_raw = {}, {}, {}, {}, {}, None
-        sat = np.asarray(model.saturation_level, dtype=np.float64)
+        sat = np.asarray(model.response.saturation_level, dtype=np.float64)
         valid_ln = np.ones(l.shape, dtype=bool)
         captures_a = {}
         for n in ns:

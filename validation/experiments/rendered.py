@@ -55,7 +55,7 @@ def run(
     if not mitsuba_available():
         res.skipped = "needs Mitsuba 3: pip install 'photoquant[render]'"
         return res
-    from photoquant.calibrate import calibrate_manifest
+    from photoquant.calibration import calibrate_manifest
     from pqsim.rendered_capture import write_rendered_capture_set
     from pqsim.synth_camera.truth import load_truth
     from validation.compare import compare_with_truth, comparison_figures

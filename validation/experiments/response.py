@@ -40,11 +40,11 @@ def response_weights(model, channel: int) -> np.ndarray:
     """The levels' weights for the comparison: the hat ≥ 5 % of its peak, above ``valid_min``."""
     from photoquant.weighting import weighting_hat_Debevec1997
 
-    levels = model.response_levels
-    w = weighting_hat_Debevec1997(levels, 0, model.saturation_level[channel])
+    levels = model.response.levels
+    w = weighting_hat_Debevec1997(levels, 0, model.response.saturation_level[channel])
     w = np.where(w >= 0.05, w, 0.0)
-    if model.response_valid_min is not None:
-        w = np.where(levels >= model.response_valid_min[channel], w, 0.0)
+    if model.response.valid_min is not None:
+        w = np.where(levels >= model.response.valid_min[channel], w, 0.0)
     return w
 
 
@@ -53,8 +53,8 @@ def gauge_offsets(model, camera_truth) -> np.ndarray:
     out = np.empty(len(model.channels))
     for ch in range(out.size):
         w = response_weights(model, ch)
-        g_true = camera_truth.inverse_response_ln(model.response_levels, ch)
-        d = g_true - model.log_inverse_response[ch]
+        g_true = camera_truth.inverse_response_ln(model.response.levels, ch)
+        d = g_true - model.response.log_inverse_response[ch]
         ok = (w > 0) & np.isfinite(d)
         out[ch] = np.sum(w[ok] * d[ok]) / np.sum(w[ok])
     return out
@@ -73,14 +73,14 @@ def run(
     for preset in config.presets:
         cal = shared.calibration(preset)
         model, cam = cal.model, cal.truth.camera
-        levels = model.response_levels
+        levels = model.response.levels
         offsets = gauge_offsets(model, cam)
         rms_all, max_all = [], []
         est, true, valid = [], [], []
         for ch, name in enumerate(model.channels):
             w = response_weights(model, ch)
             g_true = cam.inverse_response_ln(levels, ch)
-            rms, worst = response_error(model.log_inverse_response[ch], g_true, w)
+            rms, worst = response_error(model.response.log_inverse_response[ch], g_true, w)
             res.metric(
                 f"{preset}.g_rms.{name}",
                 rms,
@@ -95,13 +95,13 @@ def run(
             )
             rms_all.append(rms)
             max_all.append(worst)
-            est.append(model.log_inverse_response[ch] + offsets[ch])
+            est.append(model.response.log_inverse_response[ch] + offsets[ch])
             true.append(np.where(np.isfinite(g_true), g_true, np.nan))
             valid.append(w > 0)
-        sat_ok = np.array_equal(np.asarray(model.saturation_level), cam.saturation_dn)
+        sat_ok = np.array_equal(np.asarray(model.response.saturation_level), cam.saturation_dn)
         res.metric(
             f"{preset}.saturation_levels_wrong",
-            int(np.sum(np.asarray(model.saturation_level) != cam.saturation_dn)),
+            int(np.sum(np.asarray(model.response.saturation_level) != cam.saturation_dn)),
             description="channels whose detected clipping level differs from the truth",
         )
         ch_names = "/".join(model.channels)
@@ -117,7 +117,7 @@ def run(
             "–",
             "clipping levels "
             + ("= truth" if sat_ok else "≠ truth")
-            + f" ({', '.join(str(int(s)) for s in model.saturation_level)})",
+            + f" ({', '.join(str(int(s)) for s in model.response.saturation_level)})",
         )
         curves[preset] = {
             "levels": levels,

@@ -50,7 +50,7 @@ def run(
         cal = shared.calibration(preset)
         model, cam = cal.model, cal.truth.camera
         u_true = np.asarray(cam.sensor_lut, dtype=np.float64)
-        u_est = np.asarray(model.sensor_lut, dtype=np.float64)
+        u_est = np.asarray(model.sensor_lut.lut, dtype=np.float64)
         stats = map_relative_error(u_true, u_est)
         prnu = float(np.mean(np.abs(u_true - 1)))
         irr = cal.truth.captures["irradiance"]

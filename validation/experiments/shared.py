@@ -10,7 +10,7 @@ The calibration goes through files exactly as with a real camera:
 :func:`pqsim.capture_set.write_capture_set` writes the frames, the manifest
 and the ground truth, and photoquant reads them back
 (:func:`photoquant.io.load_manifest`, :func:`photoquant.io.load_stack`)
-before :func:`photoquant.calibrate.calibrate` runs.
+before :func:`photoquant.calibration.calibrate` runs.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import numpy as np
 
 from validation.config import ValidationConfig, stream_seed
 
-__all__ = ["Calibration", "Shared", "merge_with_model"]
+__all__ = ["Calibration", "Shared", "calibrate_arguments", "merge_with_model"]
 
 Progress = Callable[[str], None]
 
@@ -38,20 +38,29 @@ def _stderr(message: str) -> None:
 def merge_with_model(stack: Any, model: Any) -> Any:
     """Merge a stack with a calibrated model's (unbalanced) response, as calibration does.
 
-    This is :func:`photoquant.calibrate.merge_stack` with the model's levels,
-    ``g_λ``, saturation levels, lowest valid level and merge weighting: the
-    merge of step 2 of :func:`photoquant.calibrate.calibrate`.
+    :meth:`photoquant.model.CameraModel.merge_stack`: the camera's response
+    and merge method (step 2 of :func:`photoquant.calibrate`).
     """
-    from photoquant.merge import merge_stack
+    return model.merge_stack(stack)
 
-    return merge_stack(
-        stack,
-        model.response_levels,
-        model.log_inverse_response,
-        model.saturation_level,
-        min_level=model.response_valid_min,
-        weighting=model.parameters.get("merge_weighting", "hat"),
-    )
+
+def calibrate_arguments(cfg: ValidationConfig, seed: int, **overrides: Any) -> dict[str, Any]:
+    """The keyword arguments of :func:`photoquant.calibrate` for a configuration.
+
+    The response samples ``cfg.n_samples`` pixels; ``cfg.calibrate_kwargs``
+    (per-step specs such as ``{"response": {"smoothness": 1e9}}``, or
+    ``profile``) and ``overrides`` come on top, a mapping of options merged
+    into the step's options.
+    """
+    kwargs: dict[str, Any] = {"response": {"n_samples": cfg.n_samples}, "seed": seed}
+    for extra in (cfg.calibrate_kwargs, overrides):
+        for key, value in extra.items():
+            old = kwargs.get(key)
+            if isinstance(old, dict) and isinstance(value, dict):
+                kwargs[key] = old | value
+            else:
+                kwargs[key] = value
+    return kwargs
 
 
 @dataclass(eq=False)
@@ -153,7 +162,7 @@ class Shared:
         return self._calibrations[preset]
 
     def _calibrate(self, preset: str) -> Calibration:
-        from photoquant.calibrate import calibrate
+        from photoquant.calibration import calibrate
         from photoquant.io import load_manifest, load_stack
         from pqsim.capture_set import write_capture_set
         from pqsim.synth_camera.presets import camera_from_preset
@@ -190,8 +199,7 @@ class Shared:
         load_s = time.perf_counter() - t0
         if cfg.skip_vignetting:
             self.say("validate: (degraded on purpose) calibrating from view 0 only: no vignetting")
-        kwargs: dict[str, Any] = {"n_samples": cfg.n_samples, "seed": calibrate_seed}
-        kwargs.update(cfg.calibrate_kwargs)
+        kwargs = calibrate_arguments(cfg, calibrate_seed)
         self.say(f"validate: calibrating '{preset}' ...")
         t0 = time.perf_counter()
         model = calibrate(
@@ -217,7 +225,7 @@ class Shared:
         )
         if preset == cfg.sweep_preset and len(views) > 1 and tracks:
             cal.uniform_views = [
-                merge_with_model(v, model).photoquantity() / model.sensor_lut for v in views
+                merge_with_model(v, model).photoquantity() / model.sensor_lut.lut for v in views
             ]
             cal.tracks = [np.asarray(t, dtype=np.float64) for t in tracks]
         return cal
@@ -227,7 +235,7 @@ class Shared:
     def scene_correction(self, preset: str) -> Any:
         """The capture set's HDR test scene corrected with the calibrated camera (once)."""
         if preset not in self._scenes:
-            from photoquant.correct import correct
+            from photoquant.correction import correct
             from photoquant.io import load_manifest, load_stack
 
             cal = self.calibration(preset)

@@ -11,7 +11,7 @@ synthetic camera, is measured three ways:
   the mean pixel value of each patch;
 * **corrected (this method)**: the calibrated camera's photoquantity from the
   ``K`` calibration exposures with ``N`` repeats
-  (:func:`photoquant.correct.correct`), colour-balanced on the chart's white
+  (:func:`photoquant.correction.correct`), colour-balanced on the chart's white
   patch (§5.3 — the paper's white chart lit by the scene's light; the
   calibration scene's chart is neutral in camera photoquantity, i.e. lit by
   an equal-energy light), patch means;
@@ -85,7 +85,7 @@ def chart_measurements(
     import time
 
     from photoquant.balance import colour_balance
-    from photoquant.correct import correct
+    from photoquant.correction import correct
     from validation.experiments.chart import patch_means
 
     cal = shared.calibration(preset)

@@ -9,7 +9,7 @@
    nearly the same map, which is why the map is the measure).
 2. How the error falls with the number of correspondences: random subsets of
    the calibration's tracks (the paper used 10 reference points), several
-   draws each, fitted exactly as :func:`photoquant.calibrate.calibrate` does
+   draws each, fitted exactly as :func:`photoquant.calibration.calibrate` does
    (same merge, LUT, sampling window, residual normalisation and trust test).
    A fit the calibrator refuses (not converged, or its predicted map
    uncertainty above 2 %) is counted as refused, not as a number.
@@ -56,7 +56,11 @@ PAPER = {
 
 
 def fit_from_tracks(uniform_views: Sequence[np.ndarray], tracks: Sequence[np.ndarray], model):
-    """Fit the vignetting from correspondences as step 4 of ``calibrate`` does.
+    """Fit the vignetting from correspondences with the calibration's own vignetting step.
+
+    This is :func:`photoquant.calibration.fit_vignetting_step` with the
+    method and options recorded in ``model.parameters`` (so a sweep fits
+    exactly as :func:`photoquant.calibrate` did).
 
     Parameters
     ----------
@@ -65,48 +69,27 @@ def fit_from_tracks(uniform_views: Sequence[np.ndarray], tracks: Sequence[np.nda
     tracks : sequence of ndarray (n_i, 3)
         Correspondences ``[view, x, y]``.
     model : photoquant.model.CameraModel
-        Gives the method, the normalisation and the sampling window.
+        The calibrated camera whose vignetting step is repeated.
 
     Returns
     -------
-    photoquant.vignetting.VignettingFit
+    photoquant.vignetting.VignettingModel
 
     Raises
     ------
     photoquant.errors.CalibrationError
         When the calibrator would refuse the fit.
     """
-    from photoquant.correspondences import sample_image, tracks_to_observations
-    from photoquant.errors import CalibrationError
-    from photoquant.vignetting import fit_vignetting
+    from photoquant.calibration import fit_vignetting_step
 
-    params = model.parameters
-    h, w, c = uniform_views[0].shape
-    view_idx, xy, track_idx = tracks_to_observations(tracks)
-    values = np.full((view_idx.size, c), np.nan)
-    for v, img in enumerate(uniform_views):
-        sel = view_idx == v
-        if np.any(sel):
-            values[sel] = sample_image(img, xy[sel], radius=int(params.get("sample_radius", 1)))
-    fit = fit_vignetting(
-        values,
-        xy,
-        view_idx,
-        track_idx,
-        (h, w),
-        method=params.get("vignetting_method", "Extended Goldman-Chen"),
-        normalise=params.get("vignetting_normalise", "track"),
-    )
-    if not np.all(fit.converged):
-        raise CalibrationError(f"the vignetting fit cannot be trusted: {fit.message}")
-    return fit
+    step = model.parameters["steps"]["vignetting"]
+    return fit_vignetting_step(uniform_views, tracks, (step["method"], step["options"])).model
 
 
 def _map_error(fit, v_true: np.ndarray):
-    from photoquant.vignetting import vignetting_map
     from validation.metrics import map_relative_error
 
-    return map_relative_error(v_true, vignetting_map(fit.params, v_true.shape[:2]))
+    return map_relative_error(v_true, fit.map(v_true.shape[:2]))
 
 
 def _sweep_tracks(config, shared, res, preset) -> dict | None:
@@ -194,7 +177,9 @@ def _sweep_views(config, shared, res, preset) -> dict | None:
             config.n_repeats,
             rng=shared.stream("sweep_views", preset, "view", i),
         )
-        uniform.append(merge_with_model(cap.to_stack(), model).photoquantity() / model.sensor_lut)
+        uniform.append(
+            merge_with_model(cap.to_stack(), model).photoquantity() / model.sensor_lut.lut
+        )
     v_true = np.asarray(cal.truth.camera.vignetting)
     xs, means, maxes, refused = [], [], [], []
     for v in counts:
@@ -256,7 +241,7 @@ def run(
         cal = shared.calibration(preset)
         model, cam = cal.model, cal.truth.camera
         v_true = np.asarray(cam.vignetting, dtype=np.float64)
-        v_est = np.asarray(model.vignetting(), dtype=np.float64)
+        v_est = np.asarray(model.vignetting_map(), dtype=np.float64)
         stats = map_relative_error(v_true, v_est)
         for k in ("e_max", "e_mean", "e_std"):
             res.metric(
@@ -271,7 +256,7 @@ def run(
             "9 % / 1.6 % / 1 %",
             "vs the true map (no scale fitted)",
         )
-        p_est = np.asarray(model.vignetting_params, dtype=np.float64)
+        p_est = np.asarray(model.vignetting.params, dtype=np.float64)
         p_true = None if cam.vignetting_params is None else np.asarray(cam.vignetting_params)
         g_ch = 1 if len(model.channels) > 1 else 0
         for ch, name in enumerate(model.channels):

@@ -2,18 +2,20 @@
 
 Given a calibrated :class:`~photoquant.model.CameraModel` and frames of a
 static scene at one or more exposure times, :func:`correct` denoises (eq. 2),
-linearises and balances (eq. 6 with ``g_λ + ln a_λ``) and uniformises
-(``÷ u·v``, §4.3). Pixels without a valid exposure are flagged and NaN.
+linearises and balances (the camera's merge with ``g_λ + ln a_λ``) and
+uniformises (``÷ u·v``, §4.3). Pixels without a valid exposure are flagged
+and NaN.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from photoquant.errors import InputError
-from photoquant.merge import merge_stack
+from photoquant.merge import MergeModel
 from photoquant.model import CameraModel
 from photoquant.stack import ExposureStack
 
@@ -40,9 +42,7 @@ class Correction:
     all_dark: np.ndarray
 
 
-def correct(
-    stack: ExposureStack, model: CameraModel, *, weighting: str | None = None
-) -> Correction:
+def correct(stack: ExposureStack, model: CameraModel, *, merge: Any = None) -> Correction:
     """Measure the photoquantity of a scene with a calibrated camera (§4 of the paper).
 
     Parameters
@@ -51,8 +51,9 @@ def correct(
         Frames of the scene (any ``N`` and exposure times).
     model : CameraModel
         The calibrated camera.
-    weighting : str, optional
-        Weighting function; the calibration's merge weighting by default.
+    merge : MergeModel or str or (str, mapping), optional
+        Another merge than the camera's (a :class:`~photoquant.merge.MergeModel`,
+        or a method name with its options).
 
     Returns
     -------
@@ -73,16 +74,19 @@ def correct(
         )
     if stack.bit_depth != model.bit_depth:
         raise InputError(f"the scene has bit depth {stack.bit_depth}, the camera {model.bit_depth}")
-    weighting = weighting or model.parameters.get("merge_weighting", "hat")
-    merged = merge_stack(
-        stack,
-        model.response_levels,
-        model.balanced_log_inverse_response(),
-        model.saturation_level,
-        min_level=model.response_valid_min,
-        weighting=weighting,
-        method=model.parameters.get("merge_method", "Debevec 1997"),
-    )
+    if merge is None:
+        merger = model.merge
+    elif isinstance(merge, MergeModel):
+        merger = merge
+    elif isinstance(merge, str):
+        merger = MergeModel(merge)
+    elif isinstance(merge, tuple) and len(merge) == 2:
+        merger = MergeModel(merge[0], dict(merge[1]))
+    else:
+        raise InputError(
+            f"`merge` must be a MergeModel, a method name or (name, options), got {merge!r}"
+        )
+    merged = merger.merge(stack, model.balanced_response())
     with np.errstate(invalid="ignore"):
         photoquantity = np.exp(merged.log_photoquantity) * model.gain_map()
     return Correction(
@@ -94,7 +98,11 @@ def correct(
 
 
 def correct_manifest(
-    manifest, model: CameraModel, *, allow_outside: bool = False, progress_bars: bool = False
+    manifest: Any,
+    model: CameraModel,
+    *,
+    allow_outside: bool = False,
+    progress_bars: bool = False,
 ) -> Correction:
     """Correct the ``scene`` of a capture manifest (a path or ``CaptureManifest``)."""
     from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack

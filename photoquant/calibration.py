@@ -1,0 +1,434 @@
+"""Off-line calibration (§5 of the paper): response, merge, sensor LUT, vignetting, balance.
+
+:func:`calibrate` composes the steps, each a method of its step's registry
+(:mod:`photoquant.methods`) chosen by a *profile* and by per-step specs:
+
+1. response ``g_λ`` from the exposures of view 0 (:mod:`photoquant.response`),
+2. HDR merge of every view and of the irradiance scene (:mod:`photoquant.merge`),
+3. sensor LUT ``u`` from the irradiance scene (:mod:`photoquant.flatfield`),
+4. correspondences across the views, when not given
+   (:mod:`photoquant.correspondences`), and vignetting ``v``
+   (:mod:`photoquant.vignetting`),
+5. colour balance ``a_λ`` from the white chart (:mod:`photoquant.balance`).
+
+Each step is also a public function (:func:`photoquant.response.fit_response`,
+:meth:`photoquant.merge.MergeModel.merge`, :func:`fit_sensor_lut`,
+:func:`find_correspondences`, :func:`fit_vignetting_step`,
+:func:`fit_balance`) that validation and users call directly;
+``calibrate(..., return_intermediates=True)`` also returns what the steps
+passed each other (merged views, uniformised views, tracks).
+
+Profiles (:mod:`photoquant.profiles`): ``"photoquant"`` (default) and
+``"paper"``. A step spec overrides the profile for that step: a method name,
+``(name, {option: value})``, a mapping of options for the profile's method,
+or an options dataclass instance.
+
+Steps whose input is missing use their ``"None"`` method (identity) and say
+so in ``model.report["notes"]``: without an irradiance scene ``u = 1``; with
+fewer than two views ``v = 1``; without a white chart ``a = 1``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from photoquant import __version__
+from photoquant.balance import BalanceData, BalanceModel, check_roi
+from photoquant.errors import InputError
+from photoquant.flatfield import SensorLUTModel
+from photoquant.merge import MergeModel, MergeResult
+from photoquant.methods import STEPS, Method, StepFit, options_to_dict, resolve_method
+from photoquant.model import CameraModel
+from photoquant.profiles import DEFAULT_PROFILE, profile_steps
+from photoquant.response import fit_response
+from photoquant.response.model import ResponseModel
+from photoquant.stack import ExposureStack
+from photoquant.vignetting import VignettingData, VignettingModel
+
+__all__ = [
+    "CalibrationIntermediates",
+    "CalibrationResult",
+    "calibrate",
+    "calibrate_manifest",
+    "resolve_steps",
+    "fit_sensor_lut",
+    "find_correspondences",
+    "fit_vignetting_step",
+    "fit_balance",
+]
+
+Progress = Callable[[str], None]
+
+
+def resolve_steps(profile: str = DEFAULT_PROFILE, **specs: Any) -> dict[str, tuple[Method, Any]]:
+    """The method and options of every step: the profile's, overridden by ``specs``.
+
+    ``specs`` are keyed by step name (:data:`photoquant.methods.STEPS`).
+    """
+    steps = profile_steps(profile)
+    unknown = sorted(set(specs) - set(STEPS))
+    if unknown:
+        raise InputError(f"unknown step(s) {', '.join(unknown)}; the steps are {', '.join(STEPS)}")
+    return {step: resolve_method(step, specs.get(step), steps[step]) for step in STEPS}
+
+
+def _step(step: str, spec: Any, profile: str) -> tuple[Method, Any]:
+    return resolve_method(step, spec, profile_steps(profile)[step])
+
+
+def _checked_fit(fit: Any, method: Method, kind: type) -> StepFit[Any]:
+    if not isinstance(fit, StepFit) or not isinstance(fit.model, kind):
+        raise InputError(
+            f"{method.step} method {method.name!r} must return StepFit({kind.__name__}, report), "
+            f"got {type(fit).__name__}"
+        )
+    return fit
+
+
+def fit_sensor_lut(
+    irradiance: MergeResult, spec: Any = None, *, profile: str = DEFAULT_PROFILE
+) -> StepFit[SensorLUTModel]:
+    """The sensor-LUT step from the merged irradiance scene (§5.4)."""
+    method, options = _step("sensor_lut", spec, profile)
+    fit = method.function(irradiance.photoquantity(), irradiance.mask, options)
+    return _checked_fit(fit, method, SensorLUTModel)
+
+
+def find_correspondences(
+    uniform_views: Sequence[np.ndarray], spec: Any = None, *, profile: str = DEFAULT_PROFILE
+) -> list[np.ndarray]:
+    """Tracks ``[view, x, y]`` across the views by the correspondences step's method."""
+    method, options = _step("correspondences", spec, profile)
+    tracks = method.function(list(uniform_views), options)
+    return [np.asarray(t, dtype=np.float64) for t in tracks]
+
+
+def fit_vignetting_step(
+    uniform_views: Sequence[np.ndarray],
+    tracks: Sequence[np.ndarray],
+    spec: Any = None,
+    *,
+    profile: str = DEFAULT_PROFILE,
+) -> StepFit[VignettingModel]:
+    """The vignetting step (§5.5) from sensor-uniformised views and correspondences."""
+    views = [np.asarray(v) for v in uniform_views]
+    if not views:
+        raise InputError("the vignetting step needs at least one view")
+    method, options = _step("vignetting", spec, profile)
+    data = VignettingData(
+        views, [np.asarray(t, dtype=np.float64) for t in tracks], views[0].shape[:2]
+    )
+    return _checked_fit(method.function(data, options), method, VignettingModel)
+
+
+def fit_balance(
+    linearised: np.ndarray,
+    uniformised: np.ndarray,
+    roi: Sequence[int],
+    mask: np.ndarray,
+    spec: Any = None,
+    *,
+    profile: str = DEFAULT_PROFILE,
+) -> StepFit[BalanceModel]:
+    """The colour-balance step (§5.3) from view 0, before and after ``÷ u·v``."""
+    box = check_roi(roi, np.shape(linearised)[:2])
+    method, options = _step("balance", spec, profile)
+    data = BalanceData(linearised, uniformised, box, np.asarray(mask, dtype=bool))
+    return _checked_fit(method.function(data, options), method, BalanceModel)
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationIntermediates:
+    """What the steps of one calibration passed each other.
+
+    Attributes
+    ----------
+    merged_views : list of MergeResult
+        The merge of every view with the recovered (unbalanced) response.
+    uniform_views : list of ndarray
+        ``exp(merge) / u`` of every view: the vignetting step's input.
+    irradiance : MergeResult or None
+        The merged irradiance scene.
+    tracks : list of ndarray or None
+        The correspondences used (given or found); ``None`` with one view.
+    correspondence_source : str
+        ``"given"``, the finder's name, or ``"none"``.
+    """
+
+    merged_views: list[MergeResult]
+    uniform_views: list[np.ndarray]
+    irradiance: MergeResult | None
+    tracks: list[np.ndarray] | None
+    correspondence_source: str
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationResult:
+    """:func:`calibrate`'s result with ``return_intermediates=True``."""
+
+    model: CameraModel
+    intermediates: CalibrationIntermediates
+
+
+def _check_views(views: Sequence[ExposureStack], irradiance: ExposureStack | None) -> None:
+    if isinstance(views, ExposureStack):
+        raise InputError(
+            "`views` must be a sequence of ExposureStack (wrap a single view in a list)"
+        )
+    if len(views) == 0:
+        raise InputError("`views` is empty: calibration needs at least one view")
+    ref = views[0]
+    for i, view in enumerate([*views, *([irradiance] if irradiance is not None else [])]):
+        name = f"views[{i}]" if i < len(views) else "irradiance"
+        if not isinstance(view, ExposureStack):
+            raise InputError(f"`{name}` must be an ExposureStack, got {type(view).__name__}")
+        if view.image_shape != ref.image_shape or view.n_channels != ref.n_channels:
+            raise InputError(
+                f"`{name}` has images {view.image_shape} with {view.n_channels} channels, "
+                f"views[0] has {ref.image_shape} with {ref.n_channels}"
+            )
+        if view.bit_depth != ref.bit_depth:
+            raise InputError(
+                f"`{name}` has bit depth {view.bit_depth}, views[0] has {ref.bit_depth}"
+            )
+        if view.channels != ref.channels:
+            raise InputError(f"`{name}` has channels {view.channels}, views[0] has {ref.channels}")
+
+
+def _spec_record(method: Method, options: Any) -> dict[str, Any]:
+    return {"method": method.name, "options": options_to_dict(options)}
+
+
+def calibrate(
+    views: Sequence[ExposureStack],
+    *,
+    irradiance: ExposureStack | None = None,
+    white_roi: Sequence[int] | None = None,
+    correspondences: Sequence[np.ndarray] | None = None,
+    profile: str = DEFAULT_PROFILE,
+    response: Any = None,
+    merge: Any = None,
+    balance: Any = None,
+    sensor_lut: Any = None,
+    vignetting: Any = None,
+    correspondence_finder: Any = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+    return_intermediates: bool = False,
+) -> Any:
+    """Calibrate a camera from capture stacks (§5 of the paper).
+
+    Parameters
+    ----------
+    views : sequence of ExposureStack
+        The calibration scene seen from ``V`` view directions (camera rotated
+        about its centre of projection). ``views[0]`` also gives the response
+        and holds the white chart.
+    irradiance : ExposureStack, optional
+        The optics-free, uniformly lit sensor (§5.4); ``u = 1`` without it.
+    white_roi : sequence of 4 int, optional
+        White chart box ``[x0, y0, x1, y1]`` in ``views[0]`` (end exclusive).
+    correspondences : sequence of ndarray, optional
+        Tracks, each ``(n, 3)`` rows ``[view, x, y]`` in pixels. Found by the
+        correspondences step when not given and ``V ≥ 2``.
+    profile : {"photoquant", "paper"}
+        The methods and options of every step not given below
+        (:mod:`photoquant.profiles`).
+    response, merge, balance, sensor_lut, vignetting, correspondence_finder
+        Per-step specs overriding the profile: a method name, ``(name,
+        {option: value})``, a mapping of options for the profile's method, or
+        an options dataclass instance.
+    seed : int
+        Seed of the response's sample selection (results are deterministic).
+    progress : callable, optional
+        Called with a short message as each step starts.
+    return_intermediates : bool
+        Return a :class:`CalibrationResult` (the model and the steps'
+        intermediates) instead of the model alone.
+
+    Returns
+    -------
+    CameraModel or CalibrationResult
+    """
+    _check_views(views, irradiance)
+    steps = resolve_steps(
+        profile,
+        response=response,
+        merge=merge,
+        balance=balance,
+        sensor_lut=sensor_lut,
+        vignetting=vignetting,
+        correspondences=correspondence_finder,
+    )
+    say = progress or (lambda _msg: None)
+    ref = views[0]
+    height, width = ref.image_shape
+    timings: dict[str, float] = {}
+    notes: list[str] = []
+    report: dict[str, Any] = {"timings_s": timings, "notes": notes}
+
+    # 1. response -----------------------------------------------------------
+    say("response")
+    t0 = time.perf_counter()
+    method, options = steps["response"]
+    resp_fit = fit_response(ref, (method.name, options_to_dict(options)), rng=seed)
+    resp: ResponseModel = resp_fit.model
+    timings["response"] = time.perf_counter() - t0
+    report["response"] = {"method": method.name, **resp_fit.report}
+
+    # 2. merge the views ------------------------------------------------------
+    method, options = steps["merge"]
+    merge_model = MergeModel(method.name, options)
+    say(f"merge {len(views)} view(s)")
+    t0 = time.perf_counter()
+    merged = [merge_model.merge(view, resp) for view in views]
+    timings["merge_per_view"] = (time.perf_counter() - t0) / len(views)
+    report["merge"] = {
+        "method": merge_model.method,
+        "flagged_fraction_view0": float(merged[0].mask.mean()),
+        "all_saturated_view0": int(merged[0].all_saturated.sum()),
+        "all_dark_view0": int(merged[0].all_dark.sum()),
+    }
+
+    # 3. sensor LUT -----------------------------------------------------------
+    t0 = time.perf_counter()
+    irr = None
+    lut_spec = steps["sensor_lut"]
+    if irradiance is None:
+        lut_spec = resolve_method("sensor_lut", "None", ("None", {}))
+        notes.append("no irradiance scene: sensor LUT left at 1 (identity)")
+        lut_fit = lut_spec[0].function(merged[0].log_photoquantity, None, None)
+    else:
+        say("sensor LUT")
+        irr = merge_model.merge(irradiance, resp)
+        lut_fit = fit_sensor_lut(irr, (lut_spec[0].name, options_to_dict(lut_spec[1])))
+    lut = lut_fit.model
+    report["sensor_lut"] = {"method": lut.method, **lut_fit.report}
+    timings["sensor_lut"] = time.perf_counter() - t0
+
+    # 4. correspondences and vignetting --------------------------------------
+    t0 = time.perf_counter()
+    uniform = [m.photoquantity() / lut.lut for m in merged]
+    tracks: list[np.ndarray] | None = None
+    source = "none"
+    vig_spec = steps["vignetting"]
+    if len(views) >= 2:
+        say("vignetting")
+        if correspondences is None or len(correspondences) == 0:
+            finder, finder_options = steps["correspondences"]
+            tracks = find_correspondences(uniform, (finder.name, options_to_dict(finder_options)))
+            source = f"automatic ({finder.name})"
+        else:
+            tracks = [np.asarray(tr, dtype=np.float64) for tr in correspondences]
+            source = "given"
+        vig_fit = fit_vignetting_step(
+            uniform, tracks, (vig_spec[0].name, options_to_dict(vig_spec[1]))
+        )
+        report["vignetting"] = {
+            "method": vig_fit.model.method,
+            "correspondence_source": source,
+            **vig_fit.report,
+        }
+    else:
+        vig_spec = resolve_method("vignetting", "None", ("None", {}))
+        vig_fit = fit_vignetting_step(uniform, [], "None")
+        notes.append("one view only: vignetting left at 1 (identity)")
+    vig = vig_fit.model
+    timings["vignetting"] = time.perf_counter() - t0
+
+    # 5. colour balance -------------------------------------------------------
+    t0 = time.perf_counter()
+    bal_spec = steps["balance"]
+    linear = merged[0].photoquantity()
+    if white_roi is None:
+        bal_spec = resolve_method("balance", "None", ("None", {}))
+        bal_model = BalanceModel.identity(ref.n_channels)
+        bal_report: dict[str, Any] = {}
+        notes.append("no white chart: colour balance left at 1 (identity)")
+    else:
+        say("colour balance")
+        uniformised = linear / (lut.lut * vig.map((height, width)))
+        bal_fit = fit_balance(
+            linear,
+            uniformised,
+            white_roi,
+            merged[0].mask,
+            (bal_spec[0].name, options_to_dict(bal_spec[1])),
+        )
+        bal_model, bal_report = bal_fit.model, bal_fit.report
+    report["balance"] = {"method": bal_model.method, **bal_report}
+    timings["balance"] = time.perf_counter() - t0
+
+    used = dict(steps)
+    used.update({"sensor_lut": lut_spec, "vignetting": vig_spec, "balance": bal_spec})
+    if len(views) < 2 or correspondences:
+        used.pop("correspondences")
+    parameters = {
+        "photoquant_version": __version__,
+        "profile": profile.lower(),
+        "steps": {step: _spec_record(*spec) for step, spec in used.items()},
+        "seed": int(seed),
+        "n_views": len(views),
+        "white_roi": None if white_roi is None else [int(v) for v in white_roi],
+    }
+    model = CameraModel(
+        image_shape=(height, width),
+        channels=ref.channels,
+        bit_depth=ref.bit_depth,
+        response=resp,
+        merge=merge_model,
+        balance=bal_model,
+        sensor_lut=lut,
+        vignetting=vig,
+        parameters=parameters,
+        report=report,
+    )
+    if not return_intermediates:
+        return model
+    return CalibrationResult(
+        model,
+        CalibrationIntermediates(
+            merged_views=merged,
+            uniform_views=uniform,
+            irradiance=irr,
+            tracks=tracks,
+            correspondence_source=source,
+        ),
+    )
+
+
+def calibrate_manifest(
+    manifest: Any,
+    *,
+    allow_outside: bool = False,
+    progress_bars: bool = False,
+    **kwargs: Any,
+) -> Any:
+    """Calibrate from a capture manifest (a path or a loaded ``CaptureManifest``).
+
+    Uses ``views``, ``irradiance``, ``white_roi`` and ``correspondences`` of
+    the manifest; ``kwargs`` go to :func:`calibrate`.
+    """
+    from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
+
+    if not isinstance(manifest, CaptureManifest):
+        manifest = load_manifest(manifest, allow_outside=allow_outside)
+    views = [load_stack(v, manifest, progress=progress_bars) for v in manifest.views]
+    irradiance = (
+        load_stack(manifest.irradiance, manifest, progress=progress_bars)
+        if manifest.irradiance is not None
+        else None
+    )
+    corr = list(manifest.correspondences) if manifest.correspondences else None
+    return calibrate(
+        views,
+        irradiance=irradiance,
+        white_roi=manifest.white_roi,
+        correspondences=corr,
+        **kwargs,
+    )

@@ -1,0 +1,105 @@
+"""The ``photoquant`` sub-commands the validation package provides: ``validate``, ``demo``, ``compare``.
+
+They drive the simulator and read its ground truth, which the calibrator
+never imports, so they reach the ``photoquant`` command through the
+entry-point group ``photoquant.commands`` (``pyproject.toml``): each
+``register_*`` function adds its sub-parser.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from photoquant.errors import OutputExistsError
+
+__all__ = ["register_validate", "register_demo", "register_compare"]
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from validation.demo import run_demo
+
+    return run_demo(
+        output=args.output, seed=args.seed, quick=not args.full, overwrite=args.overwrite
+    )
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from photoquant.model import load_camera
+    from validation.compare import (
+        compare_with_truth,
+        comparison_json,
+        format_comparison,
+        write_comparison_figures,
+    )
+
+    model = load_camera(args.camera)
+    if args.figures is not None and Path(args.figures).exists() and not args.overwrite:
+        raise OutputExistsError(f"{args.figures} already exists (use --overwrite to replace it)")
+    rep = compare_with_truth(args.manifest, model, allow_outside=args.allow_outside)
+    if args.figures is not None:
+        paths = write_comparison_figures(
+            rep, model.channels, args.figures, overwrite=args.overwrite
+        )
+        print(f"figures: {', '.join(str(p) for p in paths)}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(comparison_json(rep), indent=1))
+    else:
+        print(
+            format_comparison(
+                rep, model, f"photoquant compare — {args.manifest}, camera {args.camera}"
+            )
+        )
+    return 0
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from validation.cli import run_validate
+
+    return run_validate(args)
+
+
+def register_validate(sub: Any) -> None:
+    """Add ``photoquant validate`` (:mod:`validation.cli`)."""
+    from validation.cli import add_validate_arguments
+
+    val = sub.add_parser(
+        "validate",
+        help="reproduce the paper's results against ground truth (report, regression check)",
+    )
+    add_validate_arguments(val)
+    val.set_defaults(func=_cmd_validate)
+
+
+def register_demo(sub: Any) -> None:
+    """Add ``photoquant demo`` (:mod:`validation.demo`)."""
+    demo = sub.add_parser(
+        "demo", help="simulate a camera, calibrate it, correct a scene, compare with the truth"
+    )
+    demo.add_argument("-o", "--output", default=None, help="keep the capture set in this folder")
+    demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument("--full", action="store_true", help="paper-sized images (slower)")
+    demo.add_argument("--overwrite", action="store_true")
+    demo.set_defaults(func=_cmd_demo)
+
+
+def register_compare(sub: Any) -> None:
+    """Add ``photoquant compare`` (:mod:`validation.compare`)."""
+    cmp_ = sub.add_parser(
+        "compare",
+        help="compare a calibrated camera with the ground truth of a synthetic capture set",
+    )
+    cmp_.add_argument("manifest", help="capture manifest written by `pqsim capture`")
+    cmp_.add_argument("--camera", required=True, help="camera folder from `photoquant calibrate`")
+    cmp_.add_argument("--json", action="store_true", help="machine-readable output")
+    cmp_.add_argument(
+        "--figures", metavar="DIR", help="write error maps (v, u, test scene) as PNGs here"
+    )
+    cmp_.add_argument("--overwrite", action="store_true", help="replace an existing DIR")
+    cmp_.add_argument(
+        "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"
+    )
+    cmp_.set_defaults(func=_cmd_compare)
