@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import maximum_filter, minimum_filter
 
-from photoquant._checks import check_array, check_positive
 from photoquant.errors import InputError
+from photoquant.utils import check_array, check_positive
 from pqsim.synth_camera.optics import check_shape, normalised_coordinates
 
 __all__ = [

@@ -52,8 +52,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from photoquant._checks import check_int
 from photoquant.errors import InputError
+from photoquant.utils import check_int
 
 __all__ = ["multijitter_count", "resample_view", "supersampled_spp"]
 

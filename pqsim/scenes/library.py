@@ -61,8 +61,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from photoquant._checks import check_int
 from photoquant.errors import InputError
+from photoquant.utils import check_int
 from pqsim import spectral
 from pqsim.spectral import CameraSensitivities, Spectrum
 

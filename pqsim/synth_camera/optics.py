@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from photoquant._checks import check_array, check_positive
 from photoquant.errors import InputError
+from photoquant.utils import check_array, check_positive
 
 __all__ = [
     "check_shape",
