@@ -290,7 +290,7 @@ def test_mitsuba_wide_sensor_sees_the_intended_rays(views, mi, s):
     ``R_0 K_wide⁻¹ (u, 1)`` (float32 rays: 1e-6 rad ≈ 0.003 wide pixels here).
     """
     from pqsim import render
-    from pqsim.scenes.library import _pixel_rays
+    from pqsim.scenes.geometry import _pixel_rays
 
     wv = views.wide_view(supersample=s)
     mod = render._activate(VARIANT)
