@@ -131,9 +131,8 @@ class CalibrationViews:
         ``H = K R_dst^T R_src K⁻¹`` [3]_; apply it to ``(x, y, 1)`` and divide by
         the third component.
         """
-        for name, v in (("src", src), ("dst", dst)):
-            if not isinstance(v, int | np.integer) or not 0 <= v < self.n_views:
-                raise InputError(f"`{name}` must be a view index in [0, {self.n_views}), got {v!r}")
+        src = check_int(src, "src", 0, self.n_views - 1)
+        dst = check_int(dst, "dst", 0, self.n_views - 1)
         return self.K @ self.rotations[dst].T @ self.rotations[src] @ np.linalg.inv(self.K)
 
     def tracks(
@@ -209,18 +208,13 @@ class CalibrationViews:
         if views is None:
             covered = tuple(range(self.n_views))
         else:
-            given = list(views) if isinstance(views, Sequence | np.ndarray) else [None]
-            if not all(
-                isinstance(v, int | np.integer)
-                and not isinstance(v, bool)
-                and 0 <= v < self.n_views
-                for v in given
-            ):
+            if not isinstance(views, Sequence | np.ndarray):
                 raise InputError(
                     f"`views` must be a sequence of view indices in [0, {self.n_views}), "
                     f"got {views!r}"
                 )
-            covered = tuple(sorted({0, *(int(v) for v in given)}))
+            given = [check_int(v, f"views[{i}]", 0, self.n_views - 1) for i, v in enumerate(views)]
+            covered = tuple(sorted({0, *given}))
 
         sensor0 = self.scenes[0]["sensor"]
         width, height = int(sensor0["film"]["width"]), int(sensor0["film"]["height"])

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from photoquant.errors import InputError
+from photoquant.utils import check_int
 
 __all__ = ["intrinsics"]
 
@@ -43,10 +44,7 @@ _EPS = 1e-9
 
 
 def _check_size(width: Any, height: Any) -> tuple[int, int]:
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, int | np.integer) or not 2 <= v <= 16384:
-            raise InputError(f"`{name}` must be an integer in [2, 16384], got {v!r}")
-    return int(width), int(height)
+    return check_int(width, "width", 2, 16384), check_int(height, "height", 2, 16384)
 
 
 def _check_range(value: Any, name: str, lo: float, hi: float, unit: str = "") -> float:

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from photoquant.errors import InputError
+from photoquant.utils import check_int
 
 __all__ = ["WideView"]
 
@@ -90,7 +91,8 @@ class WideView:
         -------
         ndarray, shape (3, 3)
         """
-        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v not in self.views:
+        v = check_int(v, "v")
+        if v not in self.views:
             raise InputError(f"`v` must be one of the covered views {list(self.views)}, got {v!r}")
         s = float(self.supersample)
         A = np.array(
