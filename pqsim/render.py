@@ -137,9 +137,8 @@ def _llvm_library_candidates() -> list[str | None]:
         return tuple(int(d) for d in digits[:2]) or (0,)
 
     # Newest first; Dr.Jit's own search (None) last, as it may find an old LLVM.
-    ordered: list[str | None] = sorted(set(found), key=version, reverse=True)
-    ordered.append(None)
-    return ordered
+    newest_first = sorted(set(found), key=version, reverse=True)
+    return [*newest_first, None]
 
 
 def _probe(variant: str, libllvm: str | None, timeout_s: float) -> bool:

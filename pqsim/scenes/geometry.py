@@ -120,8 +120,12 @@ def _mitsuba_camera_matrix(R_cv: NDArray, origin: Sequence[float]) -> list[list[
 
 
 def _frame(
-    center: Sequence[float], u: Sequence[float], v: Sequence[float], w: Sequence[float]
+    center: Sequence[float] | NDArray,
+    u: Sequence[float] | NDArray,
+    v: Sequence[float] | NDArray,
+    w: Sequence[float] | NDArray,
 ) -> NDArray:
+    """Affine 4×4 map with columns ``u``, ``v``, ``w`` (the local axes) and origin ``center``."""
     m = np.eye(4)
     m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = u, v, w, center
     return m
