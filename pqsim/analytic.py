@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import maximum_filter, minimum_filter
 
-from photoquant._checks import check_array, check_positive
 from photoquant.errors import InputError
+from photoquant.utils import check_array, check_int, check_positive
 from pqsim.synth_camera.optics import check_shape, normalised_coordinates
 
 __all__ = [
@@ -53,9 +53,7 @@ __all__ = [
 
 
 def _channels(channels: Any) -> int:
-    if isinstance(channels, bool) or not isinstance(channels, int | np.integer) or channels < 1:
-        raise InputError(f"`channels` must be a positive integer, got {channels!r}")
-    return int(channels)
+    return check_int(channels, "channels", 1)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -172,11 +170,9 @@ def scene_calibration_world(
     if not isinstance(rng, np.random.Generator):
         raise InputError(f"`rng` must be a numpy.random.Generator, got {type(rng).__name__}")
     c = _channels(channels)
-    margin = min(h, w) // 4 if margin is None else margin
-    patch_px = max(4, min(h, w) // 6) if patch_px is None else patch_px
-    for name, v, lo in (("margin", margin, 0), ("patch_px", patch_px, 1), ("edge_px", edge_px, 0)):
-        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < lo:
-            raise InputError(f"`{name}` must be an integer >= {lo}, got {v!r}")
+    margin = check_int(min(h, w) // 4 if margin is None else margin, "margin", 0)
+    patch_px = check_int(max(4, min(h, w) // 6) if patch_px is None else patch_px, "patch_px", 1)
+    edge_px = check_int(edge_px, "edge_px", 0)
     lo_l = check_positive(l_min, "l_min")
     hi_l = check_positive(l_max, "l_max")
     if not hi_l > lo_l:
@@ -238,9 +234,8 @@ def pan_shifts(n_views: int, pan_px: int) -> np.ndarray:
     ndarray, shape (V, 2), int64
         ``(dx, dy)`` per view, each at most ``pan_px`` in absolute value.
     """
-    for name, v, lo in (("n_views", n_views, 1), ("pan_px", pan_px, 0)):
-        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < lo:
-            raise InputError(f"`{name}` must be an integer >= {lo}, got {v!r}")
+    n_views = check_int(n_views, "n_views", 1)
+    pan_px = check_int(pan_px, "pan_px", 0)
     shifts = np.zeros((int(n_views), 2), dtype=np.int64)
     for i in range(1, int(n_views)):
         a = 2 * math.pi * i / n_views
@@ -325,8 +320,7 @@ def views_by_pan(
     s = check_array(shifts, "shifts", ndim=2, kind="iu").astype(np.int64)
     if s.shape[1] != 2:
         raise InputError(f"`shifts` must have shape (V, 2), got {s.shape}")
-    if isinstance(stride, bool) or not isinstance(stride, int | np.integer) or stride < 1:
-        raise InputError(f"`stride` must be a positive integer, got {stride!r}")
+    stride = check_int(stride, "stride", 1)
     hw, ww = world.shape
     origins = s + np.asarray(world.view_origin, dtype=np.int64)
     for i, (ox, oy) in enumerate(origins):
@@ -345,12 +339,7 @@ def views_by_pan(
     keep = (wx % stride == 0) & (wy % stride == 0)
     wx, wy = wx[keep], wy[keep]
     if max_tracks is not None:
-        if (
-            isinstance(max_tracks, bool)
-            or not isinstance(max_tracks, int | np.integer)
-            or max_tracks < 1
-        ):
-            raise InputError(f"`max_tracks` must be a positive integer, got {max_tracks!r}")
+        max_tracks = check_int(max_tracks, "max_tracks", 1)
         if wx.size > max_tracks:
             idx = np.unique(np.linspace(0, wx.size - 1, int(max_tracks)).round().astype(np.int64))
             wx, wy = wx[idx], wy[idx]

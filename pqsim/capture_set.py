@@ -38,9 +38,8 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from photoquant._checks import check_exposure_times, check_positive
-from photoquant._threads import thread_map
 from photoquant.errors import InputError
+from photoquant.utils import check_exposure_times, check_positive, thread_map
 from pqsim.analytic import (
     pan_shifts,
     scene_calibration_world,

@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from photoquant.errors import ImageReadError, InputError
+from photoquant.utils import check_int
 
 __all__ = [
     "DEFAULT_VARIANT",
@@ -136,9 +137,8 @@ def _llvm_library_candidates() -> list[str | None]:
         return tuple(int(d) for d in digits[:2]) or (0,)
 
     # Newest first; Dr.Jit's own search (None) last, as it may find an old LLVM.
-    ordered: list[str | None] = sorted(set(found), key=version, reverse=True)
-    ordered.append(None)
-    return ordered
+    newest_first = sorted(set(found), key=version, reverse=True)
+    return [*newest_first, None]
 
 
 def _probe(variant: str, libllvm: str | None, timeout_s: float) -> bool:
@@ -323,11 +323,8 @@ def _film_channels(film: Mapping[str, Any]) -> tuple[str, ...]:
 
 
 def _check_spp_seed(spp: Any, seed: Any) -> tuple[int, int]:
-    if isinstance(spp, bool) or not isinstance(spp, int | np.integer) or not 1 <= spp <= 1 << 20:
-        raise InputError(f"`spp` must be an integer in [1, 2**20], got {spp!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= seed < 1 << 32:
-        raise InputError(f"`seed` must be an integer in [0, 2**32), got {seed!r}")
-    return int(spp), int(seed)
+    """``spp`` in [1, 2**20] and ``seed`` in [0, 2**32) as ints."""
+    return check_int(spp, "spp", 1, 1 << 20), check_int(seed, "seed", 0, (1 << 32) - 1)
 
 
 def _with_spp(scene: Mapping[str, Any], spp: int) -> dict[str, Any]:

@@ -57,9 +57,8 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_exposure_times, check_int
-from photoquant._threads import thread_map
 from photoquant.errors import InputError
+from photoquant.utils import check_exposure_times, check_int, thread_map
 from pqsim import reproject
 from pqsim.capture_set import (
     DEFAULT_EXPOSURES_S,

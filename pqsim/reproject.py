@@ -52,8 +52,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from photoquant._checks import check_int
 from photoquant.errors import InputError
+from photoquant.utils import check_int
 
 __all__ = ["multijitter_count", "resample_view", "supersampled_spp"]
 
@@ -140,7 +140,7 @@ def resample_view(
     a box filter over the pixel's footprint, as a direct render with a box
     reconstruction filter computes it. When ``homography`` is
     ``[[s, 0, ox], [0, s, oy], [0, 0, 1]]`` with integral ``ox, oy`` (view 0 of
-    a :class:`~pqsim.scenes.library.WideView`), the samples fall on wide pixel
+    a :class:`~pqsim.scenes.WideView`), the samples fall on wide pixel
     centres and the result is the exact mean of ``s × s`` wide pixels.
 
     Parameters
@@ -150,7 +150,7 @@ def resample_view(
     homography : array_like, shape (3, 3)
         Maps continuous pixel coordinates of the view, ``(x, y, 1)``, to those
         of the wide image (pixel centres at ``i + 0.5`` in both), e.g.
-        :meth:`~pqsim.scenes.library.WideView.view_homography` =
+        :meth:`~pqsim.scenes.WideView.view_homography` =
         ``K_wide R_0^T R_v K⁻¹`` [HZ]_ (§8.4.2).
     width, height : int
         Size of the view in pixels.

@@ -41,7 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from photoquant.errors import PhotoquantError
+from photoquant.errors import InputError, PhotoquantError
+from photoquant.utils import check_int
 
 __all__ = [
     "ValidationError",
@@ -65,6 +66,14 @@ PAPER_EXPOSURES_S: tuple[float, ...] = tuple(float(t) for t in np.geomspace(1e-3
 
 class ValidationError(PhotoquantError):
     """The validation job was asked for something it cannot do (bad option, baseline mismatch)."""
+
+
+def _check_int(value: Any, name: str, lo: int) -> int:
+    """:func:`photoquant.utils.check_int` (``value >= lo``), raising a :class:`ValidationError`."""
+    try:
+        return check_int(value, name, lo)
+    except InputError as exc:
+        raise ValidationError(str(exc)) from None
 
 
 @dataclass(frozen=True)
@@ -172,9 +181,7 @@ class ValidationConfig:
             "n_samples",
             "chart_spp",
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValidationError(f"`{name}` must be a positive integer, got {v!r}")
+            object.__setattr__(self, name, _check_int(getattr(self, name), name, 1))
         missing = {1, 4, 10} - set(self.noise_repeats)
         if missing:
             raise ValidationError(
@@ -282,7 +289,5 @@ def stream_seed(seed: int, *names: Any) -> int:
     >>> stream_seed(0, "capture", "ccd") != stream_seed(1, "capture", "ccd")
     True
     """
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValidationError(f"`seed` must be a non-negative integer, got {seed!r}")
-    words = [int(seed)] + [zlib.crc32(str(n).encode()) for n in names]
+    words = [_check_int(seed, "seed", 0)] + [zlib.crc32(str(n).encode()) for n in names]
     return int(np.random.SeedSequence(words).generate_state(1, dtype=np.uint32)[0])

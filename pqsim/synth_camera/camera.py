@@ -35,15 +35,15 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import (
+from photoquant.errors import InputError
+from photoquant.utils import (
     check_array,
     check_bit_depth,
     check_exposure_times,
     check_positive,
     check_workers,
+    thread_map,
 )
-from photoquant._threads import thread_map
-from photoquant.errors import InputError
 from pqsim.synth_camera.optics import check_shape, prnu_field, vignetting_extended_goldman_chen
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import POISSON_MEAN_CAP_E, SensorNoise

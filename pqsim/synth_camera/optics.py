@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from photoquant._checks import check_array, check_positive
 from photoquant.errors import InputError
+from photoquant.utils import check_array, check_int, check_positive
 
 __all__ = [
     "check_shape",
@@ -140,8 +140,7 @@ def vignetting_cos4(
     """
     h, w = check_shape(shape)
     f = check_positive(focal_px, "focal_px")
-    if isinstance(channels, bool) or not isinstance(channels, int | np.integer) or channels < 1:
-        raise InputError(f"`channels` must be a positive integer, got {channels!r}")
+    channels = check_int(channels, "channels", 1)
     cx, cy = (w / 2.0, h / 2.0) if centre is None else (float(centre[0]), float(centre[1]))
     x = np.arange(w, dtype=np.float64) + 0.5 - cx
     y = np.arange(h, dtype=np.float64) + 0.5 - cy
@@ -200,8 +199,7 @@ def prnu_field(
         If a sigma is out of range, or the field is not positive everywhere.
     """
     h, w = check_shape(shape)
-    if isinstance(channels, bool) or not isinstance(channels, int | np.integer) or channels < 1:
-        raise InputError(f"`channels` must be a positive integer, got {channels!r}")
+    channels = check_int(channels, "channels", 1)
     if not isinstance(rng, np.random.Generator):
         raise InputError(f"`rng` must be a numpy.random.Generator, got {type(rng).__name__}")
     sp = check_positive(sigma_pixel, "sigma_pixel", allow_zero=True)

@@ -61,9 +61,8 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from photoquant._checks import validate_method
-from photoquant._json import to_json_value
 from photoquant.errors import InputError
+from photoquant.utils import to_json_value, validate_method
 from pqsim.synth_camera.camera import SyntheticCamera
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import SensorNoise

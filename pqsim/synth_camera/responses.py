@@ -46,8 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_array, check_positive, validate_method
 from photoquant.errors import InputError
+from photoquant.utils import check_array, check_positive, validate_method
 
 __all__ = [
     "response_linear",

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_array, check_positive
 from photoquant.errors import InputError
+from photoquant.utils import check_array, check_positive
 
 __all__ = ["SensorNoise", "POISSON_MEAN_CAP_E"]
 

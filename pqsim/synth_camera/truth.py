@@ -37,8 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_array, check_bit_depth
 from photoquant.errors import InputError
+from photoquant.utils import check_array, check_bit_depth
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import SensorNoise
 

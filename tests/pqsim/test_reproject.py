@@ -250,9 +250,9 @@ def test_wide_view_of_a_subset_and_bad_arguments(views):
         ({"supersample": 2.0}, "`supersample`"),
         ({"margin_px": -1}, "`margin_px`"),
         ({"margin_px": "a"}, "`margin_px`"),
-        ({"views": [3]}, "`views`"),
-        ({"views": [True]}, "`views`"),
-        ({"views": 1}, "`views`"),
+        ({"views": [3]}, r"`views\[0\]` must be an integer in \[0, 2\], got 3"),
+        ({"views": [1, True]}, r"`views\[1\]` must be an integer"),
+        ({"views": 1}, "`views` must be a sequence of view indices"),
     ):
         with pytest.raises(InputError, match=name):
             views.wide_view(**kw)
@@ -290,7 +290,7 @@ def test_mitsuba_wide_sensor_sees_the_intended_rays(views, mi, s):
     ``R_0 K_wide⁻¹ (u, 1)`` (float32 rays: 1e-6 rad ≈ 0.003 wide pixels here).
     """
     from pqsim import render
-    from pqsim.scenes.library import _pixel_rays
+    from pqsim.scenes.geometry import _pixel_rays
 
     wv = views.wide_view(supersample=s)
     mod = render._activate(VARIANT)

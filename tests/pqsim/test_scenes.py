@@ -300,3 +300,61 @@ def test_high_contrast_scene_is_plain_data():
     assert len(text) > 1000
     with pytest.raises(InputError, match="`lamp_radiance`"):
         high_contrast_scene(width=32, height=24, lamp_radiance=0.0)
+
+
+# ----------------------------------------------------------------------------- render-cache keys
+
+#: Digest of each factory's default scene dict (floats rounded to 12 significant
+#: digits, so that last-ulp differences between numpy builds do not matter),
+#: computed with the scene library as it was before its split into modules
+#: (``pqsim/scenes/library.py`` at commit 612a8cf). The dicts are the render
+#: cache's keys (:func:`pqsim.render.scene_key`): a refactor must leave them
+#: alone, and a deliberate change of a scene updates the digest here and
+#: re-renders every cached image of it. (The split was also checked to give
+#: bit-identical dicts, results and ``scene_key`` values for many arguments.)
+SCENE_DIGESTS = {
+    "calibration view 0": "3238b80b819657a5",
+    "calibration view 1": "710e5404c4163172",
+    "calibration view 2": "18fb562fee316488",
+    "calibration wide view": "5c86baba890e473e",
+    "colour checker": "bc1288d9e47df537",
+    "irradiance": "c1c06baab9725ece",
+    "irradiance non-uniform": "a92a83ccd24ff0b0",
+    "high contrast": "66086cbf4b4586cd",
+}
+
+
+def _scene_digest(scene):
+    import hashlib
+
+    from pqsim.render import _canonical
+
+    def rounded(obj):
+        if isinstance(obj, dict):
+            return {k: rounded(v) for k, v in obj.items()}
+        if isinstance(obj, list):
+            return [rounded(v) for v in obj]
+        return float(f"{obj:.12g}") if isinstance(obj, float) else obj
+
+    text = json.dumps(rounded(_canonical(scene)), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
+def test_default_scene_dicts_are_unchanged():
+    views = calibration_views()
+    scenes = {f"calibration view {v}": s for v, s in enumerate(views.scenes)}
+    scenes["calibration wide view"] = views.wide_view().scene
+    scenes["colour checker"] = colour_checker_scene().scene
+    scenes["irradiance"] = irradiance_scene().scene
+    scenes["irradiance non-uniform"] = irradiance_scene(nonuniformity=0.2, hotspot=(0.3, 0.6)).scene
+    scenes["high contrast"] = high_contrast_scene().scene
+    assert {k: _scene_digest(s) for k, s in scenes.items()} == SCENE_DIGESTS
+
+
+def test_library_module_still_exports_the_scenes():
+    import pqsim.scenes
+    import pqsim.scenes.library as library
+
+    assert set(library.__all__) == set(pqsim.scenes.__all__)
+    for name in library.__all__:
+        assert getattr(library, name) is getattr(pqsim.scenes, name)

@@ -643,9 +643,6 @@ def test_simulator_does_not_import_the_calibrator() -> None:
     allowed = (
         "photoquant.io",
         "photoquant.errors",
-        "photoquant._checks",
-        "photoquant._json",  # JSON conversion used by the file formats
-        "photoquant._threads",  # the thread pool helper: no method code
         "photoquant.utils",
         "photoquant.stack",  # the ExposureStack container of the formats
     )
