@@ -375,17 +375,14 @@ def _step_model(
     if not isinstance(image_files, dict):
         raise CameraModelError(f"{where}: `images` must be an object")
     images = {key: _read_image(folder, file, channels, where) for key, file in image_files.items()}
-    if step in ("vignetting", "sensor_lut", "balance") and method == "None":
-        cls = _DEFAULT_MODEL_CLASS[step]
-    else:
-        try:
-            registered = registry(step)[method]
-        except InputError as exc:
-            raise CameraModelError(
-                f"{where}: {exc} (a plug-in's method needs its distribution installed)"
-            ) from None
-        cls = registered.model or _DEFAULT_MODEL_CLASS[step]
-        method = registered.name
+    try:
+        registered = registry(step)[method]
+    except InputError as exc:
+        raise CameraModelError(
+            f"{where}: {exc} (a plug-in's method needs its distribution installed)"
+        ) from None
+    cls = registered.model or _DEFAULT_MODEL_CLASS[step]
+    method = registered.name
     try:
         return cls.from_params(method, params, images)
     except KeyError as exc:

@@ -15,13 +15,13 @@ from photoquant.vignetting import (
     VIGNETTING_METHODS,
     VIGNETTING_PARAMETER_NAMES,
     VignettingFit,
-    _PairProblem,
     fit_vignetting,
     fit_vignetting_ExtendedGoldmanChen,
     normalised_coordinates,
     vignetting_ExtendedGoldmanChen,
     vignetting_map,
 )
+from photoquant.vignetting.extended_goldman_chen import _PairProblem
 
 # Floating-point agreement of two evaluations of the same closed form.
 TOLERANCE_EXACT = 1e-12

@@ -256,7 +256,12 @@ def run(
             "9 % / 1.6 % / 1 %",
             "vs the true map (no scale fitted)",
         )
-        p_est = np.asarray(model.vignetting.params, dtype=np.float64)
+        p_est = getattr(model.vignetting, "params", None)
+        if p_est is None:  # the identity ("None" method): m1..m3 = 0 at the centre
+            from photoquant.vignetting import IDENTITY_VIGNETTING
+
+            p_est = np.tile(IDENTITY_VIGNETTING, (len(model.channels), 1))
+        p_est = np.asarray(p_est, dtype=np.float64)
         p_true = None if cam.vignetting_params is None else np.asarray(cam.vignetting_params)
         g_ch = 1 if len(model.channels) > 1 else 0
         for ch, name in enumerate(model.channels):

@@ -53,7 +53,8 @@ from scipy.optimize import least_squares
 
 from photoquant._checks import check_array, check_int, check_positive
 from photoquant.errors import CalibrationError, InputError
-from photoquant.methods import REGISTRIES, Method, StepFit
+from photoquant.methods import Method, StepFit
+from photoquant.vignetting.base import VIGNETTING_METHODS, VignettingData, VignettingModel
 
 __all__ = [
     "VIGNETTING_PARAMETER_NAMES",
@@ -63,12 +64,9 @@ __all__ = [
     "vignetting_map",
     "VignettingFit",
     "fit_vignetting_ExtendedGoldmanChen",
-    "VignettingModel",
     "ExtendedGoldmanChenVignetting",
-    "VignettingData",
     "ExtendedGoldmanChenOptions",
     "characterise_vignetting_ExtendedGoldmanChen",
-    "VIGNETTING_METHODS",
     "fit_vignetting",
 ]
 
@@ -713,39 +711,6 @@ def fit_vignetting_ExtendedGoldmanChen(
 # ---------------------------------------------------------------------------
 
 
-class VignettingModel:
-    """Base of the vignetting models: ``v`` per channel as a function of the pixel position.
-
-    A subclass is a frozen dataclass with a ``method`` name and implements
-    :meth:`map`, :meth:`to_params` and :meth:`from_params`. ``v`` is 1 where
-    the model has no fall-off and must be positive over the image.
-    """
-
-    method: str
-
-    def map(self, image_shape: tuple[int, int]) -> np.ndarray:
-        """``v`` on the pixel grid, ``(H, W, C)`` float64."""
-        raise NotImplementedError
-
-    def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        raise NotImplementedError
-
-    @classmethod
-    def from_params(
-        cls, method: str, params: dict[str, Any], images: dict[str, np.ndarray]
-    ) -> VignettingModel:
-        raise NotImplementedError
-
-    def check_positive(self, image_shape: tuple[int, int]) -> None:
-        """Raise :class:`InputError` unless ``v`` is finite and positive over the image."""
-        v = self.map(image_shape)
-        if not np.all(np.isfinite(v)) or np.any(v <= 0):
-            raise InputError(
-                f"the {self.method!r} vignetting map is not positive over the image "
-                f"(min {np.nanmin(v):.3g}): it cannot be divided out"
-            )
-
-
 @dataclass(frozen=True, eq=False)
 class ExtendedGoldmanChenVignetting(VignettingModel):
     """The paper's extended Goldman–Chen model (§5.5): ``m1 … m6`` per channel.
@@ -773,8 +738,8 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
 
     @classmethod
     def identity(cls, n_channels: int) -> ExtendedGoldmanChenVignetting:
-        """``v ≡ 1``."""
-        return cls("None", np.tile(IDENTITY_VIGNETTING, (n_channels, 1)))
+        """``v ≡ 1`` in this model's parameters (``m1 = m2 = m3 = 0``)."""
+        return cls("Extended Goldman-Chen", np.tile(IDENTITY_VIGNETTING, (n_channels, 1)))
 
     def map(self, image_shape: tuple[int, int]) -> np.ndarray:
         return vignetting_map(self.params, image_shape)
@@ -803,26 +768,6 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
         except (TypeError, ValueError):
             raise InputError("vignetting `params` must be numbers (C rows of 6)") from None
         return cls(method, arr)
-
-
-@dataclass(frozen=True, eq=False)
-class VignettingData:
-    """What a vignetting method sees.
-
-    Attributes
-    ----------
-    uniform_views : list of ndarray, each (H, W, C)
-        ``exp(merge) / u`` of every view: linear, sensor-uniformised; NaN
-        where flagged.
-    tracks : list of ndarray, each (n, 3)
-        Correspondences ``[view, x, y]`` (pixels): one scene point per track.
-    image_shape : tuple of int
-        ``(H, W)``.
-    """
-
-    uniform_views: list[np.ndarray]
-    tracks: list[np.ndarray]
-    image_shape: tuple[int, int]
 
 
 @dataclass(frozen=True)
@@ -918,9 +863,6 @@ def characterise_vignetting_ExtendedGoldmanChen(
     return StepFit(ExtendedGoldmanChenVignetting("Extended Goldman-Chen", fit.params), report)
 
 
-VIGNETTING_METHODS = REGISTRIES["vignetting"]
-"""Vignetting methods by name: ``function(data: VignettingData, options) -> StepFit``."""
-
 VIGNETTING_METHODS.add(
     Method(
         "vignetting",
@@ -968,22 +910,3 @@ def fit_vignetting(
             f"{entry.name!r}"
         )
     return fit_vignetting_ExtendedGoldmanChen(values, xy, view, track, image_shape, **kwargs)
-
-
-def characterise_vignetting_None(
-    data: VignettingData, options: None = None
-) -> StepFit[ExtendedGoldmanChenVignetting]:
-    """No vignetting correction: ``v = 1``."""
-    del options
-    return StepFit(ExtendedGoldmanChenVignetting.identity(data.uniform_views[0].shape[-1]))
-
-
-VIGNETTING_METHODS.add(
-    Method(
-        "vignetting",
-        "None",
-        characterise_vignetting_None,
-        model=ExtendedGoldmanChenVignetting,
-    ),
-    replace=True,
-)

@@ -1,0 +1,115 @@
+"""The vignetting step: the model base class, the data a method sees, the registry.
+
+Every vignetting method is ``function(data: VignettingData, options) ->
+StepFit[VignettingModel]`` in :data:`VIGNETTING_METHODS`; its model is a
+:class:`VignettingModel` subclass that evaluates ``v`` on a pixel grid
+(``.map(image_shape)``) and serialises itself for the camera folder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from photoquant.errors import InputError
+from photoquant.methods import REGISTRIES, Method, StepFit
+
+__all__ = ["VignettingModel", "VignettingData", "VIGNETTING_METHODS", "IdentityVignetting"]
+
+
+class VignettingModel:
+    """Base of the vignetting models: ``v`` per channel as a function of the pixel position.
+
+    A subclass is a frozen dataclass with a ``method`` name and implements
+    :meth:`map`, :meth:`to_params` and :meth:`from_params`. ``v`` is 1 where
+    the model has no fall-off and must be positive over the image.
+    """
+
+    method: str
+
+    def map(self, image_shape: tuple[int, int]) -> np.ndarray:
+        """``v`` on the pixel grid, ``(H, W, C)`` float64."""
+        raise NotImplementedError
+
+    def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        raise NotImplementedError
+
+    @classmethod
+    def from_params(
+        cls, method: str, params: dict[str, Any], images: dict[str, np.ndarray]
+    ) -> VignettingModel:
+        raise NotImplementedError
+
+    def check_positive(self, image_shape: tuple[int, int]) -> None:
+        """Raise :class:`InputError` unless ``v`` is finite and positive over the image."""
+        v = self.map(image_shape)
+        if not np.all(np.isfinite(v)) or np.any(v <= 0):
+            raise InputError(
+                f"the {self.method!r} vignetting map is not positive over the image "
+                f"(min {np.nanmin(v):.3g}): it cannot be divided out"
+            )
+
+
+@dataclass(frozen=True, eq=False)
+class VignettingData:
+    """What a vignetting method sees.
+
+    Attributes
+    ----------
+    uniform_views : list of ndarray, each (H, W, C)
+        ``exp(merge) / u`` of every view: linear, sensor-uniformised; NaN
+        where flagged.
+    tracks : list of ndarray, each (n, 3)
+        Correspondences ``[view, x, y]`` (pixels): one scene point per track.
+    image_shape : tuple of int
+        ``(H, W)``.
+    """
+
+    uniform_views: list[np.ndarray]
+    tracks: list[np.ndarray]
+    image_shape: tuple[int, int]
+
+
+VIGNETTING_METHODS = REGISTRIES["vignetting"]
+"""Vignetting methods by name: ``function(data: VignettingData, options) -> StepFit``."""
+
+
+@dataclass(frozen=True, eq=False)
+class IdentityVignetting(VignettingModel):
+    """``v ≡ 1``: no vignetting correction (the ``"None"`` method)."""
+
+    method: str = "None"
+    n_channels: int = 3
+
+    def map(self, image_shape: tuple[int, int]) -> np.ndarray:
+        h, w = image_shape
+        return np.ones((h, w, self.n_channels))
+
+    def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return {"n_channels": self.n_channels}, {}
+
+    @classmethod
+    def from_params(
+        cls, method: str, params: dict[str, Any], images: dict[str, np.ndarray]
+    ) -> IdentityVignetting:
+        del images
+        n = params.get("n_channels")
+        if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= 64:
+            raise InputError(f"`n_channels` must be an integer in [1, 64], got {n!r}")
+        return cls(method, n)
+
+
+def characterise_vignetting_None(
+    data: VignettingData, options: None = None
+) -> StepFit[IdentityVignetting]:
+    """No vignetting correction: ``v = 1``."""
+    del options
+    return StepFit(IdentityVignetting("None", data.uniform_views[0].shape[-1]))
+
+
+VIGNETTING_METHODS.add(
+    Method("vignetting", "None", characterise_vignetting_None, model=IdentityVignetting),
+    replace=True,
+)
