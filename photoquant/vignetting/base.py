@@ -65,11 +65,15 @@ class VignettingData:
         Correspondences ``[view, x, y]`` (pixels): one scene point per track.
     image_shape : tuple of int
         ``(H, W)``.
+    flat_field : ndarray, shape (H, W, C), optional
+        ``exp(merge) / u`` of a uniformly lit target seen through the optics
+        (a flat-field capture), for methods that need one; ``None`` otherwise.
     """
 
     uniform_views: list[np.ndarray]
     tracks: list[np.ndarray]
     image_shape: tuple[int, int]
+    flat_field: np.ndarray | None = None
 
 
 VIGNETTING_METHODS = REGISTRIES["vignetting"]
