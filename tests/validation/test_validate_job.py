@@ -361,3 +361,32 @@ def test_full_job_without_mitsuba_says_how_to_run(tmp_path, capsys, monkeypatch)
     assert main(["validate", "--full", "-q", "-o", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err
     assert "Mitsuba 3" in err and "--chart analytic" in err and not (tmp_path / "r").exists()
+
+
+def test_ablation_compares_every_deviation_and_reuses_the_pipeline(tmp_path):
+    """Experiment 'ablation': paper, paper + each deviation, photoquant; one calibrate for all.
+
+    The photoquant-profile row must be exactly the job's own calibration (same
+    frames, seed and pipeline: validation has no copy of a step), and the
+    paper's row must come from the paper's options.
+    """
+    from photoquant.profiles import DEVIATIONS
+    from validation.compare import compare_with_truth
+    from validation.experiments import ablation
+    from validation.experiments.shared import Shared
+
+    config = TINY.replace(presets=("ccd",))
+    shared = Shared(config, 0, tmp_path, _quiet)
+    res = ablation.run(config, 0, tmp_path, shared=shared)
+    keys = [k for k, _, _ in ablation.variants()]
+    assert len(keys) == len(DEVIATIONS) + 2
+    for key in keys:
+        for q, _, _ in ablation.QUANTITIES:
+            assert res.metrics[f"ablation.ccd.{key}.{q}"] is not None, (key, q)
+    cal = shared.calibration("ccd")
+    own = ablation._scores(compare_with_truth(cal.manifest, cal.model, cal.truth))
+    for q, value in own.items():
+        assert res.metrics[f"ablation.ccd.photoquant.{q}"] == value, q
+    assert not all(
+        res.metrics[f"ablation.ccd.paper.{q}"] == own[q] for q, _, _ in ablation.QUANTITIES
+    ), "the paper's profile gave the photoquant profile's results: the profile was not applied"

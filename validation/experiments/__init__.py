@@ -18,6 +18,7 @@ preset is simulated and calibrated once) and gathers every metric.
 | ``fig7`` | linear regression | Fig. 7 |
 | ``timings`` | step times | §6.1 |
 | ``rendered`` | calibration from a Mitsuba-rendered capture set (``--full``) | §5, §6 |
+| ``ablation`` | the paper's profile, photoquant's, each deviation alone | §5, §6 |
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ EXPERIMENTS: dict[str, str] = {
     "fig7": "validation.experiments.fig7",
     "timings": "validation.experiments.timings",
     "rendered": "validation.experiments.rendered",
+    "ablation": "validation.experiments.ablation",
 }
 """Experiment key → module, in the order of the report (the paper's §6)."""
 
