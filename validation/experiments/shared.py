@@ -202,14 +202,16 @@ class Shared:
         kwargs = calibrate_arguments(cfg, calibrate_seed)
         self.say(f"validate: calibrating '{preset}' ...")
         t0 = time.perf_counter()
-        model = calibrate(
+        result = calibrate(
             views[:1] if cfg.skip_vignetting else views,
             irradiance=irradiance,
             white_roi=manifest.white_roi,
             correspondences=None if cfg.skip_vignetting else tracks,
             progress=lambda step: self.say(f"  {preset}: {step}"),
+            return_intermediates=True,
             **kwargs,
         )
+        model = result.model
         calibrate_s = time.perf_counter() - t0
         cal = Calibration(
             preset=preset,
@@ -224,10 +226,9 @@ class Shared:
             calibrate_s=calibrate_s,
         )
         if preset == cfg.sweep_preset and len(views) > 1 and tracks:
-            cal.uniform_views = [
-                merge_with_model(v, model).photoquantity() / model.sensor_lut.lut for v in views
-            ]
-            cal.tracks = [np.asarray(t, dtype=np.float64) for t in tracks]
+            # the vignetting step's own input, as calibrate passed it
+            cal.uniform_views = result.intermediates.uniform_views
+            cal.tracks = result.intermediates.tracks
         return cal
 
     # ------------------------------------------------------------------ scenes
