@@ -644,6 +644,7 @@ def test_simulator_does_not_import_the_calibrator() -> None:
         "photoquant._checks",
         "photoquant._json",  # JSON conversion used by the file formats
         "photoquant._threads",  # the thread pool helper: no method code
+        "photoquant._signals",  # deferred SIGTERM/SIGINT for the write path: no method code
         "photoquant.errors",
         "photoquant.stack",  # the ExposureStack container, imported by photoquant.io
     }
