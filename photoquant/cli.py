@@ -55,8 +55,10 @@ def _fmt(values) -> str:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from photoquant.calibrate import calibrate_manifest
+    from photoquant.io.outputs import check_output_not_input, manifest_inputs
 
     out = Path(args.output)
+    check_output_not_input(out, manifest_inputs(args.manifest, allow_outside=args.allow_outside))
     if out.exists() and not args.overwrite:
         raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
     step, done = _step_logger(args)
@@ -116,12 +118,19 @@ def _print_summary(model, where: Path | None = None) -> None:
 
 def _cmd_correct(args: argparse.Namespace) -> int:
     from photoquant.correct import correct_manifest
+    from photoquant.io.atomic import atomic_output_file
     from photoquant.io.images import write_exr
+    from photoquant.io.outputs import camera_inputs, check_output_not_input, manifest_inputs
     from photoquant.model import load_camera
 
     out = Path(args.output)
     if out.suffix.lower() != ".exr":
         raise PhotoquantError(f"the output must be an OpenEXR file (.exr), got {out}")
+    check_output_not_input(
+        out,
+        [*manifest_inputs(args.manifest, allow_outside=args.allow_outside)]
+        + camera_inputs(args.camera),
+    )
     if out.exists() and not args.overwrite:
         raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
     t0 = time.perf_counter()
@@ -130,14 +139,15 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         args.manifest, model, allow_outside=args.allow_outside, progress_bars=not args.quiet
     )
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_exr(
-        out,
-        result.photoquantity,
-        channels=model.channels,
-        metadata={
-            "photoquant": f"photoquantity l = exp(merge)/(u*v), v{__version__}; NaN = no valid exposure",
-        },
-    )
+    with atomic_output_file(out, overwrite=args.overwrite) as tmp:  # no replace without the flag
+        write_exr(
+            tmp,
+            result.photoquantity,
+            channels=model.channels,
+            metadata={
+                "photoquant": f"photoquantity l = exp(merge)/(u*v), v{__version__}; NaN = no valid exposure",
+            },
+        )
     finite = result.photoquantity[~result.mask]
     print(
         f"photoquantity written to {out}: {result.photoquantity.shape[1]}x"
@@ -186,6 +196,14 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         raise PhotoquantError(f"compare needs the `validation` package: {exc}") from None
     from photoquant.model import load_camera
 
+    if args.figures is not None:
+        from photoquant.io.outputs import camera_inputs, check_output_not_input, manifest_inputs
+
+        check_output_not_input(
+            args.figures,
+            manifest_inputs(args.manifest, allow_outside=args.allow_outside)
+            + camera_inputs(args.camera),
+        )
     model = load_camera(args.camera)
     if args.figures is not None and Path(args.figures).exists() and not args.overwrite:
         raise OutputExistsError(f"{args.figures} already exists (use --overwrite to replace it)")
@@ -208,8 +226,18 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     # the validation job drives the simulator, which photoquant itself never imports
+    from photoquant.io.outputs import check_output_not_input
     from validation.cli import run_validate
 
+    check = getattr(args, "check", None)
+    check_output_not_input(
+        args.output,
+        [
+            check if check not in (None, "default") else None,
+            getattr(args, "cache_dir", None),
+            getattr(args, "workdir", None),
+        ],
+    )
     return run_validate(args)
 
 
@@ -316,8 +344,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         from photoquant.response import DEFAULT_SMOOTHNESS
 
         args.smoothness = DEFAULT_SMOOTHNESS
+    from photoquant._signals import Terminated, handle_signals
+    from photoquant.io.atomic import remove_live_temporaries
+
     try:
-        return int(args.func(args) or 0)
+        with handle_signals():  # SIGTERM / Ctrl-C: clean exit, temporaries removed
+            return int(args.func(args) or 0)
     except PhotoquantError as exc:
         print(f"photoquant: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
@@ -325,8 +357,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"photoquant: error: {exc}", file=sys.stderr)
         return EXIT_IO
     except KeyboardInterrupt:
+        remove_live_temporaries()
         print("photoquant: interrupted", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        remove_live_temporaries()
+        print("photoquant: terminated", file=sys.stderr)
+        return 128 + exc.signum
 
 
 if __name__ == "__main__":  # pragma: no cover

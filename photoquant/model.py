@@ -238,9 +238,13 @@ class CameraModel:
         """Write the model as a folder (see the module docs), atomically.
 
         Raises :class:`OutputExistsError` when ``path`` exists and ``overwrite``
-        is false.
+        is false, or — with ``overwrite`` — is not a camera folder (it holds
+        anything besides ``camera.json`` and the two maps): a user's folder is
+        never replaced.
         """
-        with atomic_directory(path, overwrite=overwrite) as tmp:
+        from photoquant.io.outputs import camera_folder_problem
+
+        with atomic_directory(path, overwrite=overwrite, replaceable=camera_folder_problem) as tmp:
             write_exr(tmp / _LUT_NAME, self.sensor_lut, channels=self.channels)
             write_exr(
                 tmp / _VIGNETTING_NAME, self.vignetting().astype(np.float32), channels=self.channels

@@ -401,7 +401,7 @@ def _is_empty_dir(path: Path) -> bool:
 def _check_replaceable(path: Path, target: Path, replaceable: Replaceable | None) -> None:
     if path.is_symlink() or not path.is_dir():
         raise OutputExistsError(f"{target} exists and is not a folder; it is not replaced")
-    if replaceable is not None:
+    if replaceable is not None and not _is_empty_dir(path):  # an empty folder holds nothing
         reason = replaceable(path)
         if reason:
             raise OutputExistsError(f"{target} is not replaced: {reason}")
@@ -699,9 +699,9 @@ def atomic_directory(
     empty_ok : bool
         Also write over an existing *empty* folder without ``overwrite``.
     replaceable : callable, optional
-        ``replaceable(folder) -> reason or None``: why an existing folder must
-        not be replaced even with ``overwrite`` (e.g. it is not a capture
-        set). Asked before the block runs and again about the very folder
+        ``replaceable(folder) -> reason or None``: why an existing non-empty
+        folder must not be replaced even with ``overwrite`` (e.g. it is not a
+        capture set). Asked before the block runs and again about the very folder
         displaced by the final rename (which is undone if it refuses).
 
     Yields
