@@ -92,8 +92,9 @@ def deferred_signals() -> Iterator[None]:
 def handle_signals() -> Iterator[None]:
     """Within the block, SIGTERM raises :class:`Terminated` and SIGINT :class:`KeyboardInterrupt`.
 
-    Installed from the main thread only (elsewhere the block changes nothing);
-    the previous handlers are restored when it ends. A signal held by
+    Installed from the main thread only (elsewhere the block changes nothing),
+    and not for a signal that is ignored (``SIG_IGN``, as SIGINT in a
+    background job); the previous handlers are restored when it ends. A signal held by
     :func:`deferred_signals` when the block ends is dropped.
     """
     global _pending
@@ -102,6 +103,8 @@ def handle_signals() -> Iterator[None]:
         return
     previous: dict[int, Callable[[int, FrameType | None], Any] | int | None] = {}
     for signum in HANDLED:
+        if signal.getsignal(signum) is signal.SIG_IGN:
+            continue  # e.g. SIGINT of a background job: stays ignored
         previous[signum] = signal.signal(signum, _handler)
     try:
         yield

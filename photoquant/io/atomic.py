@@ -155,13 +155,14 @@ def _process_alive(pid: int, start: int) -> bool:
 # ------------------------------------------------------------------------ registry
 
 
-_live: dict[Path, str] = {}  # temporary -> "file" | "dir" | "aside:<target>"
+#: temporary -> (owning pid, "file" | "dir" | "aside:<target>"); a forked child owns none
+_live: dict[Path, tuple[int, str]] = {}
 _live_lock = threading.Lock()
 
 
 def _register(path: Path, kind: str) -> None:
     with _live_lock:
-        _live[path] = kind
+        _live[path] = (os.getpid(), kind)
 
 
 def _unregister(path: Path) -> None:
@@ -169,15 +170,19 @@ def _unregister(path: Path) -> None:
         _live.pop(path, None)
 
 
+def _live_items() -> list[tuple[Path, str]]:
+    pid = os.getpid()
+    with _live_lock:
+        return [(p, kind) for p, (owner, kind) in _live.items() if owner == pid]
+
+
 def live_temporaries() -> list[Path]:
     """The temporaries this process has made and not yet removed or published."""
-    with _live_lock:
-        return list(_live)
+    return [p for p, _ in _live_items()]
 
 
 def _inside_live_dir(path: Path) -> bool:
-    with _live_lock:
-        dirs = {p for p, kind in _live.items() if kind == "dir"}
+    dirs = {p for p, kind in _live_items() if kind == "dir"}
     return any(parent in dirs for parent in path.parents)
 
 
@@ -213,8 +218,7 @@ def remove_live_temporaries() -> list[Path]:
     """
     removed = []
     with deferred_signals():
-        for path in live_temporaries():
-            kind = _live.get(path, "")
+        for path, kind in _live_items():
             if kind.startswith("aside:"):
                 target = Path(kind[len("aside:") :])
                 with contextlib.suppress(OSError):

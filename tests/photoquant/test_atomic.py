@@ -415,3 +415,15 @@ def test_signals_are_deferred_while_committing():
             for _ in range(10**6):
                 pass
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+def test_a_forked_child_does_not_remove_the_parents_temporaries(tmp_path):
+    with atomic_directory(tmp_path / "out") as tmp:
+        (tmp / "x").write_text("1")
+        pid = os.fork()
+        if pid == 0:  # pragma: no cover - the child
+            os._exit(len(remove_live_temporaries()))
+        _, status = os.waitpid(pid, 0)
+        assert os.waitstatus_to_exitcode(status) == 0 and (tmp / "x").read_text() == "1"
+    assert (tmp_path / "out" / "x").read_text() == "1"
