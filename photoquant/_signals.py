@@ -85,7 +85,7 @@ def deferred_signals() -> Iterator[None]:
         if signum is not None:
             if threading.current_thread() is threading.main_thread():
                 raise _exception_for(signum)
-            _thread.interrupt_main(signum)  # runs _handler in the main thread
+            _thread.interrupt_main(signal.Signals(signum))  # runs _handler in the main thread
 
 
 @contextlib.contextmanager
@@ -102,6 +102,7 @@ def handle_signals() -> Iterator[None]:
         yield
         return
     previous: dict[int, Callable[[int, FrameType | None], Any] | int | None] = {}
+    signum: int
     for signum in HANDLED:
         if signal.getsignal(signum) is signal.SIG_IGN:
             continue  # e.g. SIGINT of a background job: stays ignored

@@ -122,7 +122,16 @@ def _owner_tag() -> str:
 
 
 def _stem(name: str) -> str:
-    return name[:_STEM_MAX]
+    """The target's name cut to ``_STEM_MAX`` bytes (a temporary's name stays under NAME_MAX)."""
+    return os.fsdecode(os.fsencode(name)[:_STEM_MAX])
+
+
+def _target(path: str | os.PathLike[str]) -> Path:
+    """``path`` as the name of an output: not ``.``, ``..`` or a root."""
+    target = Path(path)
+    if target.name in ("", ".", ".."):
+        raise InputError(f"{os.fspath(path)!r} does not name a file or folder to write")
+    return target
 
 
 _TEMP_RE = re.compile(
@@ -554,7 +563,7 @@ def atomic_write(
     ...     f.write("{}")
     """
     _check_mode(mode)
-    target = Path(path)
+    target = _target(path)
     if not overwrite and os.path.lexists(target):
         raise _exists_error(target)
     _clean_stale(target)
@@ -643,7 +652,7 @@ def atomic_output_file(path: str | os.PathLike[str], *, overwrite: bool = False)
     OSError
         If the block wrote no file, or writing or renaming fails.
     """
-    target = Path(path)
+    target = _target(path)
     if not overwrite and os.path.lexists(target):
         raise _exists_error(target)
     if target.is_dir() and not target.is_symlink():
@@ -720,7 +729,7 @@ def atomic_directory(
         folder. On this and on any other exception the temporary folder is
         removed and ``path`` is untouched.
     """
-    target = Path(path)
+    target = _target(path)
     if os.path.lexists(target):
         if not overwrite and not (empty_ok and _is_empty_dir(target)):
             raise _exists_error(target)

@@ -427,3 +427,49 @@ def test_a_forked_child_does_not_remove_the_parents_temporaries(tmp_path):
         _, status = os.waitpid(pid, 0)
         assert os.waitstatus_to_exitcode(status) == 0 and (tmp / "x").read_text() == "1"
     assert (tmp_path / "out" / "x").read_text() == "1"
+
+
+def test_dot_and_root_are_not_output_names(tmp_path, monkeypatch):
+    from photoquant.errors import InputError
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mine.txt").write_text("keep")
+    for name in (".", "..", "/", "sub/.."):
+        with pytest.raises(InputError, match="does not name"):
+            with atomic_directory(name, overwrite=True):
+                pass  # pragma: no cover
+        with pytest.raises(InputError, match="does not name"):
+            write_text_atomic(name, "x")
+    assert (tmp_path / "mine.txt").read_text() == "keep"
+
+
+def test_non_ascii_long_names(tmp_path):
+    target = tmp_path / ("é" * 120)  # 240 bytes: the temporary's name must still fit
+    with atomic_directory(target) as tmp:
+        (tmp / "a").write_text("1")
+    assert (target / "a").read_text() == "1" and siblings(target) == []
+
+
+def test_a_signal_held_by_a_worker_thread_is_raised_in_the_main_thread():
+    import time
+
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("signal handlers need the main thread")
+    entered, release = threading.Event(), threading.Event()
+
+    def worker() -> None:
+        with _signals.deferred_signals():  # e.g. a frame's rename in a writer thread
+            entered.set()
+            release.wait(10)
+
+    with _signals.handle_signals():
+        t = threading.Thread(target=worker)
+        t.start()
+        entered.wait(10)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.2)  # the handler runs here and holds the signal: no exception yet
+        with pytest.raises(_signals.Terminated):
+            release.set()
+            t.join(10)
+            time.sleep(5)  # interrupted by the signal re-delivered to the main thread
+        t.join(10)
