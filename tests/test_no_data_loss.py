@@ -393,3 +393,18 @@ def test_demo_output_folder_is_kept_on_refusal(tmp_path, capsys, monkeypatch):
     assert "not a photoquant camera" in one_error_line(capsys.readouterr().err)
     assert (root / "camera" / "thesis.tex").read_text() == "years of work"
     assert sorted(p.name for p in (root / "camera").iterdir()) == ["thesis.tex"]
+
+
+def test_demo_overwrite_replaces_its_own_outputs(tmp_path, capsys, monkeypatch):
+    import validation.demo as demo
+
+    monkeypatch.setattr(demo, "QUICK_SHAPE", (24, 32))
+    root = tmp_path / "d"
+    assert main(["demo", "-o", str(root)]) == 0
+    assert main(["demo", "-o", str(root)]) == 2  # not without the flag
+    capsys.readouterr()
+    before = tree_hash(root / "capture")
+    assert main(["demo", "-o", str(root), "--overwrite", "--seed", "1"]) == 0
+    capsys.readouterr()
+    assert tree_hash(root / "capture") != before
+    assert sorted(p.name for p in root.iterdir()) == ["camera", "capture", "scene.exr"]
