@@ -451,7 +451,12 @@ def _commit_dir(
             try:
                 _check_replaceable(tmp, target, replaceable)
             except OutputExistsError:
-                _renameat2(tmp, target, _RENAME_EXCHANGE)
+                try:
+                    _renameat2(tmp, target, _RENAME_EXCHANGE)  # put it back
+                except OSError:
+                    keep = _temp_path(target, "old")  # never deleted as a temporary
+                    os.rename(tmp, keep)
+                    _log.warning("photoquant: %s was displaced; it is kept as %s", target, keep)
                 raise
             _hook("exchanged", tmp)
             return

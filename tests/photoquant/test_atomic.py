@@ -473,3 +473,39 @@ def test_a_signal_held_by_a_worker_thread_is_raised_in_the_main_thread():
             t.join(10)
             time.sleep(5)  # interrupted by the signal re-delivered to the main thread
         t.join(10)
+
+
+def test_a_folder_displaced_by_mistake_is_put_back_or_kept(tmp_path, monkeypatch):
+    """The folder the final swap displaced is checked again; if it is refused, it comes back."""
+    if atomic._renameat2_fn is None:
+        pytest.skip("renameat2 is not available here")
+    calls = []
+
+    def changes_its_mind(folder: Path) -> str | None:  # as if a user's file arrived just then
+        calls.append(folder)
+        return "a user's folder" if len(calls) >= 3 else None
+
+    cam = make_folder(tmp_path / "cam", {"camera.json": "old"})
+    with pytest.raises(OutputExistsError, match="a user's folder"):
+        with atomic_directory(cam, overwrite=True, replaceable=changes_its_mind) as tmp:
+            (tmp / "camera.json").write_text("new")
+    assert (cam / "camera.json").read_text() == "old" and siblings(cam) == []
+    # the swap back fails too: the displaced folder is kept beside, never deleted
+    real = atomic._renameat2
+    exchanges = []
+
+    def flaky(src, dst, flags):
+        if flags == atomic._RENAME_EXCHANGE:
+            exchanges.append(src)
+            if len(exchanges) == 2:
+                raise OSError(errno.EIO, "I/O error")
+        return real(src, dst, flags)
+
+    monkeypatch.setattr(atomic, "_renameat2", flaky)
+    calls.clear()
+    with pytest.raises(OutputExistsError):
+        with atomic_directory(cam, overwrite=True, replaceable=changes_its_mind) as tmp:
+            (tmp / "camera.json").write_text("new")
+    (kept,) = [tmp_path / name for name in siblings(cam)]
+    assert kept.name.endswith(".old") and (kept / "camera.json").read_text() == "old"
+    assert clean_stale_temporaries(cam)[0] == []  # ours and alive; later: named, not deleted
