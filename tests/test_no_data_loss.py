@@ -13,6 +13,7 @@ import errno
 import hashlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -257,6 +258,9 @@ cmd, rest = sys.argv[5], sys.argv[6:]
 if cmd == "pqsim":
     from pqsim.cli import main
     sys.exit(main(rest))
+if cmd == "photoquant":
+    from photoquant.cli import main
+    sys.exit(main(rest))
 # a folder written like a camera, by a command's main() (signals handled)
 from photoquant._signals import Terminated, handle_signals
 target = Path(rest[0])
@@ -408,3 +412,21 @@ def test_demo_overwrite_replaces_its_own_outputs(tmp_path, capsys, monkeypatch):
     capsys.readouterr()
     assert tree_hash(root / "capture") != before
     assert sorted(p.name for p in root.iterdir()) == ["camera", "capture", "scene.exr"]
+
+
+@pytest.mark.parametrize(
+    ("sig", "status", "word"),
+    [(signal.SIGTERM, 143, "terminated"), (signal.SIGINT, 130, "interrupted")],
+)
+def test_photoquant_calibrate_stopped_while_saving_keeps_the_old_camera(
+    capture, camera, tmp_path, sig, status, word
+):
+    cam = tmp_path / "cam"
+    shutil.copytree(camera, cam)
+    before = tree_hash(cam)
+    argv = ["photoquant", "calibrate", str(capture), "-o", str(cam), "--overwrite", "-q"]
+    proc = _start(tmp_path, "renameat2", "created", ".camera.json.", 60, *argv)
+    proc.send_signal(sig)
+    code, err = _finish(proc)
+    assert code == status and f"photoquant: {word}" in err and "Traceback" not in err
+    assert tree_hash(cam) == before and siblings(cam) == []
