@@ -128,7 +128,7 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         raise PhotoquantError(f"the output must be an OpenEXR file (.exr), got {out}")
     check_output_not_input(
         out,
-        [*manifest_inputs(args.manifest, allow_outside=args.allow_outside)]
+        manifest_inputs(args.manifest, allow_outside=args.allow_outside)
         + camera_inputs(args.camera),
     )
     if out.exists() and not args.overwrite:
@@ -226,17 +226,15 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     # the validation job drives the simulator, which photoquant itself never imports
-    from photoquant.io.outputs import check_output_not_input
+    from photoquant.io.outputs import Holder, check_output_not_input
     from validation.cli import run_validate
 
     check = getattr(args, "check", None)
+    kept = [getattr(args, "cache_dir", None), getattr(args, "workdir", None)]
     check_output_not_input(
         args.output,
-        [
-            check if check not in (None, "default") else None,
-            getattr(args, "cache_dir", None),
-            getattr(args, "workdir", None),
-        ],
+        [check if check not in (None, "default") else None]
+        + [Holder(Path(p).expanduser()) for p in kept if p is not None],
     )
     return run_validate(args)
 

@@ -430,3 +430,15 @@ def test_photoquant_calibrate_stopped_while_saving_keeps_the_old_camera(
     code, err = _finish(proc)
     assert code == status and f"photoquant: {word}" in err and "Traceback" not in err
     assert tree_hash(cam) == before and siblings(cam) == []
+
+
+def test_validate_report_refuses_to_replace_its_workdir(tmp_path, capsys):
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "kept.txt").write_text("kept")
+    argv = ["validate", "--tiny", "-q", "--workdir", str(work), "--overwrite"]
+    assert main([*argv, "-o", str(work)]) == 2
+    assert "is the input" in one_error_line(capsys.readouterr().err)
+    assert main([*argv, "-o", str(tmp_path)]) == 2
+    assert "contains the input" in one_error_line(capsys.readouterr().err)
+    assert (work / "kept.txt").read_text() == "kept"

@@ -132,7 +132,7 @@ def manifest_inputs(manifest: PathLike, *, allow_outside: bool = False) -> list[
     return found
 
 
-def camera_inputs(camera: PathLike) -> list[Path]:
+def camera_inputs(camera: PathLike) -> list[Path | Holder]:
     """The camera folder a command reads (given as the folder or its ``camera.json``)."""
     path = Path(camera)
     return [path.parent if path.is_file() else path]
