@@ -15,7 +15,9 @@ place by one rename:
   is published with :func:`os.link` (which fails on an existing name) and a
   folder by reserving the name with :func:`os.mkdir` and renaming the new
   folder onto that empty reservation (a rename onto a non-empty folder
-  fails); there is no check-then-rename race either way.
+  fails); there is no check-then-rename race either way. (On a file system
+  without hard links a file's name is reserved by an empty file created with
+  ``O_EXCL``, which the complete file then replaces.)
 - **Overwrite**: the old output is replaced only once the new one is
   complete. A file is replaced by :func:`os.replace` (atomic; a folder of
   that name is never replaced by a file). A folder is swapped with the new one
@@ -23,7 +25,16 @@ place by one rename:
   temporary name and is deleted afterwards — or, without it, moved aside to
   ``.NAME.pq<pid>-<start>-<random>.old``, the new folder renamed in, and the
   old one deleted; a failure in between moves the old one back. A failed
-  write never deletes the old output.
+  write never deletes the old output. ``replaceable`` lets a caller refuse
+  to replace a folder that is not an output of its kind (a camera, a
+  capture set, a report: :mod:`photoquant.io.outputs`); it is asked before
+  the work and again about the very folder the final rename displaced.
+
+Defaults: :func:`atomic_directory` and :func:`atomic_output_file` never
+replace without ``overwrite=True``. The plain file writers
+(:func:`atomic_write` and the two helpers) replace by default, because they
+mostly write files inside a new temporary folder or a cache; commands pass
+their ``--overwrite`` flag to them, or use :func:`atomic_output_file`.
 
 Temporaries are registered in a process-wide set while they exist and are
 removed by the ``finally`` clauses of these functions, by an :mod:`atexit`
