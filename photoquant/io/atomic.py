@@ -268,7 +268,8 @@ def clean_stale_temporaries(target: str | os.PathLike[str]) -> tuple[list[Path],
 
     Returns ``(removed, named)``: ``named`` are the ones not touched and
     reported in a warning — an ``.old`` folder (a previous output kept by an
-    overwrite that was killed) whose target exists again, and temporaries
+    overwrite that was killed) whose target exists again (not as the empty
+    folder that reserved the name, which is given back), and temporaries
     whose name carries no owner (written by an older version). An ``.old``
     folder whose target is missing is moved back to it (counted as removed).
     Temporaries of running processes are left alone.
@@ -293,6 +294,9 @@ def clean_stale_temporaries(target: str | os.PathLike[str]) -> tuple[list[Path],
             continue
         try:
             if m["kind"] == "old":
+                if _is_empty_dir(target):  # the name reserved for the new folder, still empty
+                    with contextlib.suppress(OSError):
+                        os.rmdir(target)
                 if os.path.lexists(target):
                     named.append(path)
                     continue
