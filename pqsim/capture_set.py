@@ -13,9 +13,13 @@ and the irradiance scene on the bare sensor — plus a test scene, with a
       scene/t0.000250_n0.png       the test scene, ...
       truth/truth.json, u.exr, v.exr, l_view0.exr, ..., l_irradiance.exr, l_scene.exr
 
-Frames are PNG (uint8 for 8 bits, uint16 above) or TIFF; the manifest is
-written last with :func:`photoquant.io.write_manifest`, so a folder without
-``capture.json`` is an unfinished capture.
+Frames are PNG (uint8 for 8 bits, uint16 above) or TIFF. The whole set is
+written into a temporary sibling of ``folder`` and takes its name by one
+rename (:func:`photoquant.io.atomic.atomic_directory`): a capture set appears
+whole or not at all, whatever error or signal interrupts the writing, and
+``overwrite`` replaces a previous set only once the new one is complete —
+and only a folder that is a capture set of pqsim and holds nothing else
+(:func:`capture_set_problem`); a user's folder is never emptied.
 
 The file layout is shared with the Mitsuba-rendered capture sets of
 :mod:`pqsim.rendered_capture`: both call :func:`check_output_folder` and
