@@ -114,8 +114,10 @@ def step_specs(args: argparse.Namespace) -> dict[str, Any]:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from photoquant.calibration import calibrate_manifest
+    from photoquant.io.outputs import check_output_not_input, manifest_inputs
 
     out = Path(args.output)
+    check_output_not_input(out, manifest_inputs(args.manifest, allow_outside=args.allow_outside))
     if out.exists() and not args.overwrite:
         raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
     specs = step_specs(args)
@@ -200,12 +202,19 @@ def printable(path: Any) -> str:
 
 def _cmd_correct(args: argparse.Namespace) -> int:
     from photoquant.correction import correct_manifest
+    from photoquant.io.atomic import atomic_output_file
     from photoquant.io.images import write_exr
+    from photoquant.io.outputs import camera_inputs, check_output_not_input, manifest_inputs
     from photoquant.model import load_camera
 
     out = Path(args.output)
     if out.suffix.lower() != ".exr":
         raise PhotoquantError(f"the output must be an OpenEXR file (.exr), got {out}")
+    check_output_not_input(
+        out,
+        manifest_inputs(args.manifest, allow_outside=args.allow_outside)
+        + camera_inputs(args.camera),
+    )
     if out.exists() and not args.overwrite:
         raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
     t0 = time.perf_counter()
@@ -214,14 +223,15 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         args.manifest, model, allow_outside=args.allow_outside, progress_bars=not args.quiet
     )
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_exr(
-        out,
-        result.photoquantity,
-        channels=model.channels,
-        metadata={
-            "photoquant": f"photoquantity l = exp(merge)/(u*v), v{__version__}; NaN = no valid exposure",
-        },
-    )
+    with atomic_output_file(out, overwrite=args.overwrite) as tmp:  # no replace without the flag
+        write_exr(
+            tmp,
+            result.photoquantity,
+            channels=model.channels,
+            metadata={
+                "photoquant": f"photoquantity l = exp(merge)/(u*v), v{__version__}; NaN = no valid exposure",
+            },
+        )
     finite = result.photoquantity[~result.mask]
     print(
         f"photoquantity written to {out}: {result.photoquantity.shape[1]}x"
@@ -391,10 +401,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``photoquant`` command; returns the exit status."""
+    from photoquant._signals import Terminated, handle_signals
+    from photoquant.io.atomic import remove_live_temporaries
+
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
-        return int(args.func(args) or 0)
+        with handle_signals():  # SIGTERM / Ctrl-C: clean exit, temporaries removed
+            return int(args.func(args) or 0)
     except PhotoquantError as exc:
         print(f"photoquant: error: {printable(exc)}", file=sys.stderr)
         return EXIT_INPUT
@@ -402,8 +416,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"photoquant: error: {printable(exc)}", file=sys.stderr)
         return EXIT_IO
     except KeyboardInterrupt:
+        remove_live_temporaries()
         print("photoquant: interrupted", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        remove_live_temporaries()
+        print("photoquant: terminated", file=sys.stderr)
+        return 128 + exc.signum
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -280,10 +280,14 @@ class CameraModel:
         """Write the model as a folder (see the module docs), atomically.
 
         Raises :class:`OutputExistsError` when ``path`` exists and ``overwrite``
-        is false.
+        is false, or — with ``overwrite`` — is not a camera folder (it holds
+        anything besides ``camera.json`` and the two maps): a user's folder is
+        never replaced.
         """
+        from photoquant.io.outputs import camera_folder_problem
+
         data, images = self._serialise()
-        with atomic_directory(path, overwrite=overwrite) as tmp:
+        with atomic_directory(path, overwrite=overwrite, replaceable=camera_folder_problem) as tmp:
             for file, image in images.items():
                 write_exr(tmp / file, np.asarray(image, dtype=np.float32), channels=self.channels)
             write_exr(

@@ -25,6 +25,7 @@ Other helpers:
 
 - :func:`to_json_value` — numpy scalars and arrays, tuples and paths as plain JSON values.
 - :func:`thread_map` — ``[fn(x) for x in items]`` on threads, in order.
+- :func:`handle_signals`, :class:`Terminated` — SIGTERM and Ctrl-C as clean exits (temporaries removed), for a command's ``main()``.
 
 Examples
 --------
@@ -53,9 +54,12 @@ from photoquant._checks import (
     validate_method,
 )
 from photoquant._json import to_json_value
+from photoquant._signals import Terminated, handle_signals
 from photoquant._threads import thread_map
 
 __all__ = [
+    "Terminated",
+    "handle_signals",
     "check_array",
     "check_bit_depth",
     "check_exposure_times",

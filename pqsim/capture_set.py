@@ -13,9 +13,13 @@ and the irradiance scene on the bare sensor — plus a test scene, with a
       scene/t0.000250_n0.png       the test scene, ...
       truth/truth.json, u.exr, v.exr, l_view0.exr, ..., l_irradiance.exr, l_scene.exr
 
-Frames are PNG (uint8 for 8 bits, uint16 above) or TIFF; the manifest is
-written last with :func:`photoquant.io.write_manifest`, so a folder without
-``capture.json`` is an unfinished capture.
+Frames are PNG (uint8 for 8 bits, uint16 above) or TIFF. The whole set is
+written into a temporary sibling of ``folder`` and takes its name by one
+rename (:func:`photoquant.io.atomic.atomic_directory`): a capture set appears
+whole or not at all, whatever error or signal interrupts the writing, and
+``overwrite`` replaces a previous set only once the new one is complete —
+and only a folder that is a capture set of pqsim and holds nothing else
+(:func:`capture_set_problem`); a user's folder is never emptied.
 
 The file layout is shared with the Mitsuba-rendered capture sets of
 :mod:`pqsim.rendered_capture`: both call :func:`check_output_folder` and
@@ -30,7 +34,7 @@ References
 
 from __future__ import annotations
 
-import shutil
+import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -56,6 +60,7 @@ __all__ = [
     "DEFAULT_EXPOSURES_S",
     "DEFAULT_SCENE_EXPOSURES_S",
     "MANIFEST_NAME",
+    "capture_set_problem",
     "check_output_folder",
     "frame_extension",
     "write_capture_folder",
@@ -74,7 +79,7 @@ DEFAULT_SCENE_EXPOSURES_S = np.geomspace(2.5e-4, 0.64, 10)
 shadow ~2 % at 0.64 s)."""
 
 MANIFEST_NAME = "capture.json"
-#: Paths of a capture folder written by pqsim, removed before an overwrite.
+#: Top-level paths of a capture folder written by pqsim.
 _OWNED = ("views", "irradiance", "scene", "colorchecker", "truth", MANIFEST_NAME)
 
 #: A capture, or a function simulating it when its frames are about to be written
@@ -131,45 +136,131 @@ def frame_extension(frame_format: str) -> str:
 
 
 def check_output_folder(folder: str | Path, overwrite: bool) -> tuple[Path, bool]:
-    """Check that a capture set may be written to ``folder``.
+    """Check that a capture set may be written to ``folder``, before anything is simulated.
 
     Parameters
     ----------
     folder : str or Path
-        Destination; it may be missing, or an empty folder, or any folder with
-        ``overwrite``.
+        Destination; it may be missing, or an empty folder, or — with
+        ``overwrite`` — a previous capture set of pqsim
+        (:func:`capture_set_problem` finds nothing wrong with it).
     overwrite : bool
-        Whether a non-empty folder may be written to.
+        Whether a previous capture set may be replaced.
 
     Returns
     -------
     (Path, bool)
         The folder and whether it is non-empty (then :func:`write_capture_folder`
-        removes the previous capture set's paths first).
+        replaces the previous capture set, once the new one is complete).
 
     Raises
     ------
     InputError
-        If ``folder`` is a file, or is not empty and ``overwrite`` is false.
+        If ``folder`` is a file, or is not empty and ``overwrite`` is false, or
+        is not empty and not a capture set (naming why).
     """
     folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
         raise InputError(f"`folder` {str(folder)!r} exists and is not a folder")
     non_empty = folder.is_dir() and any(folder.iterdir())
     if non_empty and not overwrite:
         raise InputError(
             f"`folder` {str(folder)!r} is not empty; pass overwrite=True to replace its capture set"
         )
+    if non_empty:
+        problem = capture_set_problem(folder)
+        if problem:
+            raise InputError(
+                f"`folder` {str(folder)!r} is not replaced: {problem} (overwrite replaces "
+                "only a capture set written by pqsim)"
+            )
     return folder, non_empty
 
 
-def _remove_owned(folder: Path) -> None:
-    for name in _OWNED:
-        p = folder / name
-        if p.is_dir() and not p.is_symlink():
-            shutil.rmtree(p)
-        elif p.exists() or p.is_symlink():
-            p.unlink()
+def _capture_set_files(folder: Path) -> set[str] | str:
+    """The files (relative POSIX paths) a pqsim capture set in ``folder`` consists of, or why not."""
+    import json
+
+    try:
+        doc = json.loads((folder / MANIFEST_NAME).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return f"it holds no {MANIFEST_NAME}"
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        return f"its {MANIFEST_NAME} is not readable JSON ({type(exc).__name__})"
+    generator = doc.get("generator") if isinstance(doc, dict) else None
+    if not isinstance(generator, dict) or generator.get("package") != "pqsim":
+        return f"its {MANIFEST_NAME} was not written by pqsim (no pqsim `generator`)"
+    files = {MANIFEST_NAME}
+
+    def frames_of(value: Any) -> None:
+        if isinstance(value, dict) and isinstance(value.get("frames"), list):
+            for frame in value["frames"]:
+                if isinstance(frame, dict) and isinstance(frame.get("file"), str):
+                    files.add(frame["file"])
+
+    for key, value in doc.items():
+        if key == "views" and isinstance(value, list):
+            for view in value:
+                frames_of(view)
+        else:
+            frames_of(value)
+    truth = doc.get("truth")
+    if isinstance(truth, str):
+        files.add(truth)
+        tdir = Path(truth).parent
+        try:
+            tdoc = json.loads((folder / truth).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+            tdoc = {}
+        sections = [tdoc.get("camera")] if isinstance(tdoc, dict) else []
+        caps = tdoc.get("captures") if isinstance(tdoc, dict) else None
+        if isinstance(caps, dict):
+            sections.extend(caps.values())
+        for section in sections:
+            if isinstance(section, dict):
+                for value in section.values():
+                    if isinstance(value, str) and value.endswith(".exr") and "/" not in value:
+                        files.add((tdir / value).as_posix())
+    return files
+
+
+def capture_set_problem(folder: str | Path) -> str | None:
+    """Why ``folder`` is not a capture set that pqsim may replace, or None if it is one.
+
+    A capture set holds a ``capture.json`` whose ``generator`` names pqsim,
+    and nothing else than the files it and its ``truth.json`` list (frames,
+    truth maps): a folder holding anything more — a user's notes, a camera
+    calibrated into it, folders named ``scene/`` or ``views/`` of another
+    program — is not one, and is never replaced or emptied.
+    """
+    folder = Path(folder)
+    if folder.is_symlink() or not folder.is_dir():
+        return "it is not a folder"
+    files = _capture_set_files(folder)
+    if isinstance(files, str):
+        return files
+    dirs = {p for f in files for p in Path(f).parents} - {Path(".")}
+    allowed_dirs = {d.as_posix() for d in dirs}
+    foreign: list[str] = []
+    for root, dirnames, filenames in os.walk(folder):
+        rel_root = Path(root).relative_to(folder)
+        for name in dirnames:
+            rel = (rel_root / name).as_posix()
+            if rel not in allowed_dirs:
+                foreign.append(rel + "/")
+        dirnames[:] = [d for d in dirnames if (rel_root / d).as_posix() in allowed_dirs]
+        for name in filenames:
+            rel = (rel_root / name).as_posix()
+            if rel not in files:
+                foreign.append(rel)
+    if foreign:
+        shown = ", ".join(sorted(foreign)[:3]) + (
+            f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+        )
+        return (
+            f"it holds files that are not part of its capture set ({shown}); move them away first"
+        )
+    return None
 
 
 def _resolve(source: CaptureSource) -> Capture:
@@ -197,7 +288,12 @@ def write_capture_folder(
     workers: int | None = None,
     progress: bool = False,
 ) -> Path:
-    """Write a capture set: frames, ground truth (``truth/``), then the manifest.
+    """Write a capture set — frames, ground truth (``truth/``), manifest — whole or not at all.
+
+    Everything is written into a temporary sibling of ``folder``, which then
+    takes its name by one rename (:func:`photoquant.io.atomic.atomic_directory`):
+    a failure or a kill on the way leaves ``folder`` as it was, and a
+    previous capture set is replaced only once the new one is complete.
 
     The one implementation of the capture-folder layout shared by
     :func:`write_capture_set` (analytic scenes) and
@@ -234,7 +330,11 @@ def write_capture_folder(
     truth_meta : mapping
         Free metadata of ``truth/truth.json``.
     remove_previous : bool
-        Remove the owned paths of a previous capture set first.
+        Replace a previous capture set at ``folder`` (only one that
+        :func:`capture_set_problem` accepts, checked again at the final
+        rename). Without it an existing non-empty ``folder`` — also one that
+        appeared meanwhile — raises :class:`~photoquant.errors.OutputExistsError`;
+        an empty folder is written over either way.
     workers : int, optional
         Threads encoding and writing frames (every CPU by default).
     progress : bool
@@ -245,15 +345,55 @@ def write_capture_folder(
     Path
         The manifest ``folder / "capture.json"``, written last and atomically.
     """
-    from photoquant import io as pqio
+    from photoquant.io.atomic import atomic_directory
 
     extra_sets = dict(extra_sets or {})
     for name in extra_sets:
         if name not in _OWNED or name in ("views", "irradiance", "scene", "truth", MANIFEST_NAME):
             raise InputError(f"`extra_sets`: {name!r} is not an extra frame-set name of pqsim")
-    if remove_previous:
-        _remove_owned(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = Path(folder)
+    with atomic_directory(
+        folder, overwrite=remove_previous, empty_ok=True, replaceable=capture_set_problem
+    ) as tmp:
+        _write_capture_contents(
+            tmp,
+            camera,
+            views=views,
+            irradiance=irradiance,
+            scene=scene,
+            extra_sets=extra_sets,
+            white_roi=white_roi,
+            correspondences=correspondences,
+            ext=ext,
+            write_saturation_level=write_saturation_level,
+            generator=generator,
+            truth_meta=truth_meta,
+            workers=workers,
+            progress=progress,
+        )
+    return folder / MANIFEST_NAME
+
+
+def _write_capture_contents(
+    folder: Path,
+    camera: SyntheticCamera,
+    *,
+    views: Sequence[CaptureSource],
+    irradiance: CaptureSource | None,
+    scene: CaptureSource | None,
+    extra_sets: Mapping[str, tuple[CaptureSource, Mapping[str, Any]]],
+    white_roi: Sequence[int] | None,
+    correspondences: list[Any] | None,
+    ext: str,
+    write_saturation_level: bool,
+    generator: Mapping[str, Any],
+    truth_meta: Mapping[str, Any],
+    workers: int | None,
+    progress: bool,
+) -> None:
+    """Write a capture set's frames, truth and manifest into the (new, temporary) ``folder``."""
+    from photoquant import io as pqio
+
     truths: dict[str, CaptureTruth] = {}
     n_sets = len(views) + (irradiance is not None) + (scene is not None) + len(extra_sets)
     bar = tqdm(total=n_sets, desc="capturing", unit="set", disable=not progress, leave=False)
@@ -288,9 +428,7 @@ def write_capture_folder(
     manifest["generator"] = dict(generator)
     bar.close()
     save_truth(folder / "truth", truths["view0"].camera, truths, truth_meta)
-    path = folder / MANIFEST_NAME
-    pqio.write_manifest(path, manifest)
-    return path
+    pqio.write_manifest(folder / MANIFEST_NAME, manifest)
 
 
 def write_capture_set(
@@ -356,10 +494,9 @@ def write_capture_set(
         (like a raw file's white level). Off by default: the calibrator must
         then detect them, as with most real frames.
     overwrite : bool
-        Allow a non-empty ``folder``: the paths of a pqsim capture set
-        (``views/``, ``irradiance/``, ``scene/``, ``colorchecker/``, ``truth/``,
-        ``capture.json``) are removed first, once the simulation succeeded;
-        other files are left alone.
+        Replace a previous capture set at ``folder`` — only a folder holding
+        nothing but a pqsim capture set (:func:`capture_set_problem`), and only
+        once the new set is complete; a failed write leaves it intact.
 
     workers : int, optional
         Threads simulating and writing frames (every CPU by default); the

@@ -60,6 +60,41 @@ def _resolution(text: str) -> tuple[int, int]:
     return h, w
 
 
+def _check_capture_output(args: argparse.Namespace) -> None:
+    """Refuse ``-o`` before anything is rendered: an input, a file, or a folder pqsim must keep.
+
+    Without ``--overwrite`` the folder must be missing or empty; with it, it
+    may also hold a previous capture set of pqsim and nothing else
+    (:func:`pqsim.capture_set.capture_set_problem`). The writer checks again
+    at its final rename.
+    """
+    from photoquant.io.outputs import check_output_not_input
+    from pqsim.capture_set import capture_set_problem
+
+    out = Path(args.output)
+    preset = Path(args.preset)
+    check_output_not_input(
+        out,
+        [
+            preset if preset.suffix.lower() == ".json" else None,
+            Path(args.cache_dir).expanduser() if getattr(args, "cache_dir", None) else None,
+        ],
+    )
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        raise PhotoquantError(f"{out} exists and is not a folder")
+    if out.is_dir() and any(out.iterdir()):
+        if not args.overwrite:
+            raise PhotoquantError(
+                f"{out} is not empty (use --overwrite to replace its capture set)"
+            )
+        problem = capture_set_problem(out)
+        if problem:
+            raise PhotoquantError(
+                f"{out} is not replaced: {problem} (--overwrite replaces only a capture set "
+                "written by pqsim)"
+            )
+
+
 def _cmd_capture(args: argparse.Namespace) -> int:
     from pqsim.render import mitsuba_available
     from pqsim.synth_camera.presets import camera_from_preset
@@ -75,9 +110,7 @@ def _cmd_capture(args: argparse.Namespace) -> int:
             "(or use --renderer analytic)"
         )
     resolution = args.resolution or _DEFAULT_RESOLUTION[renderer]
-    out = Path(args.output)
-    if out.exists() and any(out.iterdir()) and not args.overwrite:
-        raise PhotoquantError(f"{out} is not empty (use --overwrite to replace its capture set)")
+    _check_capture_output(args)
     overrides = {}
     if args.bit_depth is not None:
         overrides["bit_depth"] = args.bit_depth
@@ -189,7 +222,7 @@ def _cmd_preset(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.exists() and not args.overwrite:
         raise PhotoquantError(f"{out} already exists (use --overwrite to replace it)")
-    write_text_atomic(out, text)
+    write_text_atomic(out, text, overwrite=args.overwrite)  # refuses one that appeared meanwhile
     print(f"preset written: {out} (edit it, then: pqsim capture --preset {out} ...)")
     return 0
 
@@ -308,15 +341,27 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``pqsim`` command; returns the exit status."""
+    from photoquant.io.atomic import remove_live_temporaries
+    from photoquant.utils import Terminated, handle_signals
+
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with handle_signals():  # SIGTERM / Ctrl-C: clean exit, temporaries removed
+            return int(args.func(args) or 0)
     except PhotoquantError as exc:
         print(f"pqsim: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
         print(f"pqsim: error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        remove_live_temporaries()
+        print("pqsim: interrupted", file=sys.stderr)
+        return 130
+    except Terminated as exc:
+        remove_live_temporaries()
+        print("pqsim: terminated", file=sys.stderr)
+        return 128 + exc.signum
 
 
 if __name__ == "__main__":  # pragma: no cover

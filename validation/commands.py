@@ -36,6 +36,14 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         write_comparison_figures,
     )
 
+    if args.figures is not None:
+        from photoquant.io.outputs import camera_inputs, check_output_not_input, manifest_inputs
+
+        check_output_not_input(
+            args.figures,
+            manifest_inputs(args.manifest, allow_outside=args.allow_outside)
+            + camera_inputs(args.camera),
+        )
     model = load_camera(args.camera)
     if args.figures is not None and Path(args.figures).exists() and not args.overwrite:
         raise OutputExistsError(f"{args.figures} already exists (use --overwrite to replace it)")
@@ -57,8 +65,16 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
+    from photoquant.io.outputs import Holder, check_output_not_input
     from validation.cli import run_validate
 
+    check = getattr(args, "check", None)
+    kept = [getattr(args, "cache_dir", None), getattr(args, "workdir", None)]
+    check_output_not_input(
+        args.output,
+        [check if check not in (None, "default") else None]
+        + [Holder(Path(p).expanduser()) for p in kept if p is not None],
+    )
     return run_validate(args)
 
 

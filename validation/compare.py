@@ -340,11 +340,12 @@ def write_comparison_figures(
 ) -> list[Path]:
     """Draw :func:`comparison_figures` as PNG files into a new ``folder`` (written atomically)."""
     from photoquant.io.atomic import atomic_directory
+    from photoquant.io.outputs import figures_folder_problem
     from validation.report import draw_figure
 
     specs = comparison_figures(rep, channels)
     target = Path(folder)
-    with atomic_directory(target, overwrite=overwrite) as tmp:
+    with atomic_directory(target, overwrite=overwrite, replaceable=figures_folder_problem) as tmp:
         for spec in specs:
             draw_figure(spec, tmp / f"{spec.name}.png")
     return [target / f"{spec.name}.png" for spec in specs]

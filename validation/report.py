@@ -419,18 +419,17 @@ def write_report(
     """Write ``report.md``, ``results.json`` and ``figures/*.png`` into ``folder``, atomically.
 
     Raises :class:`photoquant.errors.OutputExistsError` when ``folder`` exists
-    and ``overwrite`` is false.
+    and ``overwrite`` is false, or is not a report folder (it holds anything
+    besides ``report.md``, ``results.json`` and ``figures/*.png``).
     """
-    from photoquant.errors import OutputExistsError
     from photoquant.io import write_text_atomic
     from photoquant.io.atomic import atomic_directory
+    from photoquant.io.outputs import report_folder_problem
 
     target = Path(folder)
-    if target.exists() and not overwrite:
-        raise OutputExistsError(f"{target} already exists (use --overwrite to replace it)")
-    if target.exists() and not target.is_dir():
-        raise OutputExistsError(f"{target} exists and is not a folder")
-    with atomic_directory(target, overwrite=True) as tmp:
+    # refused before anything is drawn, and again at the final rename: an existing
+    # folder only with ``overwrite``, and only one that holds nothing but a report
+    with atomic_directory(target, overwrite=overwrite, replaceable=report_folder_problem) as tmp:
         figures = tmp / "figures"
         figures.mkdir()
         draw = _have_matplotlib()

@@ -211,12 +211,17 @@ def test_capture_set_refuses_non_empty_folder(tmp_path) -> None:
     (folder / "notes.txt").write_text("keep me")
     with pytest.raises(InputError, match="not empty.*overwrite=True"):
         _small_set(folder, cam)
-    first = _small_set(folder, cam, overwrite=True)
+    # overwrite replaces only a capture set: a user's folder is left as it was
+    with pytest.raises(InputError, match="no capture.json"):
+        _small_set(folder, cam, overwrite=True)
+    assert sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
+    assert (folder / "notes.txt").read_text() == "keep me"
+    (folder / "notes.txt").unlink()  # an empty folder may be written to
+    first = _small_set(folder, cam)
     frame = first.parent / "views/v0/t0.016000_n0.png"
     before = frame.read_bytes()
     _small_set(folder, cam, overwrite=True, seed=6)
     assert frame.read_bytes() != before  # the frames were replaced
-    assert (folder / "notes.txt").read_text() == "keep me"  # not ours: left alone
     assert load_truth(folder / "truth").meta["seed"] == 6
     # a refused call removes nothing, even with overwrite
     with pytest.raises(InputError, match="`nonuniformity`"):
