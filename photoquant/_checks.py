@@ -36,6 +36,7 @@ __all__ = [
     "format_bytes",
     "printable_path",
     "printable_text",
+    "safe_stdio",
 ]
 
 EXPOSURE_MIN_S = 1e-9
@@ -394,3 +395,23 @@ def printable_path(path: str | os.PathLike[str] | bytes, stream: TextIO | None =
     if isinstance(path, bytes):
         return printable_text(path.decode("utf-8", "backslashreplace"), stream)
     return printable_text(os.fspath(path), stream)
+
+
+def safe_stdio() -> None:
+    """Make standard output and error print any text instead of raising ``UnicodeEncodeError``.
+
+    Under ``LC_ALL=C`` with ``PYTHONIOENCODING=ascii:strict`` (or any strict
+    encoding), printing a file name that is not valid UTF-8 (surrogate
+    escapes) or a message with ``—`` or ``×`` raises. This switches both
+    streams' error handler to ``backslashreplace`` (those characters are
+    printed as ``\\udcff``, ``\\u2014``), keeping their encoding. Streams
+    that are not :class:`io.TextIOWrapper` (a test's capture) are left alone.
+    Call it first in a command's ``main``.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None and getattr(stream, "errors", None) == "strict":
+            try:
+                reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # pragma: no cover - a closed or detached stream
+                pass

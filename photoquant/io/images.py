@@ -412,7 +412,11 @@ def _exr_parts(f: IO[bytes], path: Path, size: int) -> list[_ExrPart]:
             kind = cstring()
             (length,) = struct.unpack("<i", _read_exact(f, 4, path, "OpenEXR header"))
             if length < 0 or f.tell() + length > budget:
-                raise _fail(path, f"corrupt OpenEXR header: attribute {name!r} of {length} bytes")
+                raise _fail(
+                    path,
+                    f"corrupt OpenEXR header: attribute {name.decode('latin-1')!r} "
+                    f"of {length} bytes",
+                )
             value = _read_exact(f, length, path, "OpenEXR header")
             attrs[name.decode("latin-1")] = (kind.decode("latin-1"), value)
         if not attrs:
@@ -519,7 +523,9 @@ def read_image_header(path: PathLike) -> ImageHeader:
             raise _fail(path, exc.strerror or exc) from None
 
 
-def _check_limits(header: ImageHeader, path: Path, size: int, max_pixels: int | None) -> None:
+def _check_limits(
+    header: ImageHeader, path: Path, size: int, max_pixels: int | None, *, memory: bool = True
+) -> None:
     """Refuse an image too large for the limits, or a file its header does not justify."""
     limit = max_pixels_limit(max_pixels)
     if header.total_pixels > limit:
@@ -540,8 +546,13 @@ def _check_limits(header: ImageHeader, path: Path, size: int, max_pixels: int | 
                 f"{header.height} {header.format.upper()} header justifies (at most "
                 f"{format_bytes(allowed)}): corrupt, or not a single image",
             )
+    if memory:
+        _check_memory(header, path)
+
+
+def _check_memory(header: ImageHeader, path: Path) -> None:
     try:
-        check_memory(header.decoded_nbytes, f"decoding {header.width}x{header.height} image")
+        check_memory(header.decoded_nbytes, f"decoding its {header.width}x{header.height} pixels")
     except InputError as exc:
         raise _fail(path, exc) from None
 
@@ -583,8 +594,9 @@ def _decode_tiff(path: Path, f: IO[bytes], size: int, max_pixels: int | None) ->
         with tifffile.TiffFile(f) as tif:
             page = _tiff_page(tif)
             header = _tiff_header(page, path)
-            _check_limits(header, path, size, max_pixels)
+            _check_limits(header, path, size, max_pixels, memory=False)
             _tiff_data_in_file(page, header, path, size)
+            _check_memory(header, path)
             photometric = int(page.photometric)
             axes = page.axes
             arr = page.asarray()
