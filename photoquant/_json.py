@@ -137,7 +137,7 @@ def load_json(
     >>> load_json("[" * 100 + "]" * 100, "preset")
     Traceback (most recent call last):
     ...
-    photoquant.errors.InputError: preset: not accepted JSON (nested deeper than 64 levels)
+    photoquant.errors.InputError: preset: not valid JSON (nested deeper than 64 levels)
     """
     if isinstance(source, os.PathLike):
         path = Path(source)
@@ -158,7 +158,7 @@ def load_json(
         raise error(f"{what}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     depth = json_depth(data)
     if depth > max_depth:
-        raise error(f"{what}: not accepted JSON (nested deeper than {max_depth} levels)")
+        raise error(f"{what}: not valid JSON (nested deeper than {max_depth} levels)")
 
     def constant(name: str) -> float:
         if not allow_nan:
@@ -188,11 +188,11 @@ def load_json(
             f"{what}: not valid JSON ({exc.msg} at line {exc.lineno}, column {exc.colno})"
         ) from None
     except _Refused as exc:
-        raise error(f"{what}: not accepted JSON ({exc})") from None
+        raise error(f"{what}: not valid JSON ({exc})") from None
     except RecursionError:
-        raise error(f"{what}: not accepted JSON (nested too deeply)") from None
+        raise error(f"{what}: not valid JSON (nested too deeply)") from None
     except ValueError as exc:  # e.g. an integer of more than 4300 digits
-        raise error(f"{what}: not accepted JSON ({_one_line(exc)})") from None
+        raise error(f"{what}: not valid JSON ({_one_line(exc)})") from None
 
 
 def to_json_value(value: Any) -> Any:

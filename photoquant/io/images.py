@@ -65,7 +65,7 @@ import OpenEXR
 import tifffile
 from PIL import Image, UnidentifiedImageError
 
-from photoquant._checks import check_array, check_memory, format_bytes
+from photoquant._checks import check_array, check_memory, format_bytes, stack_nbytes
 from photoquant.errors import ImageReadError, InputError
 from photoquant.io.atomic import atomic_write, write_bytes_atomic
 
@@ -76,6 +76,7 @@ __all__ = [
     "ImageHeader",
     "max_pixels_limit",
     "read_image_header",
+    "check_stack_memory",
     "read_image",
     "write_image",
     "read_exr",
@@ -521,6 +522,67 @@ def read_image_header(path: PathLike) -> ImageHeader:
             return _header(f, path, size)
         except OSError as exc:
             raise _fail(path, exc.strerror or exc) from None
+
+
+def check_stack_memory(
+    first_frame: PathLike,
+    n_repeats: int,
+    n_exposures: int,
+    n_channels: int,
+    dtype: np.dtype | type | str,
+    *,
+    in_flight: int = 0,
+    what: str = "the stack",
+    max_pixels: int | None = None,
+) -> ImageHeader:
+    """Refuse, before any frame is decoded, a stack that would not fit in memory.
+
+    The image size comes from the first frame's header
+    (:func:`read_image_header`); the need is the stack
+    ``N × K × H × W × C × itemsize`` plus ``in_flight`` decoded frames waiting
+    in a read-ahead window.
+
+    Parameters
+    ----------
+    first_frame : str or path-like
+        The first frame (the others must have its size; the loader checks it).
+    n_repeats, n_exposures, n_channels : int
+        ``N``, ``K`` and ``C`` of the stack.
+    dtype : numpy dtype
+        The stack's sample type (``uint8`` or ``uint16``).
+    in_flight : int
+        Frames decoded ahead of the one being copied in (e.g. ``4 × workers``).
+    what : str
+        Names the stack in the message (``"views[0] of manifest capture.json"``).
+    max_pixels : int, optional
+        Pixel limit of one frame (:func:`max_pixels_limit`).
+
+    Returns
+    -------
+    ImageHeader
+        The first frame's header.
+
+    Raises
+    ------
+    ImageReadError
+        If the first frame cannot be identified or announces more pixels than
+        the limit.
+    InputError
+        ``"<what> (4 x 8 frames of 4000x3000x3 uint16) needs 2.1 GiB of
+        memory, but only 1.5 GiB is available"``.
+    """
+    path = Path(first_frame)
+    header = read_image_header(path)
+    _check_limits(header, path, 0, max_pixels, memory=False)
+    n, k, c = (int(v) for v in (n_repeats, n_exposures, n_channels))
+    dt = np.dtype(dtype)
+    need = stack_nbytes((n, k, header.height, header.width, c), dt)
+    need += int(in_flight) * header.decoded_nbytes
+    check_memory(
+        need,
+        f"{what} ({n} x {k} frames of {header.width}x{header.height}x{c} {dt.name})",
+    )
+    return header
 
 
 def _check_limits(

@@ -292,6 +292,27 @@ def test_the_memory_needed_to_decode_is_checked(tmp_path, monkeypatch):
         read_image(tmp_path / "a.png")
 
 
+def test_check_stack_memory_reads_only_the_first_header(tmp_path, monkeypatch):
+    import photoquant._checks as checks
+    from photoquant.io.images import check_stack_memory
+
+    write_image(tmp_path / "f.png", np.zeros((30, 40, 3), np.uint16))
+    head = check_stack_memory(tmp_path / "f.png", 4, 8, 3, np.uint16, in_flight=8, what="views[0]")
+    assert (head.height, head.width) == (30, 40)
+    need = 4 * 8 * 30 * 40 * 3 * 2 + 8 * 30 * 40 * 3 * 2
+    monkeypatch.setattr(checks, "memory_available", lambda: int(need / 0.9) - 1)
+    with pytest.raises(InputError) as info:
+        check_stack_memory(tmp_path / "f.png", 4, 8, 3, np.uint16, in_flight=8, what="views[0]")
+    assert _one_line(info.value).startswith(
+        "views[0] (4 x 8 frames of 40x30x3 uint16) needs 281.2 KiB of memory, but only"
+    )
+    monkeypatch.setattr(checks, "memory_available", lambda: int(need / 0.9) + 2)
+    check_stack_memory(tmp_path / "f.png", 4, 8, 3, np.uint16, in_flight=8)
+    (tmp_path / "big.tif").write_bytes(_tiff_bytes(20000, 20000))
+    with pytest.raises(ImageReadError, match="more than the limit"):
+        check_stack_memory(tmp_path / "big.tif", 1, 2, 1, np.uint8)
+
+
 # ---------------------------------------------------------------------------- channels
 
 
@@ -349,7 +370,7 @@ def test_deep_json_is_refused_before_parsing(tmp_path):
     assert load_json(deep) == json.loads(deep)
     assert load_json('["[[[[[[", {"k": "]]]"}]', max_depth=2) == ["[[[[[[", {"k": "]]]"}]
     (tmp_path / "p.json").write_text("[" * 3000 + "]" * 3000)
-    with pytest.raises(ManifestError, match=r"^manifest .*p\.json: not accepted JSON"):
+    with pytest.raises(ManifestError, match=r"^manifest .*p\.json: not valid JSON"):
         load_json(tmp_path / "p.json", f"manifest {tmp_path / 'p.json'}", error=ManifestError)
 
 
@@ -398,11 +419,11 @@ def test_a_huge_json_file_is_refused_from_its_size(tmp_path):
 
 
 def test_preset_files_use_the_guarded_loader(tmp_path):
-    from pqsim.synth_camera.presets import preset_fields
+    from pqsim.synth_camera.presets import CAMERA_PRESETS, preset_fields, preset_json
 
     path = tmp_path / "mine.json"
     path.write_text('{"format": "pqsim.preset/1", "x": ' + "[" * 10_000 + "]" * 10_000 + "}")
-    with pytest.raises(InputError, match=r"preset file .*mine\.json: not accepted JSON \(nested"):
+    with pytest.raises(InputError, match=r"preset file .*mine\.json: not valid JSON \(nested"):
         preset_fields(path)
     path.write_text('{"format": "pqsim.preset/1", "bit_depth": NaN}')
     with pytest.raises(InputError, match="NaN"):
@@ -412,6 +433,9 @@ def test_preset_files_use_the_guarded_loader(tmp_path):
         preset_fields(path)
     path.write_text('{"format": "pqsim.preset/1", "base": "cmos"}')
     assert preset_fields(path)["bit_depth"] >= 8
+    for name in CAMERA_PRESETS:  # what `pqsim preset NAME` writes loads again
+        path.write_text(preset_json(name), encoding="utf-8")
+        assert preset_fields(path)["bit_depth"] == CAMERA_PRESETS[name]["bit_depth"]
 
 
 # ---------------------------------------------------------------------------- numbers
