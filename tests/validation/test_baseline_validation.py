@@ -13,11 +13,14 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from photoquant.cli import main
 from validation.baseline import (
     DEFAULT_BASELINE,
     check_baseline_applies,
+    check_results,
     load_baseline,
     validate_baseline,
 )
@@ -127,3 +130,75 @@ def test_the_check_refuses_before_any_simulation(tmp_path, monkeypatch, capsys):
     path = _write(tmp_path, "no tolerance")
     assert main(["validate", "--tiny", "-q", "-o", str(tmp_path / "r"), "--check", str(path)]) == 2
     assert "lacks `tolerance`" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------- property
+
+
+def _results_matching(baseline: dict) -> dict:
+    """A results.json dict that reproduces the stored baseline's values exactly."""
+    metrics = {k: ref["value"] for k, ref in STORED["metrics"].items()}
+    return {
+        "config": dict(STORED["conditions"], name="quick"),
+        "metrics": metrics,
+        "metric_info": {k: {"check": True} for k in metrics},
+        "experiments_run": sorted({k.split(".")[0] for k in metrics}),
+        "experiments": {},
+        "presets": ["ccd", "cmos"],
+    }
+
+
+_json_leaf = st.none() | st.booleans() | st.integers(-5, 5) | st.floats(allow_nan=False)
+_json_any = st.recursive(
+    _json_leaf | st.text(max_size=6),
+    lambda kids: (
+        st.lists(kids, max_size=3) | st.dictionaries(st.text(max_size=6), kids, max_size=3)
+    ),
+    max_leaves=8,
+)
+_FIELDS = ["value", "tolerance", "better", "allow_none", "description", "unit", "spread", "mean"]
+
+
+@st.composite
+def _mutated_baseline(draw) -> dict:
+    doc = copy.deepcopy(STORED)
+    keys = sorted(doc["metrics"])
+    for _ in range(draw(st.integers(1, 4))):
+        where = draw(st.sampled_from(["metric", "field", "drop", "top"]))
+        key = draw(st.sampled_from(keys))
+        if not isinstance(doc["metrics"], dict) or key not in doc["metrics"]:
+            continue  # the metrics were replaced by an earlier mutation
+        if where == "metric":
+            doc["metrics"][key] = draw(_json_any)
+        elif where == "field" and isinstance(doc["metrics"][key], dict):
+            doc["metrics"][key][draw(st.sampled_from(_FIELDS))] = draw(_json_any)
+        elif where == "drop" and isinstance(doc["metrics"][key], dict):
+            doc["metrics"][key].pop(draw(st.sampled_from(_FIELDS)), None)
+        elif where == "top":
+            doc[draw(st.sampled_from(["format", "metrics", "conditions", "config_name"]))] = draw(
+                _json_any
+            )
+    return doc
+
+
+def test_the_stored_baseline_passes_a_run_that_reproduces_it():
+    result = check_results(_results_matching(STORED), load_baseline(DEFAULT_BASELINE))
+    assert result.ok and result.compared == len(STORED["metrics"])
+
+
+@settings(max_examples=200, deadline=None)
+@given(doc=_mutated_baseline())
+def test_a_baseline_is_refused_on_load_or_checks_without_crashing(doc):
+    """Tampered baselines: one-line ValidationError on load, or a check that runs to the end."""
+    try:
+        base = validate_baseline(json.loads(json.dumps(doc)), "baseline b.json")
+    except ValidationError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith("baseline b.json")
+        return
+    try:
+        result = check_results(_results_matching(STORED), base)
+    except ValidationError as exc:  # the conditions differ: refused, one line
+        assert "\n" not in str(exc)
+        return
+    result.summary()
+    json.dumps(result.to_dict())
