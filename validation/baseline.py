@@ -325,6 +325,8 @@ def load_baseline(path: str | Path) -> dict[str, Any]:
     from photoquant._json import load_json
 
     p = Path(path)
+    if not p.exists():
+        raise ValidationError(f"baseline {p} does not exist")
     data = load_json(p, f"baseline {p}", error=ValidationError, max_bytes=_MAX_BASELINE_BYTES)
     return validate_baseline(data, f"baseline {p}")
 
