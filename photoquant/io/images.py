@@ -650,7 +650,9 @@ def _decode_opencv(path: Path, data: bytes, fmt: str) -> np.ndarray:
         raise _fail(path, exc) from None
 
 
-def _decode_tiff(path: Path, f: IO[bytes], size: int, max_pixels: int | None) -> np.ndarray:
+def _decode_tiff(
+    path: Path, f: IO[bytes], size: int, max_pixels: int | None
+) -> tuple[np.ndarray, ImageHeader]:
     f.seek(0)
     try:
         with tifffile.TiffFile(f) as tif:
@@ -677,7 +679,7 @@ def _decode_tiff(path: Path, f: IO[bytes], size: int, max_pixels: int | None) ->
     elif axes not in ("YX", "YXS"):
         raise _fail(path, f"unsupported TIFF layout with axes {axes!r} and shape {arr.shape}")
     try:
-        return _drop_alpha_and_to_rgb(arr, bgr=False)
+        return _drop_alpha_and_to_rgb(arr, bgr=False), header
     except ValueError as exc:
         raise _fail(path, exc) from None
 
@@ -724,10 +726,11 @@ def read_image(path: PathLike, *, max_pixels: int | None = None) -> np.ndarray:
                     raise _fail(path, "the OpenEXR file has only an alpha channel")
                 return np.ascontiguousarray(arr[..., keep])
             f.seek(0)
-            header = _header(f, path, size)
-            if header.format == "tiff":
-                arr = _decode_tiff(path, f, size, max_pixels)
+            if f.read(4) in _TIFF_MAGICS:  # one pass of tifffile: header and pixels
+                arr, header = _decode_tiff(path, f, size, max_pixels)
             else:
+                f.seek(0)
+                header = _header(f, path, size)
                 _check_limits(header, path, size, max_pixels)
                 f.seek(0)
                 arr = _decode_opencv(path, f.read(), header.format)
