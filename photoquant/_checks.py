@@ -35,6 +35,7 @@ __all__ = [
     "stack_nbytes",
     "format_bytes",
     "printable_path",
+    "escape_controls",
     "printable_text",
     "safe_stdio",
 ]
@@ -392,9 +393,31 @@ def printable_path(path: str | os.PathLike[str] | bytes, stream: TextIO | None =
     Undecodable bytes of the file name are shown as ``\\xNN``; see
     :func:`printable_text`.
     """
-    if isinstance(path, bytes):
-        return printable_text(path.decode("utf-8", "backslashreplace"), stream)
-    return printable_text(os.fspath(path), stream)
+    text = path.decode("utf-8", "backslashreplace") if isinstance(path, bytes) else os.fspath(path)
+    return printable_text(escape_controls(text), stream)
+
+
+def escape_controls(text: str) -> str:
+    """``text`` with control characters (newline, tab, escape...) shown as ``\\n``, ``\\xNN``.
+
+    For names inside one-line messages: a file called ``"a\\nb.png"`` must
+    not split an error message in two.
+    """
+    if text.isprintable():
+        return text
+    out = []
+    for ch in text:
+        if ch.isprintable() or ch == " " or "\ud800" <= ch <= "\udfff":
+            out.append(ch)
+        else:
+            out.append(
+                repr(ch)[1:-1]
+                if ch in "\n\r\t"
+                else f"\\x{ord(ch):02x}"
+                if ord(ch) < 256
+                else f"\\u{ord(ch):04x}"
+            )
+    return "".join(out)
 
 
 def safe_stdio() -> None:

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from photoquant._checks import escape_controls
 from photoquant.errors import InputError, PhotoquantError
 
 __all__ = ["MAX_JSON_BYTES", "MAX_JSON_DEPTH", "load_json", "json_depth", "to_json_value"]
@@ -141,7 +142,7 @@ def load_json(
     """
     if isinstance(source, os.PathLike):
         path = Path(source)
-        what = what or str(path)
+        what = escape_controls(what or str(path))
         data = _read_bytes(path, what, max_bytes, error)
     elif isinstance(source, str | bytes):
         what = what or "JSON text"

@@ -65,7 +65,13 @@ import OpenEXR
 import tifffile
 from PIL import Image, UnidentifiedImageError
 
-from photoquant._checks import check_array, check_memory, format_bytes, stack_nbytes
+from photoquant._checks import (
+    check_array,
+    check_memory,
+    escape_controls,
+    format_bytes,
+    stack_nbytes,
+)
 from photoquant.errors import ImageReadError, InputError
 from photoquant.io.atomic import atomic_write, write_bytes_atomic
 
@@ -169,7 +175,7 @@ def _one_line(text: object) -> str:
 
 
 def _fail(path: Path, reason: object) -> ImageReadError:
-    return ImageReadError(f"cannot read image {path}: {_one_line(reason)}")
+    return ImageReadError(f"cannot read image {escape_controls(str(path))}: {_one_line(reason)}")
 
 
 def max_pixels_limit(max_pixels: int | None = None) -> int:

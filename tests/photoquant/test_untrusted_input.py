@@ -514,6 +514,17 @@ def test_printable_names():
     print(printable_text(f"{name} — ok", ascii_stream), file=ascii_stream)  # does not raise
 
 
+def test_names_with_control_characters_keep_messages_on_one_line(tmp_path):
+    path = tmp_path / "a\nb\tc.png"
+    path.write_text("hello", encoding="utf-8")
+    with pytest.raises(ImageReadError, match="not an image") as info:
+        read_image(path)
+    assert "a\\nb\\tc.png" in _one_line(info.value)
+    with pytest.raises(InputError, match="not valid JSON") as info:
+        load_json(path)
+    assert "a\\nb\\tc.png" in _one_line(info.value)
+
+
 _STRICT_CLI = """
 import sys
 from photoquant._checks import safe_stdio
