@@ -108,6 +108,10 @@ _EXR_MAGIC = b"v/1\x01"
 
 _SLURP_SLACK = 16 * 2**20
 """Bytes a PNG or JPEG file may hold beyond twice its decoded size (metadata, ICC profiles)."""
+_MAX_DEFLATE_RATIO = 2048
+"""Bound on how much deflate (PNG, TIFF), LZW or PackBits (TIFF) data expand (deflate: 1032)."""
+_TIFF_BOUNDED = frozenset({5, 8, 32946, 32773})
+"""TIFF compressions whose expansion :data:`_MAX_DEFLATE_RATIO` bounds: LZW, deflate, PackBits."""
 _EXR_MAX_HEADER = 64 * 2**20
 """Largest OpenEXR header (all parts) read before the pixels."""
 _EXR_MAX_PARTS = 4096
@@ -366,15 +370,21 @@ def _tiff_data_in_file(page: tifffile.TiffPage, header: ImageHeader, path: Path,
             path,
             f"truncated or corrupt TIFF data: its pixels end at byte {max(ends)}, the file has {size} bytes",
         )
-    if int(page.compression) == 1:  # uncompressed: the strips or tiles hold every sample
-        need = header.total_pixels * header.channels * np.dtype(header.dtype).itemsize
-        have = sum(int(c) for c in counts)
-        if have < need and not page.is_tiled:
-            raise _fail(
-                path,
-                f"truncated or corrupt TIFF data: {have} bytes of pixels for a {header.width}x"
-                f"{header.height}x{header.channels} {header.dtype} image ({need} bytes)",
-            )
+    need = header.total_pixels * header.channels * np.dtype(header.dtype).itemsize
+    have = sum(int(c) for c in counts)
+    compression = int(page.compression)
+    if compression == 1 and not page.is_tiled:  # uncompressed strips hold every sample
+        least = need
+    elif compression in _TIFF_BOUNDED:  # these cannot expand more than that
+        least = need // _MAX_DEFLATE_RATIO
+    else:
+        least = 0
+    if have < least:
+        raise _fail(
+            path,
+            f"truncated or corrupt TIFF data: {have} bytes of pixels for a {header.width}x"
+            f"{header.height}x{header.channels} {header.dtype} image (at least {least} needed)",
+        )
 
 
 _EXR_TYPES = {0: "uint32", 1: "float16", 2: "float32"}
@@ -605,6 +615,15 @@ def _check_limits(
             f"its header announces {what} = {_mpix(header.total_pixels)}, more than the limit "
             f"of {_mpix(limit)} (set ${MAX_PIXELS_ENV} to raise it)",
         )
+    if header.format == "png" and size:
+        # deflate's rows: at least one bit per pixel and a filter byte per row
+        least = header.height * (1 + (header.width + 7) // 8) // _MAX_DEFLATE_RATIO
+        if size < least:
+            raise _fail(
+                path,
+                f"truncated PNG: a {header.width}x{header.height} image needs at least "
+                f"{format_bytes(least)} of compressed data, the file has {format_bytes(size)}",
+            )
     if header.format in ("png", "jpeg"):
         allowed = 2 * header.decoded_nbytes + _SLURP_SLACK
         if size > allowed:

@@ -19,6 +19,7 @@ import sys
 import tempfile
 import time
 import tracemalloc
+import zlib
 from pathlib import Path
 
 import cv2
@@ -73,18 +74,31 @@ def _one_line(exc: BaseException) -> str:
     return text
 
 
-def _tiff_bytes(width: int, height: int, spp: int = 1, bits: int = 8, data: bytes = b"") -> bytes:
-    """A little-endian baseline TIFF whose single strip (``data``, maybe empty) follows the IFD."""
+def _tiff_bytes(
+    width: int,
+    height: int,
+    spp: int = 1,
+    bits: int = 8,
+    data: bytes = b"",
+    compression: int = 1,
+    bytecount: int | None = None,
+) -> bytes:
+    """A little-endian baseline TIFF whose single strip (``data``, maybe empty) follows the IFD.
+
+    Its strip byte count is ``bytecount``, by default what the header announces uncompressed.
+    """
+    if bytecount is None:
+        bytecount = width * height * spp * bits // 8
     entries: list[tuple[int, int, list[int]]] = [  # tag, type (3 SHORT, 4 LONG), values
         (256, 4, [width]),
         (257, 4, [height]),
         (258, 3, [bits] * spp),
-        (259, 3, [1]),  # no compression
+        (259, 3, [compression]),
         (262, 3, [2 if spp >= 3 else 1]),  # RGB or min-is-black
         (273, 4, [0]),  # strip offset, patched below
         (277, 3, [spp]),
         (278, 4, [height]),
-        (279, 4, [width * height * spp * bits // 8]),  # what the header announces
+        (279, 4, [bytecount]),
     ]
     n = len(entries)
     ifd_end = 8 + 2 + 12 * n + 4
@@ -232,6 +246,29 @@ def test_huge_headers_of_other_formats_are_refused(tmp_path, fmt):
     with pytest.raises(ImageReadError, match="more than the limit of 200.0 Mpixel") as info:
         reader(path)
     _one_line(info.value)
+
+
+def test_a_tiny_file_cannot_announce_a_big_image(tmp_path):
+    """Deflate expands at most ~1032:1: a 14000x14000 PNG (under the pixel limit) of 100
+    bytes is truncated, and said so before the decoder allocates 196 Mpixel."""
+    path = tmp_path / "frame.png"
+    path.write_bytes(_patch_png_size(_png_bytes(np.zeros((4, 4), np.uint8)), 14000, 14000))
+    with pytest.raises(ImageReadError, match="truncated PNG: a 14000x14000 image needs at least"):
+        read_image(path)
+    zeros = np.zeros((3000, 2000), np.uint8)  # the most compressible image there is
+    write_image(tmp_path / "zeros.png", zeros)
+    np.testing.assert_array_equal(read_image(tmp_path / "zeros.png")[..., 0], zeros)
+    buf = io.BytesIO()
+    tifffile.imwrite(buf, zeros, compression="zlib")
+    (tmp_path / "zeros.tif").write_bytes(buf.getvalue())
+    np.testing.assert_array_equal(read_image(tmp_path / "zeros.tif")[..., 0], zeros)
+    # deflate data cut to 5 bytes for 6 MB of pixels: truncated, whatever the decoder would do
+    head = zlib.compress(bytes(6_000_000))[:5]
+    (tmp_path / "cut.tif").write_bytes(
+        _tiff_bytes(2000, 3000, data=head, compression=8, bytecount=5)
+    )
+    with pytest.raises(ImageReadError, match=r"5 bytes of pixels .* \(at least 2929 needed\)"):
+        read_image(tmp_path / "cut.tif")
 
 
 def test_a_huge_sparse_file_named_png_is_refused_quickly(tmp_path):
@@ -668,3 +705,51 @@ def _json_equal(loaded, value, depth: int) -> bool:
         assert isinstance(loaded, list) and len(loaded) == 1
         loaded = loaded[0]
     return loaded == value
+
+
+_EXTREME = st.sampled_from([0, 1, 2, 3, 255, 65535, 2**20, 2**31 - 1, 2**32 - 1])
+
+
+@st.composite
+def _structured(draw) -> bytes:
+    """Well-formed containers whose header fields take any value, with any amount of data."""
+    kind = draw(st.sampled_from(["png", "tiff", "exr", "jpeg"]))
+    w = draw(st.one_of(st.integers(1, 64), _EXTREME))
+    h = draw(st.one_of(st.integers(1, 64), _EXTREME))
+    if kind == "png":
+        base = bytearray(_png_bytes(np.zeros((4, 4, 3), np.uint8)))
+        depth, colour = draw(st.sampled_from([1, 2, 4, 8, 16, 0, 255])), draw(st.integers(0, 7))
+        base[16:26] = struct.pack(">IIBB", w, h, depth, colour)
+        return bytes(base)
+    if kind == "tiff":
+        spp = draw(st.sampled_from([1, 2, 3, 4, 5, 0]))
+        bits = draw(st.sampled_from([1, 8, 12, 16, 32, 64, 0]))
+        data = draw(st.binary(max_size=256))
+        compression = draw(st.sampled_from([1, 5, 7, 8, 32773, 34887, 2]))
+        announced = min(w * h * spp * bits // 8, 2**32 - 1)
+        count = draw(st.one_of(st.just(announced), st.just(len(data)), _EXTREME))
+        return _tiff_bytes(w, h, spp, bits, data=data, compression=compression, bytecount=count)
+    if kind == "exr":
+        base = _exr_bytes(np.zeros((4, 4, 3), np.float32))
+        return _patch_exr_window(base, max(-(2**31), min(w, 2**31 - 1)), min(h, 2**31 - 1))
+    return _patch_jpeg_size(_jpeg_bytes(np.zeros((8, 8, 3), np.uint8)), w % 65536, h % 65536)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=_structured())
+def test_any_header_field_value_loads_or_fails_with_one_line(data):
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "frame.tif"
+        path.write_bytes(data)
+        try:
+            head = read_image_header(path)
+        except PhotoquantError as exc:
+            _one_line(exc)
+            return
+        assert head.height >= 1 and head.width >= 1 and head.channels >= 1
+        try:
+            arr = read_image(path, max_pixels=10**6)
+        except PhotoquantError as exc:
+            _one_line(exc)
+            return
+        assert arr.shape[:2] == (head.height, head.width) and arr.size > 0
