@@ -33,7 +33,14 @@ frame is refused, with one line, when
 * it is not a regular file (a folder, a FIFO, ``/dev/zero``);
 * a PNG or JPEG file (which the decoder needs in memory whole) is far larger
   than its header justifies (more than twice the decoded size plus
-  16 MiB), or a TIFF's pixel data lie beyond the end of the file.
+  16 MiB), or a TIFF's pixel data lie beyond the end of the file;
+* the file is too small for the image it announces: uncompressed TIFF
+  strips shorter than the pixels, or PNG and deflate/LZW/PackBits TIFF data
+  that would have to expand more than 2048:1 (deflate's limit is 1032:1), so
+  that 100 bytes cannot make the decoder allocate 196 Mpixel.
+
+:func:`check_stack_memory` does the same for a whole stack of frames from its
+first frame's header, before any is decoded.
 
 TIFF and OpenEXR pixels are read from the open file, not from a copy of it.
 
