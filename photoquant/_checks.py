@@ -241,13 +241,47 @@ def _read_int_file(path: str) -> int | None:
     return int(text) if text.isdigit() else None
 
 
+def _memory_stat(path: str, keys: tuple[str, ...]) -> int:
+    """Sum of ``keys`` in a cgroup ``memory.stat`` file (0 when unreadable)."""
+    total = 0
+    try:
+        with open(path, encoding="ascii") as f:
+            for line in f:
+                name, _, value = line.partition(" ")
+                if name in keys and value.strip().isdigit():
+                    total += int(value)
+    except (OSError, UnicodeDecodeError):
+        return 0
+    return total
+
+
+def _cgroup_room() -> int | None:
+    """Bytes left under this container's cgroup memory limit (v2, else v1), page cache counted free.
+
+    ``None`` without a limit. The page cache (``file`` / ``cache``) counts as
+    free: the kernel reclaims it before it refuses an allocation.
+    """
+    limit = _read_int_file("/sys/fs/cgroup/memory.max")  # v2 ("max": no limit)
+    if limit is not None:
+        used = _read_int_file("/sys/fs/cgroup/memory.current") or 0
+        cache = _memory_stat("/sys/fs/cgroup/memory.stat", ("file",))
+        return max(0, limit - used + cache)
+    limit = _read_int_file("/sys/fs/cgroup/memory/memory.limit_in_bytes")  # v1
+    if limit is not None and limit < 2**60:  # v1 writes ~2**63 for "no limit"
+        used = _read_int_file("/sys/fs/cgroup/memory/memory.usage_in_bytes") or 0
+        cache = _memory_stat("/sys/fs/cgroup/memory/memory.stat", ("total_cache",))
+        return max(0, limit - used + cache)
+    return None
+
+
 def memory_available() -> int | None:
     """Bytes of memory this process can still allocate, or ``None`` when unknown.
 
     The smallest of: ``MemAvailable`` of ``/proc/meminfo`` (else the free
-    physical pages of :func:`os.sysconf`), the room left under the cgroup v2
-    limit (``/sys/fs/cgroup/memory.max`` − ``memory.current``: containers) and
-    the address-space limit ``RLIMIT_AS``.
+    physical pages of :func:`os.sysconf`), the room left under the container's
+    cgroup memory limit (v2 ``memory.max`` − ``memory.current``, or v1
+    ``memory.limit_in_bytes`` − ``memory.usage_in_bytes``, the reclaimable page
+    cache counted free) and the address-space limit ``RLIMIT_AS``.
     """
     candidates: list[int] = []
     try:
@@ -263,10 +297,9 @@ def memory_available() -> int | None:
             candidates.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
         except (ValueError, OSError, AttributeError):
             pass
-    limit = _read_int_file("/sys/fs/cgroup/memory.max")
-    if limit is not None:
-        used = _read_int_file("/sys/fs/cgroup/memory.current") or 0
-        candidates.append(max(0, limit - used))
+    room = _cgroup_room()
+    if room is not None:
+        candidates.append(room)
     try:
         soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
     except (ValueError, OSError):  # pragma: no cover - every POSIX system has it

@@ -753,3 +753,23 @@ def test_any_header_field_value_loads_or_fails_with_one_line(data):
             _one_line(exc)
             return
         assert arr.shape[:2] == (head.height, head.width) and arr.size > 0
+
+
+def test_the_container_limit_counts_the_page_cache_as_free(monkeypatch):
+    import photoquant._checks as checks
+
+    mib = 2**20
+    files = {
+        "/sys/fs/cgroup/memory.max": 1024 * mib,
+        "/sys/fs/cgroup/memory.current": 900 * mib,
+    }
+    monkeypatch.setattr(checks, "_read_int_file", files.get)
+    monkeypatch.setattr(checks, "_memory_stat", lambda path, keys: 500 * mib)
+    assert checks._cgroup_room() == 624 * mib
+    assert checks.memory_available() <= 624 * mib
+    files.clear()
+    files["/sys/fs/cgroup/memory/memory.limit_in_bytes"] = 2**63 - 4096  # v1: no limit
+    assert checks._cgroup_room() is None
+    files["/sys/fs/cgroup/memory/memory.limit_in_bytes"] = 2048 * mib
+    files["/sys/fs/cgroup/memory/memory.usage_in_bytes"] = 2048 * mib
+    assert checks._cgroup_room() == 500 * mib
