@@ -6,9 +6,12 @@ names the offending argument, never a numpy traceback.
 
 from __future__ import annotations
 
+import math
 import os
+import resource
+import sys
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -20,10 +23,34 @@ __all__ = [
     "default_workers",
     "check_array",
     "check_exposure_times",
+    "check_exposure_time",
+    "EXPOSURE_MIN_S",
+    "EXPOSURE_MAX_S",
+    "MAX_WORKERS",
     "check_bit_depth",
     "check_positive",
     "validate_method",
+    "memory_available",
+    "check_memory",
+    "stack_nbytes",
+    "format_bytes",
+    "printable_path",
+    "escape_controls",
+    "printable_text",
+    "safe_stdio",
 ]
+
+EXPOSURE_MIN_S = 1e-9
+"""Shortest exposure accepted, in seconds (1 ns: below any shutter)."""
+EXPOSURE_MAX_S = 1e6
+"""Longest exposure accepted, in seconds (about 11.6 days).
+
+Exposure times enter the method as ``ln t`` and as products ``l · t`` of
+photoquantities; this range keeps both far from float64 overflow and
+underflow whatever the scene (``1e308`` s is refused, not turned into ``inf``).
+"""
+MAX_WORKERS = 1024
+"""Most threads a ``workers`` argument may ask for."""
 
 
 def check_array(
@@ -79,12 +106,48 @@ def check_array(
 
 
 def check_exposure_times(exposure_s: Any, name: str = "exposure_s") -> np.ndarray:
-    """Return exposure times as a float64 ``(K,)`` array: finite, positive and unique."""
-    t = check_array(exposure_s, name, ndim=1, kind="iuf", finite=True).astype(np.float64)
+    """Return exposure times as a float64 ``(K,)`` array: finite, in range and unique.
+
+    Every time must lie in ``[EXPOSURE_MIN_S, EXPOSURE_MAX_S]`` (1 ns to 10⁶ s),
+    so that ``ln t`` and the products of photoquantities and times cannot
+    overflow.
+    """
+    t = check_array(exposure_s, name, ndim=1, kind="iuf", finite=True)
+    with np.errstate(over="ignore", invalid="ignore"):
+        t = t.astype(np.float64)  # float128 or huge ints may overflow float64: refused below
+    if not np.all(np.isfinite(t)):
+        raise InputError(f"`{name}` must be finite seconds, got {t.tolist()}")
     if np.any(t <= 0):
         raise InputError(f"`{name}` must be positive seconds, got {t.tolist()}")
+    bad = t[(t < EXPOSURE_MIN_S) | (t > EXPOSURE_MAX_S)]
+    if bad.size:
+        raise InputError(
+            f"`{name}` must lie between {EXPOSURE_MIN_S:g} s and {EXPOSURE_MAX_S:g} s, "
+            f"got {bad[0]:g} s"
+        )
     if np.unique(t).size != t.size:
         raise InputError(f"`{name}` must be unique, got {t.tolist()}")
+    return t
+
+
+def check_exposure_time(value: Any, name: str = "exposure_s") -> float:
+    """Return one exposure time in seconds as a float in ``[EXPOSURE_MIN_S, EXPOSURE_MAX_S]``.
+
+    For manifest entries and EXIF tags, one number at a time (bools and
+    strings are refused).
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise InputError(f"`{name}` must be a number of seconds, got {value!r}")
+    try:
+        t = float(value)
+    except OverflowError:  # an int beyond float64
+        t = math.inf
+    if not math.isfinite(t) or t <= 0:
+        raise InputError(f"`{name}` must be a positive finite number of seconds, got {value!r}")
+    if not EXPOSURE_MIN_S <= t <= EXPOSURE_MAX_S:
+        raise InputError(
+            f"`{name}` must lie between {EXPOSURE_MIN_S:g} s and {EXPOSURE_MAX_S:g} s, got {t:g} s"
+        )
     return t
 
 
@@ -97,15 +160,27 @@ def check_bit_depth(bit_depth: Any, name: str = "bit_depth") -> int:
     return int(bit_depth)
 
 
-def check_positive(value: Any, name: str, *, allow_zero: bool = False) -> float:
-    """Return ``value`` as a finite float that is positive (or non-negative)."""
+def check_positive(
+    value: Any, name: str, *, allow_zero: bool = False, maximum: float | None = None
+) -> float:
+    """Return ``value`` as a finite float that is positive (or non-negative).
+
+    ``maximum``, when given, is the largest value accepted (for parameters
+    whose products or exponentials would overflow).
+    """
+    if isinstance(value, bool):
+        raise InputError(f"`{name}` must be a number, got {value!r}")
     try:
         v = float(value)
+    except OverflowError:  # an int beyond float64
+        v = math.inf
     except (TypeError, ValueError):
         raise InputError(f"`{name}` must be a number, got {value!r}") from None
     if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
         rel = "non-negative" if allow_zero else "positive"
         raise InputError(f"`{name}` must be a finite {rel} number, got {value!r}")
+    if maximum is not None and v > maximum:
+        raise InputError(f"`{name}` must be at most {maximum:g}, got {v:g}")
     return v
 
 
@@ -150,5 +225,249 @@ def default_workers() -> int:
 
 
 def check_workers(workers: Any) -> int:
-    """``workers`` as a positive int; ``None`` gives :func:`default_workers`."""
-    return default_workers() if workers is None else check_int(workers, "workers", 1)
+    """``workers`` as an int in ``[1, MAX_WORKERS]``; ``None`` gives :func:`default_workers`."""
+    return default_workers() if workers is None else check_int(workers, "workers", 1, MAX_WORKERS)
+
+
+# ---------------------------------------------------------------------------- memory
+
+
+def _read_int_file(path: str) -> int | None:
+    try:
+        with open(path, encoding="ascii") as f:
+            text = f.read(64).strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def _memory_stat(path: str, keys: tuple[str, ...]) -> int:
+    """Sum of ``keys`` in a cgroup ``memory.stat`` file (0 when unreadable)."""
+    total = 0
+    try:
+        with open(path, encoding="ascii") as f:
+            for line in f:
+                name, _, value = line.partition(" ")
+                if name in keys and value.strip().isdigit():
+                    total += int(value)
+    except (OSError, UnicodeDecodeError):
+        return 0
+    return total
+
+
+def _cgroup_room() -> int | None:
+    """Bytes left under this container's cgroup memory limit (v2, else v1), page cache counted free.
+
+    ``None`` without a limit. The page cache (``file`` / ``cache``) counts as
+    free: the kernel reclaims it before it refuses an allocation.
+    """
+    limit = _read_int_file("/sys/fs/cgroup/memory.max")  # v2 ("max": no limit)
+    if limit is not None:
+        used = _read_int_file("/sys/fs/cgroup/memory.current") or 0
+        cache = _memory_stat("/sys/fs/cgroup/memory.stat", ("file",))
+        return max(0, limit - used + cache)
+    limit = _read_int_file("/sys/fs/cgroup/memory/memory.limit_in_bytes")  # v1
+    if limit is not None and limit < 2**60:  # v1 writes ~2**63 for "no limit"
+        used = _read_int_file("/sys/fs/cgroup/memory/memory.usage_in_bytes") or 0
+        cache = _memory_stat("/sys/fs/cgroup/memory/memory.stat", ("total_cache",))
+        return max(0, limit - used + cache)
+    return None
+
+
+def memory_available() -> int | None:
+    """Bytes of memory this process can still allocate, or ``None`` when unknown.
+
+    The smallest of: ``MemAvailable`` of ``/proc/meminfo`` (else the free
+    physical pages of :func:`os.sysconf`), the room left under the container's
+    cgroup memory limit (v2 ``memory.max`` − ``memory.current``, or v1
+    ``memory.limit_in_bytes`` − ``memory.usage_in_bytes``, the reclaimable page
+    cache counted free) and the address-space limit ``RLIMIT_AS``.
+    """
+    candidates: list[int] = []
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    candidates.append(int(line.split()[1]) * 1024)
+                    break
+    except (OSError, ValueError, IndexError, UnicodeDecodeError):
+        pass
+    if not candidates:
+        try:
+            candidates.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+        except (ValueError, OSError, AttributeError):
+            pass
+    room = _cgroup_room()
+    if room is not None:
+        candidates.append(room)
+    try:
+        soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+    except (ValueError, OSError):  # pragma: no cover - every POSIX system has it
+        soft = resource.RLIM_INFINITY
+    if soft != resource.RLIM_INFINITY and soft > 0:
+        candidates.append(int(soft))
+    return min(candidates) if candidates else None
+
+
+def format_bytes(nbytes: float) -> str:
+    """``nbytes`` as a short human-readable size (``"1.5 GiB"``)."""
+    value = float(nbytes)
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(value) < 1024 or unit == "PiB":
+            return f"{int(value)} bytes" if unit == "bytes" else f"{value:.1f} {unit}"
+        value /= 1024
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def stack_nbytes(shape: Sequence[int], dtype: Any) -> int:
+    """Bytes of an array of ``shape`` and ``dtype`` (exact integer, no overflow).
+
+    For a capture stack: ``stack_nbytes((N, K, H, W, C), np.uint16)``.
+    """
+    n = 1
+    for s in shape:
+        n *= check_int(s, "shape", 0)
+    try:
+        itemsize = np.dtype(dtype).itemsize
+    except TypeError:
+        raise InputError(f"`dtype` is not a numpy dtype: {dtype!r}") from None
+    return n * itemsize
+
+
+def check_memory(
+    nbytes: int, what: str, *, available: int | None = None, fraction: float = 0.9
+) -> int:
+    """Refuse a request for more memory than this process can get.
+
+    Parameters
+    ----------
+    nbytes : int
+        Bytes the operation will allocate (e.g. :func:`stack_nbytes`).
+    what : str
+        What needs it, for the message (``"the stack of 4 x 8 frames of 4000x3000x3 uint16"``).
+    available : int, optional
+        Bytes available; :func:`memory_available` when not given. When it is
+        unknown, nothing is refused.
+    fraction : float
+        Share of the available memory one request may take (0.9: room is left
+        for the work done on the data).
+
+    Returns
+    -------
+    int
+        ``nbytes``.
+
+    Raises
+    ------
+    InputError
+        ``"<what> needs 40.0 GiB of memory, but only 7.5 GiB is available"``.
+    """
+    if isinstance(nbytes, bool) or not isinstance(nbytes, int | np.integer) or nbytes < 0:
+        raise InputError(f"`nbytes` must be a non-negative integer, got {nbytes!r}")
+    if not 0 < fraction <= 1:
+        raise InputError(f"`fraction` must be in (0, 1], got {fraction!r}")
+    avail = memory_available() if available is None else int(available)
+    if avail is not None and nbytes > fraction * avail:
+        raise InputError(
+            f"{what} needs {format_bytes(nbytes)} of memory, but only {format_bytes(avail)} "
+            "is available"
+        )
+    return int(nbytes)
+
+
+# ---------------------------------------------------------------------------- printing
+
+
+def _stream_encoding(stream: TextIO | None) -> str:
+    enc = getattr(stream if stream is not None else sys.stderr, "encoding", None)
+    return enc or "utf-8"
+
+
+def printable_text(text: object, stream: TextIO | None = None) -> str:
+    """``text`` with every character the stream cannot encode escaped.
+
+    A file name that is not valid UTF-8 reaches Python with surrogate escapes
+    (``"\\udcff"`` for the byte 0xFF); printing it raises
+    :class:`UnicodeEncodeError` under a strict encoding. Here such bytes become
+    ``\\xff`` and any character the stream's encoding (``stream``, standard
+    error by default; ASCII under ``LC_ALL=C`` with a strict
+    ``PYTHONIOENCODING``) cannot represent becomes a backslash escape.
+    Printable text is returned unchanged.
+    """
+    s = str(text)
+    enc = _stream_encoding(stream)
+    try:
+        s.encode(enc)
+        return s
+    except (UnicodeEncodeError, LookupError):
+        pass
+    # lone surrogates from os.fsdecode: back to their bytes, shown as \xNN
+    raw = s.encode("utf-8", "surrogateescape") if _has_escapes(s) else None
+    if raw is not None:
+        s = raw.decode("utf-8", "backslashreplace")
+    s = s.encode("utf-8", "backslashreplace").decode("utf-8")  # other lone surrogates
+    try:
+        return s.encode(enc, "backslashreplace").decode(enc)
+    except LookupError:
+        return s.encode("ascii", "backslashreplace").decode("ascii")
+
+
+def _has_escapes(s: str) -> bool:
+    try:
+        s.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def printable_path(path: str | os.PathLike[str] | bytes, stream: TextIO | None = None) -> str:
+    """A path as text that ``stream`` (standard error by default) can always print.
+
+    Undecodable bytes of the file name are shown as ``\\xNN``; see
+    :func:`printable_text`.
+    """
+    text = path.decode("utf-8", "backslashreplace") if isinstance(path, bytes) else os.fspath(path)
+    return printable_text(escape_controls(text), stream)
+
+
+def escape_controls(text: str) -> str:
+    """``text`` with control characters (newline, tab, escape...) shown as ``\\n``, ``\\xNN``.
+
+    For names inside one-line messages: a file called ``"a\\nb.png"`` must
+    not split an error message in two.
+    """
+    if text.isprintable():
+        return text
+    out = []
+    for ch in text:
+        if ch.isprintable() or ch == " " or "\ud800" <= ch <= "\udfff":
+            out.append(ch)
+        else:
+            out.append(
+                repr(ch)[1:-1]
+                if ch in "\n\r\t"
+                else f"\\x{ord(ch):02x}"
+                if ord(ch) < 256
+                else f"\\u{ord(ch):04x}"
+            )
+    return "".join(out)
+
+
+def safe_stdio() -> None:
+    """Make standard output and error print any text instead of raising ``UnicodeEncodeError``.
+
+    Under ``LC_ALL=C`` with ``PYTHONIOENCODING=ascii:strict`` (or any strict
+    encoding), printing a file name that is not valid UTF-8 (surrogate
+    escapes) or a message with ``—`` or ``×`` raises. This switches both
+    streams' error handler to ``backslashreplace`` (those characters are
+    printed as ``\\udcff``, ``\\u2014``), keeping their encoding. Streams
+    that are not :class:`io.TextIOWrapper` (a test's capture) are left alone.
+    Call it first in a command's ``main``.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None and getattr(stream, "errors", None) == "strict":
+            try:
+                reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # pragma: no cover - a closed or detached stream
+                pass

@@ -401,9 +401,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``photoquant`` command; returns the exit status."""
+    from photoquant._checks import safe_stdio
     from photoquant._signals import Terminated, handle_signals
     from photoquant.io.atomic import remove_live_temporaries
 
+    safe_stdio()  # a strict locale must not turn a file name into a traceback
     try:
         parser = build_parser()
         args = parser.parse_args(argv)

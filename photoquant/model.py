@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from photoquant._checks import check_bit_depth
-from photoquant._json import to_json_value
+from photoquant._json import load_json, to_json_value
 from photoquant.balance import BalanceModel
 from photoquant.errors import CameraModelError, InputError
 from photoquant.flatfield import SensorLUTModel
@@ -67,8 +67,6 @@ CAMERA_FORMAT = "photoquant.camera/2"
 CAMERA_FORMATS_READ = ("photoquant.camera/1", "photoquant.camera/2")
 _JSON_NAME = "camera.json"
 _VIGNETTING_NAME = "vignetting.exr"
-_MAX_JSON_BYTES = 64 << 20
-_MAX_JSON_DEPTH = 64
 
 _STEP_TYPES: dict[str, type] = {
     "response": ResponseModel,
@@ -305,44 +303,12 @@ class CameraModel:
 # ---------------------------------------------------------------------------
 
 
-def _depth(value: Any, limit: int) -> int:
-    """Nesting depth of a parsed JSON value (iterative: no recursion on hostile input)."""
-    deepest, stack = 0, [(value, 1)]
-    while stack:
-        item, d = stack.pop()
-        if d > limit:
-            return d
-        deepest = max(deepest, d)
-        if isinstance(item, dict):
-            stack.extend((v, d + 1) for v in item.values())
-        elif isinstance(item, list):
-            stack.extend((v, d + 1) for v in item)
-    return deepest
-
-
 def _read_json(json_path: Path) -> dict[str, Any]:
-    try:
-        size = json_path.stat().st_size
-        if size > _MAX_JSON_BYTES:
-            raise CameraModelError(
-                f"{json_path} is {size} bytes, more than a camera file can be "
-                f"({_MAX_JSON_BYTES} bytes)"
-            )
-        text = json_path.read_text(encoding="utf-8")
-        data = json.loads(text, parse_constant=_refuse_constant)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, ValueError) as exc:
-        raise CameraModelError(f"{json_path} is not readable JSON: {exc}") from None
-    except RecursionError:
-        raise CameraModelError(f"{json_path} is nested too deeply to be a camera file") from None
+    """``camera.json``, parsed by the guarded loader (size, depth, NaN, repeated keys)."""
+    data = load_json(json_path, str(json_path), error=CameraModelError)
     if not isinstance(data, dict):
         raise CameraModelError(f"{json_path} must hold a JSON object")
-    if _depth(data, _MAX_JSON_DEPTH) > _MAX_JSON_DEPTH:
-        raise CameraModelError(f"{json_path} is nested too deeply to be a camera file")
     return data
-
-
-def _refuse_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not a number a camera file may hold")
 
 
 def _field(data: dict[str, Any], key: str, kind: type | tuple[type, ...], where: str) -> Any:
@@ -361,7 +327,7 @@ def _read_image(folder: Path, file: Any, channels: tuple[str, ...], where: str) 
     path = folder / file
     if path.resolve().parent != folder.resolve():
         raise CameraModelError(f"{where}: {file} must lie in the camera folder")
-    image, names = read_exr(path)
+    image, names = read_exr(path)  # in the order the camera wrote them
     if tuple(names) != channels:
         raise CameraModelError(f"{path} has channels {tuple(names)}, the camera has {channels}")
     return image

@@ -51,13 +51,16 @@ from photoquant._checks import (
     check_positive,
     check_workers,
     default_workers,
+    safe_stdio,
     validate_method,
 )
-from photoquant._json import to_json_value
+from photoquant._json import load_json, to_json_value
 from photoquant._signals import Terminated, handle_signals
 from photoquant._threads import thread_map
 
 __all__ = [
+    "safe_stdio",
+    "load_json",
     "Terminated",
     "handle_signals",
     "check_array",

@@ -342,8 +342,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``pqsim`` command; returns the exit status."""
     from photoquant.io.atomic import remove_live_temporaries
-    from photoquant.utils import Terminated, handle_signals
+    from photoquant.utils import Terminated, handle_signals, safe_stdio
 
+    safe_stdio()  # a strict locale must not turn a file name into a traceback
     args = build_parser().parse_args(argv)
     try:
         with handle_signals():  # SIGTERM / Ctrl-C: clean exit, temporaries removed

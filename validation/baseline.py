@@ -48,6 +48,8 @@ __all__ = [
     "CheckResult",
     "make_baseline",
     "load_baseline",
+    "validate_baseline",
+    "check_baseline_applies",
     "check_results",
     "main",
 ]
@@ -233,22 +235,121 @@ _NOT_CONDITIONS = (
 """The fields :meth:`ValidationConfig.conditions` leaves out (a test keeps them in step)."""
 
 
-def load_baseline(path: str | Path) -> dict[str, Any]:
-    """Read and validate a baseline file."""
-    p = Path(path)
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ValidationError(f"baseline {p} does not exist") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValidationError(f"baseline {p} cannot be read: {exc}") from None
-    if not isinstance(data, dict) or data.get("format") != BASELINE_FORMAT:
+_BETTER = ("lower", "higher", "both")
+_MAX_BASELINE_BYTES = 16 * 2**20
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _check_metric(where: str, key: Any, ref: Any) -> None:
+    """Refuse a baseline metric entry whose fields have the wrong types."""
+    if not isinstance(key, str) or not key:
+        raise ValidationError(f"{where}: a metric name must be a non-empty string, got {key!r}")
+    at = f"{where}: metric {key!r}"
+    if not isinstance(ref, dict):
+        raise ValidationError(f"{at} must be an object, got {type(ref).__name__}")
+    for field_ in ("value", "tolerance", "better"):
+        if field_ not in ref:
+            raise ValidationError(f"{at} lacks `{field_}`")
+    if ref["value"] is not None and not _is_number(ref["value"]):
         raise ValidationError(
-            f"{p} is not a validation baseline (format {BASELINE_FORMAT!r} expected)"
+            f"{at}: `value` must be a finite number or null, got {ref['value']!r}"
+        )
+    if not _is_number(ref["tolerance"]) or ref["tolerance"] < 0:
+        raise ValidationError(
+            f"{at}: `tolerance` must be a finite non-negative number, got {ref['tolerance']!r}"
+        )
+    if ref["better"] not in _BETTER:
+        raise ValidationError(
+            f"{at}: `better` must be one of {', '.join(_BETTER)}, got {ref['better']!r}"
+        )
+    if not isinstance(ref.get("allow_none", False), bool):
+        raise ValidationError(
+            f"{at}: `allow_none` must be true or false, got {ref['allow_none']!r}"
+        )
+    for field_ in ("description", "unit"):
+        if not isinstance(ref.get(field_, ""), str):
+            raise ValidationError(f"{at}: `{field_}` must be a string, got {ref[field_]!r}")
+    for field_ in ("spread", "mean"):
+        v = ref.get(field_)
+        if v is not None and not _is_number(v):
+            raise ValidationError(f"{at}: `{field_}` must be a finite number or null, got {v!r}")
+    n = ref.get("n_values", 0)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise ValidationError(f"{at}: `n_values` must be a non-negative integer, got {n!r}")
+
+
+def validate_baseline(data: Any, name: str = "baseline") -> dict[str, Any]:
+    """Check a parsed baseline: its format, `conditions`, and every metric's fields.
+
+    Returns ``data``; raises :class:`ValidationError` with one line naming the
+    first problem (a foreign file, a missing key, a wrong type), so that
+    ``--check`` fails before the run rather than with a ``KeyError`` after it.
+    """
+    if not isinstance(data, dict):
+        raise ValidationError(
+            f"{name} is not a validation baseline (a JSON object of format "
+            f"{BASELINE_FORMAT!r} expected, got {type(data).__name__})"
+        )
+    if data.get("format") != BASELINE_FORMAT:
+        got = data.get("format")
+        raise ValidationError(
+            f"{name} is not a validation baseline (format {BASELINE_FORMAT!r} expected, "
+            f"got {str(got)[:80]!r})"
         )
     if not isinstance(data.get("metrics"), dict) or not isinstance(data.get("conditions"), dict):
-        raise ValidationError(f"baseline {p} lacks `metrics` or `conditions`")
+        raise ValidationError(f"{name} lacks `metrics` or `conditions` (objects)")
+    if not data["metrics"]:
+        raise ValidationError(f"{name} has no metrics: it would check nothing")
+    if not isinstance(data.get("config_name", ""), str):
+        raise ValidationError(f"{name}: `config_name` must be a string")
+    for key, ref in data["metrics"].items():
+        _check_metric(name, key, ref)
     return data
+
+
+def load_baseline(path: str | Path) -> dict[str, Any]:
+    """Read and validate a baseline file (:func:`validate_baseline`).
+
+    The file is read by :func:`photoquant._json.load_json`: too large, too
+    deeply nested, ``NaN`` or not JSON is refused with one line.
+
+    Raises
+    ------
+    ValidationError
+        If the file is missing, unreadable, not JSON, not a baseline, or any
+        entry has a wrong type or lacks a key.
+    """
+    from photoquant.utils import load_json
+
+    p = Path(path)
+    if not p.exists():
+        raise ValidationError(f"baseline {p} does not exist")
+    data = load_json(p, f"baseline {p}", error=ValidationError, max_bytes=_MAX_BASELINE_BYTES)
+    return validate_baseline(data, f"baseline {p}")
+
+
+def check_baseline_applies(
+    baseline: Mapping[str, Any], conditions: Mapping[str, Any], *, name: str = "baseline"
+) -> None:
+    """Refuse, before any run, a baseline made under other conditions.
+
+    ``conditions`` is :meth:`validation.config.ValidationConfig.conditions`
+    of the run about to start (normalised to JSON values here). The same
+    comparison :func:`check_results` makes on the finished run's results.
+    """
+    from photoquant.utils import to_json_value
+
+    cond = json.loads(json.dumps(to_json_value(dict(conditions))))
+    ref = baseline["conditions"]
+    if cond != ref:
+        diff = sorted(k for k in set(cond) | set(ref) if cond.get(k) != ref.get(k))
+        raise ValidationError(
+            f"{name} was made for configuration {baseline.get('config_name')!r} and differs "
+            f"from this run in {', '.join(diff)}"
+        )
 
 
 def _expected(key: str, results: Mapping[str, Any]) -> bool:

@@ -116,7 +116,12 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``photoquant validate``; returns the exit status (0, or 1 for a regression)."""
     from photoquant.errors import OutputExistsError
-    from validation.baseline import DEFAULT_BASELINE, check_results, load_baseline
+    from validation.baseline import (
+        DEFAULT_BASELINE,
+        check_baseline_applies,
+        check_results,
+        load_baseline,
+    )
     from validation.config import ValidationError, get_config
     from validation.experiments import run_validation
     from validation.report import format_table, results_json, write_report
@@ -144,6 +149,8 @@ def run_validate(args: argparse.Namespace) -> int:
     if args.check:
         path = DEFAULT_BASELINE if args.check == "default" else Path(args.check)
         baseline = (path, load_baseline(path))
+        # before the run: a tampered, foreign or mismatched baseline fails now, with one line
+        check_baseline_applies(baseline[1], config.conditions(), name=f"baseline {path}")
     if (
         args.workdir is not None
         and args.workdir.exists()

@@ -64,9 +64,9 @@ def _colour_checker(manifest: Any, model: CameraModel, truth: Any, allow_outside
     """Correct the ColorChecker frames; compare the patch means with the truth."""
     cc = truth.captures["colorchecker"]
     info = manifest.extra["colorchecker"]
-    rois = np.asarray(info.get("patch_rois"), dtype=np.int64)
-    if rois.shape != (24, 4):
-        raise InputError(f"manifest {manifest.path}: `colorchecker.patch_rois` must be 24 boxes")
+    if not isinstance(info, dict):
+        raise InputError(f"manifest {manifest.path}: `colorchecker` must be an object")
+    rois = _patch_rois(info.get("patch_rois"), cc.l.shape[:2], manifest.path)
     stack = load_stack(
         extra_frameset(manifest, "colorchecker", allow_outside=allow_outside), manifest
     )
@@ -79,10 +79,62 @@ def _colour_checker(manifest: Any, model: CameraModel, truth: Any, allow_outside
     true_l = true_l / true_l[WHITE_PATCH]
     _, stats, _ = relative_error_eq8(true_l[:, None, :], measured[:, None, :])
     out: dict[str, Any] = {"error": stats, "r_camera": correlation(measured, true_l)}
-    ref = (truth.meta.get("colorchecker") or {}).get("reference_D65", {}).get("CIE RGB")
+    ref = _nested(truth.meta, "colorchecker", "reference_D65", "CIE RGB")
     if ref is not None:
-        out["r_cie_rgb"] = correlation(measured, ref)
+        ref = np.asarray(ref, dtype=object)
+        if ref.shape != measured.shape or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in ref.ravel()
+        ):
+            raise InputError(
+                f"the truth's `meta.colorchecker.reference_D65.CIE RGB` must be "
+                f"{measured.shape[0]} x {measured.shape[1]} numbers"
+            )
+        out["r_cie_rgb"] = correlation(measured, ref.astype(np.float64))
     return out
+
+
+def _nested(meta: Any, *keys: str) -> Any:
+    """``meta[k0][k1]...``, or None where a level is missing or not an object."""
+    for key in keys:
+        if not isinstance(meta, dict):
+            return None
+        meta = meta.get(key)
+    return meta
+
+
+def _patch_rois(value: Any, shape: tuple[int, ...], where: Any) -> np.ndarray:
+    """The 24 patch boxes ``(x0, y0, x1, y1)``, checked to lie inside an image of ``shape``."""
+    h, w = shape
+    bad = InputError(
+        f"manifest {where}: `colorchecker.patch_rois` must be 24 boxes [x0, y0, x1, y1] of "
+        f"integers with 0 <= x0 < x1 <= {w}, 0 <= y0 < y1 <= {h}"
+    )
+    if not isinstance(value, list) or len(value) != 24:
+        raise bad
+    for box in value:
+        if (
+            not isinstance(box, list | tuple)
+            or len(box) != 4
+            or not all(isinstance(v, int) and not isinstance(v, bool) for v in box)
+        ):
+            raise bad
+        x0, y0, x1, y1 = box
+        if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
+            raise bad
+    return np.asarray(value, dtype=np.int64)
+
+
+def _require_captures(truth: Any, names: tuple[str, ...], where: Any) -> None:
+    """Refuse a truth set that lacks a capture the comparison needs."""
+    captures = getattr(truth, "captures", None)
+    if not isinstance(captures, dict):
+        raise InputError(f"the truth of {where} has no captures")
+    missing = [n for n in names if n not in captures]
+    if missing:
+        have = ", ".join(sorted(map(str, captures))) or "none"
+        raise InputError(
+            f"the truth of {where} lacks the capture(s) {', '.join(missing)} (it has: {have})"
+        )
 
 
 def _white_chart_truth(manifest: Any, truth: Any) -> np.ndarray:
@@ -146,6 +198,7 @@ def compare_with_truth(
         manifest = load_manifest(manifest, allow_outside=allow_outside)
     if truth is None:
         truth = load_truth(extra_path(manifest, "truth", allow_outside=allow_outside))
+    _require_captures(truth, ("scene",), manifest.path)
     cam = truth.camera
     if tuple(cam.channels) != tuple(model.channels):
         raise InputError(

@@ -62,7 +62,7 @@ from types import MappingProxyType
 from typing import Any
 
 from photoquant.errors import InputError
-from photoquant.utils import to_json_value, validate_method
+from photoquant.utils import load_json, to_json_value, validate_method
 from pqsim.synth_camera.camera import SyntheticCamera
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import SensorNoise
@@ -245,17 +245,13 @@ def preset_fields(name: str | os.PathLike[str]) -> dict[str, Any]:
     return dict(CAMERA_PRESETS[key])
 
 
+_MAX_PRESET_BYTES = 16 * 2**20
+"""Largest preset file read (a preset is a few kilobytes)."""
+
+
 def _read_preset_file(path: Path) -> dict[str, Any]:
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"preset file {path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"preset file {path}: cannot read it ({exc})") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"preset file {path}: not valid JSON ({exc.msg} at line {exc.lineno})"
-        ) from None
+    # guarded: size, nesting depth, NaN/Infinity and repeated keys refused with one line
+    doc = load_json(path, f"preset file {path}", max_bytes=_MAX_PRESET_BYTES)
     if not isinstance(doc, dict) or doc.get("format") != PRESET_FORMAT:
         got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
         raise InputError(f"preset file {path}: `format` must be {PRESET_FORMAT!r}, got {got!r}")

@@ -24,5 +24,5 @@ def test_check_int_bounds_and_types():
 
 def test_check_workers_defaults_to_the_cpus():
     assert check_workers(None) >= 1 and check_workers(3) == 3
-    with pytest.raises(InputError, match="`workers` must be an integer >= 1"):
+    with pytest.raises(InputError, match=r"`workers` must be an integer in \[1, 1024\]"):
         check_workers(0)

@@ -324,13 +324,29 @@ def test_exr_channel_order(tmp_path):
     img = np.stack([np.full((2, 2), v, np.float32) for v in (3.0, 1.0, 2.0, 9.0)], -1)
     write_exr(tmp_path / "a.exr", img, channels=("B", "R", "G", "A"))
     out, names = read_exr(tmp_path / "a.exr")
+    assert names == ("B", "R", "G", "A")  # the writer's order comes back
+    np.testing.assert_array_equal(out[0, 0], [3.0, 1.0, 2.0, 9.0])
+    out, names = read_exr(tmp_path / "a.exr", channels=("R", "G", "B", "A"))
     assert names == ("R", "G", "B", "A")
     np.testing.assert_array_equal(out[0, 0], [1.0, 2.0, 3.0, 9.0])
-    rgb = read_image(tmp_path / "a.exr")
+    rgb = read_image(tmp_path / "a.exr")  # frames are always R, G, B
     assert rgb.dtype == np.float32
     np.testing.assert_array_equal(rgb[0, 0], [1.0, 2.0, 3.0])
     write_exr(tmp_path / "z.exr", img[..., :3], channels=("z", "mask", "depth"))
-    assert read_exr(tmp_path / "z.exr")[1] == ("depth", "mask", "z")
+    assert read_exr(tmp_path / "z.exr")[1] == ("z", "mask", "depth")
+
+
+def test_exr_without_recorded_order_reads_rgb_first(tmp_path):
+    """A file from another writer (no photoquant.channels attribute): R, G, B, then sorted."""
+    import OpenEXR
+
+    planes = {
+        n: np.full((2, 2), v, np.float32) for n, v in (("B", 3), ("z", 5), ("R", 1), ("G", 2))
+    }
+    OpenEXR.File({"type": OpenEXR.scanlineimage}, planes).write(str(tmp_path / "f.exr"))
+    out, names = read_exr(tmp_path / "f.exr")
+    assert names == ("R", "G", "B", "z")
+    np.testing.assert_array_equal(out[0, 0], [1, 2, 3, 5])
 
 
 def test_exr_grayscale_via_write_image(tmp_path):
