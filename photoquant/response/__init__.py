@@ -13,6 +13,7 @@ import numpy as np
 from photoquant._checks import validate_method
 from photoquant.response.debevec1997 import (
     DEFAULT_SMOOTHNESS,
+    TOE_MODES,
     ResponseRecovery,
     camera_response_Debevec1997,
     response_levels,
@@ -24,6 +25,7 @@ __all__ = [
     "DEFAULT_SMOOTHNESS",
     "RESPONSE_METHODS",
     "ResponseRecovery",
+    "TOE_MODES",
     "camera_response_Debevec1997",
     "recover_response",
     "response_levels",
