@@ -63,7 +63,6 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import validate_method
 from photoquant.errors import InputError
 from photoquant.stack import ExposureStack
 
@@ -394,9 +393,17 @@ def crossval_stack(
         peer = get_peer(method)
         name = peer.name
     else:
+        from photoquant.peers import PEER_METHODS
         from photoquant.response import RESPONSE_METHODS
 
-        name = validate_method(method, RESPONSE_METHODS, "response")
+        lookup = {key.lower(): key for key in RESPONSE_METHODS}
+        if str(method).lower() not in lookup:
+            raise InputError(
+                f"unknown method {method!r}; valid are the response methods "
+                f"{', '.join(sorted(RESPONSE_METHODS))} and the peers "
+                f"{', '.join(sorted(PEER_METHODS))} ('opencv')"
+            )
+        name = lookup[str(method).lower()]
     height, width = stack.image_shape
     box = None if roi is None else parse_roi(list(roi), (height, width))
     lo, hi = score_range(stack.bit_depth)
