@@ -240,7 +240,9 @@ def score_range(bit_depth: int) -> tuple[float, float]:
     return SCORE_RANGE_8BIT[0] * scale, SCORE_RANGE_8BIT[1] * scale
 
 
-def parse_roi(value: Any, image_shape: tuple[int, int], where: str = "roi") -> tuple[int, ...]:
+def parse_roi(
+    value: Any, image_shape: tuple[int, int], where: str = "roi"
+) -> tuple[int, int, int, int]:
     """Validate a scoring ROI ``[x0, y0, x1, y1]`` (end exclusive) against ``(H, W)``.
 
     Raises

@@ -53,7 +53,7 @@ def get_peer(name: str) -> Peer:
         If no peer has that name, or its package is not installed.
     """
     key = _ALIASES.get(str(name).lower(), name)
-    peer = PEER_METHODS[validate_method(key, PEER_METHODS, "peer")]
+    peer = PEER_METHODS[validate_method(key, {k: p.fit for k, p in PEER_METHODS.items()}, "peer")]
     if not peer.available():
         raise InputError(f"peer method {peer.name!r} is not available: it needs {peer.requirement}")
     return peer

@@ -300,7 +300,7 @@ def _solve_channel(
     smooth_w: np.ndarray,
     smoothness: float,
     gauge: int,
-) -> tuple[np.ndarray, float, bool, int]:
+) -> tuple[np.ndarray, float, bool, int, np.ndarray]:
     """Solve eq. 7 for one channel on sampled pixels ``values (K, P)``."""
     k_count, p_count = values.shape
     n_g = top + 1
