@@ -200,3 +200,15 @@ def test_cli_errors_are_one_line(tmp_path, gamma_stack, capsys):
     assert main(["crossval", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "crossval_roi" in err and len(err.splitlines()) == 1
+
+
+def test_twelve_bit_repeats_are_scored_in_their_own_code_values(rng):
+    l = log_uniform_scene(rng, (48, 64, 3), decades=3.5)
+    frames = capture(l, EXPOSURES, balance=(1.0, 1.0, 1.0), bit_depth=12, n_repeats=2)
+    res = crossval_stack(ExposureStack(frames, EXPOSURES, bit_depth=12))
+    assert res.score_range == pytest.approx((10 * 4095 / 255, 245 * 4095 / 255))
+    # as at 8 bits: the rounding of the observed value (1/4 DN on average), twice
+    # (g is binned to 1024 knots at 12 bits: 4 DN apart, linear in between)
+    assert res.overall_mae_dn < 0.5
+    with pytest.raises(InputError, match="8-bit"):
+        crossval_stack(ExposureStack(frames, EXPOSURES, bit_depth=12), "opencv")
