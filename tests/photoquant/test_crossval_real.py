@@ -48,7 +48,7 @@ def _scores(path: Path) -> tuple[float, float]:
     return ours.overall_mae_dn, peer.overall_mae_dn
 
 
-@pytest.mark.slow  # 16 frames of 512x768, 14 fits per method: ~15 s alone, ~30 s on a loaded machine
+@pytest.mark.slow  # 16 frames of 512x768, 14 fits per method: 15-30 s here
 def test_memorial_crossval_is_25_percent_below_opencv(tmp_path):
     from tests.conftest import MEMORIAL
 
