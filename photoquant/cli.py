@@ -298,6 +298,21 @@ def _cmd_methods(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_crossval(args: argparse.Namespace) -> int:
+    from photoquant.crossval import crossval_manifest
+
+    result = crossval_manifest(
+        args.manifest,
+        args.method,
+        roi=args.roi,
+        allow_outside=args.allow_outside,
+        seed=args.seed,
+        profile=args.profile,
+    )
+    print(json.dumps(result.to_json(), indent=1) if args.json else result.format_table())
+    return 0
+
+
 COMMAND_ENTRY_POINTS = "photoquant.commands"
 """Entry-point group of sub-commands other distributions add (``validate``,
 ``demo`` and ``compare`` come from the ``validation`` package this way):
@@ -394,6 +409,37 @@ def build_parser() -> argparse.ArgumentParser:
     meth = sub.add_parser("methods", help="list the methods of every step and their options")
     meth.add_argument("--json", action="store_true", help="machine-readable output")
     meth.set_defaults(func=_cmd_methods)
+
+    xval = sub.add_parser(
+        "crossval",
+        help="leave-one-exposure-out cross-validation of the response on views[0] of a manifest",
+    )
+    xval.add_argument("manifest", help="capture manifest (photoquant.captures/1 JSON)")
+    xval.add_argument(
+        "--method",
+        default="Debevec 1997",
+        help="a response method (calibrate's default pipeline) or a peer: 'opencv' "
+        "(default: Debevec 1997)",
+    )
+    xval.add_argument("--json", action="store_true", help="machine-readable output")
+    xval.add_argument(
+        "--roi",
+        type=int,
+        nargs=4,
+        metavar=("X0", "Y0", "X1", "Y1"),
+        help="score only this box (end exclusive); default: the manifest's crossval_roi",
+    )
+    xval.add_argument("--seed", type=int, default=0, help="seed of the sample selection")
+    xval.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        default=DEFAULT_PROFILE,
+        help="the calibration profile the response method runs in (default photoquant)",
+    )
+    xval.add_argument(
+        "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"
+    )
+    xval.set_defaults(func=_cmd_crossval)
 
     _add_plugin_commands(sub)
     return parser

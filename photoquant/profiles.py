@@ -48,7 +48,10 @@ _PHOTOQUANT: dict[str, tuple[str, Mapping[str, Any]]] = {
 
 _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
     # §5.2: a random subset P⁻ of 500 image points, the hat of eq. 6
-    "response": ("Debevec 1997", {"weighting": "hat", "sampling": "random", "n_samples": 500}),
+    "response": (
+        "Debevec 1997",
+        {"weighting": "hat", "sampling": "random", "n_samples": 500, "toe": "solved"},
+    ),
     # eq. 6: the hat over every value the camera gives
     "merge": ("Debevec 1997", {"weighting": "hat", "exclude_below_valid_min": False}),
     # §5.3: the balance from the linearised white chart
@@ -97,6 +100,13 @@ DEVIATIONS: tuple[Deviation, ...] = (
         {"sampling": "histogram", "n_samples": 2000},
         "2000 pixels drawn from every value bin of every exposure instead of 500 at random: "
         "the toe and shoulder of g get data",
+    ),
+    Deviation(
+        "toe continued",
+        "response",
+        {"toe": "continued"},
+        "below the toe's steepest level, where noise dilutes eq. 7's regression, g is continued "
+        "linearly instead of flattening, and valid_min is raised there",
     ),
     Deviation(
         "quantisation-aware weights",

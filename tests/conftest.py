@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
+# ``../shared`` beside the checkout; PHOTOQUANT_SHARED points elsewhere (e.g. from a worktree)
+SHARED = Path(os.environ.get("PHOTOQUANT_SHARED", REPO.parent / "shared"))
 FROBISHER = SHARED / "data" / "real" / "frobisher_001"
+MEMORIAL = SHARED / "data" / "real" / "memorial_debevec"
 
 
 @pytest.fixture

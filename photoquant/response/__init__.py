@@ -22,6 +22,7 @@ from photoquant.methods import REGISTRIES, Method, StepFit, resolve_method
 from photoquant.response.debevec1997 import (
     DEFAULT_SMOOTHNESS,
     SAMPLING_METHODS,
+    TOE_MODES,
     DebevecResponseOptions,
     ResponseRecovery,
     camera_response_Debevec1997,
@@ -40,6 +41,7 @@ __all__ = [
     "DebevecResponseOptions",
     "ResponseModel",
     "ResponseRecovery",
+    "TOE_MODES",
     "camera_response_Debevec1997",
     "characterise_response_Debevec1997",
     "recover_response",

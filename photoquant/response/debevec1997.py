@@ -41,6 +41,29 @@ Implementation notes
 * **Saturation**: values at a channel's saturation level (in any repeat) are
   excluded; ``g`` above the saturation level is held constant (never used
   with a non-zero weight).
+* **Toe** (``toe="continued"``, the default): eq. 7 regresses ``ln X`` on the
+  observed value, so where the noise (in code values) is comparable with the
+  response's rise the estimate becomes ``E[ln X | c]``, which tends to the
+  mean log exposure of whatever dark pixels were sampled instead of falling
+  towards ``−∞`` (regression dilution of a noisy regressor, [Fuller1987]_):
+  the recovered ``g`` flattens, and can even turn back up, near the dark
+  floor. Any response that reaches a floor (``f(X) → c_0`` as ``X → 0``, be
+  it a black offset, film fog or a power law) has ``g' = X'/X → ∞`` there:
+  ``g'`` grows towards the floor. A slope that *falls* towards the floor is
+  therefore the signature of dilution, not of the camera. Below the level of
+  steepest slope in the lower half of the range (``c_L``) the levels are
+  taken as not measured: ``valid_min`` is raised to ``c_L`` (the merge gives
+  their values no weight) and ``g`` is continued below it as a straight line
+  with the slope at ``c_L`` — the smoothness prior ``g'' = 0`` carried into
+  the toe, the least-curved continuation compatible with a slope that does
+  not decrease towards the floor. It stays strictly increasing, so that the
+  forward response ``f = g⁻¹`` is defined at every level (predicting a
+  frame, :mod:`photoquant.crossval`, inverts it). Where the slope is largest
+  at the lowest supported level (a linear or power-law camera without
+  offset, little noise), nothing but the extrapolation below ``valid_min``
+  changes. ``toe="solved"`` keeps eq. 7's solution everywhere (the earlier
+  behaviour: the prior's extrapolation, flattened by the monotonicity
+  constraint).
 
 References
 ----------
@@ -48,6 +71,9 @@ References
    range radiance maps from photographs. SIGGRAPH '97, 369-378.
    doi:10.1145/258734.258884
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.2, eq. 7.
+.. [Fuller1987] Fuller, W. A. (1987). *Measurement Error Models*. Wiley,
+   ch. 1 (attenuation of a regression by noise in the regressor).
+   doi:10.1002/9780470316665
 """
 
 from __future__ import annotations
@@ -84,10 +110,53 @@ __all__ = [
     "DebevecResponseOptions",
     "characterise_response_Debevec1997",
     "DEFAULT_SMOOTHNESS",
+    "TOE_MODES",
+    "continue_toe",
 ]
 
 DEFAULT_SMOOTHNESS = 1000.0
 """Default β of eq. 7 (weights scaled to a peak of 1). The paper leaves β free."""
+
+TOE_MODES = ("continued", "solved")
+"""Treatments of the dark end of ``g`` (module notes, *Toe*)."""
+
+
+def continue_toe(g: np.ndarray, lowest: int, gauge: int) -> tuple[np.ndarray, int]:
+    """Continue ``g`` linearly below its steepest level in ``[lowest, gauge]``.
+
+    Parameters
+    ----------
+    g : ndarray, shape (L,)
+        Non-decreasing log inverse response at consecutive levels (or knots).
+    lowest : int
+        Lowest level supported by data.
+    gauge : int
+        The gauge level (mid-range); the search stays below it.
+
+    Returns
+    -------
+    g : ndarray, shape (L,)
+        A copy, with ``g[j] = g[j_L] − s_L (j_L − j)`` for ``j < j_L``, where
+        ``s_L = g[j_L + 1] − g[j_L]`` is the largest slope of ``g`` over
+        ``[lowest, gauge]`` (the lowest such level on a tie).
+    j_L : int
+        The level below which ``g`` was continued.
+
+    Notes
+    -----
+    See the module notes (*Toe*): a slope that decreases towards the dark
+    floor is regression dilution, so the levels below the steepest one are
+    not trusted. A non-positive largest slope (no rise at all) leaves ``g``
+    unchanged, with ``j_L = lowest``.
+    """
+    g = np.array(g, dtype=np.float64)
+    lowest = int(min(max(lowest, 0), gauge))
+    slopes = np.diff(g[lowest : gauge + 1])
+    if slopes.size == 0 or not np.max(slopes) > 0:
+        return g, lowest
+    j_l = lowest + int(np.argmax(slopes))
+    g[:j_l] = g[j_l] - slopes[j_l - lowest] * (j_l - np.arange(j_l))
+    return g, j_l
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,10 +182,12 @@ class ResponseRecovery:
         Whether the monotonicity constraint was active.
     valid_min : ndarray, shape (C,)
         Lowest level supported by data (at least ``min_support`` data
-        equations, counted with their interpolation weights). Below it ``g``
-        is extrapolated by the smoothness prior alone (for a response with
-        ``g → −∞`` at 0 that prior is biased), so the merge gives such values
-        no weight.
+        equations, counted with their interpolation weights) and, with
+        ``toe="continued"``, not below the toe's steepest level, under which
+        noise dilutes the fit (module notes, *Toe*). Below it ``g`` is an
+        extrapolation (a straight line with the slope at ``valid_min``, or the
+        smoothness prior's with ``toe="solved"``), so the merge gives such
+        values no weight.
     smoothness : float
         The β used.
     """
@@ -267,7 +338,7 @@ def _solve_channel(
     smooth_w: np.ndarray,
     smoothness: float,
     gauge: int,
-) -> tuple[np.ndarray, float, bool, int]:
+) -> tuple[np.ndarray, float, bool, int, np.ndarray]:
     """Solve eq. 7 for one channel on sampled pixels ``values (K, P)``."""
     k_count, p_count = values.shape
     n_g = top + 1
@@ -354,6 +425,7 @@ def camera_response_Debevec1997(
     c_min: float = 0.0,
     min_support: float = 10.0,
     sampling: str = "histogram",
+    toe: str = "continued",
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -390,6 +462,11 @@ def camera_response_Debevec1997(
         random among the pixels with two usable exposures
         (:func:`select_samples_random`, the paper's "subset of the set of
         image points").
+    toe : {"continued", "solved"}
+        ``"continued"`` (default): below the steepest level of the lower half
+        of the range, where noise dilutes eq. 7, ``g`` is continued linearly
+        and ``valid_min`` raised to that level (module notes, *Toe*);
+        ``"solved"``: eq. 7's solution as it is.
 
     Returns
     -------
@@ -404,6 +481,8 @@ def camera_response_Debevec1997(
     if k_count < 2:
         raise InputError("response recovery needs at least 2 exposure times, got 1")
     smoothness = check_positive(smoothness, "smoothness", allow_zero=True)
+    if toe not in TOE_MODES:
+        raise InputError(f"`toe` must be one of {list(TOE_MODES)}, got {toe!r}")
     if int(n_samples) < 2:
         raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
     c_full = 2**bit_depth - 1
@@ -465,7 +544,10 @@ def camera_response_Debevec1997(
         # lowest measured level: below it g is extrapolated by the prior alone
         # (gaps between measured levels are interpolated, which is fine)
         measured = np.flatnonzero(support[: gauge + 1] >= min_support)
-        valid_min[ch] = levels[measured[0]] if measured.size else levels[gauge]
+        lowest = int(measured[0]) if measured.size else gauge
+        if toe == "continued":
+            g, lowest = continue_toe(g, lowest, gauge)
+        valid_min[ch] = levels[lowest]
         g_all[ch, : top + 1] = g
         g_all[ch, top + 1 :] = g[-1]
         n_used[ch] = idx.size
@@ -506,6 +588,9 @@ class DebevecResponseOptions:
         Most unknowns per channel (levels are binned above it).
     min_support : float
         Data equations a level needs to count as measured.
+    toe : {"continued", "solved"}
+        Continue ``g`` linearly below the toe's steepest level (default) or
+        keep eq. 7's solution there (the paper's).
     """
 
     smoothness: float = DEFAULT_SMOOTHNESS
@@ -514,8 +599,11 @@ class DebevecResponseOptions:
     sampling: str = "histogram"
     max_levels: int = 1024
     min_support: float = 10.0
+    toe: str = "continued"
 
     def __post_init__(self) -> None:
+        if self.toe not in TOE_MODES:
+            raise InputError(f"`toe` must be one of {list(TOE_MODES)}, got {self.toe!r}")
         check_positive(self.smoothness, "smoothness", allow_zero=True)
         check_int(self.n_samples, "n_samples", 2)
         check_int(self.max_levels, "max_levels", 16)
@@ -564,6 +652,7 @@ def characterise_response_Debevec1997(
         sampling=opts.sampling,
         max_levels=opts.max_levels,
         min_support=opts.min_support,
+        toe=opts.toe,
         rng=rng,
         c_min=c_min,
     )

@@ -13,6 +13,7 @@ from photoquant.response import (
     recover_response,
     response_levels,
 )
+from photoquant.response.debevec1997 import continue_toe
 from photoquant.stack import ExposureStack
 from photoquant.weighting import weighting_hat_Debevec1997
 
@@ -193,3 +194,73 @@ def test_sample_selection_takes_usable_pixels_only(seed, n_samples, p):
     idx = select_samples_histogram(vals, valid, 255.0, n_samples, np.random.default_rng(seed))
     assert np.array_equal(idx, np.unique(idx)) and np.isin(idx, usable).all()
     assert idx.size == min(n_samples, usable.size)
+
+
+# --- a film-like response: fog floor, toe and shoulder ---------------------------------
+
+FILM_FLOOR, FILM_SPAN, FILM_CONTRAST = 0.06, 0.90, 0.9  # fog 6 % of range, top at 96 %
+FILM_GRAIN_DN = 2.0
+
+
+def _film(x: np.ndarray) -> np.ndarray:
+    """H&D-like curve: a logistic in ``ln X`` above a fog floor (toe and shoulder)."""
+    xa = x**FILM_CONTRAST
+    return FILM_FLOOR + FILM_SPAN * xa / (xa + 1.0)
+
+
+def _film_g(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """True ``g = ln f⁻¹`` of :func:`_film` at 8-bit values ``c`` and its slope ``dg/dc``."""
+    y = (np.asarray(c, dtype=np.float64) / 255.0 - FILM_FLOOR) / FILM_SPAN
+    g = np.log(y / (1.0 - y)) / FILM_CONTRAST
+    slope = 1.0 / (FILM_CONTRAST * 255.0 * FILM_SPAN * y * (1.0 - y))
+    return g, slope
+
+
+def _film_stack(rng: np.random.Generator) -> ExposureStack:
+    l = np.exp(rng.uniform(np.log(1e-3), np.log(1e3), (60, 80, 3)))
+    t = 2.0 ** np.arange(-6, 7)  # 13 exposures a stop apart, like a film bracket
+    x = l[None] * t[:, None, None, None]
+    noisy = 255.0 * _film(x) + rng.normal(0.0, FILM_GRAIN_DN, x.shape)
+    return ExposureStack(np.clip(np.round(noisy), 0, 255).astype(np.uint8)[None], t)
+
+
+def test_film_toe_and_shoulder_are_recovered_over_the_whole_range(rng):
+    stack = _film_stack(rng)
+    rec = recover_response(stack)
+    floor = 255.0 * FILM_FLOOR  # f(0): the fog level, below which no level has a meaning
+    top = 255.0 * (FILM_FLOOR + FILM_SPAN)
+    # a level's value is known to σ_eff (grain and quantisation) code values, so
+    # g there to σ_eff·g'(c) in ln; allow two of them (errors of neighbouring
+    # levels are correlated through the smoothness term, a gauge is removed)
+    sigma_eff = np.hypot(FILM_GRAIN_DN, 1.0 / np.sqrt(12.0))
+    for ch in range(3):
+        g = rec.log_inverse_response[ch]
+        vmin = rec.valid_min[ch]
+        # the fog level is not a measurement of g (g → −∞ there) ...
+        assert vmin >= floor
+        # ... but the toe is: levels 3 σ_eff above the floor have signal
+        assert vmin <= floor + 3 * sigma_eff + 1
+        # no flat or undefined stretch anywhere up to the saturation level
+        sat = int(rec.saturation_level[ch])
+        assert np.all(np.diff(g[: sat + 1]) > 0)
+        levels = np.arange(int(np.ceil(vmin)), int(top - 3 * sigma_eff))
+        g_true, slope = _film_g(levels)
+        err = g[levels] - g_true
+        mid = (levels > 100) & (levels < 160)
+        err -= err[mid].mean()
+        bound = 2.0 * sigma_eff * slope
+        worst = np.argmax(np.abs(err) / bound)
+        assert np.all(np.abs(err) <= bound), (
+            f"channel {ch}: level {levels[worst]} off by {err[worst]:.3f} (bound {bound[worst]:.3f})"
+        )
+
+
+def test_continue_toe_extends_below_the_steepest_level():
+    g = np.array([0.0, 0.1, 0.2, 1.0, 1.5, 1.8, 2.0, 2.1])
+    out, j = continue_toe(g, 0, 6)
+    assert j == 2  # steepest step 2 → 3
+    np.testing.assert_allclose(out[2:], g[2:])
+    np.testing.assert_allclose(out[:2], [0.2 - 1.6, 0.2 - 0.8])
+    flat = np.zeros(5)
+    same, j0 = continue_toe(flat, 1, 3)
+    assert j0 == 1 and np.array_equal(same, flat)

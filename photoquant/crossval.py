@@ -1,0 +1,497 @@
+"""Leave-one-exposure-out cross-validation of a response and merge on one bracket.
+
+For each inner exposure ``k`` of a single-view bracket (neither the shortest
+nor the longest), the response is recovered from the other ``K − 1``
+exposures, the same exposures are merged (eq. 6) into log photoquantity
+``ln E``, and the held-out frame is predicted through the recovered response,
+
+    ẑ_pk = f(exp(ln E_p + ln t_k)),    f = exp(g)⁻¹,  i.e.  g(ẑ) = ln E_p + ln t_k,
+
+and scored by ``|ẑ − z|`` in code values over the held-out frame's values
+``z`` within ``[10, 245]`` at 8 bits (the same fraction of the range at other
+bit depths: ``[10/255, 245/255] · (2**bit_depth − 1)``), every channel's value
+counted on its own. The score needs no ground truth: a response that is wrong
+anywhere in the range mispredicts the frames that use that part of it, and the
+extreme frames of a real bracket exercise its toe and shoulder.
+
+Every scored value gets a prediction: a method cannot escape scoring by
+flagging pixels. Where the merge leaves a pixel without a valid exposure (NaN)
+the value is predicted from the *fallback merge*, every unclipped value of the
+other exposures with equal weight (``weighting="uniform"``, no ``min_level``),
+and where even that has nothing (every other exposure clipped) from the
+clipping bound: the channel's saturation level if all of them were
+saturated, the lowest level if all were dark. Both counts are reported.
+
+Methods
+-------
+* any key of :data:`photoquant.response.RESPONSE_METHODS`, run as
+  ``photoquant calibrate``'s pipeline: :func:`photoquant.calibrate` on the
+  ``K − 1`` frames (one view, the given response method, the profile's
+  choices otherwise), then the camera's own merge
+  (:meth:`photoquant.model.CameraModel.merge_stack`), as the correction does;
+* a peer (:data:`photoquant.peers.PEER_METHODS`, e.g. ``"opencv"``: OpenCV's
+  ``CalibrateDebevec`` + ``MergeDebevec`` with OpenCV's defaults), predicted
+  through the peer's own response table.
+
+"Overall" is the mean over every scored value of every held-out frame (each
+value weighs the same, :attr:`CrossvalResult.overall_mae_dn`); the mean of the
+per-frame means is reported beside it (:attr:`CrossvalResult.mean_of_frames_mae_dn`).
+
+A region of interest (``roi``, ``[x0, y0, x1, y1]``, end exclusive; from the
+manifest's ``crossval_roi`` key or the command line) limits the scored pixels,
+e.g. to leave out a registration border that is not scene content; the fits
+use the whole frames.
+
+References
+----------
+.. [Debevec1997] Debevec, P. E., & Malik, J. (1997). Recovering high dynamic
+   range radiance maps from photographs. SIGGRAPH '97, 369-378.
+   doi:10.1145/258734.258884
+.. [Stone1974] Stone, M. (1974). Cross-validatory choice and assessment of
+   statistical predictions. J. R. Stat. Soc. B 36(2), 111-147.
+   doi:10.1111/j.2517-6161.1974.tb00994.x
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 5-7.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from photoquant.errors import InputError
+from photoquant.stack import ExposureStack
+
+__all__ = [
+    "SCORE_RANGE_8BIT",
+    "HeldOutScore",
+    "CrossvalResult",
+    "predict_values",
+    "score_range",
+    "crossval_stack",
+    "crossval_manifest",
+    "parse_roi",
+]
+
+SCORE_RANGE_8BIT = (10.0, 245.0)
+"""Scored code values at 8 bits (inclusive); scaled to other bit depths."""
+
+
+@dataclass(frozen=True)
+class HeldOutScore:
+    """The prediction of one held-out exposure.
+
+    Attributes
+    ----------
+    index : int
+        Position of the exposure in the bracket (by increasing time).
+    exposure_s : float
+        Its exposure time.
+    n_scored : int
+        Values (pixel × channel) scored.
+    mae_dn : float
+        Mean ``|ẑ − z|`` in code values.
+    bias_dn : float
+        Mean ``ẑ − z``.
+    mae_dn_per_channel : tuple of float
+        ``mae_dn`` of each channel alone (NaN where a channel has no scored value).
+    n_fallback : int
+        Scored values whose pixel the merge left without a valid exposure,
+        predicted from the fallback merge.
+    n_bound : int
+        Of those, the values predicted from a clipping bound.
+    time_s : float
+        Time of the fit, merge and prediction.
+    """
+
+    index: int
+    exposure_s: float
+    n_scored: int
+    mae_dn: float
+    bias_dn: float
+    mae_dn_per_channel: tuple[float, ...]
+    n_fallback: int
+    n_bound: int
+    time_s: float
+
+
+@dataclass(frozen=True)
+class CrossvalResult:
+    """Leave-one-exposure-out cross-validation of one method on one bracket.
+
+    Attributes
+    ----------
+    method : str
+        The response method (or peer) scored.
+    exposure_s : tuple of float
+        The bracket's exposure times, increasing.
+    bit_depth : int
+        Bits per value.
+    channels : tuple of str
+        Channel names.
+    score_range : tuple of float
+        Inclusive range of the scored observed values.
+    roi : tuple of 4 int or None
+        Scored region ``(x0, y0, x1, y1)``, end exclusive; the whole frame if None.
+    rows : tuple of HeldOutScore
+        One per held-out (inner) exposure.
+    """
+
+    method: str
+    exposure_s: tuple[float, ...]
+    bit_depth: int
+    channels: tuple[str, ...]
+    score_range: tuple[float, float]
+    roi: tuple[int, int, int, int] | None
+    rows: tuple[HeldOutScore, ...]
+
+    @property
+    def n_scored(self) -> int:
+        """Values scored over every held-out exposure."""
+        return int(sum(r.n_scored for r in self.rows))
+
+    @property
+    def overall_mae_dn(self) -> float:
+        """The overall score: mean ``|ẑ − z|`` over every scored value (value-weighted)."""
+        n = self.n_scored
+        if n == 0:
+            return float("nan")
+        return float(sum(r.mae_dn * r.n_scored for r in self.rows if r.n_scored) / n)
+
+    @property
+    def mean_of_frames_mae_dn(self) -> float:
+        """Mean of the held-out frames' ``mae_dn`` (each frame weighs the same)."""
+        scores = [r.mae_dn for r in self.rows if r.n_scored]
+        return float(np.mean(scores)) if scores else float("nan")
+
+    @property
+    def n_fallback(self) -> int:
+        """Scored values predicted from the fallback merge (the merge left them NaN)."""
+        return int(sum(r.n_fallback for r in self.rows))
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (``overall_mae_dn`` is the value-weighted mean)."""
+        return {
+            "method": self.method,
+            "exposure_s": list(self.exposure_s),
+            "bit_depth": self.bit_depth,
+            "channels": list(self.channels),
+            "score_range": list(self.score_range),
+            "roi": None if self.roi is None else list(self.roi),
+            "overall_mae_dn": _json_float(self.overall_mae_dn),
+            "mean_of_frames_mae_dn": _json_float(self.mean_of_frames_mae_dn),
+            "n_scored": self.n_scored,
+            "n_fallback": self.n_fallback,
+            "held_out": [
+                {
+                    "index": r.index,
+                    "exposure_s": r.exposure_s,
+                    "n_scored": r.n_scored,
+                    "mae_dn": _json_float(r.mae_dn),
+                    "bias_dn": _json_float(r.bias_dn),
+                    "mae_dn_per_channel": [_json_float(v) for v in r.mae_dn_per_channel],
+                    "n_fallback": r.n_fallback,
+                    "n_bound": r.n_bound,
+                    "time_s": r.time_s,
+                }
+                for r in self.rows
+            ],
+        }
+
+    def format_table(self) -> str:
+        """A plain-text table: one row per held-out exposure, then the overall scores."""
+        lo, hi = self.score_range
+        head = (
+            f"leave-one-exposure-out cross-validation — {self.method}; "
+            f"|predicted − observed| in DN over observed values in [{lo:g}, {hi:g}]"
+            + (f", ROI {list(self.roi)}" if self.roi is not None else "")
+        )
+        chans = "/".join(self.channels)
+        lines = [
+            head,
+            f"{'k':>3}  {'t (s)':>11}  {'scored':>9}  {'MAE':>7}  {'bias':>7}  "
+            f"{'MAE ' + chans:>22}  {'fallback':>8}  {'time':>6}",
+        ]
+        for r in self.rows:
+            per = " / ".join(f"{v:.2f}" for v in r.mae_dn_per_channel)
+            lines.append(
+                f"{r.index:>3}  {r.exposure_s:>11.5g}  {r.n_scored:>9d}  {r.mae_dn:>7.3f}  "
+                f"{r.bias_dn:>+7.2f}  {per:>22}  {r.n_fallback:>8d}  {r.time_s:>5.2f}s"
+            )
+        lines.append(
+            f"overall (every scored value): {self.overall_mae_dn:.3f} DN over {self.n_scored} "
+            f"values; mean over held-out frames: {self.mean_of_frames_mae_dn:.3f} DN; "
+            f"fallback-predicted values: {self.n_fallback}"
+        )
+        return "\n".join(lines)
+
+
+def _json_float(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
+def score_range(bit_depth: int) -> tuple[float, float]:
+    """The scored range ``[10, 245]`` at 8 bits, scaled to ``2**bit_depth − 1``."""
+    scale = (2**bit_depth - 1) / 255.0
+    return SCORE_RANGE_8BIT[0] * scale, SCORE_RANGE_8BIT[1] * scale
+
+
+def parse_roi(
+    value: Any, image_shape: tuple[int, int], where: str = "roi"
+) -> tuple[int, int, int, int]:
+    """Validate a scoring ROI ``[x0, y0, x1, y1]`` (end exclusive) against ``(H, W)``.
+
+    Raises
+    ------
+    InputError
+        If it is not 4 integers with ``0 <= x0 < x1 <= W`` and ``0 <= y0 < y1 <= H``.
+    """
+    height, width = image_shape
+    ok = (
+        isinstance(value, Sequence)
+        and not isinstance(value, str)
+        and len(value) == 4
+        and all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in value)
+    )
+    if not ok:
+        raise InputError(f"`{where}` must be 4 integers [x0, y0, x1, y1], got {value!r}")
+    x0, y0, x1, y1 = (int(v) for v in value)
+    if not (0 <= x0 < x1 <= width and 0 <= y0 < y1 <= height):
+        raise InputError(
+            f"`{where}` {[x0, y0, x1, y1]} must satisfy 0 <= x0 < x1 <= {width} and "
+            f"0 <= y0 < y1 <= {height} (the {width}x{height} frames, end exclusive)"
+        )
+    return (x0, y0, x1, y1)
+
+
+def predict_values(
+    levels: np.ndarray,
+    log_inverse_response: np.ndarray,
+    saturation_level: np.ndarray,
+    log_exposure: np.ndarray,
+) -> np.ndarray:
+    """Pixel values ``ẑ`` with ``g(ẑ) = ln X`` (the forward response ``f``), per channel.
+
+    Parameters
+    ----------
+    levels : ndarray, shape (L,)
+        Levels at which ``g`` is tabulated.
+    log_inverse_response : ndarray, shape (C, L)
+        ``g`` per channel, non-decreasing up to the saturation level.
+    saturation_level : ndarray, shape (C,)
+        Top of each channel's range; ``g`` above it is not used.
+    log_exposure : ndarray, shape (..., C)
+        ``ln X = ln E + ln t``, finite.
+
+    Returns
+    -------
+    ndarray, shape (..., C)
+        ``f(X)`` by linear interpolation of the inverse table, clamped to
+        ``[levels[0], saturation level]``. A flat stretch of ``g`` (no rise
+        between two levels) is crossed linearly from its first level to the
+        next level where ``g`` rises.
+    """
+    out = np.empty(log_exposure.shape, dtype=np.float64)
+    for ch in range(log_exposure.shape[-1]):
+        top = int(np.searchsorted(levels, saturation_level[ch], side="right"))
+        g = np.asarray(log_inverse_response[ch, : max(top, 2)], dtype=np.float64)
+        lv = levels[: g.size]
+        run_max = np.maximum.accumulate(g)
+        keep = np.concatenate([[True], g[1:] > run_max[:-1]])
+        xp, fp = run_max[keep], lv[keep]
+        hi = min(float(saturation_level[ch]), float(lv[-1]))
+        out[..., ch] = np.clip(np.interp(log_exposure[..., ch], xp, fp), lv[0], hi)
+    return out
+
+
+def _is_peer(method: str) -> bool:
+    from photoquant.peers import _ALIASES, PEER_METHODS
+
+    name = _ALIASES.get(str(method).lower(), str(method)).lower()
+    return name in {k.lower() for k in PEER_METHODS}
+
+
+def _fit_photoquant(
+    stack: ExposureStack, method: str, seed: int, profile: str = "photoquant"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any]:
+    """``photoquant calibrate``'s pipeline on one view (the profile's, with ``method`` as the
+    response): response, then the camera's own merge."""
+    from photoquant.calibration import calibrate
+    from photoquant.merge import MergeModel
+
+    model = calibrate([stack], profile=profile, response=method, seed=seed)
+    merged = model.merge_stack(stack)
+    log_e = merged.log_photoquantity
+    if np.any(merged.mask):
+        fallback = MergeModel(
+            "Debevec 1997", {"weighting": "uniform", "exclude_below_valid_min": False}
+        ).merge(stack, model.response)
+        log_e = np.where(merged.mask, fallback.log_photoquantity, log_e)
+    resp = model.response
+    return resp.levels, resp.log_inverse_response, resp.saturation_level, log_e, merged.mask
+
+
+def crossval_stack(
+    stack: ExposureStack,
+    method: str = "Debevec 1997",
+    *,
+    roi: Sequence[int] | None = None,
+    seed: int = 0,
+    profile: str = "photoquant",
+) -> CrossvalResult:
+    """Leave-one-exposure-out cross-validation of ``method`` on a single-view bracket.
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        The bracket (``K ≥ 3`` exposures; ``N`` repeats are averaged, eq. 2, for
+        the observed values).
+    method : str
+        A key of :data:`photoquant.response.RESPONSE_METHODS` (run through
+        ``calibrate``'s default pipeline) or of :data:`photoquant.peers.PEER_METHODS`
+        (``"opencv"`` accepted), case-insensitive.
+    roi : sequence of 4 int, optional
+        Scored region ``[x0, y0, x1, y1]``, end exclusive (the whole frame by default).
+    seed : int
+        Seed of photoquant's sample selection (results are deterministic).
+    profile : {"photoquant", "paper"}
+        The calibration profile the response method runs in (not for peers).
+
+    Returns
+    -------
+    CrossvalResult
+
+    Raises
+    ------
+    InputError
+        If the bracket has fewer than 3 exposures, the method is unknown or
+        unavailable, or the ROI does not fit the frames.
+    """
+    if not isinstance(stack, ExposureStack):
+        raise InputError(f"`stack` must be an ExposureStack, got {type(stack).__name__}")
+    k_count = stack.n_exposures
+    if k_count < 3:
+        raise InputError(
+            f"cross-validation needs at least 3 exposures (an inner one to hold out), got {k_count}"
+        )
+    peer = None
+    if _is_peer(method):
+        from photoquant.peers import get_peer
+
+        peer = get_peer(method)
+        name = peer.name
+    else:
+        from photoquant.peers import PEER_METHODS
+        from photoquant.response import RESPONSE_METHODS
+
+        lookup = {key.lower(): key for key in RESPONSE_METHODS}
+        if str(method).lower() not in lookup:
+            raise InputError(
+                f"unknown method {method!r}; valid are the response methods "
+                f"{', '.join(sorted(RESPONSE_METHODS))} and the peers "
+                f"{', '.join(sorted(PEER_METHODS))} ('opencv')"
+            )
+        name = lookup[str(method).lower()]
+    height, width = stack.image_shape
+    box = None if roi is None else parse_roi(list(roi), (height, width))
+    lo, hi = score_range(stack.bit_depth)
+    observed_all = stack.mean()
+    region = np.zeros((height, width), dtype=bool)
+    if box is None:
+        region[:] = True
+    else:
+        x0, y0, x1, y1 = box
+        region[y0:y1, x0:x1] = True
+
+    rows = []
+    for k in range(1, k_count - 1):
+        t0 = time.perf_counter()
+        keep = [i for i in range(k_count) if i != k]
+        sub = ExposureStack(
+            stack.frames[:, keep],
+            stack.exposure_s[keep],
+            bit_depth=stack.bit_depth,
+            channels=stack.channels,
+        )
+        if peer is None:
+            levels, g, sat, log_e, flagged = _fit_photoquant(sub, name, seed, profile)
+        else:
+            fit = peer.fit(sub)
+            levels, g, sat, log_e = (
+                fit.levels,
+                fit.log_inverse_response,
+                fit.saturation_level,
+                fit.log_photoquantity,
+            )
+            flagged = ~np.isfinite(log_e)
+        z = observed_all[k]
+        scored = (z >= lo) & (z <= hi) & region[..., None]
+        log_x = log_e + np.log(stack.exposure_s[k])
+        bound = ~np.isfinite(log_x)
+        pred = predict_values(levels, g, sat, np.where(bound, 0.0, log_x))
+        if np.any(bound):
+            # nothing to merge from: every other exposure clipped at one end
+            frames = sub.frames
+            all_sat = np.all(frames.max(axis=0) >= np.asarray(sat)[None, None, None, :], axis=0)
+            top = np.broadcast_to(np.asarray(sat, dtype=np.float64), pred.shape)
+            pred = np.where(bound, np.where(all_sat, top, float(levels[0])), pred)
+        err = pred - z
+        e = err[scored]
+        per_channel = tuple(
+            float(np.abs(err[..., c][scored[..., c]]).mean()) if scored[..., c].any() else np.nan
+            for c in range(stack.n_channels)
+        )
+        rows.append(
+            HeldOutScore(
+                index=k,
+                exposure_s=float(stack.exposure_s[k]),
+                n_scored=int(e.size),
+                mae_dn=float(np.abs(e).mean()) if e.size else float("nan"),
+                bias_dn=float(e.mean()) if e.size else float("nan"),
+                mae_dn_per_channel=per_channel,
+                n_fallback=int(np.count_nonzero(flagged & scored)),
+                n_bound=int(np.count_nonzero(bound & scored)),
+                time_s=time.perf_counter() - t0,
+            )
+        )
+    return CrossvalResult(
+        method=name,
+        exposure_s=tuple(float(t) for t in stack.exposure_s),
+        bit_depth=stack.bit_depth,
+        channels=tuple(stack.channels),
+        score_range=(lo, hi),
+        roi=box,
+        rows=tuple(rows),
+    )
+
+
+def crossval_manifest(
+    manifest: Any,
+    method: str = "Debevec 1997",
+    *,
+    roi: Sequence[int] | None = None,
+    allow_outside: bool = False,
+    seed: int = 0,
+    profile: str = "photoquant",
+) -> CrossvalResult:
+    """Cross-validate on ``views[0]`` of a capture manifest (a path or a ``CaptureManifest``).
+
+    The scored region is ``roi`` when given, else the manifest's
+    ``crossval_roi`` key (``[x0, y0, x1, y1]``, end exclusive), else the whole
+    frame. See :func:`crossval_stack`.
+    """
+    from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
+
+    if not isinstance(manifest, CaptureManifest):
+        manifest = load_manifest(manifest, allow_outside=allow_outside)
+    stack = load_stack(manifest.views[0], manifest)
+    if roi is None and manifest.extra.get("crossval_roi") is not None:
+        roi = parse_roi(
+            manifest.extra["crossval_roi"],
+            stack.image_shape,
+            where=f"manifest {manifest.path}: crossval_roi",
+        )
+    return crossval_stack(stack, method, roi=roi, seed=seed, profile=profile)

@@ -1,0 +1,214 @@
+"""Leave-one-exposure-out cross-validation (photoquant.crossval) and the OpenCV peer."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from photoquant.cli import main
+from photoquant.crossval import (
+    crossval_manifest,
+    crossval_stack,
+    predict_values,
+    score_range,
+)
+from photoquant.errors import InputError
+from photoquant.io import write_manifest
+from photoquant.peers import PEER_METHODS, get_peer
+from photoquant.stack import ExposureStack
+
+from .analytic import capture, log_uniform_scene, true_g
+
+EXPOSURES = np.geomspace(1.0, 243.0, 6)  # ratio 3
+
+
+@pytest.fixture
+def gamma_stack(rng) -> ExposureStack:
+    l = log_uniform_scene(rng, (48, 64, 3), decades=3.5)
+    return ExposureStack(capture(l, EXPOSURES, balance=(1.0, 1.0, 1.0)), EXPOSURES)
+
+
+def test_predict_values_inverts_the_table():
+    levels = np.arange(256.0)
+    g = 2.2 * np.log(np.maximum(levels, 0.5) / 255.0)
+    table = np.stack([g, g + 0.1])
+    x = np.stack([g[[20, 100, 250]], g[[20, 100, 250]] + 0.1], axis=-1)
+    np.testing.assert_allclose(
+        predict_values(levels, table, np.array([255.0, 200.0]), x),
+        [[20, 20], [100, 100], [250, 200]],
+    )
+    # beyond the table: clamped to [lowest level, saturation]
+    out = predict_values(levels, table, np.array([255.0, 255.0]), np.array([[-50.0, 50.0]]))
+    np.testing.assert_allclose(out, [[0.0, 255.0]])
+
+
+def test_predict_values_crosses_a_flat_stretch():
+    levels = np.arange(6.0)
+    g = np.array([[0.0, 1.0, 1.0, 1.0, 2.0, 3.0]])  # flat over levels 1..3
+    out = predict_values(levels, g, np.array([5.0]), np.array([[1.0], [1.5], [2.5]]))
+    # from the stretch's first level (1) linearly to the next rise (4)
+    np.testing.assert_allclose(out[:, 0], [1.0, 2.5, 4.5])
+
+
+def test_score_range_scales_with_bit_depth():
+    assert score_range(8) == (10.0, 245.0)
+    lo, hi = score_range(12)
+    assert lo == pytest.approx(10 * 4095 / 255) and hi == pytest.approx(245 * 4095 / 255)
+
+
+def test_noise_free_camera_is_predicted_to_quantisation(gamma_stack):
+    res = crossval_stack(gamma_stack)
+    assert [r.index for r in res.rows] == [1, 2, 3, 4]
+    assert res.method == "Debevec 1997"
+    # the observed value is round(v): |round(v) − v| averages 1/4 DN for a
+    # prediction that is exact; the other frames' quantisation reaches the
+    # merge (≤ 1/4 DN each, averaged over K − 1 = 5) and g (fit to rounded
+    # values): allow twice the rounding term
+    assert res.overall_mae_dn < 0.5
+    for row in res.rows:
+        assert row.n_scored > 0.3 * gamma_stack.frames[0, 0].size
+        assert abs(row.bias_dn) < 0.25
+        assert row.n_fallback == 0
+    assert res.overall_mae_dn == pytest.approx(
+        sum(r.mae_dn * r.n_scored for r in res.rows) / res.n_scored
+    )
+    assert res.mean_of_frames_mae_dn == pytest.approx(np.mean([r.mae_dn for r in res.rows]))
+
+
+def test_opencv_peer_is_scored_on_the_same_values(gamma_stack):
+    assert get_peer("opencv").available()
+    ours = crossval_stack(gamma_stack)
+    peer = crossval_stack(gamma_stack, "OpenCV")
+    assert peer.method == "OpenCV Debevec" and "OpenCV Debevec" in PEER_METHODS
+    assert [r.n_scored for r in peer.rows] == [r.n_scored for r in ours.rows]
+    assert np.isfinite(peer.overall_mae_dn)
+
+
+def test_opencv_peer_returns_its_response_in_the_stacks_channel_order(rng):
+    balance = (0.85, 1.0, 0.75)  # the channels differ: a BGR/RGB mix-up shows
+    l = log_uniform_scene(rng, (96, 128, 3), decades=3.5)
+    stack = ExposureStack(capture(l, EXPOSURES, balance=balance), EXPOSURES)
+    fit = get_peer("opencv").fit(stack)
+    assert fit.log_inverse_response.shape == (3, 256)
+    assert fit.log_photoquantity.shape == (96, 128, 3)
+    g = fit.log_inverse_response
+    # G spans the whole range of a noise-free camera: OpenCV's g is right to a
+    # few per cent (R and B, clipped at 217 and 191 by the balance, are not:
+    # OpenCV does not exclude clipped values, so its g shoots up above them)
+    levels = np.arange(20, 240)
+    err = g[1, levels] - true_g(levels, 1, balance=balance)
+    assert np.ptp(err) < 0.05
+    # channel order: B clips first (191), then R (217)
+    blue_rise, red_rise = g[2, 200] - g[2, 170], g[0, 200] - g[0, 170]
+    true_rise = true_g(200, 0, balance=balance) - true_g(170, 0, balance=balance)
+    assert blue_rise > 5 * true_rise and red_rise < 2 * true_rise
+
+
+def test_roi_limits_the_scored_values(gamma_stack):
+    roi = (5, 7, 40, 30)
+    res = crossval_stack(gamma_stack, roi=roi)
+    lo, hi = score_range(8)
+    z = gamma_stack.frames[0][:, 7:30, 5:40]
+    for row in res.rows:
+        assert row.n_scored == int(np.count_nonzero((z[row.index] >= lo) & (z[row.index] <= hi)))
+    assert res.roi == roi
+    assert "ROI [5, 7, 40, 30]" in res.format_table()
+
+
+def test_a_pixel_the_merge_cannot_measure_is_still_scored():
+    # pixel (0, 0): saturated in every exposure but the held-out middle one (not
+    # physical, which is the point: the merge has nothing, the score must not skip it)
+    rng = np.random.default_rng(3)
+    l = log_uniform_scene(rng, (30, 40, 3), decades=2.5)
+    t = np.array([1.0, 3.0, 9.0])
+    frames = capture(l, t, balance=(1.0, 1.0, 1.0))
+    frames[0, :, 0, 0, :] = 255
+    frames[0, 1, 0, 0, :] = 200
+    res = crossval_stack(ExposureStack(frames, t))
+    (row,) = res.rows
+    assert row.n_fallback == 3 and row.n_bound == 3  # all three channels, from the bound
+    # predicted at the saturation level: 55 DN off, and counted
+    plain = frames[0, 1].astype(float)
+    assert row.n_scored == int(np.count_nonzero((plain >= 10) & (plain <= 245)))
+    assert res.n_fallback == 3
+
+
+def test_json_and_table(gamma_stack):
+    res = crossval_stack(gamma_stack)
+    data = json.loads(json.dumps(res.to_json()))
+    assert data["overall_mae_dn"] == pytest.approx(res.overall_mae_dn)
+    assert len(data["held_out"]) == 4 and data["score_range"] == [10.0, 245.0]
+    assert {"mae_dn", "bias_dn", "n_scored", "n_fallback", "n_bound"} <= set(data["held_out"][0])
+    table = res.format_table()
+    assert "overall (every scored value)" in table and len(table.splitlines()) == 2 + 4 + 1
+
+
+def test_bad_input_is_named(gamma_stack):
+    two = ExposureStack(gamma_stack.frames[:, :2], EXPOSURES[:2])
+    with pytest.raises(InputError, match="at least 3 exposures"):
+        crossval_stack(two)
+    with pytest.raises(InputError, match="unknown method 'nope'"):
+        crossval_stack(gamma_stack, "nope")
+    with pytest.raises(InputError, match="roi"):
+        crossval_stack(gamma_stack, roi=(0, 0, 65, 10))
+    with pytest.raises(InputError, match="4 integers"):
+        crossval_stack(gamma_stack, roi=(0, 0, 10))
+    deep = ExposureStack(gamma_stack.frames.astype(np.uint16) * 16, EXPOSURES, bit_depth=12)
+    with pytest.raises(InputError, match="8-bit"):
+        crossval_stack(deep, "opencv")
+
+
+def _write_set(folder, stack: ExposureStack, extra=None):
+    frames = []
+    for k, t in enumerate(stack.exposure_s):
+        name = f"t{k}.png"
+        cv2.imwrite(str(folder / name), stack.frames[0, k][..., ::-1])
+        frames.append({"file": name, "exposure_s": float(t)})
+    manifest = {"format": "photoquant.captures/1", "bit_depth": 8, "views": [{"frames": frames}]}
+    manifest.update(extra or {})
+    write_manifest(folder / "capture.json", manifest)
+    return folder / "capture.json"
+
+
+def test_manifest_roi_and_cli(tmp_path, gamma_stack, capsys):
+    path = _write_set(tmp_path, gamma_stack, {"crossval_roi": [5, 7, 40, 30]})
+    res = crossval_manifest(path)
+    assert res.roi == (5, 7, 40, 30)
+    assert res.overall_mae_dn == pytest.approx(
+        crossval_stack(gamma_stack, roi=(5, 7, 40, 30)).overall_mae_dn
+    )
+    assert main(["crossval", str(path), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["roi"] == [5, 7, 40, 30]
+    assert main(["crossval", str(path), "--method", "opencv", "--roi", "0", "0", "64", "48"]) == 0
+    assert "OpenCV Debevec" in capsys.readouterr().out
+
+
+def test_cli_errors_are_one_line(tmp_path, gamma_stack, capsys):
+    two = ExposureStack(gamma_stack.frames[:, :2], EXPOSURES[:2])
+    path = _write_set(tmp_path, two)
+    assert main(["crossval", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("photoquant: error:") and "at least 3 exposures" in err
+    assert len(err.splitlines()) == 1
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    path = _write_set(bad, gamma_stack, {"crossval_roi": [0, 0, 1000, 10]})
+    assert main(["crossval", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "crossval_roi" in err and len(err.splitlines()) == 1
+
+
+def test_twelve_bit_repeats_are_scored_in_their_own_code_values(rng):
+    l = log_uniform_scene(rng, (48, 64, 3), decades=3.5)
+    frames = capture(l, EXPOSURES, balance=(1.0, 1.0, 1.0), bit_depth=12, n_repeats=2)
+    res = crossval_stack(ExposureStack(frames, EXPOSURES, bit_depth=12))
+    assert res.score_range == pytest.approx((10 * 4095 / 255, 245 * 4095 / 255))
+    # as at 8 bits: the rounding of the observed value (1/4 DN on average), twice
+    # (g is binned to 1024 knots at 12 bits: 4 DN apart, linear in between)
+    assert res.overall_mae_dn < 0.5
+    with pytest.raises(InputError, match="8-bit"):
+        crossval_stack(ExposureStack(frames, EXPOSURES, bit_depth=12), "opencv")
