@@ -38,6 +38,12 @@ from photoquant.vignetting.extended_goldman_chen import (
     vignetting_ExtendedGoldmanChen,
     vignetting_map,
 )
+from photoquant.vignetting.flatfield import (
+    FlatFieldOptions,
+    FlatFieldVignetting,
+    characterise_vignetting_FlatField,
+    smooth_flat_field,
+)
 from photoquant.vignetting.goldman_chen2005 import (
     GoldmanChen2005Options,
     GoldmanChen2005Vignetting,
@@ -75,4 +81,8 @@ __all__ = [
     "RadialPolynomialVignetting",
     "RadialPolynomialOptions",
     "characterise_vignetting_RadialPolynomial",
+    "smooth_flat_field",
+    "FlatFieldVignetting",
+    "FlatFieldOptions",
+    "characterise_vignetting_FlatField",
 ]
