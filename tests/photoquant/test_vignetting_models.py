@@ -16,6 +16,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+import photoquant
 from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import options_from_mapping
 from photoquant.vignetting import (
@@ -32,7 +33,9 @@ from photoquant.vignetting import (
     vignetting_GoldmanChen2005,
     vignetting_RadialPolynomial,
 )
+from pqsim.analytic import pan_shifts, scene_calibration_world, views_by_pan
 from pqsim.synth_camera.optics import vignetting_cos4, vignetting_extended_goldman_chen
+from tests.photoquant.analytic import capture
 
 IMAGE_SHAPE = (120, 160)  # (H, W)
 PAN_AND_TILT = ((0, 0), (16, 0), (0, 12))  # about 10 % of the image in each axis
@@ -497,6 +500,78 @@ def test_flat_field_model_params_and_shape():
         FlatFieldVignetting.from_params("Flat Field", params, {})
     with pytest.raises(InputError, match="finite and positive"):
         FlatFieldVignetting("Flat Field", -image)
+
+
+# ---------------------------------------------------------------------------
+# Round trip: calibrate → save → load_camera → correct
+# ---------------------------------------------------------------------------
+
+ROUND_TRIP_SHAPE = (48, 64)
+# l spans 10^-2.4 .. 10^0.7 (the analytic world) times v ≥ 0.7: the shortest
+# exposure keeps the brightest patch below clipping, the longest lifts the
+# darkest one to about 1/3 of the range.
+ROUND_TRIP_EXPOSURES = np.geomspace(0.05, 100.0, 8)
+
+
+@pytest.fixture(scope="module")
+def round_trip_capture():
+    rng = np.random.default_rng(20261201)
+    h, w = ROUND_TRIP_SHAPE
+    world = scene_calibration_world(ROUND_TRIP_SHAPE, rng)
+    pv = views_by_pan(world, ROUND_TRIP_SHAPE, pan_shifts(3, 8), stride=2, max_tracks=400)
+    v = radial_truth(np.array([-0.3, 0.05, -0.02]), (w / 2, h / 2), ROUND_TRIP_SHAPE)
+    stacks = [
+        photoquant.ExposureStack(capture(l * v, ROUND_TRIP_EXPOSURES), ROUND_TRIP_EXPOSURES)
+        for l in pv.l
+    ]
+    return stacks, [np.asarray(t) for t in pv.tracks], v
+
+
+@pytest.mark.parametrize(
+    ("method", "cls"),
+    [
+        ("Goldman-Chen 2005", GoldmanChen2005Vignetting),
+        ("Radial Polynomial", RadialPolynomialVignetting),
+    ],
+)
+def test_calibrate_save_load_correct(tmp_path, round_trip_capture, method, cls):
+    stacks, tracks, v_true = round_trip_capture
+    model = photoquant.calibrate(stacks, vignetting=method, correspondences=tracks)
+    assert isinstance(model.vignetting, cls) and model.vignetting.method == method
+    assert model.parameters["steps"]["vignetting"]["method"] == method
+    # 8-bit quantisation (0.29 DN rms) merged over several exposures and a 3 × 3
+    # window leaves ~0.1 % per sampled value, and the response's error budget is
+    # 0.5 % (tests/test_roundtrip.py): together well under a 1 % mean map error.
+    e_mean, _ = map_errors(model.vignetting_map(), v_true)
+    assert e_mean < 0.01, e_mean
+    model.save(tmp_path / "cam")
+    back = photoquant.load_camera(tmp_path / "cam")
+    assert isinstance(back.vignetting, cls)
+    np.testing.assert_array_equal(back.vignetting.params, model.vignetting.params)
+    a = photoquant.correct(stacks[1], model).photoquantity
+    b = photoquant.correct(stacks[1], back).photoquantity
+    np.testing.assert_array_equal(a, b)
+
+
+def test_flat_field_camera_saves_loads_and_corrects(tmp_path, round_trip_capture):
+    stacks, _, v_true = round_trip_capture
+    base = photoquant.calibrate(stacks[:1])  # one view: no vignetting fitted
+    data = VignettingData([], [], ROUND_TRIP_SHAPE, flat_field=0.5 * v_true)
+    flat = fit("Flat Field", data).model
+    model = dataclasses.replace(base, vignetting=flat)
+    model.save(tmp_path / "cam")
+    assert (tmp_path / "cam" / "flat_field.exr").is_file()
+    back = photoquant.load_camera(tmp_path / "cam")
+    assert isinstance(back.vignetting, FlatFieldVignetting)
+    # stored as float32 EXR: equal to half an ulp of float32 (2^-24 ≈ 6e-8)
+    np.testing.assert_allclose(back.vignetting_map(), model.vignetting_map(), rtol=6e-8)
+    a = photoquant.correct(stacks[0], model).photoquantity
+    b = photoquant.correct(stacks[0], back).photoquantity
+    np.testing.assert_allclose(a, b, rtol=1e-6)
+    # dividing by v: the corrected image of the flat field's own scene is v-free
+    np.testing.assert_allclose(
+        photoquant.correct(stacks[0], base).photoquantity / a, flat.image, rtol=1e-5
+    )
 
 
 # ---------------------------------------------------------------------------
