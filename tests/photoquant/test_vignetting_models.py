@@ -15,6 +15,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 import photoquant
 from photoquant.errors import CalibrationError, InputError
@@ -252,6 +254,43 @@ def test_evaluation_rejects_bad_arguments(bad):
         vignetting_GoldmanChen2005(**args)
     with pytest.raises(InputError, match="params"):
         vignetting_RadialPolynomial(0.5, 0.5, np.zeros(4), (4, 4))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    k=st.tuples(*[st.floats(-2.0, 2.0) for _ in range(3)]),
+    centre=st.tuples(st.floats(0.2, 0.8), st.floats(0.2, 0.8)),
+    h=st.integers(1, 24),
+    w=st.integers(1, 24),
+)
+@example(k=(-0.3, 0.05, -0.02), centre=(0.5, 0.5), h=1, w=1)
+@example(k=(2.0, -2.0, 2.0), centre=(0.2, 0.8), h=24, w=2)
+def test_radial_polynomial_equals_the_extended_model_for_any_shape(k, centre, h, w):
+    # the identity of test_radial_polynomial_is_the_extended_model_with_a_fixed_aspect,
+    # over shapes (odd, even, 1 px, tall, wide) and parameters
+    a_y = 4.0 * h * h / (w * w + h * h)
+    egc = np.r_[np.asarray(k) * a_y ** np.arange(1, 4), (w / h) ** 2, centre]
+    rp = RadialPolynomialVignetting("x", np.r_[k, centre][None]).map((h, w))
+    np.testing.assert_allclose(
+        rp, ExtendedGoldmanChenVignetting("x", egc[None]).map((h, w)), rtol=1e-10, atol=1e-10
+    )
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    alpha=st.tuples(*[st.floats(-2.0, 2.0) for _ in range(3)]),
+    h=st.integers(1, 24),
+    w=st.integers(1, 24),
+)
+@example(alpha=(-0.25, -0.05, 0.02), h=1, w=2)
+def test_goldman_chen_is_symmetric_about_the_image_centre(alpha, h, w):
+    # pixel x ↔ W − 1 − x and y ↔ H − 1 − y mirror about the centre; with a
+    # square image, x ↔ y too (radial symmetry)
+    v = GoldmanChen2005Vignetting("x", np.asarray(alpha)[None]).map((h, w))
+    np.testing.assert_allclose(v, v[:, ::-1], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(v, v[::-1, :], rtol=1e-12, atol=1e-12)
+    square = GoldmanChen2005Vignetting("x", np.asarray(alpha)[None]).map((h, h))
+    np.testing.assert_allclose(square, np.swapaxes(square, 0, 1), rtol=1e-12, atol=1e-12)
 
 
 # ---------------------------------------------------------------------------
@@ -587,6 +626,15 @@ def test_flat_field_camera_saves_loads_and_corrects(tmp_path, round_trip_capture
     np.testing.assert_allclose(
         photoquant.correct(stacks[0], base).photoquantity / a, flat.image, rtol=1e-5
     )
+
+
+def test_calibrate_with_flat_field_method_names_the_missing_input(round_trip_capture):
+    # calibrate does not pass a flat field to the vignetting step yet: the
+    # method must say what is missing, in one line, rather than guess
+    stacks, tracks, _ = round_trip_capture
+    with pytest.raises(CalibrationError, match="needs a flat field") as info:
+        photoquant.calibrate(stacks, vignetting="Flat Field", correspondences=tracks)
+    assert "\n" not in str(info.value)
 
 
 # ---------------------------------------------------------------------------
