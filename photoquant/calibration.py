@@ -39,7 +39,7 @@ import numpy as np
 
 from photoquant import __version__
 from photoquant.balance import BalanceData, BalanceModel, check_roi
-from photoquant.errors import InputError
+from photoquant.errors import CalibrationError, InputError
 from photoquant.flatfield import SensorLUTModel
 from photoquant.merge import MergeModel, MergeResult
 from photoquant.methods import STEPS, Method, StepFit, options_to_dict, resolve_method
@@ -114,14 +114,22 @@ def fit_vignetting_step(
     spec: Any = None,
     *,
     profile: str = DEFAULT_PROFILE,
+    flat_field: np.ndarray | None = None,
 ) -> StepFit[VignettingModel]:
-    """The vignetting step (§5.5) from sensor-uniformised views and correspondences."""
+    """The vignetting step (§5.5) from sensor-uniformised views and correspondences.
+
+    ``flat_field`` (``exp(merge) / u`` of a flat-field capture) is passed to
+    the methods that use one (e.g. ``"Flat Field"``).
+    """
     views = [np.asarray(v) for v in uniform_views]
     if not views:
         raise InputError("the vignetting step needs at least one view")
     method, options = _step("vignetting", spec, profile)
     data = VignettingData(
-        views, [np.asarray(t, dtype=np.float64) for t in tracks], views[0].shape[:2]
+        views,
+        [np.asarray(t, dtype=np.float64) for t in tracks],
+        views[0].shape[:2],
+        flat_field=None if flat_field is None else np.asarray(flat_field),
     )
     return _checked_fit(method.function(data, options), method, VignettingModel)
 
@@ -210,6 +218,7 @@ def calibrate(
     irradiance: ExposureStack | None = None,
     white_roi: Sequence[int] | None = None,
     correspondences: Sequence[np.ndarray] | None = None,
+    flat_field: ExposureStack | None = None,
     profile: str = DEFAULT_PROFILE,
     response: Any = None,
     merge: Any = None,
@@ -235,7 +244,12 @@ def calibrate(
         White chart box ``[x0, y0, x1, y1]`` in ``views[0]`` (end exclusive).
     correspondences : sequence of ndarray, optional
         Tracks, each ``(n, 3)`` rows ``[view, x, y]`` in pixels. Found by the
-        correspondences step when not given and ``V ≥ 2``.
+        correspondences step when not given, ``V ≥ 2`` and the vignetting
+        method uses them.
+    flat_field : ExposureStack, optional
+        A uniformly lit target seen through the optics (diffuser, integrating
+        sphere), for vignetting methods that need one (``"Flat Field"``);
+        merged and divided by ``u`` like the views.
     profile : {"photoquant", "paper"}
         The methods and options of every step not given below
         (:mod:`photoquant.profiles`).
@@ -256,6 +270,8 @@ def calibrate(
     CameraModel or CalibrationResult
     """
     _check_views(views, irradiance)
+    if flat_field is not None:
+        _check_views([views[0], flat_field], None)
     steps = resolve_steps(
         profile,
         response=response,
@@ -317,27 +333,54 @@ def calibrate(
     tracks: list[np.ndarray] | None = None
     source = "none"
     vig_spec = steps["vignetting"]
-    if len(views) >= 2:
+    needs = vig_spec[0].needs
+    flat = None
+    missing = []
+    if "tracks" in needs and len(views) < 2:
+        missing.append("one view only")
+    if "flat_field" in needs and flat_field is None:
+        missing.append("no flat-field capture")
+    if missing and vignetting is not None:
+        raise CalibrationError(
+            f"the {vig_spec[0].name!r} vignetting method needs "
+            + " and ".join(
+                {"tracks": "two or more views", "flat_field": "a flat field"}[n]
+                for n in sorted(needs)
+            )
+            + f", but the capture has {' and '.join(missing)}"
+        )
+    if missing:
+        vig_spec = resolve_method("vignetting", "None", ("None", {}))
+        vig_fit = fit_vignetting_step(uniform, [], "None")
+        notes.append(
+            f"{' and '.join(missing)} for the {steps['vignetting'][0].name!r} vignetting: "
+            "vignetting left at 1 (identity)"
+        )
+    else:
         say("vignetting")
-        if correspondences is None or len(correspondences) == 0:
-            finder, finder_options = steps["correspondences"]
-            tracks = find_correspondences(uniform, (finder.name, options_to_dict(finder_options)))
-            source = f"automatic ({finder.name})"
-        else:
-            tracks = [np.asarray(tr, dtype=np.float64) for tr in correspondences]
-            source = "given"
+        if "tracks" in needs:
+            if correspondences is None or len(correspondences) == 0:
+                finder, finder_options = steps["correspondences"]
+                tracks = find_correspondences(
+                    uniform, (finder.name, options_to_dict(finder_options))
+                )
+                source = f"automatic ({finder.name})"
+            else:
+                tracks = [np.asarray(tr, dtype=np.float64) for tr in correspondences]
+                source = "given"
+        if flat_field is not None:
+            flat = merge_model.merge(flat_field, resp).photoquantity() / lut.lut
         vig_fit = fit_vignetting_step(
-            uniform, tracks, (vig_spec[0].name, options_to_dict(vig_spec[1]))
+            uniform,
+            tracks or [],
+            (vig_spec[0].name, options_to_dict(vig_spec[1])),
+            flat_field=flat,
         )
         report["vignetting"] = {
             "method": vig_fit.model.method,
             "correspondence_source": source,
             **vig_fit.report,
         }
-    else:
-        vig_spec = resolve_method("vignetting", "None", ("None", {}))
-        vig_fit = fit_vignetting_step(uniform, [], "None")
-        notes.append("one view only: vignetting left at 1 (identity)")
     vig = vig_fit.model
     timings["vignetting"] = time.perf_counter() - t0
 
@@ -366,7 +409,7 @@ def calibrate(
 
     used = dict(steps)
     used.update({"sensor_lut": lut_spec, "vignetting": vig_spec, "balance": bal_spec})
-    if len(views) < 2 or correspondences:
+    if source in ("none", "given"):
         used.pop("correspondences")
     parameters = {
         "photoquant_version": __version__,

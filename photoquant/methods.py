@@ -76,6 +76,8 @@ ENTRY_POINT_GROUP = "photoquant.methods"
 
 M = TypeVar("M")
 
+_NEEDS = frozenset({"tracks", "flat_field"})
+
 
 @dataclass(frozen=True)
 class StepFit(Generic[M]):
@@ -114,6 +116,11 @@ class Method:
         asks the step's default model class).
     reference : str
         The paper or source it implements.
+    needs : frozenset of str
+        The inputs it cannot run without, beyond its step's usual ones, for
+        :func:`photoquant.calibrate` to check or skip: ``"tracks"``
+        (correspondences across two or more views) or ``"flat_field"`` (a
+        flat-field capture) for vignetting methods.
     """
 
     step: str
@@ -122,6 +129,7 @@ class Method:
     options: type | None = None
     model: type | None = None
     reference: str = ""
+    needs: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
         if self.step not in STEPS:
@@ -132,6 +140,12 @@ class Method:
             raise InputError(f"method {self.name!r}: `function` must be callable")
         if self.options is not None and not dataclasses.is_dataclass(self.options):
             raise InputError(f"method {self.name!r}: `options` must be a dataclass type")
+        unknown = set(self.needs) - _NEEDS
+        if unknown:
+            raise InputError(
+                f"method {self.name!r}: unknown `needs` {sorted(unknown)}; known: {sorted(_NEEDS)}"
+            )
+        object.__setattr__(self, "needs", frozenset(self.needs))
 
     def default_options(self) -> Any:
         """An instance of the options dataclass with every default (``None`` without one)."""
@@ -229,6 +243,7 @@ def register_method(
     options: type | None = None,
     model: type | None = None,
     reference: str = "",
+    needs: frozenset[str] | set[str] | tuple[str, ...] = (),
     replace: bool = False,
 ) -> Method:
     """Register a method of ``step`` under ``name``; returns the :class:`Method`.
@@ -248,6 +263,8 @@ def register_method(
         provide ``from_params(params, images)`` so that a saved camera loads.
     reference : str
         Citation of what it implements.
+    needs : set of str
+        Inputs it cannot run without (:attr:`Method.needs`).
     replace : bool
         Replace a method of the same name instead of raising.
 
@@ -263,7 +280,15 @@ def register_method(
     >>> pq.registry("balance").remove("Flat")
     """
     return registry(step).add(
-        Method(step, name, function, options=options, model=model, reference=reference),
+        Method(
+            step,
+            name,
+            function,
+            options=options,
+            model=model,
+            reference=reference,
+            needs=frozenset(needs),
+        ),
         replace=replace,
     )
 

@@ -871,6 +871,7 @@ VIGNETTING_METHODS.add(
         options=ExtendedGoldmanChenOptions,
         model=ExtendedGoldmanChenVignetting,
         reference="[PQ] §5.5; Goldman & Chen 2005, doi:10.1109/ICCV.2005.249",
+        needs=frozenset({"tracks"}),
     ),
     replace=True,
 )

@@ -422,6 +422,7 @@ VIGNETTING_METHODS.add(
         options=FlatFieldOptions,
         model=FlatFieldVignetting,
         reference="flat-fielding (Howell 2006, §4.3); TUM vignetteCalib (Engel et al. 2016)",
+        needs=frozenset({"flat_field"}),
     ),
     replace=True,
 )

@@ -323,6 +323,7 @@ VIGNETTING_METHODS.add(
         options=GoldmanChen2005Options,
         model=GoldmanChen2005Vignetting,
         reference="Goldman & Chen 2005, doi:10.1109/ICCV.2005.249",
+        needs=frozenset({"tracks"}),
     ),
     replace=True,
 )

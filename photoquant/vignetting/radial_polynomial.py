@@ -282,6 +282,7 @@ VIGNETTING_METHODS.add(
         options=RadialPolynomialOptions,
         model=RadialPolynomialVignetting,
         reference="lensfun 'pa' / Hugin Vb, Vc, Vd, Vx, Vy; https://lensfun.github.io/",
+        needs=frozenset({"tracks"}),
     ),
     replace=True,
 )
