@@ -304,7 +304,9 @@ def load_plugins(*, reload: bool = False) -> list[str]:
                     obj = ep.load()
                     result = obj() if callable(obj) and not isinstance(obj, Method) else obj
                     for method in _as_methods(result):
-                        if method.name not in REGISTRIES[method.step]._methods:
+                        # the same Method again (a reload) is no collision; any
+                        # other method under a taken name is an error naming both
+                        if REGISTRIES[method.step]._methods.get(method.name) != method:
                             REGISTRIES[method.step].add(method)
                 except InputError as exc:
                     raise InputError(f"plug-in {ep.name!r} ({dist}): {exc}") from None
