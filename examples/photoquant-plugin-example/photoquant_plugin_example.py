@@ -135,7 +135,8 @@ class RadialPolynomialVignetting(VignettingModel):
     def map(self, image_shape: tuple[int, int]) -> np.ndarray:
         """``v`` on the pixel grid, ``(H, W, C)``."""
         r2 = radius_squared(image_shape)[..., None]
-        return 1.0 + self.coefficients[:, 0] * r2 + self.coefficients[:, 1] * r2**2
+        v: np.ndarray = 1.0 + self.coefficients[:, 0] * r2 + self.coefficients[:, 1] * r2**2
+        return v
 
     def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """JSON parameters (no image) for the camera folder."""
