@@ -23,7 +23,7 @@ The names below are loaded on first use, so that ``import photoquant.io``
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 __version__ = "0.2.0"
 
@@ -79,6 +79,87 @@ _EXPORTS: dict[str, str] = {
 }
 
 __all__ = ["__version__", *_EXPORTS]
+
+# The lazy exports as type checkers see them (never executed). Kept in step with
+# _EXPORTS by tests/photoquant/test_public_api.py; `X as X` marks a re-export.
+if TYPE_CHECKING:
+    # isort: off
+    from photoquant.balance import (
+        BalanceModel as BalanceModel,
+        BalanceData as BalanceData,
+        BALANCE_METHODS as BALANCE_METHODS,
+    )
+    from photoquant.calibration import (
+        calibrate as calibrate,
+        calibrate_manifest as calibrate_manifest,
+        CalibrationResult as CalibrationResult,
+        CalibrationIntermediates as CalibrationIntermediates,
+        resolve_steps as resolve_steps,
+        fit_sensor_lut as fit_sensor_lut,
+        find_correspondences as find_correspondences,
+        fit_vignetting_step as fit_vignetting_step,
+        fit_balance as fit_balance,
+    )
+    from photoquant.correction import (
+        correct as correct,
+        correct_manifest as correct_manifest,
+        Correction as Correction,
+    )
+    from photoquant.correspondences import (
+        CORRESPONDENCE_METHODS as CORRESPONDENCE_METHODS,
+    )
+    from photoquant.errors import (
+        PhotoquantError as PhotoquantError,
+    )
+    from photoquant.flatfield import (
+        SensorLUTModel as SensorLUTModel,
+        SENSOR_LUT_METHODS as SENSOR_LUT_METHODS,
+    )
+    from photoquant.io import (
+        load_manifest as load_manifest,
+        load_stack as load_stack,
+        read_exr as read_exr,
+        write_exr as write_exr,
+    )
+    from photoquant.merge import (
+        MergeModel as MergeModel,
+        MergeResult as MergeResult,
+        MERGE_METHODS as MERGE_METHODS,
+    )
+    from photoquant.methods import (
+        STEPS as STEPS,
+        REGISTRIES as REGISTRIES,
+        Method as Method,
+        StepFit as StepFit,
+        register_method as register_method,
+        registry as registry,
+    )
+    from photoquant.model import (
+        CameraModel as CameraModel,
+        load_camera as load_camera,
+    )
+    from photoquant.profiles import (
+        PROFILES as PROFILES,
+        DEVIATIONS as DEVIATIONS,
+    )
+    from photoquant.response import (
+        fit_response as fit_response,
+        ResponseModel as ResponseModel,
+        RESPONSE_METHODS as RESPONSE_METHODS,
+    )
+    from photoquant.stack import (
+        ExposureStack as ExposureStack,
+    )
+    from photoquant.vignetting import (
+        VignettingModel as VignettingModel,
+        VignettingData as VignettingData,
+        ExtendedGoldmanChenVignetting as ExtendedGoldmanChenVignetting,
+        VIGNETTING_METHODS as VIGNETTING_METHODS,
+    )
+    from photoquant.weighting import (
+        WEIGHTING_FUNCTIONS as WEIGHTING_FUNCTIONS,
+    )
+    # isort: on
 
 
 def __getattr__(name: str) -> Any:

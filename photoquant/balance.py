@@ -113,7 +113,7 @@ def colour_balance_WhiteChart(
     return colour[reference_channel] / colour
 
 
-def colour_balance_none(linear: np.ndarray, roi=None, **_kwargs) -> np.ndarray:  # noqa: ARG001
+def colour_balance_none(linear: np.ndarray, roi: Any = None, **_kwargs: Any) -> np.ndarray:  # noqa: ARG001
     """No balance: every factor is 1."""
     return np.ones(np.asarray(linear).shape[-1])
 

@@ -15,7 +15,7 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,8 +35,10 @@ def _log(args: argparse.Namespace, message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
 
-def _step_logger(args: argparse.Namespace):
-    state = {"t": None, "name": None}
+def _step_logger(
+    args: argparse.Namespace,
+) -> tuple[Callable[[str], None], Callable[[], None]]:
+    state: dict[str, Any] = {"t": None, "name": None}
 
     def step(name: str) -> None:
         now = time.perf_counter()

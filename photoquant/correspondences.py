@@ -42,7 +42,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -424,7 +424,7 @@ def find_correspondences_homography(
         raise CalibrationError(f"reference view {reference} has no valid (finite, positive) pixel")
     lo, hi = (float(q) for q in np.percentile(ref_log, [0.5, 99.5]))
     hi = max(hi, lo + 1e-6)
-    sift = cv2.SIFT_create()
+    sift = cast(Any, cv2).SIFT_create()  # in cv2 since 4.4, not in every version of its stubs
     features = []
     for log_grey in logs:
         img8, mask = _tonemap_8bit(log_grey, lo, hi)
@@ -452,8 +452,8 @@ def find_correspondences_homography(
                 f"reference); at least {min_inliers} are needed: the views need texture "
                 "and overlap"
             )
-        src = np.float32([ref_kp[m.trainIdx].pt for m in good])
-        dst = np.float32([kp[m.queryIdx].pt for m in good])
+        src = np.array([ref_kp[m.trainIdx].pt for m in good], dtype=np.float32)
+        dst = np.array([kp[m.queryIdx].pt for m in good], dtype=np.float32)
         hom, mask = cv2.findHomography(src, dst, cv2.RANSAC, ransac_threshold)
         n_in = int(mask.sum()) if mask is not None else 0
         if hom is None or n_in < min_inliers:

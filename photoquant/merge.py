@@ -17,9 +17,9 @@ References
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -197,7 +197,7 @@ def merge_Debevec1997(
                 if isinstance(ch, slice)
                 else np.interp(v, levels, step_table[ch])
             )
-            w = wfun(v, c_min, s, log_step=step)
+            w = cast(Callable[..., np.ndarray], wfun)(v, c_min, s, log_step=step)
         w = np.where(v >= s, 0.0, w)
         if min_level is not None:
             w = np.where(v < min_level[ch], 0.0, w)
@@ -310,7 +310,7 @@ def merge_stack_Debevec1997(
         dark_clipped=stack.dark_clipped(),
         min_level=response.valid_min if opts.exclude_below_valid_min else None,
         weighting=opts.weighting,
-        c_min=float(np.min(response.black_level)),
+        c_min=float(np.min(cast(np.ndarray, response.black_level))),
         repeats=stack.n_repeats,
     )
 

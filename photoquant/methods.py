@@ -329,7 +329,9 @@ def load_plugins(*, reload: bool = False) -> list[str]:
                     obj = ep.load()
                     result = obj() if callable(obj) and not isinstance(obj, Method) else obj
                     for method in _as_methods(result):
-                        if method.name not in REGISTRIES[method.step]._methods:
+                        # the same Method again (a reload) is no collision; any
+                        # other method under a taken name is an error naming both
+                        if REGISTRIES[method.step]._methods.get(method.name) != method:
                             REGISTRIES[method.step].add(method)
                 except InputError as exc:
                     raise InputError(f"plug-in {ep.name!r} ({dist}): {exc}") from None
@@ -413,6 +415,17 @@ def resolve_method(
         instance: the method whose ``options`` class it is.
     default : (str, mapping)
         The profile's method and options for this step.
+
+    Examples
+    --------
+    >>> from photoquant.methods import resolve_method
+    >>> method, options = resolve_method("merge", {"weighting": "hat"}, ("Debevec 1997", {}))
+    >>> method.name, options.weighting, options.exclude_below_valid_min
+    ('Debevec 1997', 'hat', True)
+    >>> resolve_method("merge", "Nope", ("Debevec 1997", {}))
+    Traceback (most recent call last):
+    ...
+    photoquant.errors.InputError: unknown merge method 'Nope'; valid methods are: Debevec 1997
     """
     reg = registry(step)
     default_name, default_options = default

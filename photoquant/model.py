@@ -351,7 +351,7 @@ def _step_model(
         raise CameraModelError(
             f"{where}: {exc} (a plug-in's method needs its distribution installed)"
         ) from None
-    cls = registered.model or _DEFAULT_MODEL_CLASS[step]
+    cls: Any = registered.model or _DEFAULT_MODEL_CLASS[step]
     method = registered.name
     try:
         return cls.from_params(method, params, images)

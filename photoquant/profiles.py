@@ -137,7 +137,16 @@ DEVIATIONS: tuple[Deviation, ...] = (
 
 
 def profile_steps(profile: str) -> Mapping[str, tuple[str, Mapping[str, Any]]]:
-    """The steps of the named profile (``"photoquant"`` or ``"paper"``)."""
+    """The steps of the named profile (``"photoquant"`` or ``"paper"``).
+
+    Examples
+    --------
+    >>> from photoquant.profiles import profile_steps
+    >>> profile_steps("paper")["balance"]
+    ('White Chart', {'stage': 'linearised'})
+    >>> profile_steps("Photoquant")["vignetting"]
+    ('Extended Goldman-Chen', {})
+    """
     if not isinstance(profile, str) or profile.lower() not in PROFILES:
         raise InputError(f"unknown profile {profile!r}; profiles are: {', '.join(PROFILES)}")
     return PROFILES[profile.lower()]

@@ -7,6 +7,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings
+
+# Property tests draw new examples on every run by default (and remember
+# failures in .hypothesis/). CI selects "ci" (HYPOTHESIS_PROFILE=ci, set by
+# .ci/run): examples derived from each test's own source, no example
+# database, so that a CI run is reproducible and a statistical test cannot
+# fail by the luck of the draw. Each test's own @settings (max_examples,
+# deadline) still apply on top of the profile.
+settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
 REPO = Path(__file__).resolve().parents[1]
 # ``../shared`` beside the checkout; PHOTOQUANT_SHARED points elsewhere (e.g. from a worktree)

@@ -19,7 +19,7 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -198,8 +198,8 @@ class ResponseModel:
                 "levels": self.levels.tolist(),
                 "log_inverse_response": self.log_inverse_response.tolist(),
                 "saturation_level": self.saturation_level.tolist(),
-                "valid_min": self.valid_min.tolist(),
-                "black_level": self.black_level.tolist(),
+                "valid_min": cast(np.ndarray, self.valid_min).tolist(),
+                "black_level": cast(np.ndarray, self.black_level).tolist(),
                 "method_params": self.params,
             },
             {},
