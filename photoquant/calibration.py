@@ -333,7 +333,7 @@ def calibrate(
     tracks: list[np.ndarray] | None = None
     source = "none"
     vig_spec = steps["vignetting"]
-    needs = vig_spec[0].needs
+    needs = vig_spec[0].needs or frozenset()
     flat = None
     missing = []
     if "tracks" in needs and len(views) < 2:

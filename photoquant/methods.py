@@ -78,6 +78,9 @@ M = TypeVar("M")
 
 _NEEDS = frozenset({"tracks", "flat_field"})
 
+DEFAULT_NEEDS: dict[str, frozenset[str]] = {"vignetting": frozenset({"tracks"})}
+"""What a method of a step needs unless it says otherwise (:attr:`Method.needs`)."""
+
 
 @dataclass(frozen=True)
 class StepFit(Generic[M]):
@@ -116,11 +119,11 @@ class Method:
         asks the step's default model class).
     reference : str
         The paper or source it implements.
-    needs : frozenset of str
-        The inputs it cannot run without, beyond its step's usual ones, for
-        :func:`photoquant.calibrate` to check or skip: ``"tracks"``
-        (correspondences across two or more views) or ``"flat_field"`` (a
-        flat-field capture) for vignetting methods.
+    needs : frozenset of str, optional
+        The inputs it cannot run without, for :func:`photoquant.calibrate` to
+        provide, check or skip: ``"tracks"`` (correspondences across two or
+        more views) or ``"flat_field"`` (a flat-field capture). By default the
+        step's usual inputs (:data:`DEFAULT_NEEDS`: tracks for vignetting).
     """
 
     step: str
@@ -129,7 +132,7 @@ class Method:
     options: type | None = None
     model: type | None = None
     reference: str = ""
-    needs: frozenset[str] = frozenset()
+    needs: frozenset[str] | None = None
 
     def __post_init__(self) -> None:
         if self.step not in STEPS:
@@ -140,12 +143,13 @@ class Method:
             raise InputError(f"method {self.name!r}: `function` must be callable")
         if self.options is not None and not dataclasses.is_dataclass(self.options):
             raise InputError(f"method {self.name!r}: `options` must be a dataclass type")
-        unknown = set(self.needs) - _NEEDS
+        needs = DEFAULT_NEEDS.get(self.step, frozenset()) if self.needs is None else self.needs
+        unknown = set(needs) - _NEEDS
         if unknown:
             raise InputError(
                 f"method {self.name!r}: unknown `needs` {sorted(unknown)}; known: {sorted(_NEEDS)}"
             )
-        object.__setattr__(self, "needs", frozenset(self.needs))
+        object.__setattr__(self, "needs", frozenset(needs))
 
     def default_options(self) -> Any:
         """An instance of the options dataclass with every default (``None`` without one)."""
@@ -243,7 +247,7 @@ def register_method(
     options: type | None = None,
     model: type | None = None,
     reference: str = "",
-    needs: frozenset[str] | set[str] | tuple[str, ...] = (),
+    needs: frozenset[str] | set[str] | tuple[str, ...] | None = None,
     replace: bool = False,
 ) -> Method:
     """Register a method of ``step`` under ``name``; returns the :class:`Method`.
@@ -263,8 +267,9 @@ def register_method(
         provide ``from_params(params, images)`` so that a saved camera loads.
     reference : str
         Citation of what it implements.
-    needs : set of str
-        Inputs it cannot run without (:attr:`Method.needs`).
+    needs : set of str, optional
+        Inputs it cannot run without (:attr:`Method.needs`; the step's usual
+        ones by default).
     replace : bool
         Replace a method of the same name instead of raising.
 
@@ -287,7 +292,7 @@ def register_method(
             options=options,
             model=model,
             reference=reference,
-            needs=frozenset(needs),
+            needs=None if needs is None else frozenset(needs),
         ),
         replace=replace,
     )

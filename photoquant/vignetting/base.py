@@ -114,6 +114,12 @@ def characterise_vignetting_None(
 
 
 VIGNETTING_METHODS.add(
-    Method("vignetting", "None", characterise_vignetting_None, model=IdentityVignetting),
+    Method(
+        "vignetting",
+        "None",
+        characterise_vignetting_None,
+        model=IdentityVignetting,
+        needs=frozenset(),
+    ),
     replace=True,
 )
