@@ -187,8 +187,7 @@ def sample_image(image: Any, xy: Any, radius: int = 1) -> np.ndarray:
     points = check_array(xy, "xy", ndim=2, kind="iuf").astype(np.float64)
     if points.shape[1] != 2:
         raise InputError(f"`xy` must have shape (M, 2), got {points.shape}")
-    if isinstance(radius, bool) or not isinstance(radius, int | np.integer) or radius < 0:
-        raise InputError(f"`radius` must be a non-negative integer, got {radius!r}")
+    radius = check_int(radius, "radius", 0)
 
     offsets = np.arange(-int(radius), int(radius) + 1, dtype=np.float64)
     ox, oy = np.meshgrid(offsets, offsets)
@@ -399,13 +398,9 @@ def find_correspondences_homography(
                 f"((H, W, C) or (H, W)), got {img.shape}"
             )
     h, w = views[0].shape[:2]
-    if isinstance(reference, bool) or not isinstance(reference, int | np.integer):
-        raise InputError(f"`reference` must be an integer view index, got {reference!r}")
-    if not 0 <= reference < n_views:
-        raise InputError(f"`reference` must be in [0, {n_views - 1}], got {reference}")
-    for name, value, least in (("max_points", max_points, 1), ("min_inliers", min_inliers, 4)):
-        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
-            raise InputError(f"`{name}` must be an integer >= {least}, got {value!r}")
+    reference = check_int(reference, "reference", 0, n_views - 1)
+    max_points = check_int(max_points, "max_points", 1)
+    min_inliers = check_int(min_inliers, "min_inliers", 4)
     margin = check_positive(margin, "margin", allow_zero=True)
     if margin >= 0.5:
         raise InputError(f"`margin` must be below 0.5, got {margin}")

@@ -43,7 +43,7 @@ import numpy as np
 from tqdm import tqdm
 
 from photoquant.errors import InputError
-from photoquant.utils import check_exposure_times, check_positive, thread_map
+from photoquant.utils import check_exposure_times, check_int, check_positive, thread_map
 from pqsim.analytic import (
     pan_shifts,
     scene_calibration_world,
@@ -523,14 +523,10 @@ def write_capture_set(
         DEFAULT_SCENE_EXPOSURES_S if scene_exposure_s is None else scene_exposure_s,
         "scene_exposure_s",
     )
-    for name, v in (("n_repeats", n_repeats), ("n_views", n_views)):
-        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
-            raise InputError(f"`{name}` must be a positive integer, got {v!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise InputError(f"`seed` must be a non-negative integer, got {seed!r}")
-    pan = min(h, w) // 4 if pan_px is None else pan_px
-    if isinstance(pan, bool) or not isinstance(pan, int | np.integer) or pan < 0:
-        raise InputError(f"`pan_px` must be a non-negative integer, got {pan_px!r}")
+    check_int(n_repeats, "n_repeats", 1)
+    check_int(n_views, "n_views", 1)
+    check_int(seed, "seed", 0)
+    pan = check_int(min(h, w) // 4 if pan_px is None else pan_px, "pan_px", 0)
     if pan >= min(h, w) // 2:
         raise InputError(
             f"`pan_px` must be below half the image size ({min(h, w) // 2}), got {pan}"

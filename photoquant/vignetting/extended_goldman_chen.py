@@ -561,9 +561,8 @@ def fit_vignetting_ExtendedGoldmanChen(
         raise InputError(f"`normalise` must be 'track' or 'none', got {normalise!r}")
     if not isinstance(scale_invariant, bool | np.bool_):
         raise InputError(f"`scale_invariant` must be a bool, got {scale_invariant!r}")
-    for name, value in (("min_pairs", min_pairs), ("max_nfev", max_nfev)):
-        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-            raise InputError(f"`{name}` must be a positive integer, got {value!r}")
+    min_pairs = check_int(min_pairs, "min_pairs", 1)
+    max_nfev = check_int(max_nfev, "max_nfev", 1)
     if not isinstance(min_spread, int | float | np.number) or not 0.0 <= min_spread <= 1.0:
         raise InputError(f"`min_spread` must be a number in [0, 1], got {min_spread!r}")
     if not isinstance(max_uncertainty, int | float | np.number) or not max_uncertainty > 0:

@@ -40,6 +40,7 @@ from photoquant.utils import (
     check_array,
     check_bit_depth,
     check_exposure_times,
+    check_int,
     check_positive,
     check_workers,
     thread_map,
@@ -192,8 +193,7 @@ class SyntheticCamera:
                 raise InputError(f"`{name}` must be at most 0.25, got {v}")
             object.__setattr__(self, name, v)
         seed = self.prnu_seed
-        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-            raise InputError(f"`prnu_seed` must be a non-negative int, got {seed!r}")
+        check_int(seed, "prnu_seed", 0)
         channels = tuple(str(s) for s in self.channels)
         if len(channels) != c:
             raise InputError(f"`channels` names {len(channels)} channels but `responses` has {c}")
@@ -357,12 +357,7 @@ class SyntheticCamera:
         if np.any(arr < 0):
             raise InputError("`l` must be non-negative photoquantities")
         t = check_exposure_times(exposure_s)
-        if (
-            isinstance(n_repeats, bool)
-            or not isinstance(n_repeats, int | np.integer)
-            or n_repeats < 1
-        ):
-            raise InputError(f"`n_repeats` must be a positive int, got {n_repeats!r}")
+        check_int(n_repeats, "n_repeats", 1)
         if not isinstance(optics, bool | np.bool_):
             raise InputError(f"`optics` must be a bool, got {optics!r}")
         shape = arr.shape[:2]
