@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
 import numpy as np
@@ -176,3 +177,67 @@ def test_pqsim_preset_file_drives_a_capture(tmp_path, capsys):
     assert json.loads((out / "capture.json").read_text())["bit_depth"] == 12
     assert pqsim_main(["preset", "nope"]) == 2
     assert "unknown camera preset 'nope'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "report",
+    [
+        {"response": "not a dict", "vignetting": [1, 2], "notes": "one string", "timings_s": 3},
+        {"response": {"n_samples": "many", "residual_rms": {"a": 1}}, "sensor_lut": {"x": 1}},
+        {"vignetting": {"n_tracks": None, "residual_rms": "?"}, "timings_s": {"a": "b"}},
+    ],
+)
+def test_info_prints_any_valid_camera_whatever_its_report_holds(capture, tmp_path, capsys, report):
+    """The report is diagnostics: `info` must describe the camera whatever types it holds."""
+    cam = tmp_path / "cam"
+    assert main(["calibrate", str(capture), "-o", str(cam), "-q"]) == 0
+    path = cam / "camera.json"
+    data = json.loads(path.read_text())
+    data["report"] = report
+    path.write_text(json.dumps(data))
+    capsys.readouterr()
+    assert main(["info", str(cam)]) == 0
+    out = capsys.readouterr().out
+    assert "methods: response Debevec 1997" in out and "balance:" in out
+    assert main(["info", str(cam), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["report"] == report
+
+
+def test_methods_lists_every_step_and_the_profiles(capsys):
+    assert main(["methods", "--json"]) == 0
+    listing = json.loads(capsys.readouterr().out)
+    assert set(listing) == {
+        "response",
+        "merge",
+        "balance",
+        "sensor_lut",
+        "vignetting",
+        "correspondences",
+    }
+    debevec = listing["response"]["Debevec 1997"]
+    assert debevec["options"]["smoothness"] == 1000.0
+    assert debevec["in profiles"] == ["photoquant", "paper"]
+    assert main(["methods"]) == 0
+    assert "Extended Goldman-Chen" in capsys.readouterr().out
+
+
+def test_calibrate_method_and_option_flags(capture, tmp_path, capsys):
+    cam = tmp_path / "cam"
+    args = ["calibrate", str(capture), "-o", str(cam), "-q", "--profile", "paper"]
+    args += ["--method", "vignetting=None", "--option", "response.smoothness=300"]
+    assert main(args) == 0
+    model = load_camera(cam)
+    steps = model.parameters["steps"]
+    assert model.parameters["profile"] == "paper" and model.vignetting.method == "None"
+    assert steps["response"]["options"]["smoothness"] == 300
+    assert steps["response"]["options"]["sampling"] == "random"  # the paper's, kept
+    capsys.readouterr()
+    for bad, message in [
+        (["--method", "vignetting"], "--method takes STEP=NAME"),
+        (["--method", "shading=None"], "--method takes STEP=NAME"),
+        (["--option", "response.speed=3"], "has no option.*speed"),
+        (["--method", "response=Nope"], "unknown response method 'Nope'; valid methods are"),
+    ]:
+        assert main(["calibrate", str(capture), "-o", str(tmp_path / "x"), "-q", *bad]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and re.search(message, err), err
