@@ -13,6 +13,7 @@ CAPTURE_FORMAT, FrameRef, FrameSetRef, CaptureManifest, load_manifest, load_stac
 from __future__ import annotations
 
 from photoquant.io.atomic import atomic_write, write_bytes_atomic, write_text_atomic
+from photoquant.io.frames import load_stack
 from photoquant.io.images import exif_exposure_time, read_exr, read_image, write_exr, write_image
 from photoquant.io.manifest import (
     CAPTURE_FORMAT,
@@ -22,7 +23,6 @@ from photoquant.io.manifest import (
     extra_frameset,
     extra_path,
     load_manifest,
-    load_stack,
     write_manifest,
 )
 
