@@ -26,14 +26,42 @@ Key                           Required  Meaning
 ``correspondences``           no        tracks of ``[view_index, x, y]`` (pixels), at
                                         least 2 entries each, one per view at most
 ``saturation_level``          no        per-channel clipping level, 1 to 2**bit_depth - 1
+``black_level``               no        the value of a pixel that received no light: one
+                                        number for every channel or one per channel,
+                                        0 to 2**bit_depth - 1, below ``saturation_level``
+``dark``                      no        a frame set of dark frames (lens capped); the
+                                        black level is their mean per channel
+``exposure_basis``            no        ``"auto"`` (default), ``"time"`` or
+                                        ``"exposure value"`` (see below)
 ============================  ========  =================================================
 
 A frame set is ``{"frames": [frame, ...]}`` with at least one frame; a frame is
-``{"file": str, "exposure_s": float, "repeat": int}`` where ``exposure_s`` is
-optional (read from the image's EXIF ExposureTime when absent) and ``repeat``
-is optional (by default the order of appearance among the frames of the same
-exposure). Unknown top-level keys are kept in :attr:`CaptureManifest.extra`;
-unknown keys elsewhere are ignored.
+``{"file": str, "exposure_s": float, "repeat": int, "f_number": float, "iso":
+float}`` where ``exposure_s`` is optional (read from the image's EXIF
+ExposureTime when absent), ``repeat`` is optional (by default the order of
+appearance among the frames of the same exposure) and ``f_number``, ``iso``
+are optional (read from the EXIF FNumber and ISO speed when absent).
+Unknown top-level keys are kept in :attr:`CaptureManifest.extra`; unknown keys
+elsewhere are ignored.
+
+Black level
+    ``black_level`` or ``dark`` (not both). Without either, the black level of
+    a raw frame set (``.dng``, ``.cr2``, ``.nef``, ``.arw``, ... read through
+    LibRaw, :mod:`photoquant.io.raw`) is the files' own, and that of other
+    images is 0: it is *not* guessed from the data, because nothing in a
+    bracket of an unknown scene tells the darkest value apart from the offset
+    (a scene without a black object has no pixel at the black level). A black
+    level at or above a channel's saturation level, or above the data (more
+    than half of the longest exposure's values at or below it), is refused.
+
+Exposure basis
+    With ``"auto"``, a frame set whose frames all know their f-number and ISO
+    speed (manifest or EXIF) and whose f-number or ISO varies is calibrated in
+    *exposure value* ``t · (S / 100) / N²`` (seconds at ISO 100 and f/1) rather
+    than exposure time; otherwise in time. ``"exposure value"`` forces it for
+    every frame set (each frame then needs its f-number and ISO), ``"time"``
+    ignores aperture and ISO. The stack records the basis it used
+    (:attr:`photoquant.stack.ExposureStack.exposure_basis`).
 
 A manifest is untrusted input: every file must resolve (symbolic links
 followed) inside the manifest's folder unless ``allow_outside=True``, and
@@ -87,8 +115,12 @@ _KNOWN_KEYS = frozenset(
         "scene",
         "correspondences",
         "saturation_level",
+        "black_level",
+        "dark",
+        "exposure_basis",
     }
 )
+EXPOSURE_BASIS_CHOICES = ("auto", "time", "exposure value")
 
 PathLike = str | os.PathLike[str]
 
@@ -106,11 +138,16 @@ class FrameRef:
     repeat : int or None
         Index among the repeats of the same exposure; ``None`` means "order of
         appearance".
+    f_number, iso : float or None
+        Aperture f-number and ISO speed; ``None`` means "read it from the EXIF
+        data, if any".
     """
 
     file: Path
     exposure_s: float | None
     repeat: int | None
+    f_number: float | None = None
+    iso: float | None = None
 
 
 @dataclass(frozen=True)
@@ -153,6 +190,12 @@ class CaptureManifest:
         Per-channel clipping level, if given.
     extra : dict
         Unknown top-level keys, kept as read.
+    black_level : tuple of float or None
+        Per-channel black level, if given.
+    dark : FrameSetRef or None
+        Dark frames, if given (the black level is their mean per channel).
+    exposure_basis : {"auto", "time", "exposure value"}
+        How exposures are measured (see the module docstring).
     """
 
     path: Path
@@ -166,6 +209,9 @@ class CaptureManifest:
     correspondences: tuple[np.ndarray, ...]
     saturation_level: tuple[int, ...] | None
     extra: dict[str, Any] = field(default_factory=dict)
+    black_level: tuple[float, ...] | None = None
+    dark: FrameSetRef | None = None
+    exposure_basis: str = "auto"
 
 
 # --------------------------------------------------------------------------- parsing
@@ -215,6 +261,18 @@ class _Parser:
         scene = self.parse_optional_frameset(data, "scene")
         tracks = self.parse_tracks(data.get("correspondences"), len(views))
         saturation = self.parse_saturation(data.get("saturation_level"), bit_depth, channels)
+        black = self.parse_black_level(data.get("black_level"), bit_depth, channels, saturation)
+        dark = self.parse_optional_frameset(data, "dark", group=False)
+        if black is not None and dark is not None:
+            raise self.error(
+                "give either `black_level` or `dark` frames, not both "
+                "(the dark frames would estimate the black level the manifest states)"
+            )
+        basis = data.get("exposure_basis", "auto")
+        if basis not in EXPOSURE_BASIS_CHOICES:
+            raise self.error(
+                f"`exposure_basis` must be one of {list(EXPOSURE_BASIS_CHOICES)}, got {basis!r}"
+            )
         extra = {k: v for k, v in data.items() if k not in _KNOWN_KEYS}
         return CaptureManifest(
             path=self.manifest_path,
@@ -228,6 +286,9 @@ class _Parser:
             correspondences=tracks,
             saturation_level=saturation,
             extra=extra,
+            black_level=black,
+            dark=dark,
+            exposure_basis=basis,
         )
 
     def check_format(self, data: dict[str, Any]) -> None:
@@ -270,11 +331,13 @@ class _Parser:
 
     # -- frames ------------------------------------------------------------------
 
-    def parse_optional_frameset(self, data: dict[str, Any], key: str) -> FrameSetRef | None:
+    def parse_optional_frameset(
+        self, data: dict[str, Any], key: str, *, group: bool = True
+    ) -> FrameSetRef | None:
         value = data.get(key)
-        return None if value is None else self.parse_frameset(value, key)
+        return None if value is None else self.parse_frameset(value, key, group=group)
 
-    def parse_frameset(self, value: Any, where: str) -> FrameSetRef:
+    def parse_frameset(self, value: Any, where: str, *, group: bool = True) -> FrameSetRef:
         if not isinstance(value, dict):
             raise self.error(f"`{where}` must be an object with `frames`, got {_describe(value)}")
         frames_raw = value.get("frames")
@@ -294,7 +357,7 @@ class _Parser:
                 )
             seen[frame.file] = i
         given = [f.exposure_s for f in frames if f.exposure_s is not None]
-        if len(given) == len(frames):
+        if group and len(given) == len(frames):
             _group_by_exposure(frames, given, where, self.error)
         return FrameSetRef(frames)
 
@@ -313,10 +376,17 @@ class _Parser:
         repeat = value.get("repeat")
         if repeat is not None and (not _is_int(repeat) or repeat < 0):
             raise self.error(f"`{where}.repeat` must be a non-negative integer, got {repeat!r}")
+        optics = {}
+        for key in ("f_number", "iso"):
+            v = value.get(key)
+            if v is not None and (not _is_number(v) or not math.isfinite(v) or v <= 0):
+                raise self.error(f"`{where}.{key}` must be a positive finite number, got {v!r}")
+            optics[key] = None if v is None else float(v)
         return FrameRef(
             file=file,
             exposure_s=None if exposure is None else float(exposure),
             repeat=repeat,
+            **optics,
         )
 
     def resolve_file(self, name: Any, where: str) -> Path:
@@ -413,6 +483,35 @@ class _Parser:
                 f"{list(channels)}) from 1 to {c_max}, got {value!r}"
             )
         return tuple(value)
+
+    def parse_black_level(
+        self,
+        value: Any,
+        bit_depth: int,
+        channels: tuple[str, ...],
+        saturation: tuple[int, ...] | None,
+    ) -> tuple[float, ...] | None:
+        if value is None:
+            return None
+        c_max = 2**bit_depth - 1
+        values = [value] * len(channels) if _is_number(value) else value
+        if (
+            not isinstance(values, list)
+            or len(values) != len(channels)
+            or not all(_is_number(v) and math.isfinite(v) and 0 <= v <= c_max for v in values)
+        ):
+            raise self.error(
+                f"`black_level` must be a number or {len(channels)} numbers (one per channel "
+                f"{list(channels)}) from 0 to {c_max}, got {value!r}"
+            )
+        if saturation is not None:
+            for ch, (b, s) in enumerate(zip(values, saturation, strict=True)):
+                if b >= s:
+                    raise self.error(
+                        f"`black_level` {b:g} of channel {channels[ch]} is at or above its "
+                        f"`saturation_level` {s}: no value could carry light"
+                    )
+        return tuple(float(v) for v in values)
 
 
 def _json_type(value: Any) -> str:
