@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -297,7 +298,9 @@ class ExposureStack:
         """
         if not self._sum:
             top = self.n_repeats * self.c_max
-            dtype = np.uint16 if top <= np.iinfo(np.uint16).max else np.uint32
+            dtype: type[np.unsignedinteger[Any]] = (
+                np.uint16 if top <= np.iinfo(np.uint16).max else np.uint32
+            )
             if top > np.iinfo(np.uint32).max:  # pragma: no cover - 65 536 repeats of 16 bits
                 dtype = np.uint64
             self._sum.append(self.frames.sum(axis=0, dtype=dtype))

@@ -69,10 +69,15 @@ class ExposureMetadata:
     iso: float | None = None
 
 
-def _positive(value: Any) -> float | None:
-    """A positive finite float from an EXIF value (rational, tuple, int...), else None."""
+def _positive(value: Any, rational: bool) -> float | None:
+    """A positive finite float from an EXIF value, else None.
+
+    ``rational``: the tag's type is RATIONAL, which tifffile gives as a
+    ``(numerator, denominator)`` tuple (Pillow as an ``IFDRational``); a
+    SHORT tag (ISO) may instead hold several values, of which the first counts.
+    """
     if isinstance(value, list | tuple):
-        if len(value) == 2 and all(isinstance(v, int) for v in value):  # (num, den)
+        if rational and len(value) == 2 and all(isinstance(v, int) for v in value):
             num, den = value
             if not den:
                 return None
@@ -96,7 +101,7 @@ def _from_mapping(main: Any, exif: Any) -> ExposureMetadata:
             value = source.get(tag)
             if value is None:
                 value = source.get(_TAG_NAMES[tag])
-            got = _positive(value) if value is not None else None
+            got = _positive(value, rational=tag != ISO_SPEED) if value is not None else None
             if got is not None:
                 return got
         return None

@@ -41,6 +41,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -109,6 +110,17 @@ def is_raw_file(path: PathLike) -> bool:
     return Path(path).suffix.lower() in RAW_EXTENSIONS
 
 
+def _rawpy(path: Path) -> Any:
+    """The rawpy module, or a one-line error saying how to install it."""
+    try:
+        import rawpy
+    except ImportError:
+        raise _fail(
+            path, "reading raw files needs rawpy (LibRaw): pip install 'photoquant[raw]'"
+        ) from None
+    return rawpy
+
+
 def _fail(path: Path, reason: object) -> ImageReadError:
     return ImageReadError(f"cannot read raw file {path}: {' '.join(str(reason).split())}")
 
@@ -132,9 +144,8 @@ def read_raw(path: PathLike) -> RawFrame:
         a 2×2 Bayer R, G, B mosaic (X-Trans, Foveon, monochrome and already
         demosaiced "linear raw" DNGs are refused).
     """
-    import rawpy
-
     path = Path(path)
+    rawpy = _rawpy(path)
     if not path.is_file():
         raise _fail(path, "no such file" if not path.exists() else "it is not a regular file")
     try:
@@ -143,7 +154,7 @@ def read_raw(path: PathLike) -> RawFrame:
             pattern = np.array(raw.raw_pattern) if raw.raw_pattern is not None else None
             desc = raw.color_desc.decode("ascii", "replace")
             blacks = [float(b) for b in raw.black_level_per_channel]
-            whites_ch = raw.camera_white_level_per_channel
+            whites_ch = getattr(raw, "camera_white_level_per_channel", None)
             white = int(raw.white_level)
             other = raw.other
     except rawpy.LibRawError as exc:
@@ -196,9 +207,8 @@ def read_raw_metadata(path: PathLike) -> ExposureMetadata:
     ImageReadError
         If LibRaw cannot open the file.
     """
-    import rawpy
-
     path = Path(path)
+    rawpy = _rawpy(path)
     try:
         with rawpy.imread(str(path)) as raw:
             other = raw.other
