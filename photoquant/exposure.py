@@ -186,7 +186,8 @@ def _repeat_variance(stack: ExposureStack, ch: int, n_bins: int = 64) -> np.ndar
     frames = stack.frames[..., ch].astype(np.float64)
     mean = frames.mean(axis=0).ravel()
     var = frames.var(axis=0, ddof=1).ravel()
-    lo, hi = float(stack.black_level[ch]), float(stack.saturation_level[ch])
+    lo = float(np.asarray(stack.black_level)[ch])
+    hi = float(np.asarray(stack.saturation_level)[ch])
     return _binned_variance(mean, var, lo, hi, n_bins)
 
 
@@ -582,7 +583,7 @@ def combine_stacks(
             st.n_repeats != first.n_repeats
             or st.bit_depth != first.bit_depth
             or st.channels != first.channels
-            or not np.array_equal(st.black_level, first.black_level)
+            or not np.array_equal(np.asarray(st.black_level), np.asarray(first.black_level))
         ):
             raise InputError(
                 f"stacks[{i}] differs from stacks[0] in repeats, bit depth, channels or "
@@ -603,7 +604,7 @@ def combine_stacks(
         full[:, np.searchsorted(times, st.exposure_s)] = frames
         parts.append(full)
     combined = np.concatenate(parts, axis=2)[:, :, None]
-    sat = np.min(np.stack([st.saturation_level for st in stacks]), axis=0)
+    sat = np.min(np.stack([np.asarray(st.saturation_level) for st in stacks]), axis=0)
     return ExposureStack(
         combined,
         times,
@@ -753,7 +754,7 @@ def fit_affine_shutter(
     -------
     (list of ExposureRefinement, ShutterFit)
     """
-    from scipy.optimize import minimize_scalar
+    from scipy.optimize import minimize_scalar  # type: ignore[import-untyped]
 
     xs = [np.log(r.exposure_s[r.refined]) for r in refs]
     tn = [r.nominal_s[r.refined] for r in refs]
