@@ -189,9 +189,9 @@ def test_refined_scene_times_restore_the_test_scene_error():
     labelled with its nominal times and refined against the camera's response, is measured
     within 10 % of the error it has with its exact times (the perfectly calibrated camera,
     so that only the exposure times differ)."""
+    from photoquant.correct import correct
     from pqsim.analytic import scene_test_hdr
     from pqsim.capture_set import DEFAULT_SCENE_EXPOSURES_S
-    from photoquant.correct import correct
     from validation.metrics import relative_error_eq8
     from validation.truth_model import camera_model_from_truth
 
