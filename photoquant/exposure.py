@@ -35,6 +35,28 @@ Uncertainty
     level) and is not in it; with a response recovered from the same stack,
     see :func:`refine_jointly`.
 
+What the data determine, and what they do not
+    *At correction* (a scene bracket, ``g`` from a calibrated camera) the
+    exposure ratios are fully determined where exposures share valid
+    pixels; exposures that share none (e.g. the longest of a bracket whose
+    deep shadow is seen by it alone) keep their nominal value and are
+    flagged (``refined`` False). Measured on pqsim's CCD preset, 3 % jitter
+    and 0.1 ms lag: the test scene's error 1.10 % with the exact times, 3.09 %
+    with the nominal ones, 1.10 % refined.
+
+    *At calibration* (``g`` recovered from the same frames) a single stack
+    does not determine its errors: ``g`` bends to absorb them. Several stacks
+    with independent shutter errors (the views) do, up to (a) one exponent
+    ``γ`` common to all (``(g, ln t) → γ·(g, ln t)``), fixed by
+    :func:`fit_affine_shutter` to ``σ_γ ≈ 0.5 %`` for three views of eight
+    exposures with 3 % jitter (the jitter itself limits it), and (b) one
+    scale per stack (the gauge: each view keeps its nominal geometric mean,
+    whose jitter is ``3 %/√8 ≈ 1 %``). A step that compares stacks pixel by
+    pixel (the vignetting fit over correspondences) must therefore carry a
+    free gain per view; without it a 1 % gauge difference between views
+    reads as vignetting (measured: 4.7 % vignetting-map error, test-scene
+    error 4.4 % instead of 1.2 %; with the views' true gauges 1.4 %).
+
 References
 ----------
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 1, 2.
