@@ -33,7 +33,7 @@ PATTERNS = {
 }
 
 
-def _rational(x: float, den: int = 1_000_000) -> tuple[int, int]:
+def _rational(x: float, den: int = 1_000_000_000) -> tuple[int, int]:
     return (round(x * den), den)
 
 

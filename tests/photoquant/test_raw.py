@@ -159,3 +159,21 @@ def test_mosaic_helper_round_trips(rng):
     cfa = mosaic(rgb, "GBRG")
     assert cfa.shape == (22, 24)
     np.testing.assert_array_equal(cfa[1::2, 0::2], rgb[..., 0])
+
+
+def test_the_shared_raw_capture_fixture_is_what_it_says(raw_linear_capture):
+    cap = raw_linear_capture
+    m = load_manifest(cap.manifest)
+    stack = load_stack(m.views[0], m)
+    np.testing.assert_array_equal(stack.frames, cap.frames)
+    np.testing.assert_array_equal(stack.black_level, cap.black_level)
+    np.testing.assert_allclose(stack.exposure_s, cap.exposure_s, rtol=1e-6)
+    # unsaturated values are linear above black: (c - b) / (l t) is 1 up to noise
+    expected = cap.l[None] * cap.exposure_s[:, None, None, None]  # (K, H, W, 3)
+    lin = stack.linear_mean()
+    ok = ~stack.saturated().any(axis=0) & (expected > 100)
+    ratio = lin[ok] / expected[ok]
+    # per value: shot + read noise over N = 2, relative sd <= sqrt((100 + 4) / 2) / 100 = 7 %;
+    # the median of thousands of values is within 1 %
+    assert ok.sum() > 5000
+    assert abs(np.median(ratio) - 1) < 0.01
