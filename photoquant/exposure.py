@@ -301,7 +301,7 @@ def refine_exposure_times(
     gauge: Gauge = "geometric mean",
     margin_sigma: float = 3.0,
     min_overlap: int = 200,
-    max_values: int = 300_000,
+    max_values: int = 200_000,
     huber_k: float = 2.5,
     max_iterations: int = 10,
     bias_correction: bool = True,
