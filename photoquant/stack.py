@@ -4,6 +4,12 @@ A capture of one static scene is a stack of frames ``(N, K, H, W, C)``: ``N``
 repeats of each of ``K`` exposure times, images of ``H`` rows, ``W`` columns and
 ``C`` channels, holding integer pixel values in ``[0, 2**bit_depth - 1]``.
 
+Pixel values sit on a per-channel *black level* ``b`` (the offset of raw and
+machine-vision data: the value of a pixel that received no light, 0 for most
+8-bit images): the signal is ``c - b``, a value at or below ``b`` carries no
+measurable light (:meth:`ExposureStack.dark_clipped`), and the usable range of
+a channel is ``(b, saturation_level)``.
+
 Denoising averages the ``N`` repeats (eq. 2 of the reference paper); a pixel
 value is treated as *saturated* when any of its repeats reached the channel's
 saturation level, because the mean of partly clipped samples is biased.
@@ -18,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -25,10 +32,17 @@ from photoquant._checks import check_array, check_bit_depth, check_exposure_time
 from photoquant.errors import InputError
 
 __all__ = [
+    "EXPOSURE_BASES",
     "ExposureStack",
     "denoise_mean",
     "detect_saturation_levels",
 ]
+
+
+#: What ``ExposureStack.exposure_s`` measures: seconds of exposure, or the
+#: relative exposure value ``t · (S / 100) / N²`` (ISO speed ``S``, f-number
+#: ``N``) when the aperture or the gain varies across the bracket.
+EXPOSURE_BASES = ("time", "exposure value")
 
 
 def denoise_mean(frames: np.ndarray) -> np.ndarray:
@@ -125,6 +139,23 @@ class ExposureStack:
         (:func:`detect_saturation_levels`) when not given.
     channels : tuple of str
         Channel names, ``("R", "G", "B")`` by default.
+    black_level : array_like, shape (C,), optional
+        Per-channel black level (the value of a pixel that received no light),
+        0 by default; float64, ``0 <= b < saturation_level`` per channel. The
+        linear signal is ``c - b``.
+    exposure_basis : {"time", "exposure value"}
+        What ``exposure_s`` holds: exposure times in seconds (default), or the
+        relative exposure value ``t · (S / 100) / N²`` of a bracket whose ISO
+        speed ``S`` or f-number ``N`` varies (still proportional to the light
+        collected per unit photoquantity, which is all the method needs).
+
+    Raises
+    ------
+    InputError
+        If any field is invalid, including a black level at or above the
+        saturation level or *above the data*: more than half of the longest
+        exposure's values of a channel at or below its (non-zero) black level,
+        which no real bracket does and a mislabelled black level does.
     """
 
     frames: np.ndarray
@@ -132,6 +163,8 @@ class ExposureStack:
     bit_depth: int = 8
     saturation_level: np.ndarray | None = None
     channels: tuple[str, ...] = ("R", "G", "B")
+    black_level: np.ndarray | None = None
+    exposure_basis: str = "time"
     _mean: list = field(default_factory=list, init=False, repr=False)
     _sum: list = field(default_factory=list, init=False, repr=False)
     _extremes: list = field(default_factory=list, init=False, repr=False)
@@ -169,11 +202,37 @@ class ExposureStack:
             ).astype(np.int64)
             if np.any(sat < 1) or np.any(sat > c_max):
                 raise InputError(f"`saturation_level` must lie in [1, {c_max}], got {sat.tolist()}")
+        black = _check_black_level(self.black_level, frames, sat, c_max, channels)
+        if self.exposure_basis not in EXPOSURE_BASES:
+            raise InputError(
+                f"`exposure_basis` must be one of {list(EXPOSURE_BASES)}, "
+                f"got {self.exposure_basis!r}"
+            )
         object.__setattr__(self, "frames", frames)
         object.__setattr__(self, "exposure_s", t)
         object.__setattr__(self, "bit_depth", bit_depth)
         object.__setattr__(self, "saturation_level", sat)
         object.__setattr__(self, "channels", channels)
+        object.__setattr__(self, "black_level", black)
+
+    def with_exposure_times(self, exposure_s: Sequence[float] | np.ndarray) -> ExposureStack:
+        """The same frames labelled with other exposure times (e.g. refined ones).
+
+        Parameters
+        ----------
+        exposure_s : array_like, shape (K,)
+            New times, in the order of this stack's exposures (increasing
+            nominal time); the result is re-sorted if their order differs.
+        """
+        return ExposureStack(
+            self.frames,
+            np.asarray(exposure_s, dtype=np.float64),
+            bit_depth=self.bit_depth,
+            saturation_level=self.saturation_level,
+            channels=self.channels,
+            black_level=self.black_level,
+            exposure_basis=self.exposure_basis,
+        )
 
     @classmethod
     def from_frames(
@@ -239,7 +298,9 @@ class ExposureStack:
         """
         if not self._sum:
             top = self.n_repeats * self.c_max
-            dtype = np.uint16 if top <= np.iinfo(np.uint16).max else np.uint32
+            dtype: type[np.unsignedinteger[Any]] = (
+                np.uint16 if top <= np.iinfo(np.uint16).max else np.uint32
+            )
             if top > np.iinfo(np.uint32).max:  # pragma: no cover - 65 536 repeats of 16 bits
                 dtype = np.uint64
             self._sum.append(self.frames.sum(axis=0, dtype=dtype))
@@ -265,6 +326,66 @@ class ExposureStack:
         # frames are integers: c >= level  <=>  c >= ceil(level)
         return self._repeat_extremes()[1] >= np.ceil(level.astype(np.float64)).astype(np.int64)
 
-    def dark_clipped(self, floor: float = 0.0) -> np.ndarray:
-        """``(K, H, W, C)`` bool: any repeat sits at the floor ``c_min`` (clipped dark)."""
-        return self._repeat_extremes()[0] <= floor
+    def dark_clipped(self, floor: float | np.ndarray | None = None) -> np.ndarray:
+        """``(K, H, W, C)`` bool: any repeat at or below the floor (no measurable light).
+
+        Parameters
+        ----------
+        floor : float or array_like (C,), optional
+            Per-channel floor; the stack's :attr:`black_level` by default (0
+            for data without an offset, where this is "any repeat is 0").
+        """
+        level = self.black_level if floor is None else floor
+        level = np.broadcast_to(np.asarray(level, dtype=np.float64), (self.n_channels,))
+        return self._repeat_extremes()[0] <= level
+
+    def linear_mean(self) -> np.ndarray:
+        """Denoised values above the black level, ``mean() - black_level`` (K, H, W, C).
+
+        For linear (raw) data this is proportional to the exposure ``u·v·t·l``
+        of eq. 1 of [PQ]; it is negative where noise took a dark pixel below
+        the black level.
+        """
+        assert self.black_level is not None  # set in __post_init__
+        return self.mean() - self.black_level
+
+
+def _check_black_level(
+    value: object,
+    frames: np.ndarray,
+    saturation: np.ndarray,
+    c_max: int,
+    channels: tuple[str, ...],
+) -> np.ndarray:
+    """Validate a per-channel black level against the bit depth, saturation and data."""
+    n_ch = frames.shape[-1]
+    if value is None:
+        return np.zeros(n_ch, dtype=np.float64)
+    arr = np.asarray(value)
+    if arr.ndim == 0:
+        arr = np.full(n_ch, arr)
+    black = check_array(arr, "black_level", shape=(n_ch,), kind="iuf", finite=True).astype(
+        np.float64
+    )
+    if np.any(black < 0) or np.any(black > c_max):
+        raise InputError(f"`black_level` must lie in [0, {c_max}], got {black.tolist()}")
+    above = black >= saturation
+    if np.any(above):
+        ch = int(np.argmax(above))
+        raise InputError(
+            f"`black_level` {black[ch]:g} of channel {channels[ch]} is at or above its "
+            f"saturation level {int(saturation[ch])}: no value could carry light"
+        )
+    longest = frames[:, -1].reshape(-1, n_ch)
+    for ch in range(n_ch):
+        if black[ch] <= 0:
+            continue
+        dark = float(np.count_nonzero(longest[:, ch] <= black[ch])) / longest.shape[0]
+        if dark > 0.5:
+            median = float(np.median(longest[:, ch]))
+            raise InputError(
+                f"`black_level` {black[ch]:g} of channel {channels[ch]} lies above the data: "
+                f"{100 * dark:.0f} % of the longest exposure's values are at or below it "
+                f"(median {median:g}); is the black level mislabelled?"
+            )
+    return black

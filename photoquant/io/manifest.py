@@ -26,18 +26,50 @@ Key                           Required  Meaning
 ``correspondences``           no        tracks of ``[view_index, x, y]`` (pixels), at
                                         least 2 entries each, one per view at most
 ``saturation_level``          no        per-channel clipping level, 1 to 2**bit_depth - 1
+``black_level``               no        the value of a pixel that received no light: one
+                                        number for every channel or one per channel,
+                                        0 to 2**bit_depth - 1, below ``saturation_level``
+``dark``                      no        a frame set of dark frames (lens capped); the
+                                        black level is their mean per channel
+``exposure_basis``            no        ``"auto"`` (default), ``"time"`` or
+                                        ``"exposure value"`` (see below)
 ============================  ========  =================================================
 
 A frame set is ``{"frames": [frame, ...]}`` with at least one frame; a frame is
-``{"file": str, "exposure_s": float, "repeat": int}`` where ``exposure_s`` is
-optional (read from the image's EXIF ExposureTime when absent) and ``repeat``
-is optional (by default the order of appearance among the frames of the same
-exposure). Unknown top-level keys are kept in :attr:`CaptureManifest.extra`;
-unknown keys elsewhere are ignored.
+``{"file": str, "exposure_s": float, "repeat": int, "f_number": float, "iso":
+float}`` where ``exposure_s`` is optional (read from the image's EXIF
+ExposureTime when absent), ``repeat`` is optional (by default the order of
+appearance among the frames of the same exposure) and ``f_number``, ``iso``
+are optional (read from the EXIF FNumber and ISO speed when absent).
+Unknown top-level keys are kept in :attr:`CaptureManifest.extra`; unknown keys
+elsewhere are ignored.
+
+Black level
+    ``black_level`` or ``dark`` (not both). Without either, the black level of
+    a raw frame set (``.dng``, ``.cr2``, ``.nef``, ``.arw``, ... read through
+    LibRaw, :mod:`photoquant.io.raw`) is the files' own, and that of other
+    images is 0: it is *not* guessed from the data, because nothing in a
+    bracket of an unknown scene tells the darkest value apart from the offset
+    (a scene without a black object has no pixel at the black level). A black
+    level at or above a channel's saturation level, or above the data (more
+    than half of the longest exposure's values at or below it), is refused.
+
+Exposure basis
+    With ``"auto"``, a frame set whose frames all know their f-number and ISO
+    speed (manifest or EXIF) and whose f-number or ISO varies is calibrated in
+    *exposure value* ``t · (S / 100) / N²`` (seconds at ISO 100 and f/1) rather
+    than exposure time; otherwise in time. ``"exposure value"`` forces it for
+    every frame set (each frame then needs its f-number and ISO), ``"time"``
+    ignores aperture and ISO. The stack records the basis it used
+    (:attr:`photoquant.stack.ExposureStack.exposure_basis`).
 
 A manifest is untrusted input: every file must resolve (symbolic links
 followed) inside the manifest's folder unless ``allow_outside=True``, and
 nothing is ever unpickled.
+
+Reading the frames themselves is :mod:`photoquant.io.frames`
+(:func:`~photoquant.io.frames.load_stack`, re-exported here so that
+``from photoquant.io.manifest import load_stack`` keeps working).
 """
 
 from __future__ import annotations
@@ -45,22 +77,17 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections import deque
-from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
-from photoquant._checks import check_workers
 from photoquant._json import to_json_value
 from photoquant.errors import ManifestError
 from photoquant.io.atomic import write_text_atomic
-from photoquant.io.images import exif_exposure_time, read_image
-from photoquant.stack import ExposureStack
+from photoquant.io.frames import _group_by_exposure, load_stack
 
 __all__ = [
     "CAPTURE_FORMAT",
@@ -88,8 +115,12 @@ _KNOWN_KEYS = frozenset(
         "scene",
         "correspondences",
         "saturation_level",
+        "black_level",
+        "dark",
+        "exposure_basis",
     }
 )
+EXPOSURE_BASIS_CHOICES = ("auto", "time", "exposure value")
 
 PathLike = str | os.PathLike[str]
 
@@ -107,11 +138,16 @@ class FrameRef:
     repeat : int or None
         Index among the repeats of the same exposure; ``None`` means "order of
         appearance".
+    f_number, iso : float or None
+        Aperture f-number and ISO speed; ``None`` means "read it from the EXIF
+        data, if any".
     """
 
     file: Path
     exposure_s: float | None
     repeat: int | None
+    f_number: float | None = None
+    iso: float | None = None
 
 
 @dataclass(frozen=True)
@@ -154,6 +190,12 @@ class CaptureManifest:
         Per-channel clipping level, if given.
     extra : dict
         Unknown top-level keys, kept as read.
+    black_level : tuple of float or None
+        Per-channel black level, if given.
+    dark : FrameSetRef or None
+        Dark frames, if given (the black level is their mean per channel).
+    exposure_basis : {"auto", "time", "exposure value"}
+        How exposures are measured (see the module docstring).
     """
 
     path: Path
@@ -167,6 +209,9 @@ class CaptureManifest:
     correspondences: tuple[np.ndarray, ...]
     saturation_level: tuple[int, ...] | None
     extra: dict[str, Any] = field(default_factory=dict)
+    black_level: tuple[float, ...] | None = None
+    dark: FrameSetRef | None = None
+    exposure_basis: str = "auto"
 
 
 # --------------------------------------------------------------------------- parsing
@@ -216,6 +261,18 @@ class _Parser:
         scene = self.parse_optional_frameset(data, "scene")
         tracks = self.parse_tracks(data.get("correspondences"), len(views))
         saturation = self.parse_saturation(data.get("saturation_level"), bit_depth, channels)
+        black = self.parse_black_level(data.get("black_level"), bit_depth, channels, saturation)
+        dark = self.parse_optional_frameset(data, "dark", group=False)
+        if black is not None and dark is not None:
+            raise self.error(
+                "give either `black_level` or `dark` frames, not both "
+                "(the dark frames would estimate the black level the manifest states)"
+            )
+        basis = data.get("exposure_basis", "auto")
+        if basis not in EXPOSURE_BASIS_CHOICES:
+            raise self.error(
+                f"`exposure_basis` must be one of {list(EXPOSURE_BASIS_CHOICES)}, got {basis!r}"
+            )
         extra = {k: v for k, v in data.items() if k not in _KNOWN_KEYS}
         return CaptureManifest(
             path=self.manifest_path,
@@ -229,6 +286,9 @@ class _Parser:
             correspondences=tracks,
             saturation_level=saturation,
             extra=extra,
+            black_level=black,
+            dark=dark,
+            exposure_basis=basis,
         )
 
     def check_format(self, data: dict[str, Any]) -> None:
@@ -271,11 +331,13 @@ class _Parser:
 
     # -- frames ------------------------------------------------------------------
 
-    def parse_optional_frameset(self, data: dict[str, Any], key: str) -> FrameSetRef | None:
+    def parse_optional_frameset(
+        self, data: dict[str, Any], key: str, *, group: bool = True
+    ) -> FrameSetRef | None:
         value = data.get(key)
-        return None if value is None else self.parse_frameset(value, key)
+        return None if value is None else self.parse_frameset(value, key, group=group)
 
-    def parse_frameset(self, value: Any, where: str) -> FrameSetRef:
+    def parse_frameset(self, value: Any, where: str, *, group: bool = True) -> FrameSetRef:
         if not isinstance(value, dict):
             raise self.error(f"`{where}` must be an object with `frames`, got {_describe(value)}")
         frames_raw = value.get("frames")
@@ -294,8 +356,9 @@ class _Parser:
                     f"(frames[{seen[frame.file]}] and frames[{i}])"
                 )
             seen[frame.file] = i
-        if all(f.exposure_s is not None for f in frames):
-            _group_by_exposure(frames, [f.exposure_s for f in frames], where, self.error)
+        given = [f.exposure_s for f in frames if f.exposure_s is not None]
+        if group and len(given) == len(frames):
+            _group_by_exposure(frames, given, where, self.error)
         return FrameSetRef(frames)
 
     def parse_frame(self, value: Any, where: str) -> FrameRef:
@@ -313,10 +376,17 @@ class _Parser:
         repeat = value.get("repeat")
         if repeat is not None and (not _is_int(repeat) or repeat < 0):
             raise self.error(f"`{where}.repeat` must be a non-negative integer, got {repeat!r}")
+        optics = {}
+        for key in ("f_number", "iso"):
+            v = value.get(key)
+            if v is not None and (not _is_number(v) or not math.isfinite(v) or v <= 0):
+                raise self.error(f"`{where}.{key}` must be a positive finite number, got {v!r}")
+            optics[key] = None if v is None else float(v)
         return FrameRef(
             file=file,
             exposure_s=None if exposure is None else float(exposure),
             repeat=repeat,
+            **optics,
         )
 
     def resolve_file(self, name: Any, where: str) -> Path:
@@ -414,6 +484,35 @@ class _Parser:
             )
         return tuple(value)
 
+    def parse_black_level(
+        self,
+        value: Any,
+        bit_depth: int,
+        channels: tuple[str, ...],
+        saturation: tuple[int, ...] | None,
+    ) -> tuple[float, ...] | None:
+        if value is None:
+            return None
+        c_max = 2**bit_depth - 1
+        values = [value] * len(channels) if _is_number(value) else value
+        if (
+            not isinstance(values, list)
+            or len(values) != len(channels)
+            or not all(_is_number(v) and math.isfinite(v) and 0 <= v <= c_max for v in values)
+        ):
+            raise self.error(
+                f"`black_level` must be a number or {len(channels)} numbers (one per channel "
+                f"{list(channels)}) from 0 to {c_max}, got {value!r}"
+            )
+        if saturation is not None:
+            for ch, (b, s) in enumerate(zip(values, saturation, strict=True)):
+                if b >= s:
+                    raise self.error(
+                        f"`black_level` {b:g} of channel {channels[ch]} is at or above its "
+                        f"`saturation_level` {s}: no value could carry light"
+                    )
+        return tuple(float(v) for v in values)
+
 
 def _json_type(value: Any) -> str:
     names = {dict: "object", list: "array", str: "string", bool: "boolean", type(None): "null"}
@@ -426,61 +525,6 @@ def _describe(value: Any) -> str:
     if isinstance(value, list | dict):
         return f"a JSON {_json_type(value)}"
     return repr(value)
-
-
-def _group_by_exposure(
-    frames: Sequence[FrameRef],
-    exposures: Sequence[float],
-    where: str,
-    error: Callable[[str], ManifestError],
-) -> dict[float, list[FrameRef]]:
-    """Group frames by exposure time and order each group by repeat index.
-
-    Frames with an explicit ``repeat`` take that slot; the others fill the free
-    slots in order of appearance. Every exposure must then have the same number
-    ``N`` of repeats, with indices ``0 .. N-1``.
-
-    Returns
-    -------
-    dict
-        Exposure time -> its frames in repeat order, by increasing exposure.
-    """
-    groups: dict[float, list[int]] = {}
-    for i, t in enumerate(exposures):
-        groups.setdefault(float(t), []).append(i)
-    counts = {t: len(idx) for t, idx in groups.items()}
-    if len(set(counts.values())) > 1:
-        detail = ", ".join(f"{t:g} s: {n}" for t, n in sorted(counts.items()))
-        raise error(
-            f"`{where}` must have the same number of repeats for every exposure, "
-            f"got frames per exposure {detail}"
-        )
-    ordered: dict[float, list[FrameRef]] = {}
-    for t in sorted(groups):
-        idx = groups[t]
-        n = len(idx)
-        slots: dict[int, int] = {}
-        for i in idx:
-            r = frames[i].repeat
-            if r is None:
-                continue
-            if r in slots:
-                raise error(
-                    f"`{where}` has two frames with exposure {t:g} s and repeat {r}: "
-                    f"{frames[slots[r]].file} and {frames[i].file}"
-                )
-            slots[r] = i
-        free = iter(r for r in range(n) if r not in slots)
-        for i in idx:
-            if frames[i].repeat is None:
-                slots[next(free)] = i
-        if sorted(slots) != list(range(n)):
-            raise error(
-                f"`{where}` repeat indices for exposure {t:g} s must be 0 to {n - 1}, "
-                f"got {sorted(slots)}"
-            )
-        ordered[t] = [frames[slots[r]] for r in range(n)]
-    return ordered
 
 
 # --------------------------------------------------------------------------- public API
@@ -599,147 +643,3 @@ def write_manifest(path: PathLike, data: Mapping[str, Any], *, allow_outside: bo
     except (TypeError, ValueError) as exc:
         raise parser.error(f"cannot be written as JSON: {exc}") from None
     write_text_atomic(path, text + "\n")
-
-
-def load_stack(
-    frameset: FrameSetRef,
-    manifest: CaptureManifest,
-    *,
-    progress: bool = False,
-    workers: int | None = None,
-) -> ExposureStack:
-    """Read the frames of a frame set into an :class:`~photoquant.stack.ExposureStack`.
-
-    Parameters
-    ----------
-    frameset : FrameSetRef
-        One of ``manifest.views``, ``manifest.irradiance`` or ``manifest.scene``.
-    manifest : CaptureManifest
-        Supplies the bit depth, channel names and saturation levels.
-    progress : bool
-        Whether to show a tqdm progress bar while reading.
-    workers : int, optional
-        Threads decoding images (OpenCV releases the GIL); every CPU by
-        default. The result, and the first error reported, do not depend on it.
-
-    Returns
-    -------
-    ExposureStack
-        Frames ``(N, K, H, W, C)`` by increasing exposure time; same
-        ``exposure_s`` means repeats, ordered by their ``repeat`` index.
-
-    Raises
-    ------
-    ManifestError
-        If a frame has neither ``exposure_s`` nor an EXIF ExposureTime, the
-        exposures have different numbers of repeats, an image's shape or
-        channel count differs, its type does not match ``bit_depth`` (e.g. a
-        16-bit file in an 8-bit manifest), or a value exceeds
-        ``2**bit_depth - 1``. Every message names the file concerned.
-    ImageReadError
-        If an image file cannot be read.
-    """
-    where = "frame set"
-    for name, candidate in [(f"views[{i}]", v) for i, v in enumerate(manifest.views)] + [
-        ("irradiance", manifest.irradiance),
-        ("scene", manifest.scene),
-    ]:
-        if candidate == frameset:
-            where = name
-            break
-
-    def error(message: str) -> ManifestError:
-        return ManifestError(f"manifest {manifest.path}: {message}")
-
-    exposures = []
-    for frame in frameset.frames:
-        t = frame.exposure_s if frame.exposure_s is not None else exif_exposure_time(frame.file)
-        if t is None:
-            raise error(
-                f"frame {frame.file} has no `exposure_s` in the manifest and no EXIF "
-                "ExposureTime in the image"
-            )
-        exposures.append(t)
-    groups = _group_by_exposure(frameset.frames, exposures, where, error)
-    times = list(groups)
-    n_rep = len(groups[times[0]])
-
-    bit_depth = manifest.bit_depth
-    want_dtype = np.dtype(np.uint8 if bit_depth == 8 else np.uint16)
-    c_max = 2**bit_depth - 1
-    n_channels = len(manifest.channels)
-    stack: np.ndarray | None = None
-    first: Path | None = None
-    jobs = [(n, k, groups[t][n]) for k, t in enumerate(times) for n in range(n_rep)]
-    n_workers = min(check_workers(workers), len(jobs))
-    with (
-        ThreadPoolExecutor(max_workers=n_workers) as pool,
-        tqdm(total=len(jobs), desc=f"reading {where}", unit="frame", disable=not progress) as bar,
-    ):
-        # decoded in parallel, a bounded window ahead; checked in manifest order
-        window = 4 * n_workers
-        pending = deque(pool.submit(read_image, job[2].file) for job in jobs[:window])
-        try:
-            for i, (n, k, frame) in enumerate(jobs):
-                img = pending.popleft().result()  # the first error in manifest order wins
-                if i + window < len(jobs):
-                    pending.append(pool.submit(read_image, jobs[i + window][2].file))
-                bar.update()
-                if img.dtype != want_dtype:
-                    raise error(_dtype_message(frame.file, img.dtype, bit_depth))
-                if img.shape[2] != n_channels:
-                    raise error(
-                        f"{frame.file} has {img.shape[2]} channel(s) (shape {img.shape}) but the "
-                        f"manifest names {n_channels} channels {list(manifest.channels)}"
-                    )
-                if stack is None:
-                    stack = np.empty((n_rep, len(times), *img.shape), dtype=want_dtype)
-                    first = frame.file
-                elif img.shape != stack.shape[2:]:
-                    raise error(
-                        f"{frame.file} has shape {img.shape} but {first} has shape {stack.shape[2:]}"
-                    )
-                top = int(img.max())
-                if top > c_max:
-                    raise error(
-                        f"{frame.file} holds values up to {top}, above {c_max} = 2**{bit_depth} - 1; "
-                        f"is `bit_depth` {bit_depth} mislabelled?"
-                    )
-                stack[n, k] = img
-        finally:
-            for future in pending:  # nothing left to read after an error
-                future.cancel()
-    assert stack is not None  # frame sets are never empty
-    if manifest.white_roi is not None and frameset == manifest.views[0]:
-        x0, y0, x1, y1 = manifest.white_roi
-        h, w = stack.shape[2:4]
-        if x1 > w or y1 > h:
-            raise error(
-                f"`white_roi` {list(manifest.white_roi)} extends beyond the {w}x{h} (WxH) "
-                f"images of views[0]"
-            )
-    return ExposureStack(
-        frames=stack,
-        exposure_s=np.asarray(times, dtype=np.float64),
-        bit_depth=bit_depth,
-        saturation_level=(
-            None
-            if manifest.saturation_level is None
-            else np.asarray(manifest.saturation_level, dtype=np.int64)
-        ),
-        channels=manifest.channels,
-    )
-
-
-def _dtype_message(file: Path, dtype: np.dtype, bit_depth: int) -> str:
-    want = "uint8" if bit_depth == 8 else "uint16"
-    if dtype.kind == "f":
-        return (
-            f"{file} holds {dtype} values but capture frames must be integers "
-            f"({want} for bit_depth {bit_depth})"
-        )
-    bits = 8 * dtype.itemsize
-    return (
-        f"{file} is a {bits}-bit image ({dtype}) but the manifest says bit_depth {bit_depth}, "
-        f"which needs {want} files; the manifest or the file is mislabelled"
-    )

@@ -1,0 +1,447 @@
+"""Loading a manifest's frame sets into exposure stacks (threaded decoding).
+
+:func:`load_stack` reads the image files of one frame set of a
+:class:`~photoquant.io.manifest.CaptureManifest`, checks each against the
+manifest (bit depth, channel count, shape) and returns an
+:class:`~photoquant.stack.ExposureStack`. Decoding runs on a thread pool, a
+bounded window ahead of the checks, which run in manifest order so that the
+first error reported does not depend on the number of threads.
+
+Files with a raw extension (:data:`photoquant.io.raw.RAW_EXTENSIONS`) are
+read through LibRaw as linear half-size R, G, B data
+(:func:`photoquant.io.raw.read_raw`); the stack then takes their black and
+white levels. Exposure times, f-numbers and ISO speeds missing from the
+manifest are read from the files' headers (:mod:`photoquant.io.exif`, and
+LibRaw's metadata for raw files); :func:`black_level_from_dark` estimates the
+black level from the manifest's ``dark`` frames.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from tqdm import tqdm
+
+from photoquant._checks import check_workers
+from photoquant.errors import InputError, ManifestError
+from photoquant.io.exif import ExposureMetadata, read_exposure_metadata
+from photoquant.io.images import read_image
+from photoquant.io.raw import RawFrame, is_raw_file, read_raw, read_raw_metadata
+from photoquant.stack import ExposureStack
+
+if TYPE_CHECKING:
+    from photoquant.io.manifest import CaptureManifest, FrameRef, FrameSetRef
+
+__all__ = ["load_stack", "black_level_from_dark", "exposure_value", "RAW_BLACK_TOLERANCE_DN"]
+
+#: Largest spread (DN) of the black levels of a frame set's raw files that is
+#: averaged rather than refused (LibRaw estimates some cameras' black level per
+#: file from masked pixels, which varies by a fraction of a DN).
+RAW_BLACK_TOLERANCE_DN = 1.0
+#: Reference of exposure values: ISO speed 100 at f/1.
+_EV_ISO, _EV_F_NUMBER = 100.0, 1.0
+
+
+def exposure_value(t: float, f_number: float, iso: float) -> float:
+    """Relative exposure value ``t · (S / 100) / N²``: seconds at ISO 100 and f/1.
+
+    The light a pixel collects per unit scene radiance is proportional to
+    ``t / N²`` (the aperture's area goes as ``1/N²``), and the digital value
+    per collected photon to the gain, proportional to the ISO speed ``S``
+    [ISO12232]_; their product ranks frames of a bracket whose aperture or
+    ISO varies exactly as exposure time ranks those of a fixed one.
+
+    References
+    ----------
+    .. [ISO12232] ISO 12232:2019, *Photography — Digital still cameras —
+       Determination of exposure index, ISO speed ratings...*; Ray, S. F.,
+       *Applied Photographic Optics*, 3rd ed., §22 (exposure ∝ t/N²).
+    """
+    return t * (iso / _EV_ISO) * (_EV_F_NUMBER / f_number) ** 2
+
+
+def _group_by_exposure(
+    frames: Sequence[FrameRef],
+    exposures: Sequence[float],
+    where: str,
+    error: Callable[[str], ManifestError],
+) -> dict[float, list[FrameRef]]:
+    """Group frames by exposure time and order each group by repeat index.
+
+    Frames with an explicit ``repeat`` take that slot; the others fill the free
+    slots in order of appearance. Every exposure must then have the same number
+    ``N`` of repeats, with indices ``0 .. N-1``.
+
+    Returns
+    -------
+    dict
+        Exposure time -> its frames in repeat order, by increasing exposure.
+    """
+    groups: dict[float, list[int]] = {}
+    for i, t in enumerate(exposures):
+        groups.setdefault(float(t), []).append(i)
+    counts = {t: len(idx) for t, idx in groups.items()}
+    if len(set(counts.values())) > 1:
+        detail = ", ".join(f"{t:g} s: {n}" for t, n in sorted(counts.items()))
+        raise error(
+            f"`{where}` must have the same number of repeats for every exposure, "
+            f"got frames per exposure {detail}"
+        )
+    ordered: dict[float, list[FrameRef]] = {}
+    for t in sorted(groups):
+        idx = groups[t]
+        n = len(idx)
+        slots: dict[int, int] = {}
+        for i in idx:
+            r = frames[i].repeat
+            if r is None:
+                continue
+            if r in slots:
+                raise error(
+                    f"`{where}` has two frames with exposure {t:g} s and repeat {r}: "
+                    f"{frames[slots[r]].file} and {frames[i].file}"
+                )
+            slots[r] = i
+        free = iter(r for r in range(n) if r not in slots)
+        for i in idx:
+            if frames[i].repeat is None:
+                slots[next(free)] = i
+        if sorted(slots) != list(range(n)):
+            raise error(
+                f"`{where}` repeat indices for exposure {t:g} s must be 0 to {n - 1}, "
+                f"got {sorted(slots)}"
+            )
+        ordered[t] = [frames[slots[r]] for r in range(n)]
+    return ordered
+
+
+def _frameset_name(frameset: FrameSetRef, manifest: CaptureManifest) -> str:
+    for name, candidate in [(f"views[{i}]", v) for i, v in enumerate(manifest.views)] + [
+        ("irradiance", manifest.irradiance),
+        ("scene", manifest.scene),
+        ("dark", manifest.dark),
+    ]:
+        if candidate == frameset:
+            return name
+    return "frame set"
+
+
+def _metadata(frame: FrameRef, need_optics: bool) -> ExposureMetadata:
+    """The frame's exposure time, f-number and ISO: manifest first, then the file's header."""
+    t, f, iso = frame.exposure_s, frame.f_number, frame.iso
+    if t is None or (need_optics and (f is None or iso is None)):
+        meta = read_exposure_metadata(frame.file)
+        if is_raw_file(frame.file) and None in (meta.exposure_time_s, meta.f_number, meta.iso):
+            lib = read_raw_metadata(frame.file)
+            meta = ExposureMetadata(
+                meta.exposure_time_s or lib.exposure_time_s,
+                meta.f_number or lib.f_number,
+                meta.iso or lib.iso,
+            )
+        t = meta.exposure_time_s if t is None else t
+        f = meta.f_number if f is None else f
+        iso = meta.iso if iso is None else iso
+    return ExposureMetadata(t, f, iso)
+
+
+def _exposures(
+    frameset: FrameSetRef,
+    manifest: CaptureManifest,
+    error: Callable[[str], ManifestError],
+) -> tuple[list[float], str]:
+    """Per frame, the exposure (time or exposure value) and the basis used."""
+    basis = manifest.exposure_basis
+    metas = [_metadata(frame, need_optics=basis != "time") for frame in frameset.frames]
+    for frame, meta in zip(frameset.frames, metas, strict=True):
+        if meta.exposure_time_s is None:
+            raise error(
+                f"frame {frame.file} has no `exposure_s` in the manifest and no EXIF "
+                "ExposureTime in the image"
+            )
+    times = [float(m.exposure_time_s) for m in metas]  # type: ignore[arg-type]
+    if basis == "time":
+        return times, "time"
+    known = [m.f_number is not None and m.iso is not None for m in metas]
+    if basis == "auto":
+        optics = {(m.f_number, m.iso) for m, k in zip(metas, known, strict=True) if k}
+        if len(optics) <= 1:
+            return times, "time"  # fixed aperture and ISO (or unknown): time ranks the frames
+    for frame, k in zip(frameset.frames, known, strict=True):
+        if not k:
+            why = (
+                '`exposure_basis` is "exposure value"'
+                if basis != "auto"
+                else "the f-number or ISO speed varies across the frame set"
+            )
+            raise error(
+                f"frame {frame.file} records no f-number or no ISO speed (EXIF FNumber, "
+                f"ISOSpeedRatings), but {why}; give `f_number` and `iso` in the manifest, "
+                f'or `exposure_basis: "time"` if they do not vary'
+            )
+    values = [
+        exposure_value(t, m.f_number, m.iso)  # type: ignore[arg-type]
+        for t, m in zip(times, metas, strict=True)
+    ]
+    return values, "exposure value"
+
+
+def _read_frames(
+    jobs: Sequence[FrameRef],
+    manifest: CaptureManifest,
+    where: str,
+    error: Callable[[str], ManifestError],
+    *,
+    progress: bool,
+    workers: int | None,
+) -> tuple[np.ndarray, list[RawFrame | None]]:
+    """Decode frames in parallel and check them in order: ``(M, H, W, C)`` and raw levels."""
+    bit_depth = manifest.bit_depth
+    want_dtype = np.dtype(np.uint8 if bit_depth == 8 else np.uint16)
+    c_max = 2**bit_depth - 1
+    n_channels = len(manifest.channels)
+    raws = [is_raw_file(f.file) for f in jobs]
+    if any(raws) and not all(raws):
+        raw_file = jobs[raws.index(True)].file
+        other = jobs[raws.index(False)].file
+        raise error(
+            f"`{where}` mixes raw files ({raw_file}) and other images ({other}); a frame set "
+            "is one kind of data"
+        )
+    out: np.ndarray | None = None
+    first: Path | None = None
+    levels: list[RawFrame | None] = []
+
+    def decode(frame: FrameRef) -> np.ndarray | RawFrame:
+        return read_raw(frame.file) if is_raw_file(frame.file) else read_image(frame.file)
+
+    n_workers = min(check_workers(workers), len(jobs))
+    with (
+        ThreadPoolExecutor(max_workers=n_workers) as pool,
+        tqdm(total=len(jobs), desc=f"reading {where}", unit="frame", disable=not progress) as bar,
+    ):
+        # decoded in parallel, a bounded window ahead; checked in manifest order
+        window = 4 * n_workers
+        pending = deque(pool.submit(decode, frame) for frame in jobs[:window])
+        try:
+            for i, frame in enumerate(jobs):
+                got = pending.popleft().result()  # the first error in manifest order wins
+                if i + window < len(jobs):
+                    pending.append(pool.submit(decode, jobs[i + window]))
+                bar.update()
+                raw = got if isinstance(got, RawFrame) else None
+                img = raw.image if raw is not None else got
+                assert isinstance(img, np.ndarray)
+                levels.append(raw)
+                if img.dtype != want_dtype:
+                    raise error(_dtype_message(frame.file, img.dtype, bit_depth, raw))
+                if img.shape[2] != n_channels:
+                    raise error(
+                        f"{frame.file} has {img.shape[2]} channel(s) (shape {img.shape}) but the "
+                        f"manifest names {n_channels} channels {list(manifest.channels)}"
+                    )
+                if out is None:
+                    out = np.empty((len(jobs), *img.shape), dtype=want_dtype)
+                    first = frame.file
+                elif img.shape != out.shape[1:]:
+                    raise error(
+                        f"{frame.file} has shape {img.shape} but {first} has shape {out.shape[1:]}"
+                    )
+                top = int(img.max())
+                if top > c_max:
+                    hint = (
+                        f"its white level is {int(raw.white_level.max())}"
+                        if raw is not None
+                        else f"is `bit_depth` {bit_depth} mislabelled?"
+                    )
+                    raise error(
+                        f"{frame.file} holds values up to {top}, above {c_max} = 2**{bit_depth} - 1; "
+                        f"{hint}"
+                    )
+                out[i] = img
+        finally:
+            for future in pending:  # nothing left to read after an error
+                future.cancel()
+    assert out is not None  # frame sets are never empty
+    return out, levels
+
+
+def _raw_levels(
+    jobs: Sequence[FrameRef],
+    levels: Sequence[RawFrame | None],
+    error: Callable[[str], ManifestError],
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The common black and white levels of a frame set's raw files (None: not raw)."""
+    raws = [r for r in levels if r is not None]
+    if not raws:
+        return None
+    blacks = np.stack([r.black_level for r in raws])
+    spread = blacks.max(axis=0) - blacks.min(axis=0)
+    if np.any(spread > RAW_BLACK_TOLERANCE_DN):
+        ch = int(np.argmax(spread))
+        lo, hi = int(np.argmin(blacks[:, ch])), int(np.argmax(blacks[:, ch]))
+        raise error(
+            f"raw files disagree on the black level of channel {ch}: {blacks[lo, ch]:g} in "
+            f"{jobs[lo].file} and {blacks[hi, ch]:g} in {jobs[hi].file}; give `black_level` "
+            "or `dark` frames in the manifest"
+        )
+    whites = np.stack([r.white_level for r in raws]).min(axis=0)
+    return blacks.mean(axis=0), whites
+
+
+def black_level_from_dark(
+    manifest: CaptureManifest, *, progress: bool = False, workers: int | None = None
+) -> np.ndarray | None:
+    """The black level estimated from the manifest's ``dark`` frames (None without them).
+
+    Parameters
+    ----------
+    manifest : CaptureManifest
+        Its ``dark`` frame set: frames taken with no light reaching the sensor
+        (lens capped), of the same size and kind as the others.
+
+    Returns
+    -------
+    ndarray, shape (C,), float64, or None
+        The mean of every value of every dark frame, per channel. The mean
+        (not the median) is the offset the signal sits on, dark current at
+        the dark frames' exposure included; its standard error is
+        ``σ_read / sqrt(number of values)``, far below one DN.
+
+    Raises
+    ------
+    ManifestError
+        If a dark frame does not match the manifest (see :func:`load_stack`).
+    ImageReadError
+        If a dark frame cannot be read.
+    """
+    if manifest.dark is None:
+        return None
+
+    def error(message: str) -> ManifestError:
+        return ManifestError(f"manifest {manifest.path}: {message}")
+
+    frames, _ = _read_frames(
+        manifest.dark.frames, manifest, "dark", error, progress=progress, workers=workers
+    )
+    return frames.reshape(-1, frames.shape[-1]).mean(axis=0, dtype=np.float64)
+
+
+def load_stack(
+    frameset: FrameSetRef,
+    manifest: CaptureManifest,
+    *,
+    progress: bool = False,
+    workers: int | None = None,
+    black_level: np.ndarray | None = None,
+) -> ExposureStack:
+    """Read the frames of a frame set into an :class:`~photoquant.stack.ExposureStack`.
+
+    Parameters
+    ----------
+    frameset : FrameSetRef
+        One of ``manifest.views``, ``manifest.irradiance`` or ``manifest.scene``.
+    manifest : CaptureManifest
+        Supplies the bit depth, channel names, saturation and black levels
+        and the exposure basis.
+    progress : bool
+        Whether to show a tqdm progress bar while reading.
+    workers : int, optional
+        Threads decoding images (OpenCV releases the GIL); every CPU by
+        default. The result, and the first error reported, do not depend on it.
+    black_level : array_like (C,), optional
+        The black level, when the caller has it already (e.g. from
+        :func:`black_level_from_dark` once for every frame set).
+
+    Returns
+    -------
+    ExposureStack
+        Frames ``(N, K, H, W, C)`` by increasing exposure; same exposure
+        means repeats, ordered by their ``repeat`` index. Its black level is,
+        first found: ``black_level``, the manifest's ``black_level``, the mean
+        of its ``dark`` frames, the raw files' own, 0. Its saturation level:
+        the manifest's, the raw files' white level, detected from the data.
+        Its ``exposure_basis`` says whether ``exposure_s`` holds times or
+        exposure values (see :mod:`photoquant.io.manifest`).
+
+    Raises
+    ------
+    ManifestError
+        If a frame has neither ``exposure_s`` nor an EXIF ExposureTime, the
+        exposures have different numbers of repeats, an image's shape or
+        channel count differs, its type does not match ``bit_depth`` (e.g. a
+        16-bit file in an 8-bit manifest), a value exceeds
+        ``2**bit_depth - 1``, the exposure basis needs an f-number or ISO
+        speed a frame lacks, or the black level lies at or above the
+        saturation level or above the data. Every message names the file or
+        the frame set concerned.
+    ImageReadError
+        If an image file cannot be read (a raw file LibRaw cannot decode
+        included).
+    """
+    where = _frameset_name(frameset, manifest)
+
+    def error(message: str) -> ManifestError:
+        return ManifestError(f"manifest {manifest.path}: {message}")
+
+    exposures, basis = _exposures(frameset, manifest, error)
+    groups = _group_by_exposure(frameset.frames, exposures, where, error)
+    times = list(groups)
+    n_rep = len(groups[times[0]])
+    jobs = [groups[t][n] for t in times for n in range(n_rep)]
+    flat, levels = _read_frames(jobs, manifest, where, error, progress=progress, workers=workers)
+    stack = np.ascontiguousarray(flat.reshape(len(times), n_rep, *flat.shape[1:]).swapaxes(0, 1))
+    if manifest.white_roi is not None and frameset == manifest.views[0]:
+        x0, y0, x1, y1 = manifest.white_roi
+        h, w = stack.shape[2:4]
+        if x1 > w or y1 > h:
+            raise error(
+                f"`white_roi` {list(manifest.white_roi)} extends beyond the {w}x{h} (WxH) "
+                f"images of views[0]"
+            )
+    raw = _raw_levels(jobs, levels, error)
+    saturation = None if raw is None else raw[1]
+    if manifest.saturation_level is not None:
+        saturation = np.asarray(manifest.saturation_level, dtype=np.int64)
+    if black_level is None and manifest.black_level is not None:
+        black_level = np.asarray(manifest.black_level, dtype=np.float64)
+    if black_level is None and manifest.dark is not None:
+        black_level = black_level_from_dark(manifest, workers=workers)
+    if black_level is None and raw is not None:
+        black_level = raw[0]
+    try:
+        return ExposureStack(
+            frames=stack,
+            exposure_s=np.asarray(times, dtype=np.float64),
+            bit_depth=manifest.bit_depth,
+            saturation_level=saturation,
+            channels=manifest.channels,
+            black_level=black_level,
+            exposure_basis=basis,
+        )
+    except InputError as exc:
+        raise error(f"`{where}`: {exc}") from None
+
+
+def _dtype_message(file: Path, dtype: np.dtype, bit_depth: int, raw: RawFrame | None) -> str:
+    want = "uint8" if bit_depth == 8 else "uint16"
+    if raw is not None:
+        need = max(9, int(raw.white_level.max()).bit_length())
+        return (
+            f"{file} is a raw file (16-bit values, white level {int(raw.white_level.max())}) "
+            f"but the manifest says bit_depth {bit_depth}; raw frames need bit_depth >= {need}"
+        )
+    if dtype.kind == "f":
+        return (
+            f"{file} holds {dtype} values but capture frames must be integers "
+            f"({want} for bit_depth {bit_depth})"
+        )
+    bits = 8 * dtype.itemsize
+    return (
+        f"{file} is a {bits}-bit image ({dtype}) but the manifest says bit_depth {bit_depth}, "
+        f"which needs {want} files; the manifest or the file is mislabelled"
+    )
