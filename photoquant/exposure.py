@@ -776,7 +776,7 @@ def fit_affine_shutter(
     -------
     (list of ExposureRefinement, ShutterFit)
     """
-    from scipy.optimize import minimize_scalar  # type: ignore[import-untyped]
+    from scipy.optimize import minimize_scalar
 
     xs = [np.log(r.exposure_s[r.refined]) for r in refs]
     tn = [r.nominal_s[r.refined] for r in refs]

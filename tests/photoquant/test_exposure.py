@@ -189,7 +189,7 @@ def test_refined_scene_times_restore_the_test_scene_error():
     labelled with its nominal times and refined against the camera's response, is measured
     within 10 % of the error it has with its exact times (the perfectly calibrated camera,
     so that only the exposure times differ)."""
-    from photoquant.correct import correct
+    from photoquant.correction import correct
     from pqsim.analytic import scene_test_hdr
     from pqsim.capture_set import DEFAULT_SCENE_EXPOSURES_S
     from validation.metrics import relative_error_eq8
@@ -205,10 +205,10 @@ def test_refined_scene_times_restore_the_test_scene_error():
     nominal = ExposureStack(cap.frames, t_nom, bit_depth=cam.bit_depth, channels=cam.channels)
     ref = refine_exposure_times(
         nominal,
-        model.response_levels,
-        model.log_inverse_response,
-        model.saturation_level,
-        valid_min=model.response_valid_min,
+        model.response.levels,
+        model.response.log_inverse_response,
+        model.response.saturation_level,
+        valid_min=model.response.valid_min,
     )
 
     def error(stack):
