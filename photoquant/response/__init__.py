@@ -9,6 +9,8 @@ step's registry; :func:`recover_response` dispatches.
 Methods
 -------
 - ``"Debevec 1997"``: :func:`characterise_response_Debevec1997` (eq. 7 of the paper).
+- ``"Robertson 2003"``: :func:`characterise_response_Robertson2003`, iterative maximum likelihood.
+- ``"Gamma"``: :func:`characterise_response_Gamma`, a one-parameter power law (baseline).
 """
 
 from __future__ import annotations
@@ -30,7 +32,12 @@ from photoquant.response.debevec1997 import (
     select_samples_histogram,
     select_samples_random,
 )
+from photoquant.response.gamma import GammaResponseOptions, characterise_response_Gamma
 from photoquant.response.model import ResponseModel
+from photoquant.response.robertson2003 import (
+    RobertsonResponseOptions,
+    characterise_response_Robertson2003,
+)
 from photoquant.stack import ExposureStack
 
 __all__ = [
@@ -38,10 +45,14 @@ __all__ = [
     "RESPONSE_METHODS",
     "SAMPLING_METHODS",
     "DebevecResponseOptions",
+    "GammaResponseOptions",
     "ResponseModel",
     "ResponseRecovery",
+    "RobertsonResponseOptions",
     "camera_response_Debevec1997",
     "characterise_response_Debevec1997",
+    "characterise_response_Gamma",
+    "characterise_response_Robertson2003",
     "recover_response",
     "fit_response",
     "response_levels",
@@ -60,6 +71,28 @@ RESPONSE_METHODS.add(
         options=DebevecResponseOptions,
         model=ResponseModel,
         reference="Debevec & Malik 1997, doi:10.1145/258734.258884",
+    ),
+    replace=True,
+)
+RESPONSE_METHODS.add(
+    Method(
+        "response",
+        "Robertson 2003",
+        characterise_response_Robertson2003,
+        options=RobertsonResponseOptions,
+        model=ResponseModel,
+        reference="Robertson, Borman & Stevenson 2003, doi:10.1117/1.1557695",
+    ),
+    replace=True,
+)
+RESPONSE_METHODS.add(
+    Method(
+        "response",
+        "Gamma",
+        characterise_response_Gamma,
+        options=GammaResponseOptions,
+        model=ResponseModel,
+        reference="one-parameter power law f(E) = E^(1/gamma) (Mann & Picard 1995)",
     ),
     replace=True,
 )
