@@ -10,6 +10,7 @@ Methods
 -------
 - ``"Debevec 1997"``: :func:`characterise_response_Debevec1997` (eq. 7 of the paper).
 - ``"Robertson 2003"``: :func:`characterise_response_Robertson2003`, iterative maximum likelihood.
+- ``"Mitsunaga-Nayar 1999"``: :func:`characterise_response_MitsunagaNayar1999`, a polynomial.
 - ``"Gamma"``: :func:`characterise_response_Gamma`, a one-parameter power law (baseline).
 """
 
@@ -33,6 +34,10 @@ from photoquant.response.debevec1997 import (
     select_samples_random,
 )
 from photoquant.response.gamma import GammaResponseOptions, characterise_response_Gamma
+from photoquant.response.mitsunaga1999 import (
+    MitsunagaNayarResponseOptions,
+    characterise_response_MitsunagaNayar1999,
+)
 from photoquant.response.model import ResponseModel
 from photoquant.response.robertson2003 import (
     RobertsonResponseOptions,
@@ -46,12 +51,14 @@ __all__ = [
     "SAMPLING_METHODS",
     "DebevecResponseOptions",
     "GammaResponseOptions",
+    "MitsunagaNayarResponseOptions",
     "ResponseModel",
     "ResponseRecovery",
     "RobertsonResponseOptions",
     "camera_response_Debevec1997",
     "characterise_response_Debevec1997",
     "characterise_response_Gamma",
+    "characterise_response_MitsunagaNayar1999",
     "characterise_response_Robertson2003",
     "recover_response",
     "fit_response",
@@ -82,6 +89,17 @@ RESPONSE_METHODS.add(
         options=RobertsonResponseOptions,
         model=ResponseModel,
         reference="Robertson, Borman & Stevenson 2003, doi:10.1117/1.1557695",
+    ),
+    replace=True,
+)
+RESPONSE_METHODS.add(
+    Method(
+        "response",
+        "Mitsunaga-Nayar 1999",
+        characterise_response_MitsunagaNayar1999,
+        options=MitsunagaNayarResponseOptions,
+        model=ResponseModel,
+        reference="Mitsunaga & Nayar 1999, doi:10.1109/CVPR.1999.786966",
     ),
     replace=True,
 )
