@@ -11,6 +11,7 @@ Methods
 - ``"Debevec 1997"``: :func:`characterise_response_Debevec1997` (eq. 7 of the paper).
 - ``"Robertson 2003"``: :func:`characterise_response_Robertson2003`, iterative maximum likelihood.
 - ``"Mitsunaga-Nayar 1999"``: :func:`characterise_response_MitsunagaNayar1999`, a polynomial.
+- ``"EMoR 2004"``: :func:`characterise_response_EMoR2004`, Grossberg & Nayar's principal components.
 - ``"Gamma"``: :func:`characterise_response_Gamma`, a one-parameter power law (baseline).
 """
 
@@ -33,6 +34,7 @@ from photoquant.response.debevec1997 import (
     select_samples_histogram,
     select_samples_random,
 )
+from photoquant.response.emor2004 import EMoRResponseOptions, characterise_response_EMoR2004
 from photoquant.response.gamma import GammaResponseOptions, characterise_response_Gamma
 from photoquant.response.mitsunaga1999 import (
     MitsunagaNayarResponseOptions,
@@ -50,6 +52,7 @@ __all__ = [
     "RESPONSE_METHODS",
     "SAMPLING_METHODS",
     "DebevecResponseOptions",
+    "EMoRResponseOptions",
     "GammaResponseOptions",
     "MitsunagaNayarResponseOptions",
     "ResponseModel",
@@ -57,6 +60,7 @@ __all__ = [
     "RobertsonResponseOptions",
     "camera_response_Debevec1997",
     "characterise_response_Debevec1997",
+    "characterise_response_EMoR2004",
     "characterise_response_Gamma",
     "characterise_response_MitsunagaNayar1999",
     "characterise_response_Robertson2003",
@@ -100,6 +104,17 @@ RESPONSE_METHODS.add(
         options=MitsunagaNayarResponseOptions,
         model=ResponseModel,
         reference="Mitsunaga & Nayar 1999, doi:10.1109/CVPR.1999.786966",
+    ),
+    replace=True,
+)
+RESPONSE_METHODS.add(
+    Method(
+        "response",
+        "EMoR 2004",
+        characterise_response_EMoR2004,
+        options=EMoRResponseOptions,
+        model=ResponseModel,
+        reference="Grossberg & Nayar 2004, doi:10.1109/TPAMI.2004.88",
     ),
     replace=True,
 )

@@ -291,7 +291,7 @@ def characterise_response_MitsunagaNayar1999(
         refine_args = (opts.refine_ratios, opts.max_iterations, opts.tolerance)
         held_out: dict[int, tuple[float, float] | None] = {}
         if opts.order is None:
-            held: np.ndarray = gen.random(s.values.shape[1]) < 0.5  # pixels held out
+            held = np.asarray(gen.random(s.values.shape[1])) < 0.5  # pixels held out
             train, test = ~held[p], held[p]
             if np.count_nonzero(train) < opts.max_order + 1 or not np.any(test):
                 raise CalibrationError(f"channel {ch}: too few pairs to choose the order")

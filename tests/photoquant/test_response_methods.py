@@ -34,6 +34,7 @@ estimator, which shows the same wiggles.
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 
 import numpy as np
 import pytest
@@ -43,6 +44,7 @@ from photoquant.correction import correct
 from photoquant.errors import CalibrationError, InputError
 from photoquant.model import load_camera
 from photoquant.response import RESPONSE_METHODS, fit_response
+from photoquant.response.emor2004 import emor_basis
 from photoquant.response.gamma import GammaResponseOptions
 from photoquant.response.robertson2003 import (
     RobertsonResponseOptions,
@@ -51,13 +53,14 @@ from photoquant.response.robertson2003 import (
 )
 from photoquant.stack import ExposureStack
 
+from ..conftest import REPO, SHARED
 from .analytic import log_uniform_scene
 
 BALANCE = (0.85, 1.0, 0.75)
 EXPOSURES = np.array([0.5, 1.1, 3.0, 7.0, 20.0, 45.0, 130.0, 500.0])  # unequal ratios 2.1–3.8
 GEOMETRIC = np.geomspace(0.5, 500.0, 8)
 
-NEW_METHODS = ("Robertson 2003", "Mitsunaga-Nayar 1999", "Gamma")
+NEW_METHODS = ("Robertson 2003", "Mitsunaga-Nayar 1999", "EMoR 2004", "Gamma")
 
 
 # ---------------------------------------------------------------------------
@@ -197,6 +200,10 @@ BAD_OPTIONS = [
     ("Mitsunaga-Nayar 1999", {"max_order": 0}, "max_order"),
     ("Mitsunaga-Nayar 1999", {"refine_ratios": "yes"}, "refine_ratios"),
     ("Mitsunaga-Nayar 1999", {"tolerance": 0}, "tolerance"),
+    ("EMoR 2004", {"n_components": 26}, "n_components"),
+    ("EMoR 2004", {"n_components": 0}, "n_components"),
+    ("EMoR 2004", {"weighting": "nope"}, "weighting"),
+    ("EMoR 2004", {"max_iterations": True}, "max_iterations"),
     ("Gamma", {"weighting": "hat-quantisation"}, "weighting"),
     ("Gamma", {"n_samples": 2.5}, "n_samples"),
     ("Gamma", {"min_support": float("nan")}, "min_support"),
@@ -368,6 +375,87 @@ def test_mitsunaga_nayar_fixed_order_that_is_not_monotone_is_an_error(rng):
     with pytest.raises(CalibrationError, match="non-decreasing") as info:
         fit_response(bad, ("Mitsunaga-Nayar 1999", {"order": 10}))
     assert "\n" not in str(info.value)
+
+
+# ---------------------------------------------------------------------------
+# EMoR 2004
+# ---------------------------------------------------------------------------
+
+
+def test_emor_basis_ships_in_the_package():
+    e, f0, h = emor_basis()
+    assert e.shape == f0.shape == (1024,) and h.shape == (25, 1024)
+    np.testing.assert_allclose(e, np.linspace(0, 1, 1024), atol=1e-6)
+    assert f0[0] == 0 and f0[-1] == 1 and np.all(np.diff(f0) > 0)
+    np.testing.assert_allclose(h @ h.T, np.eye(25), atol=1e-5)  # orthonormal components
+    assert not e.flags.writeable
+
+
+def test_emor_basis_equals_the_source_file():
+    source = SHARED / "data" / "emor.txt"
+    if not source.is_file():
+        pytest.skip("../shared/data/emor.txt is not available")
+    spec = importlib.util.spec_from_file_location("emor_to_npz", REPO / "tools" / "emor_to_npz.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    arrays = module.read_emor(source)
+    e, f0, h = emor_basis()
+    np.testing.assert_array_equal(arrays["E"], e)
+    np.testing.assert_array_equal(arrays["f0"], f0)
+    np.testing.assert_array_equal(arrays["h"], h)
+
+
+def _emor_stack(rng, c_true, bit_depth):
+    e, f0, h = emor_basis()
+    f = f0 + np.asarray(c_true) @ h[: len(c_true)]
+    assert np.all(np.diff(f) > 0)
+    l = log_uniform_scene(rng, (60, 80, 3))
+    sat = np.round(np.asarray(BALANCE) * (2**bit_depth - 1))
+    x = np.clip(l[None] * EXPOSURES[:, None, None, None], 0, 1)
+    frames = np.round(sat * np.interp(x, e, f)).astype(np.uint16)
+    return ExposureStack(frames[None], EXPOSURES, bit_depth=bit_depth, saturation_level=sat)
+
+
+@pytest.mark.parametrize("bit_depth", [8, 12])
+def test_emor_recovers_the_coefficients_of_an_emor_response(rng, bit_depth):
+    """A true ``f = f0 + Σ c h`` (K = 3): the fit recovers ``c``.
+
+    The components are orthonormal on the 1024 samples, so an error ``Δf``
+    of the fitted curve gives ``Δc = h·Δf``, ``|Δc_k| ≤ ‖Δf‖₂ ≤ √1024 ·
+    max|Δf|``; with ``max|Δf|`` half a DN of the channel's range (rounding),
+    ``|Δc_k| ≤ 32 · 0.5 / saturation``.
+    """
+    c_true = np.array([0.8, -0.5, 0.3])
+    stack = _emor_stack(rng, c_true, bit_depth)
+    fit = fit_response(stack, ("EMoR 2004", {"n_components": 3}))
+    assert np.all(fit.report["converged"])
+    for ch in range(3):
+        c = np.asarray(fit.model.params["coefficients"][ch])
+        bound = np.sqrt(1024) * 0.5 / stack.saturation_level[ch]
+        assert np.all(np.abs(c - c_true) <= bound), (ch, c - c_true, bound)
+
+
+@pytest.mark.parametrize(
+    ("truth", "bit_depth", "n_components"),
+    [
+        ("gamma2.2", 8, 8),
+        ("s-curve", 8, 8),
+        ("linear", 8, 8),
+        ("s-curve", 12, 8),
+        ("gamma2.2", 12, 12),
+    ],
+)
+def test_emor_fits_responses_with_few_components(rng, truth, bit_depth, n_components):
+    """Gamma, linear and S-curve with 8 of the 25 components: ``g`` within the quantisation bound.
+
+    A power law needs more components at 12 bits (its infinite slope at 0 is
+    far from the measured cameras' curves; 8 components leave 2× the finer
+    bound there, 12 reach it).
+    """
+    stack, _ = _stack(rng, truth, bit_depth)
+    fit = fit_response(stack, ("EMoR 2004", {"n_components": n_components, "n_samples": 2000}))
+    assert len(fit.model.params["coefficients"][0]) == n_components
+    _check_g_within_quantisation(fit.model, truth, bit_depth)
 
 
 # ---------------------------------------------------------------------------
