@@ -209,8 +209,8 @@ def response_model(
     for ch, s in enumerate(samples):
         m = np.clip((levels - s.black) / (s.saturation - s.black), 0.0, 1.0)
         inv = np.asarray(inverse(ch, m), dtype=np.float64)
-        # the table starts at the lowest level at or above valid_min (a level
-        # below it would be extrapolated), and is held flat outside [lo, sat]
+        # the table starts at the level at or just below valid_min (within one
+        # level of the data) and above black, and is held flat outside [lo, sat]
         lo = int(np.searchsorted(levels, valid_min[ch], side="right")) - 1
         lo = max(lo, int(np.searchsorted(levels, s.black, side="right")))
         lo = min(lo, levels.size - 1)

@@ -149,7 +149,7 @@ class RobertsonResponseOptions:
     """
 
     n_samples: int = 10000
-    max_iterations: int = 200
+    max_iterations: int = 500
     tolerance: float = 1e-4
     max_levels: int = 1024
     min_support: float = 10.0
@@ -166,7 +166,7 @@ def solve_response_Robertson2003(
     samples: ChannelSamples,
     levels: np.ndarray,
     *,
-    max_iterations: int = 200,
+    max_iterations: int = 500,
     tolerance: float = 1e-4,
     min_support: float = 10.0,
 ) -> tuple[np.ndarray, np.ndarray, int, bool, float]:
