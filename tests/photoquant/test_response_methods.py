@@ -510,3 +510,11 @@ def test_gamma_table_is_the_power_law(rng):
         expected = gam[ch] * np.log(lv / sat)
         np.testing.assert_allclose(model.log_inverse(np.stack([lv] * 3, -1))[:, ch], expected)
         assert model.log_inverse_response[ch, -1] == 0.0  # f⁻¹(1) = 1, held above saturation
+
+
+def test_the_quantisation_bound_rejects_a_wrong_model(rng):
+    """The bound has teeth: a power law fitted to an S-curve violates it."""
+    stack, _ = _stack(rng, "s-curve")
+    model = fit_response(stack, "Gamma").model
+    with pytest.raises(AssertionError):
+        _check_g_within_quantisation(model, "s-curve", 8)
