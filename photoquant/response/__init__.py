@@ -9,6 +9,10 @@ step's registry; :func:`recover_response` dispatches.
 Methods
 -------
 - ``"Debevec 1997"``: :func:`characterise_response_Debevec1997` (eq. 7 of the paper).
+- ``"Robertson 2003"``: :func:`characterise_response_Robertson2003`, iterative maximum likelihood.
+- ``"Mitsunaga-Nayar 1999"``: :func:`characterise_response_MitsunagaNayar1999`, a polynomial.
+- ``"EMoR 2004"``: :func:`characterise_response_EMoR2004`, Grossberg & Nayar's principal components.
+- ``"Gamma"``: :func:`characterise_response_Gamma`, a one-parameter power law (baseline).
 """
 
 from __future__ import annotations
@@ -31,7 +35,17 @@ from photoquant.response.debevec1997 import (
     select_samples_histogram,
     select_samples_random,
 )
+from photoquant.response.emor2004 import EMoRResponseOptions, characterise_response_EMoR2004
+from photoquant.response.gamma import GammaResponseOptions, characterise_response_Gamma
+from photoquant.response.mitsunaga1999 import (
+    MitsunagaNayarResponseOptions,
+    characterise_response_MitsunagaNayar1999,
+)
 from photoquant.response.model import ResponseModel
+from photoquant.response.robertson2003 import (
+    RobertsonResponseOptions,
+    characterise_response_Robertson2003,
+)
 from photoquant.stack import ExposureStack
 
 __all__ = [
@@ -39,11 +53,19 @@ __all__ = [
     "RESPONSE_METHODS",
     "SAMPLING_METHODS",
     "DebevecResponseOptions",
+    "EMoRResponseOptions",
+    "GammaResponseOptions",
+    "MitsunagaNayarResponseOptions",
     "ResponseModel",
     "ResponseRecovery",
+    "RobertsonResponseOptions",
     "TOE_MODES",
     "camera_response_Debevec1997",
     "characterise_response_Debevec1997",
+    "characterise_response_EMoR2004",
+    "characterise_response_Gamma",
+    "characterise_response_MitsunagaNayar1999",
+    "characterise_response_Robertson2003",
     "recover_response",
     "fit_response",
     "response_levels",
@@ -62,6 +84,50 @@ RESPONSE_METHODS.add(
         options=DebevecResponseOptions,
         model=ResponseModel,
         reference="Debevec & Malik 1997, doi:10.1145/258734.258884",
+    ),
+    replace=True,
+)
+RESPONSE_METHODS.add(
+    Method(
+        "response",
+        "Robertson 2003",
+        characterise_response_Robertson2003,
+        options=RobertsonResponseOptions,
+        model=ResponseModel,
+        reference="Robertson, Borman & Stevenson 2003, doi:10.1117/1.1557695",
+    ),
+    replace=True,
+)
+RESPONSE_METHODS.add(
+    Method(
+        "response",
+        "Mitsunaga-Nayar 1999",
+        characterise_response_MitsunagaNayar1999,
+        options=MitsunagaNayarResponseOptions,
+        model=ResponseModel,
+        reference="Mitsunaga & Nayar 1999, doi:10.1109/CVPR.1999.786966",
+    ),
+    replace=True,
+)
+RESPONSE_METHODS.add(
+    Method(
+        "response",
+        "EMoR 2004",
+        characterise_response_EMoR2004,
+        options=EMoRResponseOptions,
+        model=ResponseModel,
+        reference="Grossberg & Nayar 2004, doi:10.1109/TPAMI.2004.88",
+    ),
+    replace=True,
+)
+RESPONSE_METHODS.add(
+    Method(
+        "response",
+        "Gamma",
+        characterise_response_Gamma,
+        options=GammaResponseOptions,
+        model=ResponseModel,
+        reference="one-parameter power law f(E) = E^(1/gamma) (Mann & Picard 1995)",
     ),
     replace=True,
 )
