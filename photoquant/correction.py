@@ -74,6 +74,14 @@ def correct(stack: ExposureStack, model: CameraModel, *, merge: Any = None) -> C
         )
     if stack.bit_depth != model.bit_depth:
         raise InputError(f"the scene has bit depth {stack.bit_depth}, the camera {model.bit_depth}")
+    scene_black = np.asarray(stack.black_level, dtype=np.float64)
+    camera_black = np.asarray(model.response.black_level, dtype=np.float64)
+    if np.any(np.abs(scene_black - camera_black) > 1.0):
+        raise InputError(
+            f"the scene's black level {scene_black.tolist()} differs from the camera's "
+            f"{camera_black.tolist()}: the response was recovered above the camera's own "
+            "offset (give the manifest the same `black_level` or `dark` frames)"
+        )
     if merge is None:
         merger = model.merge
     elif isinstance(merge, MergeModel):

@@ -96,7 +96,7 @@ def merge_Debevec1997(
     dark_clipped: np.ndarray | None = None,
     min_level: np.ndarray | None = None,
     weighting: str | WeightingFunction = "hat",
-    c_min: float = 0.0,
+    c_min: float | np.ndarray = 0.0,
     repeats: int = 1,
 ) -> MergeResult:
     """Merge ``K`` exposures into log photoquantities (eq. 6 of [PQ]_).
@@ -125,8 +125,9 @@ def merge_Debevec1997(
         measured there (see ``ResponseRecovery.valid_min``).
     weighting : str or callable
         Weighting function, the paper's hat by default.
-    c_min : float
-        Lowest value the camera outputs.
+    c_min : float or ndarray, shape (C,)
+        Lowest value the camera outputs: the black level (per channel), where
+        the hat weights are anchored.
     repeats : int
         ``N`` when ``values`` are sums of ``N`` integer frames; 1 otherwise.
 
@@ -176,6 +177,7 @@ def merge_Debevec1997(
     if min_level is not None:
         min_level = check_array(min_level, "min_level", shape=(n_ch,), kind="iuf").astype(float)
     wfun = weighting_function(weighting)
+    floor = np.broadcast_to(np.asarray(c_min, dtype=np.float64), (n_ch,))
 
     step_table = None
     if getattr(wfun, "uses_log_step", False):
@@ -190,14 +192,14 @@ def merge_Debevec1997(
         """Weights of (mean) values ``v`` of channel(s) ``ch``: none at saturation or below min."""
         s = sat[ch]
         if step_table is None:
-            w = wfun(v, c_min, s)
+            w = wfun(v, floor[ch], s)
         else:
             step = (
                 apply_log_inverse_response(v, levels, step_table[ch])
                 if isinstance(ch, slice)
                 else np.interp(v, levels, step_table[ch])
             )
-            w = cast(Callable[..., np.ndarray], wfun)(v, c_min, s, log_step=step)
+            w = cast(Callable[..., np.ndarray], wfun)(v, floor[ch], s, log_step=step)
         w = np.where(v >= s, 0.0, w)
         if min_level is not None:
             w = np.where(v < min_level[ch], 0.0, w)
@@ -310,7 +312,7 @@ def merge_stack_Debevec1997(
         dark_clipped=stack.dark_clipped(),
         min_level=response.valid_min if opts.exclude_below_valid_min else None,
         weighting=opts.weighting,
-        c_min=float(np.min(cast(np.ndarray, response.black_level))),
+        c_min=np.asarray(response.black_level, dtype=np.float64),
         repeats=stack.n_repeats,
     )
 

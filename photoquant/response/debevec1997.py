@@ -422,7 +422,7 @@ def camera_response_Debevec1997(
     weighting: str | WeightingFunction = "hat",
     max_levels: int = 1024,
     rng: np.random.Generator | int | None = 0,
-    c_min: float = 0.0,
+    c_min: float | np.ndarray = 0.0,
     min_support: float = 10.0,
     sampling: str = "histogram",
     toe: str = "continued",
@@ -451,8 +451,9 @@ def camera_response_Debevec1997(
         Most unknowns per channel; above it the levels are binned.
     rng : numpy.random.Generator or int or None
         Randomness of the sample selection (an int seeds a new generator).
-    c_min : float
-        Lowest value the camera outputs.
+    c_min : float or ndarray, shape (C,)
+        Lowest value the camera outputs: the black level (per channel), where
+        the hat weights are anchored and below which nothing is used.
     min_support : float
         Data equations a level needs to count as measured (see
         :attr:`ResponseRecovery.valid_min`).
@@ -495,6 +496,11 @@ def camera_response_Debevec1997(
         saturated = values >= sat
     else:
         saturated = check_array(saturated, "saturated", shape=values.shape, kind="b")
+    floor = np.broadcast_to(np.asarray(c_min, dtype=np.float64), (n_ch,))
+    if not np.all(np.isfinite(floor)) or np.any(floor < 0) or np.any(floor >= sat):
+        raise InputError(
+            f"`c_min` (the black level) {floor.tolist()} must lie in [0, saturation_level)"
+        )
     wfun = weighting_function(weighting)
     sampler = SAMPLING_METHODS[validate_method(sampling, SAMPLING_METHODS, "sampling")]
     if not isinstance(rng, np.random.Generator):
@@ -512,9 +518,10 @@ def camera_response_Debevec1997(
     valid_min = np.zeros(n_ch)
     for ch in range(n_ch):
         vals = values[..., ch].reshape(k_count, -1)
-        valid = (vals > c_min) & (vals < sat[ch]) & ~saturated[..., ch].reshape(k_count, -1)
+        c_lo = float(floor[ch])
+        valid = (vals > c_lo) & (vals < sat[ch]) & ~saturated[..., ch].reshape(k_count, -1)
         idx = sampler(vals, valid, sat[ch], int(n_samples), rng)
-        weights = wfun(vals[:, idx], c_min, sat[ch])
+        weights = wfun(vals[:, idx], c_lo, sat[ch])
         valid_idx = valid[:, idx] & (weights > 0)
         if idx.size < 2:
             raise CalibrationError(
@@ -524,9 +531,15 @@ def camera_response_Debevec1997(
         top = min(int(np.ceil(sat[ch] / spacing)), n_levels - 1)
         if top < 3:
             raise CalibrationError(f"channel {ch}: saturation level {sat[ch]} is too low")
-        mid = 0.5 * (c_min + sat[ch])
+        mid = 0.5 * (c_lo + sat[ch])
         gauge = int(np.argmin(np.abs(levels[: top + 1] - mid)))
-        smooth_w = wfun(levels, c_min, sat[ch])
+        smooth_w = wfun(levels, c_lo, sat[ch])
+        if c_lo > levels[0]:
+            # below the black level there are no data: the smoothness prior
+            # alone (at the weight of the first level above it) continues g there
+            # (never used: valid_min lies above), so the system stays regular
+            first = wfun(np.array([c_lo + spacing]), c_lo, sat[ch])[0]
+            smooth_w = np.where(levels <= c_lo, first, smooth_w)
         # the dense systems are small (≤ 1024²): one BLAS thread is fastest, and
         # a multi-threaded BLAS on a loaded machine can be 100× slower
         with threadpool_limits(limits=1, user_api="blas"):
@@ -639,7 +652,7 @@ def characterise_response_Debevec1997(
     """
     opts = options or DebevecResponseOptions()
     black = getattr(stack, "black_level", None)
-    c_min = 0.0 if black is None else float(np.min(black))
+    c_min = 0.0 if black is None else np.asarray(black, dtype=np.float64)
     rec = camera_response_Debevec1997(
         stack.mean(),
         stack.exposure_s,
