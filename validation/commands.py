@@ -171,9 +171,10 @@ def register_leaderboard(sub: Any) -> None:
     )
     lb.add_argument(
         "--step",
+        nargs="+",
         choices=[*RANKED_STEPS, "all"],
-        default="all",
-        help="the step whose methods are ranked (default: all)",
+        default=["all"],
+        help="the step(s) whose methods are ranked (default: all)",
     )
     lb.add_argument(
         "--methods", nargs="+", metavar="NAME", help="rank only these methods (registered names)"

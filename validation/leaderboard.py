@@ -312,6 +312,9 @@ def find_real_sets(real_dir: str | Path, workdir: str | Path) -> list[RealSet]:
     stay where they are, read with ``allow_outside``). Folders that are
     neither are ignored; a missing ``real_dir`` gives none.
     """
+    from photoquant.errors import PhotoquantError
+    from photoquant.io import read_image
+
     root = Path(real_dir)
     out: list[RealSet] = []
     if not root.is_dir():
@@ -334,11 +337,14 @@ def find_real_sets(real_dir: str | Path, workdir: str | Path) -> list[RealSet]:
                 continue
         if len(frames) < 3:
             continue
+        try:  # 8 or 16 bits, as the first frame is stored
+            bits = 8 if read_image(frames[0]["file"]).dtype == np.uint8 else 16
+        except PhotoquantError:
+            bits = 8  # unreadable: load_stack names the file later
         path = Path(workdir) / f"real-{folder.name}.json"
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(
-            json.dumps({"format": "photoquant.captures/1", "views": [{"frames": frames}]})
-        )
+        manifest = {"format": "photoquant.captures/1", "bit_depth": bits}
+        path.write_text(json.dumps(manifest | {"views": [{"frames": frames}]}))
         out.append(RealSet(folder.name, path))
     return out
 
@@ -621,10 +627,13 @@ def run_leaderboard(
         captures = [_load_capture(shared, p) for p in presets]
         lb = Leaderboard(config, int(seed), presets, [])
         for step in chosen:
+            selected = _methods_of(step, methods)
+            if methods is not None and not selected:
+                continue  # --methods names none of this step's
             floors: dict[str, float] = {}
             entries = [
                 _run_entry(step, m, captures, config, repeats, repeat_below_s, floors, say)
-                for m in _methods_of(step, methods)
+                for m in selected
             ]
             board = Board(step, entries, floors)
             board.rank()
