@@ -821,6 +821,10 @@ def _bar_chart(board: Board, lb: Leaderboard, path: Path) -> bool:
         for j, p in enumerate(lb.presets):
             if p in board.noise_floor:
                 ax.axvline(scale * board.noise_floor[p], ls="--", lw=1, color=f"C{j}")
+    shown = [scale * e.scores[p][key] for e in scored for p in lb.presets]
+    positive = [v for v in shown if v > 0]
+    if positive and max(positive) > 30 * min(positive):
+        ax.set_xscale("log")  # a bad method must not flatten the good ones' bars
     ax.set_yticks(y, [e.method for e in scored])
     ax.invert_yaxis()
     ax.set_xlabel(label + (" (%)" if unit == "fraction" else ""))
