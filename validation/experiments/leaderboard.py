@@ -12,7 +12,9 @@ calibration per method (a few seconds per method on two cores); ``--full``
 (configuration ``full``) ranks the merge step as well. The metrics are
 reported, not baseline-checked (``check=False``): the set of registered
 methods changes as methods are added, and the default pipeline's own
-metrics are checked by the other experiments.
+metrics are checked by the other experiments. The times are shown in the
+table only (a run's metrics are deterministic for its seed; timings are the
+``timings`` experiment's).
 """
 
 from __future__ import annotations
@@ -82,13 +84,6 @@ def run(
                         check=False,
                         description=f"test scene e_mean, {board.step} method {e.method!r}",
                     )
-                res.metric(
-                    f"{preset}.{slug}.time",
-                    e.time_s.get(preset),
-                    unit="s",
-                    check=False,
-                    description=f"calibration time, {board.step} method {e.method!r}",
-                )
             primary = " / ".join(
                 f"{e.scores[p][key]:.4f}" if unit == "ln" else fmt_pct(e.scores[p][key], 3)
                 for p in lb.presets
