@@ -137,12 +137,20 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         from validation.leaderboard import default_real_dir
 
         real_dir = args.real_dir or (default_real_dir() if args.real else None)
-        check_output_not_input(args.output, [real_dir])
+        inputs: list[Any] = [real_dir]
+        if args.manifests:
+            from photoquant.io.outputs import manifest_inputs
+
+            for m in args.manifests:
+                inputs += manifest_inputs(m, allow_outside=args.allow_outside)
+        check_output_not_input(args.output, inputs)
         check_report_folder(args.output, overwrite=args.overwrite)
     config = BOARD_QUICK if args.quick else None
     kwargs: dict[str, Any] = {} if config is None else {"config": config, "repeats": 1}
     lb = run_leaderboard(
         args.step,
+        manifests=args.manifests or None,
+        allow_outside=args.allow_outside,
         methods=args.methods,
         presets=args.presets,
         seed=args.seed,
@@ -168,6 +176,13 @@ def register_leaderboard(sub: Any) -> None:
     lb = sub.add_parser(
         "leaderboard",
         help="rank every registered method of a step against the synthetic cameras' truth",
+    )
+    lb.add_argument(
+        "manifests",
+        nargs="*",
+        metavar="MANIFEST",
+        help="synthetic capture sets (pqsim capture) to rank on, with their truth "
+        "(default: simulate the presets)",
     )
     lb.add_argument(
         "--step",
@@ -198,6 +213,9 @@ def register_leaderboard(sub: Any) -> None:
     lb.add_argument("--seed", type=int, default=0, help="master seed (capture and sampling)")
     lb.add_argument(
         "--quick", action="store_true", help="small capture sets (160x120, N = 2), timed once"
+    )
+    lb.add_argument(
+        "--allow-outside", action="store_true", help="allow paths outside the manifests' folders"
     )
     lb.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     lb.set_defaults(func=_cmd_leaderboard)

@@ -252,6 +252,10 @@ class Leaderboard:
     real_sets: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
+    describe: str = ""
+    """The capture sets' size, ``N``, ``K``, ``V`` (one line)."""
+    manifests: dict[str, str] = field(default_factory=dict)
+    """Column label → manifest, when the sets were given rather than generated."""
 
     def board(self, step: str) -> Board:
         """The board of ``step``."""
@@ -274,6 +278,8 @@ class Leaderboard:
                 "exposure_s": list(self.config.exposure_s),
                 "n_views": self.config.n_views,
             },
+            "captures": self.describe,
+            "manifests": dict(self.manifests),
             "real_sets": list(self.real_sets),
             "boards": [b.to_json() for b in self.boards],
             "notes": list(self.notes),
@@ -387,6 +393,52 @@ class _Capture:
     tracks: list[np.ndarray] | None
     calibrate_seed: int
     inputs: frozenset[str]
+    allow_outside: bool = False
+
+    def describe(self) -> str:
+        ref = self.views[0]
+        h, w = ref.image_shape
+        return f"{w}x{h}, N = {ref.n_repeats}, K = {ref.n_exposures}, V = {len(self.views)}"
+
+
+def _capture_from_manifest(
+    path: str | Path, label: str, seed: int, allow_outside: bool
+) -> _Capture:
+    """A user's synthetic capture set (``pqsim capture``): its frames and its truth."""
+    from photoquant.errors import InputError
+    from photoquant.io import extra_path, load_manifest, load_stack
+    from pqsim.synth_camera.truth import load_truth
+
+    manifest = load_manifest(path, allow_outside=allow_outside)
+    if "truth" not in manifest.extra:
+        raise InputError(
+            f"{path} has no ground truth (no `truth` entry): the leaderboard scores against a "
+            "synthetic set's truth; rank on a real capture with --real or `photoquant crossval`"
+        )
+    if manifest.scene is None:
+        raise InputError(f"{path} has no `scene` frames: the test scene is part of the score")
+    truth = load_truth(extra_path(manifest, "truth", allow_outside=allow_outside))
+    views = [load_stack(v, manifest) for v in manifest.views]
+    irradiance = load_stack(manifest.irradiance, manifest) if manifest.irradiance else None
+    tracks = list(manifest.correspondences) if manifest.correspondences else None
+    return _Capture(
+        preset=label,
+        manifest=Path(manifest.path),
+        truth=truth,
+        views=views,
+        irradiance=irradiance,
+        white_roi=manifest.white_roi,
+        tracks=None if len(views) < 2 else tracks,
+        calibrate_seed=int(seed),
+        inputs=frozenset({"tracks"} if len(views) >= 2 else set()),
+        allow_outside=allow_outside,
+    )
+
+
+def _labels(paths: Sequence[str | Path]) -> list[str]:
+    """A short unique column label per manifest: its folder's name (numbered when repeated)."""
+    names = [Path(p).resolve().parent.name or Path(p).stem for p in paths]
+    return [n if names.count(n) == 1 else f"{n}#{i + 1}" for i, n in enumerate(names)]
 
 
 def _load_capture(shared: Any, preset: str) -> _Capture:
@@ -487,7 +539,9 @@ def _run_entry(
                 model = model or fitted  # deterministic: the first one is scored
                 if len(times) >= repeats or times[-1] > repeat_below_s:
                     break
-            rep = compare_with_truth(cap.manifest, model, cap.truth)
+            rep = compare_with_truth(
+                cap.manifest, model, cap.truth, allow_outside=cap.allow_outside
+            )
         except Exception as exc:  # noqa: BLE001 - a method must not crash the board
             entry.status = "failed"
             entry.reason = f"{cap.preset}: {_one_line(exc)}"
@@ -545,6 +599,8 @@ def check_steps(step: str | Sequence[str]) -> tuple[str, ...]:
 def run_leaderboard(
     steps: str | Sequence[str] = "all",
     *,
+    manifests: Sequence[str | Path] | None = None,
+    allow_outside: bool = False,
     methods: Sequence[str] | None = None,
     presets: Sequence[str] | None = None,
     config: ValidationConfig = QUICK,
@@ -563,6 +619,11 @@ def run_leaderboard(
     ----------
     steps : str or sequence of str
         ``"all"`` or steps of :data:`RANKED_STEPS`.
+    manifests : sequence of path, optional
+        Synthetic capture sets (``pqsim capture``) to rank on, with their
+        truth, instead of simulating the presets; a manifest without truth
+        (a real capture) is a one-line error. ``allow_outside`` lets their
+        files lie outside their folders.
     methods : sequence of str, optional
         Only these methods (names of any of the steps; unknown names are an
         error listing the registered ones).
@@ -604,14 +665,25 @@ def run_leaderboard(
     if methods is not None:
         _check_names(chosen, methods)
     repeats = check_int(repeats, "repeats", 1)
-    presets = tuple(presets if presets is not None else config.presets)
-    if not presets:
-        raise InputError("no camera preset to rank on")
-    from pqsim.synth_camera.presets import camera_from_preset
+    if manifests:
+        if presets is not None:
+            raise InputError("give capture manifests or presets, not both")
+        labels = _labels(manifests)
+        given = [
+            _capture_from_manifest(m, label, seed, allow_outside)
+            for m, label in zip(manifests, labels, strict=True)
+        ]
+        presets = tuple(labels)
+    else:
+        given = []
+        presets = tuple(presets if presets is not None else config.presets)
+        if not presets:
+            raise InputError("no camera preset to rank on")
+        from pqsim.synth_camera.presets import camera_from_preset
 
-    for p in presets:
-        camera_from_preset(p)  # an unknown preset is a one-line error naming the valid ones
-    config = config.replace(presets=presets)
+        for p in presets:
+            camera_from_preset(p)  # an unknown preset is a one-line error naming the valid ones
+        config = config.replace(presets=presets)
     t_start = time.perf_counter()
     keep = workdir is not None or shared is not None
     root = (
@@ -622,10 +694,16 @@ def run_leaderboard(
         else Path(tempfile.mkdtemp(prefix="photoquant-leaderboard-"))
     )
     try:
-        if shared is None:
-            shared = Shared(config, seed, root, say)
-        captures = [_load_capture(shared, p) for p in presets]
+        if given:
+            captures = given
+        else:
+            if shared is None:
+                shared = Shared(config, seed, root, say)
+            captures = [_load_capture(shared, p) for p in presets]
         lb = Leaderboard(config, int(seed), presets, [])
+        lb.describe = "; ".join(dict.fromkeys(c.describe() for c in captures))
+        if given:
+            lb.manifests = {c.preset: str(c.manifest) for c in captures}
         for step in chosen:
             selected = _methods_of(step, methods)
             if methods is not None and not selected:
@@ -740,11 +818,9 @@ def _columns(board: Board, lb: Leaderboard) -> tuple[list[str], list[tuple[list[
 
 def _title(board: Board, lb: Leaderboard) -> str:
     _, label, _ = PRIMARY[board.step]
-    h, w = lb.config.shape
     return (
         f"{board.step} — ranked by {label}, mean over {', '.join(lb.presets)} "
-        f"({w}x{h}, N = {lb.config.n_repeats}, K = {len(lb.config.exposure_s)}, "
-        f"V = {lb.config.n_views}, seed {lb.seed})"
+        f"({lb.describe}, seed {lb.seed})"
     )
 
 

@@ -319,3 +319,31 @@ def test_command_errors_are_one_line(command, tmp_path):
     line = _one_error_line(*command("leaderboard", "--presets", "nikon", "-q")[::2])
     assert "nikon" in line and "ccd" in line
     assert not list(tmp_path.glob("photoquant-leaderboard-*"))
+
+
+def test_given_synthetic_manifests_are_ranked_with_their_truth(board, command, tmp_path):
+    lb, shared = board
+    manifest = shared.calibration("ccd").manifest
+    status, out, err = command(
+        "leaderboard", str(manifest), "--step", "response", "--methods", "Debevec 1997",
+        "--json", "-q",
+    )  # fmt: skip
+    assert status == 0, err
+    data = json.loads(out)
+    assert data["presets"] == ["capture"] and data["manifests"] == {"capture": str(manifest)}
+    assert data["captures"] == "96x72, N = 4, K = 8, V = 3"
+    (entry,) = data["boards"][0]["entries"]
+    ours = entry["scores"]["capture"]["g_rms"]
+    # the same frames, another sample-selection seed: the same error to within a factor 2
+    theirs = lb.board("response").entry("Debevec 1997").scores["ccd"]["g_rms"]
+    assert 0.5 * theirs < ours < 2 * theirs
+
+    # a capture without truth (a real camera's) cannot be scored against the truth
+    real = json.loads(manifest.read_text())
+    del real["truth"]
+    path = manifest.parent / "real.json"
+    path.write_text(json.dumps(real))
+    line = _one_error_line(*command("leaderboard", str(path), "-q")[::2])
+    assert "no ground truth" in line and "crossval" in line
+    line = _one_error_line(*command("leaderboard", str(manifest), "--presets", "ccd")[::2])
+    assert "not both" in line
