@@ -509,11 +509,21 @@ def _run_entry(
     repeat_below_s: float,
     floors: dict[str, float],
     say: Progress,
+    memo: dict[tuple[int, str], Any],
 ) -> Entry:
+    """Calibrate and score one method on every capture (or say why it is n/a / failed).
+
+    ``memo`` keeps each calibration by capture and keywords: the default
+    pipeline, on every board, is calibrated and scored once per capture.
+    """
     from photoquant.calibration import calibrate
     from validation.compare import compare_with_truth
 
     entry = Entry(step, method.name, method.reference)
+    unavailable = _unavailable(method)
+    if unavailable is not None:
+        entry.status, entry.reason = "n/a", unavailable
+        return entry
     for cap in captures:
         why = _missing_needs(method, cap.inputs)
         if why is not None:
@@ -523,6 +533,11 @@ def _run_entry(
     for cap in captures:
         say(f"leaderboard: {step} / {method.name} / {cap.preset}")
         kwargs = _calibrate_kwargs(cfg, step, method, cap.calibrate_seed)
+        key = (id(cap), json.dumps(kwargs, sort_keys=True, default=repr))
+        if key in memo:
+            model, times, rep = memo[key]
+            _score_into(entry, step, cap, model, times, rep, floors)
+            continue
         times: list[float] = []
         try:
             model = None
@@ -536,7 +551,8 @@ def _run_entry(
                     **kwargs,
                 )
                 times.append(time.perf_counter() - t0)
-                model = model or fitted  # deterministic: the first one is scored
+                if model is None:
+                    model = fitted  # deterministic: the first one is scored
                 if len(times) >= repeats or times[-1] > repeat_below_s:
                     break
             rep = compare_with_truth(
@@ -547,13 +563,47 @@ def _run_entry(
             entry.reason = f"{cap.preset}: {_one_line(exc)}"
             entry.scores.clear()
             return entry
-        entry.scores[cap.preset] = _scores(rep)
-        entry.time_s[cap.preset] = float(statistics.median(times))
-        step_t = model.report.get("timings_s", {}).get(_STEP_TIMING[step])
-        if step_t is not None:
-            entry.step_time_s[cap.preset] = float(step_t)
-        floors.setdefault(cap.preset, float(rep["scene"]["noise_floor_mean"]))
+        memo[key] = (model, times, rep)
+        _score_into(entry, step, cap, model, times, rep, floors)
     return entry
+
+
+def _score_into(
+    entry: Entry,
+    step: str,
+    cap: _Capture,
+    model: Any,
+    times: list[float],
+    rep: dict[str, Any],
+    floors: dict[str, float],
+) -> None:
+    entry.scores[cap.preset] = _scores(rep)
+    entry.time_s[cap.preset] = float(statistics.median(times))
+    step_t = model.report.get("timings_s", {}).get(_STEP_TIMING[step])
+    if step_t is not None:
+        entry.step_time_s[cap.preset] = float(step_t)
+    floors.setdefault(cap.preset, float(rep["scene"]["noise_floor_mean"]))
+
+
+def _unavailable(method: Any) -> str | None:
+    """Why a method cannot run here (a peer whose tool is not installed), or None.
+
+    A method (or its function) may carry ``available()``, returning ``True``
+    / ``None`` when it can run, ``False`` or a reason string when it cannot
+    (the peer adapters' convention, design notes).
+    """
+    for owner in (method, method.function):
+        check = getattr(owner, "available", None)
+        if callable(check):
+            try:
+                answer = check()
+            except Exception as exc:  # noqa: BLE001 - a broken check means it cannot run
+                return f"not available: {_one_line(exc)}"
+            if answer is False:
+                return "not available (not installed)"
+            if isinstance(answer, str) and answer:
+                return f"not available: {answer}"
+    return None
 
 
 def _methods_of(step: str, names: Sequence[str] | None) -> list[Any]:
@@ -701,6 +751,7 @@ def run_leaderboard(
                 shared = Shared(config, seed, root, say)
             captures = [_load_capture(shared, p) for p in presets]
         lb = Leaderboard(config, int(seed), presets, [])
+        memo: dict[tuple[int, str], Any] = {}
         lb.describe = "; ".join(dict.fromkeys(c.describe() for c in captures))
         if given:
             lb.manifests = {c.preset: str(c.manifest) for c in captures}
@@ -710,7 +761,7 @@ def run_leaderboard(
                 continue  # --methods names none of this step's
             floors: dict[str, float] = {}
             entries = [
-                _run_entry(step, m, captures, config, repeats, repeat_below_s, floors, say)
+                _run_entry(step, m, captures, config, repeats, repeat_below_s, floors, say, memo)
                 for m in selected
             ]
             board = Board(step, entries, floors)

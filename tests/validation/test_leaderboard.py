@@ -34,6 +34,7 @@ from validation.leaderboard import (
 
 BAD = "Gamma 2.2 (test)"
 FAILING = "Always fails (test)"
+ABSENT = "Peer not installed (test)"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
@@ -62,13 +63,21 @@ def _failing_response(stack, options, rng):
     raise CalibrationError("deliberately fails\nsecond line that the board must not show")
 
 
+def _absent_peer(stack, options, rng):
+    raise AssertionError("a method that is not available must not be run")
+
+
+_absent_peer.available = lambda: "the tool `nope` is not on PATH"  # type: ignore[attr-defined]
+
+
 @pytest.fixture(scope="module")
 def registered():
     pq.register_method("response", BAD, _gamma_response, reference="test: wrong gamma")
     pq.register_method("response", FAILING, _failing_response, reference="test: raises")
+    pq.register_method("response", ABSENT, _absent_peer, reference="test: a peer")
     yield
-    pq.registry("response").remove(BAD)
-    pq.registry("response").remove(FAILING)
+    for name in (BAD, FAILING, ABSENT):
+        pq.registry("response").remove(name)
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +132,8 @@ def test_a_bad_response_ranks_below_debevec_and_a_failing_one_last(board):
         # a wrong curve: its g error is tenths of ln units, Debevec's a few thousandths
         assert bad.scores[preset]["g_rms"] > 10 * debevec.scores[preset]["g_rms"]
         assert bad.scores[preset]["scene"] > debevec.scores[preset]["scene"]
-    assert failing.status == "failed" and failing.rank == len(b.entries)
+    ranked = [e for e in b.entries if e.rank is not None]
+    assert failing.status == "failed" and failing.rank == len(ranked)
     assert failing.reason == "ccd: deliberately fails"
     assert failing.reference == "test: raises"
     text = format_leaderboard(lb)
@@ -132,6 +142,9 @@ def test_a_bad_response_ranks_below_debevec_and_a_failing_one_last(board):
 
 def test_methods_whose_needs_the_capture_lacks_are_na_with_the_reason(board):
     lb, _ = board
+    absent = lb.board("response").entry(ABSENT)
+    assert absent.status == "n/a" and absent.rank is None
+    assert absent.reason == "not available: the tool `nope` is not on PATH"
     for b in lb.boards:
         for e in b.entries:
             method = pq.registry(b.step)[e.method]
@@ -151,7 +164,7 @@ def test_the_default_entry_is_the_validation_pipelines_calibration(board):
         assert scores["g_rms"] == max(r["rms"] for r in rep["response"])
         assert scores["scene"] == rep["scene"]["error"].e_mean
         vig = lb.board("vignetting").entry(cal.model.vignetting.method).scores[preset]
-        assert vig["vignetting"] == rep["vignetting"]["error"].e_mean
+        assert vig == scores  # the default pipeline, on either board
 
 
 def test_json_output(board):
