@@ -21,14 +21,21 @@ included, without naming any method:
   the frames in memory, the median of up to ``repeats`` runs while one run
   is cheap, and the step's own time from the camera's report);
 * a method whose ``needs`` the capture cannot meet (e.g. a flat-field
-  capture, which the synthetic sets do not have) is listed "n/a" with the
-  reason; a method that fails (:class:`~photoquant.errors.PhotoquantError`,
+  capture, which the synthetic sets do not have), or whose ``available()``
+  says it cannot run here (a peer whose tool is not installed), is listed
+  "n/a" with the reason; a method that fails (:class:`~photoquant.errors.PhotoquantError`,
   or any exception a third-party method raises) is ranked last with its
   one-line reason, and the board goes on;
 * with ``real=True`` the response methods are also cross-validated
   (leave-one-exposure-out, :mod:`photoquant.crossval`) on the real brackets
   in ``../shared/data/real/`` (:func:`find_real_sets`); without them the
   column is skipped with a note.
+
+Synthetic capture sets of the user's own (``manifests``, ``photoquant
+leaderboard MANIFEST ...``) replace the presets, each scored against its own
+truth; a manifest without truth (a real camera's) is a one-line error. The
+default pipeline is calibrated once per capture set and shared by the
+boards (it is every board's default entry).
 
 Ranking: by the mean over the presets of the step's own error, lower is
 better; failed methods follow, "n/a" methods are listed unranked. The
@@ -68,9 +75,13 @@ __all__ = [
     "Leaderboard",
     "RealSet",
     "find_real_sets",
+    "default_real_dir",
+    "check_steps",
     "run_leaderboard",
     "format_leaderboard",
+    "format_markdown",
     "write_report",
+    "check_report_folder",
 ]
 
 LEADERBOARD_FORMAT = "photoquant.leaderboard/1"
