@@ -296,3 +296,32 @@ def test_plugin_that_fails_to_import_is_a_one_line_error_naming_it(tmp_path, cap
         line = one_error_line(photoquant(*args, path=(site,)))
         assert "plug-in 'broken' (broken-plugin) failed to load" in line, line
         assert "photoquant_no_such_dependency" in line, line
+
+
+def test_example_plugin_ranks_in_the_leaderboard(plugin_site, tmp_path):
+    """Issue 8's "Done when": the plug-in's methods are ranked by the comparison command."""
+    from tests._commands import commands_site
+
+    site = commands_site(tmp_path / "commands")  # `leaderboard` if the install predates it
+    args = ["leaderboard", "--quick", "--presets", "ccd", "--json", "-q"]
+    args += ["--step", "response", "vignetting"]
+    result = photoquant(*args, path=(plugin_site, site))
+    assert result.returncode == 0, result.stderr
+    boards = {b["step"]: b for b in json.loads(result.stdout)["boards"]}
+    ranked = {e["method"]: e for e in boards["response"]["entries"]}
+    assert {RESPONSE, "Debevec 1997"} <= set(ranked)
+    linear = ranked[RESPONSE]
+    assert linear["status"] == "ok" and linear["reference"] == "example: an ideal linear sensor"
+    # the ccd preset is linear: the example's g is exact, so it ranks first, above Debevec
+    assert linear["scores"]["ccd"]["g_rms"] < 1e-9
+    assert linear["rank"] == 1 < ranked["Debevec 1997"]["rank"]
+    assert linear["scores"]["ccd"]["scene"] < 0.1 and linear["time_s"]["ccd"] > 0
+    vignetting = {e["method"]: e for e in boards["vignetting"]["entries"]}
+    radial = vignetting[VIGNETTING]
+    assert radial["status"] == "ok" and radial["rank"] is not None
+    assert radial["scores"]["ccd"]["vignetting"] < 0.03
+    # without the plug-in, the board has none of its methods
+    plain = photoquant(*args, path=(site,))
+    assert plain.returncode == 0, plain.stderr
+    names = {e["method"] for b in json.loads(plain.stdout)["boards"] for e in b["entries"]}
+    assert RESPONSE not in names and VIGNETTING not in names and "Debevec 1997" in names

@@ -1,4 +1,6 @@
-"""The ``photoquant`` sub-commands the validation package provides: ``validate``, ``demo``, ``compare``.
+"""The ``photoquant`` sub-commands the validation package provides.
+
+``validate``, ``demo``, ``compare`` and ``leaderboard``.
 
 They drive the simulator and read its ground truth, which the calibrator
 never imports, so they reach the ``photoquant`` command through the
@@ -16,7 +18,7 @@ from typing import Any
 
 from photoquant.errors import OutputExistsError
 
-__all__ = ["register_validate", "register_demo", "register_compare"]
+__all__ = ["register_validate", "register_demo", "register_compare", "register_leaderboard"]
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -119,3 +121,101 @@ def register_compare(sub: Any) -> None:
         "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"
     )
     cmp_.set_defaults(func=_cmd_compare)
+
+
+def _cmd_leaderboard(args: argparse.Namespace) -> int:
+    from validation.leaderboard import (
+        BOARD_QUICK,
+        check_report_folder,
+        format_leaderboard,
+        run_leaderboard,
+        write_report,
+    )
+
+    if args.output is not None:
+        from photoquant.io.outputs import check_output_not_input
+        from validation.leaderboard import default_real_dir
+
+        real_dir = args.real_dir or (default_real_dir() if args.real else None)
+        inputs: list[Any] = [real_dir]
+        if args.manifests:
+            from photoquant.io.outputs import manifest_inputs
+
+            for m in args.manifests:
+                inputs += manifest_inputs(m, allow_outside=args.allow_outside)
+        check_output_not_input(args.output, inputs)
+        check_report_folder(args.output, overwrite=args.overwrite)
+    config = BOARD_QUICK if args.quick else None
+    kwargs: dict[str, Any] = {} if config is None else {"config": config, "repeats": 1}
+    lb = run_leaderboard(
+        args.step,
+        manifests=args.manifests or None,
+        allow_outside=args.allow_outside,
+        methods=args.methods,
+        presets=args.presets,
+        seed=args.seed,
+        real=args.real,
+        real_dir=args.real_dir,
+        progress=(lambda _msg: None) if args.quiet else None,
+        **kwargs,
+    )
+    if args.output is not None:
+        write_report(lb, args.output, overwrite=args.overwrite)
+        print(f"report: {args.output}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(lb.to_json(), indent=1))
+    else:
+        print(format_leaderboard(lb))
+    return 0
+
+
+def register_leaderboard(sub: Any) -> None:
+    """Add ``photoquant leaderboard`` (:mod:`validation.leaderboard`)."""
+    from validation.leaderboard import RANKED_STEPS
+
+    lb = sub.add_parser(
+        "leaderboard",
+        help="rank every registered method of a step against the synthetic cameras' truth",
+    )
+    lb.add_argument(
+        "manifests",
+        nargs="*",
+        metavar="MANIFEST",
+        help="synthetic capture sets (pqsim capture) to rank on, with their truth "
+        "(default: simulate the presets)",
+    )
+    lb.add_argument(
+        "--step",
+        nargs="+",
+        choices=[*RANKED_STEPS, "all"],
+        default=["all"],
+        help="the step(s) whose methods are ranked (default: all)",
+    )
+    lb.add_argument(
+        "--methods", nargs="+", metavar="NAME", help="rank only these methods (registered names)"
+    )
+    lb.add_argument(
+        "--presets", nargs="+", metavar="PRESET", help="camera presets (default: ccd cmos)"
+    )
+    lb.add_argument(
+        "--real",
+        action="store_true",
+        help="also cross-validate the response methods on the real brackets (../shared/data/real)",
+    )
+    lb.add_argument(
+        "--real-dir", metavar="DIR", help="folder of real brackets for --real (one per sub-folder)"
+    )
+    lb.add_argument("--json", action="store_true", help="machine-readable output")
+    lb.add_argument(
+        "-o", "--output", metavar="DIR", help="write a report folder (Markdown, JSON, bar charts)"
+    )
+    lb.add_argument("--overwrite", action="store_true", help="replace an existing DIR")
+    lb.add_argument("--seed", type=int, default=0, help="master seed (capture and sampling)")
+    lb.add_argument(
+        "--quick", action="store_true", help="small capture sets (160x120, N = 2), timed once"
+    )
+    lb.add_argument(
+        "--allow-outside", action="store_true", help="allow paths outside the manifests' folders"
+    )
+    lb.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    lb.set_defaults(func=_cmd_leaderboard)

@@ -19,6 +19,7 @@ preset is simulated and calibrated once) and gathers every metric.
 | ``timings`` | step times | §6.1 |
 | ``rendered`` | calibration from a Mitsuba-rendered capture set (``--full``) | §5, §6 |
 | ``ablation`` | the paper's profile, photoquant's, each deviation alone | §5, §6 |
+| ``leaderboard`` | every registered method ranked against the truth | issue 11 |
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ EXPERIMENTS: dict[str, str] = {
     "timings": "validation.experiments.timings",
     "rendered": "validation.experiments.rendered",
     "ablation": "validation.experiments.ablation",
+    "leaderboard": "validation.experiments.leaderboard",
 }
 """Experiment key → module, in the order of the report (the paper's §6)."""
 

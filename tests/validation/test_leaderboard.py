@@ -1,0 +1,362 @@
+"""The leaderboard (``photoquant leaderboard``, :mod:`validation.leaderboard`).
+
+One board on the ``tiny`` configuration (96×72, both presets, the response
+and vignetting steps) is shared by the module; two methods are registered
+for it by the test: a deliberately wrong response (``g = 2.2 ln z``, a gamma
+that neither preset has) and one that always fails. The command is run
+in-process through :func:`photoquant.cli.main` with its entry point
+(``tests/_commands.py`` declares it when the installed metadata predates it).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import photoquant as pq
+from photoquant.cli import main
+from photoquant.errors import CalibrationError, PhotoquantError
+from tests._commands import commands_site
+from validation.config import TINY
+from validation.experiments.shared import Shared
+from validation.leaderboard import (
+    _static_border_roi,
+    find_real_sets,
+    format_leaderboard,
+    run_leaderboard,
+    write_report,
+)
+
+BAD = "Gamma 2.2 (test)"
+FAILING = "Always fails (test)"
+ABSENT = "Peer not installed (test)"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _quiet(_message: str) -> None:
+    pass
+
+
+def _gamma_response(stack, options, rng):
+    """A wrong response for both presets: ``g = 2.2 ln z`` (no fit)."""
+    levels = np.arange(2**stack.bit_depth, dtype=np.float64)
+    g = 2.2 * np.log(np.maximum(levels, 0.5))
+    n = stack.n_channels
+    model = pq.ResponseModel(
+        method=BAD,
+        levels=levels,
+        log_inverse_response=np.tile(g, (n, 1)),
+        saturation_level=np.asarray(stack.saturation_level, dtype=np.float64),
+        valid_min=np.full(n, 1.0),
+        black_level=np.zeros(n),
+        params={},
+    )
+    return pq.StepFit(model, {})
+
+
+def _failing_response(stack, options, rng):
+    raise CalibrationError("deliberately fails\nsecond line that the board must not show")
+
+
+def _absent_peer(stack, options, rng):
+    raise AssertionError("a method that is not available must not be run")
+
+
+_absent_peer.available = lambda: "the tool `nope` is not on PATH"  # type: ignore[attr-defined]
+
+
+@pytest.fixture(scope="module")
+def registered():
+    pq.register_method("response", BAD, _gamma_response, reference="test: wrong gamma")
+    pq.register_method("response", FAILING, _failing_response, reference="test: raises")
+    pq.register_method("response", ABSENT, _absent_peer, reference="test: a peer")
+    yield
+    for name in (BAD, FAILING, ABSENT):
+        pq.registry("response").remove(name)
+
+
+@pytest.fixture(scope="module")
+def board(registered, tmp_path_factory):
+    shared = Shared(TINY, 0, tmp_path_factory.mktemp("board"), _quiet)
+    lb = run_leaderboard(
+        ("response", "vignetting"), config=TINY, repeats=1, shared=shared, progress=_quiet
+    )
+    return lb, shared
+
+
+def _registered(step: str) -> set[str]:
+    return {n for n in pq.registry(step) if n.casefold() != "none"}
+
+
+def test_every_registered_method_is_on_its_board(board):
+    lb, _ = board
+    assert [b.step for b in lb.boards] == ["response", "vignetting"]
+    for b in lb.boards:
+        assert {e.method for e in b.entries} == _registered(b.step)
+        assert set(b.noise_floor) == {"ccd", "cmos"} and all(
+            0 < v < 0.1 for v in b.noise_floor.values()
+        )
+
+
+def test_ranks_follow_the_steps_own_error_failed_last_na_unranked(board):
+    lb, _ = board
+    for b in lb.boards:
+        ok = [e for e in b.entries if e.status == "ok"]
+        assert ok, b.step
+        assert [e.rank for e in ok] == list(range(1, len(ok) + 1))
+        primaries = [e.primary for e in ok]
+        assert all(p is not None and math.isfinite(p) for p in primaries)
+        assert primaries == sorted(primaries)
+        rest = b.entries[len(ok) :]
+        assert [e.status for e in rest] == sorted(
+            (e.status for e in rest), key=["failed", "n/a"].index
+        )
+        for e in rest:
+            assert e.reason and "\n" not in e.reason
+            assert (e.rank is None) == (e.status == "n/a")
+            assert not e.scores
+
+
+def test_a_bad_response_ranks_below_debevec_and_a_failing_one_last(board):
+    lb, _ = board
+    b = lb.board("response")
+    debevec, bad, failing = b.entry("Debevec 1997"), b.entry(BAD), b.entry(FAILING)
+    assert debevec.status == bad.status == "ok"
+    assert bad.rank > debevec.rank
+    for preset in ("ccd", "cmos"):
+        # a wrong curve: its g error is tenths of ln units, Debevec's a few thousandths
+        assert bad.scores[preset]["g_rms"] > 10 * debevec.scores[preset]["g_rms"]
+        assert bad.scores[preset]["scene"] > debevec.scores[preset]["scene"]
+    ranked = [e for e in b.entries if e.rank is not None]
+    assert failing.status == "failed" and failing.rank == len(ranked)
+    assert failing.reason == "ccd: deliberately fails"
+    assert failing.reference == "test: raises"
+    text = format_leaderboard(lb)
+    assert "failed: ccd: deliberately fails" in text and "second line" not in text
+
+
+def test_methods_whose_needs_the_capture_lacks_are_na_with_the_reason(board):
+    lb, _ = board
+    absent = lb.board("response").entry(ABSENT)
+    assert absent.status == "n/a" and absent.rank is None
+    assert absent.reason == "not available: the tool `nope` is not on PATH"
+    for b in lb.boards:
+        for e in b.entries:
+            method = pq.registry(b.step)[e.method]
+            if "flat_field" in (method.needs or ()):  # pqsim's sets have no flat field
+                assert e.status == "n/a" and "flat field" in e.reason, e
+
+
+def test_the_default_entry_is_the_validation_pipelines_calibration(board):
+    """Debevec with the defaults reproduces Shared's camera exactly (same frames, seed)."""
+    from validation.compare import compare_with_truth
+
+    lb, shared = board
+    for preset in ("ccd", "cmos"):
+        cal = shared.calibration(preset)
+        rep = compare_with_truth(cal.manifest, cal.model, cal.truth)
+        scores = lb.board("response").entry("Debevec 1997").scores[preset]
+        assert scores["g_rms"] == max(r["rms"] for r in rep["response"])
+        assert scores["scene"] == rep["scene"]["error"].e_mean
+        vig = lb.board("vignetting").entry(cal.model.vignetting.method).scores[preset]
+        assert vig == scores  # the default pipeline, on either board
+
+
+def test_json_output(board):
+    lb, _ = board
+    data = json.loads(json.dumps(lb.to_json()))
+    assert data["format"] == "photoquant.leaderboard/1"
+    assert data["presets"] == ["ccd", "cmos"] and data["config"]["shape"] == [72, 96]
+    resp = data["boards"][0]
+    assert resp["step"] == "response" and resp["ranked_by"]["score"] == "g_rms"
+    by_name = {e["method"]: e for e in resp["entries"]}
+    assert by_name[FAILING]["status"] == "failed" and by_name[FAILING]["primary"] is None
+    assert by_name["Debevec 1997"]["rank"] == 1 or by_name[BAD]["rank"] > 1
+    assert set(by_name["Debevec 1997"]["scores"]["ccd"]) == {"g_rms", "vignetting", "scene"}
+    assert by_name["Debevec 1997"]["time_s"]["ccd"] > 0
+
+
+def _without_timings(value):
+    if isinstance(value, dict):
+        return {
+            k: _without_timings(v)
+            for k, v in value.items()
+            if k not in ("time_s", "step_time_s", "elapsed_s")
+        }
+    if isinstance(value, list):
+        return [_without_timings(v) for v in value]
+    return value
+
+
+def test_deterministic_for_a_seed(registered, tmp_path):
+    runs = [
+        run_leaderboard(
+            "response",
+            presets=["ccd"],
+            config=TINY,
+            seed=5,
+            repeats=1,
+            workdir=tmp_path / str(i),
+            progress=_quiet,
+        ).to_json()
+        for i in range(2)
+    ]
+    assert _without_timings(runs[0]) == _without_timings(runs[1])
+    other = run_leaderboard(
+        "response", methods=["Debevec 1997"], presets=["ccd"], config=TINY, seed=6,
+        repeats=1, progress=_quiet,
+    ).to_json()  # fmt: skip
+    a = runs[0]["boards"][0]["entries"][0]["scores"]["ccd"]["g_rms"]
+    assert other["boards"][0]["entries"][0]["scores"]["ccd"]["g_rms"] != a
+
+
+def test_report_folder(board, tmp_path):
+    lb, _ = board
+    folder = write_report(lb, tmp_path / "report")
+    md = (folder / "leaderboard.md").read_text(encoding="utf-8")
+    assert "## response" in md and "## vignetting" in md and FAILING in md
+    assert "failed: ccd: deliberately fails" in md
+    for step in ("response", "vignetting"):
+        assert (folder / f"{step}.png").read_bytes()[:8] == PNG_SIGNATURE
+        assert f"]({step}.png)" in md
+    assert json.loads((folder / "leaderboard.json").read_text())["boards"]
+    with pytest.raises(PhotoquantError, match="already exists"):
+        write_report(lb, folder)
+    write_report(lb, folder, overwrite=True)
+    assert not list(tmp_path.glob(".report*")), "temporary folders left behind"
+
+
+# --------------------------------------------------------------------------- real brackets
+
+
+def test_static_border_is_not_scored():
+    frames = np.zeros((1, 3, 10, 12, 3), dtype=np.uint8)
+    frames[:, :, :, :] = [0, 0, 255]
+    for k in range(3):
+        frames[0, k, 1:8, 2:11] = 20 * (k + 1)
+    assert _static_border_roi(frames) == [2, 1, 11, 8]
+    frames[0, :, 0, 0, 0] = [1, 2, 3]  # a corner that changes: the top row and left column stay
+    assert _static_border_roi(frames) == [0, 0, 11, 8]
+
+
+def test_real_brackets_add_a_crossval_column(registered, tmp_path):
+    from pqsim.capture_set import write_capture_set
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    manifest = write_capture_set(
+        tmp_path / "capture", camera_from_preset("cmos"), shape=(48, 64), n_repeats=1,
+        n_views=1, seed=2,
+    )  # fmt: skip
+    data = json.loads(manifest.read_text())
+    real = tmp_path / "real" / "bracket"
+    real.mkdir(parents=True)
+    lines = ["# file exposure_s"]
+    for f in data["views"][0]["frames"]:
+        shutil.copy(manifest.parent / f["file"], real / Path(f["file"]).name)
+        lines.append(f"{Path(f['file']).name} {f['exposure_s']}")
+    (real / "exposures.txt").write_text("\n".join(lines) + "\n")
+    (tmp_path / "real" / "not-a-bracket").mkdir()
+    assert [s.name for s in find_real_sets(tmp_path / "real", tmp_path / "m")] == ["bracket"]
+
+    lb = run_leaderboard(
+        "response", presets=["ccd"], config=TINY, repeats=1, real=True,
+        real_dir=tmp_path / "real", progress=_quiet,
+    )  # fmt: skip
+    assert lb.real_sets == ["bracket"]
+    b = lb.board("response")
+    debevec, bad = b.entry("Debevec 1997"), b.entry(BAD)
+    assert 0 < debevec.crossval["bracket"] < bad.crossval["bracket"]
+    assert b.entry(FAILING).crossval == {}  # only scored methods are cross-validated
+    assert "crossval bracket (DN)" in format_leaderboard(lb)
+
+    none = run_leaderboard(
+        "response", methods=["Debevec 1997"], presets=["ccd"], config=TINY, repeats=1,
+        real=True, real_dir=tmp_path / "absent", progress=_quiet,
+    )  # fmt: skip
+    assert none.real_sets == [] and any("no real brackets" in n for n in none.notes)
+
+
+# --------------------------------------------------------------------------- the command
+
+
+@pytest.fixture
+def command(tmp_path, monkeypatch, capsys):
+    """Run ``photoquant ARGS`` in-process; returns (status, stdout, stderr)."""
+    monkeypatch.syspath_prepend(str(commands_site(tmp_path / "commands")))
+
+    def run(*args: str) -> tuple[int, str, str]:
+        status = main(list(args))
+        out, err = capsys.readouterr()
+        return status, out, err
+
+    return run
+
+
+def _one_error_line(status: int, err: str) -> str:
+    assert status == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("photoquant: error: "), err
+    return lines[0]
+
+
+def test_command_json_and_report(command, tmp_path):
+    report = tmp_path / "report"
+    status, out, err = command(
+        "leaderboard", "--quick", "--step", "response", "--presets", "ccd", "--json", "-q",
+        "-o", str(report),
+    )  # fmt: skip
+    assert status == 0, err
+    data = json.loads(out)
+    assert data["config"]["shape"] == [120, 160] and data["presets"] == ["ccd"]
+    entries = data["boards"][0]["entries"]
+    assert {e["method"] for e in entries} == _registered("response")
+    assert (report / "leaderboard.md").is_file() and (report / "response.png").is_file()
+
+    line = _one_error_line(*command("leaderboard", "--quick", "-q", "-o", str(report))[::2])
+    assert "already exists" in line and "--overwrite" in line
+
+
+def test_command_errors_are_one_line(command, tmp_path):
+    line = _one_error_line(*command("leaderboard", "--methods", "Nope", "-q")[::2])
+    assert "'Nope'" in line and "Debevec 1997" in line and "Extended Goldman-Chen" in line
+    # a method of another step than the one ranked
+    line = _one_error_line(
+        *command("leaderboard", "--step", "merge", "--methods", "Extended Goldman-Chen")[::2]
+    )
+    assert "unknown method 'Extended Goldman-Chen'" in line
+    line = _one_error_line(*command("leaderboard", "--presets", "nikon", "-q")[::2])
+    assert "nikon" in line and "ccd" in line
+    assert not list(tmp_path.glob("photoquant-leaderboard-*"))
+
+
+def test_given_synthetic_manifests_are_ranked_with_their_truth(board, command, tmp_path):
+    lb, shared = board
+    manifest = shared.calibration("ccd").manifest
+    status, out, err = command(
+        "leaderboard", str(manifest), "--step", "response", "--methods", "Debevec 1997",
+        "--json", "-q",
+    )  # fmt: skip
+    assert status == 0, err
+    data = json.loads(out)
+    assert data["presets"] == ["capture"] and data["manifests"] == {"capture": str(manifest)}
+    assert data["captures"] == "96x72, N = 4, K = 8, V = 3"
+    (entry,) = data["boards"][0]["entries"]
+    ours = entry["scores"]["capture"]["g_rms"]
+    # the same frames, another sample-selection seed: the same error to within a factor 2
+    theirs = lb.board("response").entry("Debevec 1997").scores["ccd"]["g_rms"]
+    assert 0.5 * theirs < ours < 2 * theirs
+
+    # a capture without truth (a real camera's) cannot be scored against the truth
+    real = json.loads(manifest.read_text())
+    del real["truth"]
+    path = manifest.parent / "real.json"
+    path.write_text(json.dumps(real))
+    line = _one_error_line(*command("leaderboard", str(path), "-q")[::2])
+    assert "no ground truth" in line and "crossval" in line
+    line = _one_error_line(*command("leaderboard", str(manifest), "--presets", "ccd")[::2])
+    assert "not both" in line

@@ -1,0 +1,116 @@
+"""Experiment 11 — the leaderboard: every registered method ranked against the truth (issue 11).
+
+:func:`validation.leaderboard.run_leaderboard` on the run's presets and
+configuration, reusing the run's capture sets (:class:`Shared`): each
+registered method of a step (plug-ins included, ``"None"`` left out)
+calibrates each preset's set with the other steps at their defaults, and is
+scored against the truth (the step's own error, the test scene's eq. 8
+error beside its noise floor) and timed.
+
+The quick job ranks the response and vignetting steps only, with one timed
+calibration per method (a few seconds per method on two cores); ``--full``
+(configuration ``full``) ranks the merge step as well. The metrics are
+reported, not baseline-checked (``check=False``): the set of registered
+methods changes as methods are added, and the default pipeline's own
+metrics are checked by the other experiments. The times are shown in the
+table only (a run's metrics are deterministic for its seed; timings are the
+``timings`` experiment's).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from validation.config import ValidationConfig
+from validation.experiments.base import ExperimentResult, fmt_pct
+from validation.experiments.shared import Shared
+
+__all__ = ["run", "TITLE", "steps_for"]
+
+TITLE = "Leaderboard: every registered method ranked against the truth (issue 11)"
+
+
+def steps_for(config: ValidationConfig) -> tuple[str, ...]:
+    """The steps ranked at ``config``: all of them in the full job, response and vignetting else."""
+    if config.name == "full":
+        return ("response", "merge", "vignetting")
+    return ("response", "vignetting")
+
+
+def _slug(name: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "_", name.casefold()).strip("_") or "method"
+
+
+def run(
+    config: ValidationConfig, seed: int, workdir: Path, *, shared: Shared | None = None
+) -> ExperimentResult:
+    """Rank the registered methods of :func:`steps_for` on the run's capture sets."""
+    from validation.leaderboard import PRIMARY, run_leaderboard
+
+    shared = shared or Shared(config, seed, workdir)
+    res = ExperimentResult("leaderboard", TITLE, "issue 11; validation.leaderboard")
+    lb = run_leaderboard(
+        steps_for(config),
+        presets=config.presets,
+        config=config,
+        seed=seed,
+        repeats=1,
+        shared=shared,
+        progress=lambda msg: shared.say(f"  {msg}"),
+    )
+    for board in lb.boards:
+        key, label, unit = PRIMARY[board.step]
+        for e in board.entries:
+            slug = f"{board.step}.{_slug(e.method)}"
+            where = f"{board.step}: {'n/a' if e.rank is None else f'#{e.rank}'} {e.method}"
+            if e.status != "ok":
+                res.row(where, f"{e.status}: {e.reason}", "–", "")
+                continue
+            for preset in lb.presets:
+                scores = e.scores[preset]
+                res.metric(
+                    f"{preset}.{slug}.{key}",
+                    scores[key],
+                    unit=unit,
+                    check=False,
+                    description=f"{label}, {board.step} method {e.method!r}",
+                )
+                if key != "scene":
+                    res.metric(
+                        f"{preset}.{slug}.scene",
+                        scores["scene"],
+                        unit="fraction",
+                        check=False,
+                        description=f"test scene e_mean, {board.step} method {e.method!r}",
+                    )
+            primary = " / ".join(
+                f"{e.scores[p][key]:.4f}" if unit == "ln" else fmt_pct(e.scores[p][key], 3)
+                for p in lb.presets
+            )
+            scene = " / ".join(fmt_pct(e.scores[p]["scene"], 3) for p in lb.presets)
+            t = e.time_median_s
+            res.row(
+                where,
+                f"{primary}; scene {scene}; {t:.2f} s" if t is not None else primary,
+                "–",
+                f"{label} ({' / '.join(lb.presets)})",
+            )
+        floor = " / ".join(fmt_pct(board.noise_floor.get(p), 3) for p in lb.presets)
+        res.row(f"{board.step}: test scene noise floor", floor, "–", "physics", detail=True)
+    res.notes.append(
+        "Every registered method of each ranked step (plug-ins included; 'None' left out) "
+        "calibrates the run's capture sets with the other steps at the photoquant profile's "
+        "defaults; ranked by the mean over the presets of the step's own error against the "
+        "truth, with the corrected test scene's eq. 8 e_mean and the calibration time. "
+        "Failed methods are ranked last with their reason; methods whose inputs the synthetic "
+        "sets lack (a flat field) are n/a. Reported, not baseline-checked. "
+        + (
+            "The merge step is ranked in the full job only."
+            if "merge" not in steps_for(config)
+            else ""
+        )
+        + " `photoquant leaderboard` runs the same board from the command line."
+    )
+    res.notes.extend(lb.notes)
+    return res
