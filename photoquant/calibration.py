@@ -454,8 +454,8 @@ def calibrate_manifest(
 ) -> Any:
     """Calibrate from a capture manifest (a path or a loaded ``CaptureManifest``).
 
-    Uses ``views``, ``irradiance``, ``white_roi`` and ``correspondences`` of
-    the manifest; ``kwargs`` go to :func:`calibrate`.
+    Uses ``views``, ``irradiance``, ``white_roi``, ``correspondences`` and
+    ``flatfield`` of the manifest; ``kwargs`` go to :func:`calibrate`.
     """
     from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
 
@@ -468,6 +468,8 @@ def calibrate_manifest(
         else None
     )
     corr = list(manifest.correspondences) if manifest.correspondences else None
+    if manifest.flatfield is not None and "flat_field" not in kwargs:
+        kwargs["flat_field"] = load_stack(manifest.flatfield, manifest, progress=progress_bars)
     return calibrate(
         views,
         irradiance=irradiance,

@@ -23,6 +23,8 @@ Key                           Required  Meaning
 ``white_roi``                 no        white chart box ``[x0, y0, x1, y1]`` in pixels,
                                         x right, y down, end exclusive
 ``irradiance``, ``scene``     no        frame sets
+``flatfield``                 no        frame set: a uniformly lit target through the
+                                        optics, for flat-field vignetting methods
 ``correspondences``           no        tracks of ``[view_index, x, y]`` (pixels), at
                                         least 2 entries each, one per view at most
 ``saturation_level``          no        per-channel clipping level, 1 to 2**bit_depth - 1
@@ -113,6 +115,7 @@ _KNOWN_KEYS = frozenset(
         "white_roi",
         "irradiance",
         "scene",
+        "flatfield",
         "correspondences",
         "saturation_level",
         "black_level",
@@ -196,6 +199,8 @@ class CaptureManifest:
         Dark frames, if given (the black level is their mean per channel).
     exposure_basis : {"auto", "time", "exposure value"}
         How exposures are measured (see the module docstring).
+    flatfield : FrameSetRef or None
+        A flat-field capture (a uniformly lit target through the optics), if given.
     """
 
     path: Path
@@ -212,6 +217,7 @@ class CaptureManifest:
     black_level: tuple[float, ...] | None = None
     dark: FrameSetRef | None = None
     exposure_basis: str = "auto"
+    flatfield: FrameSetRef | None = None
 
 
 # --------------------------------------------------------------------------- parsing
@@ -259,6 +265,7 @@ class _Parser:
         white_roi = self.parse_roi(data.get("white_roi"))
         irradiance = self.parse_optional_frameset(data, "irradiance")
         scene = self.parse_optional_frameset(data, "scene")
+        flatfield = self.parse_optional_frameset(data, "flatfield")
         tracks = self.parse_tracks(data.get("correspondences"), len(views))
         saturation = self.parse_saturation(data.get("saturation_level"), bit_depth, channels)
         black = self.parse_black_level(data.get("black_level"), bit_depth, channels, saturation)
@@ -289,6 +296,7 @@ class _Parser:
             black_level=black,
             dark=dark,
             exposure_basis=basis,
+            flatfield=flatfield,
         )
 
     def check_format(self, data: dict[str, Any]) -> None:

@@ -728,3 +728,33 @@ def test_models_by_truths():
 
 if __name__ == "__main__":
     print(format_table(models_by_truths()[0]))
+
+
+def test_a_manifest_flatfield_set_feeds_the_flat_field_vignetting(round_trip_capture, tmp_path):
+    """The manifest's ``flatfield`` frame set reaches the vignetting step through calibrate_manifest."""
+    import json
+
+    from photoquant.io import write_image
+
+    stacks, _, v_true = round_trip_capture
+    h, w = ROUND_TRIP_SHAPE
+    flat = capture(np.full((h, w, 3), 0.5) * v_true, ROUND_TRIP_EXPOSURES)
+
+    def frame_set(name: str, frames: np.ndarray) -> dict:
+        entries = []
+        for k, t in enumerate(ROUND_TRIP_EXPOSURES):
+            file = f"{name}_{k}.png"
+            write_image(tmp_path / file, np.asarray(frames[0, k], dtype=np.uint8))
+            entries.append({"file": file, "exposure_s": float(t)})
+        return {"frames": entries}
+
+    doc = {
+        "format": "photoquant.captures/1",
+        "bit_depth": 8,
+        "views": [frame_set("view", stacks[0].frames)],
+        "flatfield": frame_set("flat", flat),
+    }
+    (tmp_path / "capture.json").write_text(json.dumps(doc))
+    model = photoquant.calibrate_manifest(tmp_path / "capture.json", vignetting="Flat Field")
+    e_mean, _ = map_errors(model.vignetting_map(), v_true)
+    assert e_mean < 0.01, e_mean  # the bound of the in-memory flat-field test above
