@@ -119,10 +119,24 @@ def _table(response: np.ndarray) -> np.ndarray:
 
 
 def _peer_fit(
-    images: list[np.ndarray], times: np.ndarray, response: np.ndarray, merger: Any, peer: str
+    images: list[np.ndarray],
+    times: np.ndarray,
+    response: np.ndarray,
+    merger: Any,
+    peer: str,
+    *,
+    fill_unmeasured: bool = False,
 ) -> PeerFit:
     hdr = merger.process(images, times, response)
     table = _table(response)
+    if fill_unmeasured:
+        # Robertson leaves the levels no pixel takes at 0 (or NaN): the lowest measured value
+        for c in range(table.shape[0]):
+            ok = np.isfinite(table[c]) & (table[c] > 0)
+            if np.any(ok):
+                first = int(np.argmax(ok))
+                table[c, :first] = table[c, first]
+                table[c, ~(np.isfinite(table[c]) & (table[c] > 0))] = table[c, first]
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.log(table)
         log_e = np.log(hdr[..., ::-1].astype(np.float64))
@@ -163,13 +177,21 @@ def fit_opencv_debevec(stack: ExposureStack) -> PeerFit:
 def fit_opencv_robertson(stack: ExposureStack) -> PeerFit:
     """Calibrate and merge ``stack`` with OpenCV's Robertson pipeline, OpenCV's defaults.
 
-    Same inputs and limits as :func:`fit_opencv_debevec`.
+    Same inputs and limits as :func:`fit_opencv_debevec`. Levels that no
+    pixel takes (OpenCV leaves them at 0) get the lowest measured value.
     """
     import cv2
 
     images, times = _opencv_images(stack, "OpenCV's Robertson calibration")
     response = cv2.createCalibrateRobertson().process(images, times)
-    return _peer_fit(images, times, response, cv2.createMergeRobertson(), "OpenCV Robertson")
+    return _peer_fit(
+        images,
+        times,
+        response,
+        cv2.createMergeRobertson(),
+        "OpenCV Robertson",
+        fill_unmeasured=True,
+    )
 
 
 # ---------------------------------------------------------------------------

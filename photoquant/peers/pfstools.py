@@ -1,7 +1,7 @@
 """pfstools' ``pfshdrcalibrate`` as a peer: ``"pfstools Robertson"`` and ``"pfstools Mitsunaga"``.
 
 The adapter writes one binary PPM per exposure (the mean of the ``N``
-repeats, rounded; 8- to 16-bit, ``--bpp`` set to the stack's bit depth) and
+repeats, rounded; 8-bit only, see below) and
 an hdrgen script (``file 1/t aperture ISO 0`` per line, aperture 1 and ISO
 100, so that pfstools' brightness value is the exposure time alone) into a
 temporary folder, runs
@@ -16,6 +16,12 @@ vignetting and balance are photoquant's). Levels pfstools leaves at 0 (not
 observed, or outside its weighting) get no estimate: they are set to the
 lowest measured value and lie below ``valid_min``; a table that decreases
 (pfstools' Robertson does near saturation) is raised to its running maximum.
+
+8-bit only: ``pfshdrcalibrate --bpp 12`` on 12-bit PPM frames (read by
+``pfsinppm`` as values in ``[0, 1]``), with or without ``--multiplier
+4096``, reported "saturated pixels found in 100% of the image" and "failed to
+converge" here (pfstools 2.2.0, Debian 12), leaving most levels at 0: the
+adapter refuses other bit depths with one line rather than return that.
 
 References
 ----------
@@ -65,7 +71,7 @@ __all__ = [
 ]
 
 REQUIREMENT = "pfstools (`apt-get install pfstools`: pfsinhdrgen, pfshdrcalibrate)"
-BIT_DEPTHS = tuple(range(8, 17))
+BIT_DEPTHS = (8,)
 
 
 def available() -> bool:
@@ -205,7 +211,7 @@ def characterise_response_PfstoolsRobertson(
 ) -> StepFit[ResponseModel]:
     """The response step by ``pfshdrcalibrate -c robertson`` [pfstools]_ [Robertson2003]_.
 
-    8- to 16-bit, 3-channel stacks (the mean of the repeats, rounded). ``rng``
+    8-bit, 3-channel stacks (the mean of the repeats, rounded). ``rng``
     is unused (pfstools' Robertson uses every pixel).
     """
     del rng
@@ -221,7 +227,7 @@ def characterise_response_PfstoolsMitsunaga(
 ) -> StepFit[ResponseModel]:
     """The response step by ``pfshdrcalibrate -c mitsunaga`` [pfstools]_ [Mitsunaga1999]_.
 
-    8- to 16-bit, 3-channel stacks (the mean of the repeats, rounded).
+    8-bit, 3-channel stacks (the mean of the repeats, rounded).
     pfstools draws its samples itself (``rng`` unused).
     """
     del rng
