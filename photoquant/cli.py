@@ -295,6 +295,8 @@ def _cmd_methods(args: argparse.Namespace) -> int:
         for name, info in methods.items():
             tag = f" (profiles: {', '.join(info['in profiles'])})" if info["in profiles"] else ""
             print(f"  {name}{tag} — {info['module']}")
+            if info["reference"].startswith("peer ("):  # a peer says whether it is installed
+                print(f"    {info['reference']}")
             if info["options"]:
                 print("    options: " + ", ".join(f"{k}={v!r}" for k, v in info["options"].items()))
     return 0

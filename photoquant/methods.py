@@ -305,6 +305,7 @@ _BUILTIN_MODULES = (
     "photoquant.flatfield",
     "photoquant.vignetting",
     "photoquant.correspondences",
+    "photoquant.peers",
 )
 """Modules whose import registers the built-in methods (loaded before any plug-in)."""
 

@@ -104,8 +104,8 @@ def format_table(run: ValidationRun, check: Any = None) -> str:
     chart = "rendered by Mitsuba 3" if run.config.chart == "rendered" else "analytic, not rendered"
     lines.append(
         "Relative errors: eq. 8 after one global scale fit (photoquantity is defined up to "
-        "scale); maps (u, v) compared directly. Table 1's Hugin row is missing (no "
-        f"alternative pipeline yet); the ColorChecker is {chart}."
+        "scale); maps (u, v) compared directly. Table 1's Hugin row is Hugin's own "
+        f"calibration (vig_optimize, where installed); the ColorChecker is {chart}."
     )
     if check is not None:
         lines.append("")

@@ -1,4 +1,4 @@
-"""OpenCV's Debevec pipeline as a peer: ``CalibrateDebevec`` + ``MergeDebevec``.
+"""OpenCV's HDR calibration as a peer: ``CalibrateDebevec``/``CalibrateRobertson`` (+ merges).
 
 OpenCV implements [Debevec1997]_ with its own choices (70 samples on a
 regular grid, λ = 10, a triangular weight that never reaches 0, one weight
@@ -12,26 +12,66 @@ either way).
 OpenCV's calibration accepts 8-bit images only; a stack with ``N > 1``
 repeats is given as its mean rounded to integers.
 
+Two uses:
+
+* response methods of photoquant (registered, selectable by name):
+  ``"OpenCV Debevec"`` (``cv::CalibrateDebevec``, [Debevec1997]_; options
+  ``samples``, ``smoothness`` (OpenCV's λ), ``random``) and ``"OpenCV
+  Robertson"`` (``cv::CalibrateRobertson``, [Robertson2003]_; options
+  ``max_iter``, ``threshold``). They estimate the response only; the
+  saturation levels are the stack's (OpenCV does not estimate them) and the
+  merge, LUT, vignetting and balance are photoquant's.
+* whole peers for cross-validation (:data:`photoquant.peers.PEER_METHODS`):
+  calibration and OpenCV's own merge (``MergeDebevec``/``MergeRobertson``),
+  :func:`fit_opencv_debevec`, :func:`fit_opencv_robertson`.
+
 References
 ----------
 .. [Debevec1997] Debevec, P. E., & Malik, J. (1997). Recovering high dynamic
    range radiance maps from photographs. SIGGRAPH '97, 369-378.
    doi:10.1145/258734.258884
-.. [OpenCV] OpenCV, ``cv::CalibrateDebevec`` and ``cv::MergeDebevec``
-   (modules/photo, ``calibrate.cpp`` and ``merge.cpp``).
+.. [Robertson2003] Robertson, M. A., Borman, S., & Stevenson, R. L. (2003).
+   Estimation-theoretic approach to dynamic range enhancement using multiple
+   exposures. J. Electronic Imaging 12(2), 219-228. doi:10.1117/1.1557695
+.. [OpenCV] OpenCV, ``cv::CalibrateDebevec``, ``cv::CalibrateRobertson``,
+   ``cv::MergeDebevec``, ``cv::MergeRobertson`` (modules/photo,
+   ``calibrate.cpp`` and ``merge.cpp``);
+   https://docs.opencv.org/4.x/d2/df0/tutorial_py_hdr.html
 """
 
 from __future__ import annotations
 
 import importlib.util
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from photoquant.errors import InputError
+from photoquant.methods import StepFit
+from photoquant.peers._common import (
+    check_channels,
+    integer_frames,
+    register_peer,
+    require,
+    response_from_inverse,
+)
+from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
-__all__ = ["PeerFit", "available", "fit_opencv_debevec"]
+__all__ = [
+    "PeerFit",
+    "REQUIREMENT",
+    "available",
+    "fit_opencv_debevec",
+    "fit_opencv_robertson",
+    "OpenCVDebevecOptions",
+    "OpenCVRobertsonOptions",
+    "characterise_response_OpenCVDebevec",
+    "characterise_response_OpenCVRobertson",
+]
+
+REQUIREMENT = "OpenCV with its photo module (`pip install opencv-python-headless`)"
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,6 +106,50 @@ def available() -> bool:
     return hasattr(cv2, "createCalibrateDebevec") and hasattr(cv2, "createMergeDebevec")
 
 
+def _opencv_images(stack: ExposureStack, peer: str) -> tuple[list[np.ndarray], np.ndarray]:
+    check_channels(stack, peer)
+    frames = integer_frames(stack, peer, bit_depths=(8,))
+    images = [np.ascontiguousarray(frames[k][..., ::-1]) for k in range(stack.n_exposures)]
+    return images, np.asarray(stack.exposure_s, dtype=np.float32)
+
+
+def _table(response: np.ndarray) -> np.ndarray:
+    """OpenCV's ``(256, 1, 3)`` BGR ``f⁻¹`` table as ``(C, 256)`` in the stack's order."""
+    return response.reshape(256, 3)[:, ::-1].astype(np.float64).T
+
+
+def _peer_fit(
+    images: list[np.ndarray],
+    times: np.ndarray,
+    response: np.ndarray,
+    merger: Any,
+    peer: str,
+    *,
+    fill_unmeasured: bool = False,
+) -> PeerFit:
+    hdr = merger.process(images, times, response)
+    table = _table(response)
+    if fill_unmeasured:
+        # Robertson leaves the levels no pixel takes at 0 (or NaN): the lowest measured value
+        for c in range(table.shape[0]):
+            ok = np.isfinite(table[c]) & (table[c] > 0)
+            if np.any(ok):
+                first = int(np.argmax(ok))
+                table[c, :first] = table[c, first]
+                table[c, ~(np.isfinite(table[c]) & (table[c] > 0))] = table[c, first]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = np.log(table)
+        log_e = np.log(hdr[..., ::-1].astype(np.float64))
+    if not np.all(np.isfinite(g)):
+        raise InputError(f"{peer}'s calibration returned a non-positive response")
+    return PeerFit(
+        levels=np.arange(256, dtype=np.float64),
+        log_inverse_response=g,
+        saturation_level=np.full(3, 255.0),
+        log_photoquantity=log_e,
+    )
+
+
 def fit_opencv_debevec(stack: ExposureStack) -> PeerFit:
     """Calibrate and merge ``stack`` with OpenCV's Debevec pipeline, OpenCV's defaults.
 
@@ -85,32 +169,165 @@ def fit_opencv_debevec(stack: ExposureStack) -> PeerFit:
     """
     import cv2
 
-    if stack.bit_depth != 8:
-        raise InputError(
-            f"OpenCV's Debevec calibration accepts 8-bit images only, the stack is "
-            f"{stack.bit_depth}-bit"
-        )
-    if stack.n_channels != 3:
-        raise InputError(
-            f"OpenCV's Debevec calibration needs 3-channel images, the stack has {stack.n_channels}"
-        )
-    if stack.n_repeats == 1:
-        frames = stack.frames[0]
-    else:
-        frames = np.clip(np.rint(stack.mean()), 0, 255).astype(np.uint8)
-    images = [np.ascontiguousarray(frames[k][..., ::-1]) for k in range(stack.n_exposures)]
-    times = np.asarray(stack.exposure_s, dtype=np.float32)
+    images, times = _opencv_images(stack, "OpenCV's Debevec calibration")
     response = cv2.createCalibrateDebevec().process(images, times)
-    hdr = cv2.createMergeDebevec().process(images, times, response)
-    table = response.reshape(256, 3)[:, ::-1].astype(np.float64).T  # (C, 256), f⁻¹
-    with np.errstate(divide="ignore", invalid="ignore"):
-        g = np.log(table)
-        log_e = np.log(hdr[..., ::-1].astype(np.float64))
-    if not np.all(np.isfinite(g)):
-        raise InputError("OpenCV's Debevec calibration returned a non-positive response")
-    return PeerFit(
-        levels=np.arange(256, dtype=np.float64),
-        log_inverse_response=g,
-        saturation_level=np.full(3, 255.0),
-        log_photoquantity=log_e,
+    return _peer_fit(images, times, response, cv2.createMergeDebevec(), "OpenCV Debevec")
+
+
+def fit_opencv_robertson(stack: ExposureStack) -> PeerFit:
+    """Calibrate and merge ``stack`` with OpenCV's Robertson pipeline, OpenCV's defaults.
+
+    Same inputs and limits as :func:`fit_opencv_debevec`. Levels that no
+    pixel takes (OpenCV leaves them at 0) get the lowest measured value.
+    """
+    import cv2
+
+    images, times = _opencv_images(stack, "OpenCV's Robertson calibration")
+    response = cv2.createCalibrateRobertson().process(images, times)
+    return _peer_fit(
+        images,
+        times,
+        response,
+        cv2.createMergeRobertson(),
+        "OpenCV Robertson",
+        fill_unmeasured=True,
     )
+
+
+# ---------------------------------------------------------------------------
+# Response methods
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class OpenCVDebevecOptions:
+    """Options of ``"OpenCV Debevec"`` (``cv::createCalibrateDebevec``'s arguments).
+
+    Attributes
+    ----------
+    samples : int
+        Number of pixel locations sampled (OpenCV's default 70).
+    smoothness : float
+        OpenCV's ``lambda``, the weight of the smoothness term (default 10).
+    random : bool
+        Random sample locations instead of OpenCV's regular grid.
+    """
+
+    samples: int = 70
+    smoothness: float = 10.0
+    random: bool = False
+
+    def __post_init__(self) -> None:
+        if isinstance(self.samples, bool) or not isinstance(self.samples, int):
+            raise InputError(f"`samples` must be an integer, got {self.samples!r}")
+        if not 2 <= self.samples <= 100_000:
+            raise InputError(f"`samples` must lie in [2, 100000], got {self.samples}")
+        if not (isinstance(self.smoothness, int | float) and self.smoothness > 0):
+            raise InputError(f"`smoothness` must be a positive number, got {self.smoothness!r}")
+        if not isinstance(self.random, bool):
+            raise InputError(f"`random` must be true or false, got {self.random!r}")
+
+
+@dataclass(frozen=True)
+class OpenCVRobertsonOptions:
+    """Options of ``"OpenCV Robertson"`` (``cv::createCalibrateRobertson``'s arguments).
+
+    Attributes
+    ----------
+    max_iter : int
+        Most Gauss-Seidel iterations (OpenCV's default 30).
+    threshold : float
+        Convergence threshold on the change of the response (default 0.01).
+    """
+
+    max_iter: int = 30
+    threshold: float = 0.01
+
+    def __post_init__(self) -> None:
+        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int):
+            raise InputError(f"`max_iter` must be an integer, got {self.max_iter!r}")
+        if not 1 <= self.max_iter <= 10_000:
+            raise InputError(f"`max_iter` must lie in [1, 10000], got {self.max_iter}")
+        if not (isinstance(self.threshold, int | float) and self.threshold > 0):
+            raise InputError(f"`threshold` must be a positive number, got {self.threshold!r}")
+
+
+def _response_fit(
+    name: str, stack: ExposureStack, calibrator: Any, params: dict[str, Any]
+) -> StepFit[ResponseModel]:
+    require(available, name, REQUIREMENT)
+    images, times = _opencv_images(stack, name)
+    response = calibrator.process(images, times)
+    model, report = response_from_inverse(
+        name, np.arange(256.0), _table(response), stack.saturation_level, params=params
+    )
+    return StepFit(model, {"peer": "OpenCV", "opencv_version": _version(), **params, **report})
+
+
+def _version() -> str:
+    import cv2
+
+    return str(cv2.__version__)
+
+
+def characterise_response_OpenCVDebevec(
+    stack: ExposureStack,
+    options: OpenCVDebevecOptions | None = None,
+    rng: np.random.Generator | int | None = None,
+) -> StepFit[ResponseModel]:
+    """The response step by OpenCV's ``CalibrateDebevec`` [Debevec1997]_ [OpenCV]_.
+
+    8-bit, 3-channel stacks only (the mean of the repeats, rounded). The
+    table is OpenCV's ``f⁻¹``, made non-decreasing where it is not
+    (:func:`photoquant.peers._common.response_from_inverse`). ``rng`` is
+    unused (OpenCV seeds its random sampler itself).
+    """
+    del rng
+    import cv2
+
+    opts = options or OpenCVDebevecOptions()
+    cal = cv2.createCalibrateDebevec(opts.samples, float(opts.smoothness), opts.random)
+    params = {"samples": opts.samples, "lambda": float(opts.smoothness), "random": opts.random}
+    return _response_fit("OpenCV Debevec", stack, cal, params)
+
+
+def characterise_response_OpenCVRobertson(
+    stack: ExposureStack,
+    options: OpenCVRobertsonOptions | None = None,
+    rng: np.random.Generator | int | None = None,
+) -> StepFit[ResponseModel]:
+    """The response step by OpenCV's ``CalibrateRobertson`` [Robertson2003]_ [OpenCV]_.
+
+    8-bit, 3-channel stacks only (the mean of the repeats, rounded). Levels
+    that no pixel of the stack takes have no estimate in OpenCV's table; they
+    are set to the lowest measured value and lie below ``valid_min``.
+    """
+    del rng
+    import cv2
+
+    opts = options or OpenCVRobertsonOptions()
+    cal = cv2.createCalibrateRobertson(opts.max_iter, float(opts.threshold))
+    params = {"max_iter": opts.max_iter, "threshold": float(opts.threshold)}
+    return _response_fit("OpenCV Robertson", stack, cal, params)
+
+
+register_peer(
+    "response",
+    "OpenCV Debevec",
+    characterise_response_OpenCVDebevec,
+    options=OpenCVDebevecOptions,
+    model=ResponseModel,
+    reference="OpenCV cv::CalibrateDebevec (Debevec & Malik 1997, doi:10.1145/258734.258884)",
+    available=available,
+    requirement=REQUIREMENT,
+)
+register_peer(
+    "response",
+    "OpenCV Robertson",
+    characterise_response_OpenCVRobertson,
+    options=OpenCVRobertsonOptions,
+    model=ResponseModel,
+    reference="OpenCV cv::CalibrateRobertson (Robertson et al. 2003, doi:10.1117/1.1557695)",
+    available=available,
+    requirement=REQUIREMENT,
+)

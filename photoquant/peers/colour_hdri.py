@@ -1,0 +1,152 @@
+"""colour-hdri's Debevec 1997 response as a peer (the ``"colour-hdri Debevec 1997"`` method).
+
+The adapter builds a :class:`colour_hdri.ImageStack` from the stack's
+frames (one image per exposure: the mean of the ``N`` repeats, scaled to
+``[0, 1]`` by the bit depth, with the exposure time in its metadata,
+aperture f/1 and ISO 100) and calls
+:func:`colour_hdri.camera_response_functions_Debevec1997` with colour-hdri's
+own defaults: Grossberg 2003 histogram sampling
+(:func:`colour_hdri.samples_Grossberg2003`, 1000 samples, 256 bins),
+Debevec's hat weighting, smoothness ``l_s = 30``, polynomial extrapolation
+of the ends, the table normalised to a maximum of 1. colour-hdri returns
+``f⁻¹`` (linear) at ``n = 256`` levels; levels are the 8-bit values, so
+the adapter accepts 8-bit stacks only (colour-hdri's solver has one unknown
+per level). Its luminance gauge (``1 / average_luminance(N, t, S)``) is a
+constant factor of the exposure time; it drops out with photoquant's gauge.
+
+It estimates the response only; the saturation levels are the stack's and
+the merge, LUT, vignetting and balance are photoquant's.
+
+References
+----------
+.. [Debevec1997] Debevec, P. E., & Malik, J. (1997). Recovering high dynamic
+   range radiance maps from photographs. SIGGRAPH '97, 369-378.
+   doi:10.1145/258734.258884
+.. [ColourHDRI] Mansencal, T. et al., colour-hdri,
+   ``colour_hdri.camera_response_functions_Debevec1997``,
+   https://colour-hdri.readthedocs.io/ (doi:10.5281/zenodo.3363098)
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import dataclass
+
+import numpy as np
+
+from photoquant.errors import InputError
+from photoquant.methods import StepFit
+from photoquant.peers._common import (
+    check_channels,
+    register_peer,
+    require,
+    response_from_inverse,
+)
+from photoquant.response.model import ResponseModel
+from photoquant.stack import ExposureStack
+
+__all__ = [
+    "REQUIREMENT",
+    "available",
+    "ColourHDRIDebevecOptions",
+    "characterise_response_ColourHDRIDebevec1997",
+]
+
+METHOD_NAME = "colour-hdri Debevec 1997"
+REQUIREMENT = "colour-hdri (`pip install colour-hdri`)"
+
+
+def available() -> bool:
+    """Whether :mod:`colour_hdri` can be imported."""
+    return importlib.util.find_spec("colour_hdri") is not None
+
+
+@dataclass(frozen=True)
+class ColourHDRIDebevecOptions:
+    """Options of ``"colour-hdri Debevec 1997"`` (colour-hdri's arguments, its defaults).
+
+    Attributes
+    ----------
+    samples : int
+        Samples drawn by ``samples_Grossberg2003`` (default 1000).
+    smoothness : float
+        colour-hdri's ``l_s``, the smoothness weight (default 30).
+    """
+
+    samples: int = 1000
+    smoothness: float = 30.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.samples, bool) or not isinstance(self.samples, int):
+            raise InputError(f"`samples` must be an integer, got {self.samples!r}")
+        if not 10 <= self.samples <= 100_000:
+            raise InputError(f"`samples` must lie in [10, 100000], got {self.samples}")
+        if not (isinstance(self.smoothness, int | float) and self.smoothness > 0):
+            raise InputError(f"`smoothness` must be a positive number, got {self.smoothness!r}")
+
+
+def characterise_response_ColourHDRIDebevec1997(
+    stack: ExposureStack,
+    options: ColourHDRIDebevecOptions | None = None,
+    rng: np.random.Generator | int | None = None,
+) -> StepFit[ResponseModel]:
+    """The response step by colour-hdri's Debevec 1997 solver [ColourHDRI]_.
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        8-bit, 3-channel frames (the mean of the repeats is given, not rounded:
+        colour-hdri takes float images).
+    options : ColourHDRIDebevecOptions, optional
+    rng : unused
+        colour-hdri's sampler is deterministic (histogram-based).
+
+    Returns
+    -------
+    StepFit
+        The :class:`ResponseModel` (colour-hdri's ``f⁻¹``, made non-decreasing
+        where it is not) and a report.
+    """
+    del rng
+    require(available, METHOD_NAME, REQUIREMENT)
+    import colour_hdri
+
+    check_channels(stack, METHOD_NAME)
+    if stack.bit_depth != 8:
+        raise InputError(
+            f"{METHOD_NAME} accepts 8-bit images only (one unknown per level), "
+            f"the stack is {stack.bit_depth}-bit"
+        )
+    opts = options or ColourHDRIDebevecOptions()
+    means = stack.mean() / stack.c_max  # (K, H, W, C) in [0, 1]
+    images = colour_hdri.ImageStack()
+    for k in range(stack.n_exposures):
+        meta = colour_hdri.Metadata(f_number=1.0, exposure_time=float(stack.exposure_s[k]), iso=100)
+        images.append(colour_hdri.Image(f"exposure_{k}", np.asarray(means[k]), meta))
+    crfs = colour_hdri.camera_response_functions_Debevec1997(
+        images,
+        sampling_function_kwargs={"samples": opts.samples},
+        l_s=float(opts.smoothness),
+        n=256,
+    )
+    table = np.asarray(crfs, dtype=np.float64).T  # (C, 256), f⁻¹ normalised to max 1
+    params = {"samples": opts.samples, "l_s": float(opts.smoothness), "n": 256}
+    model, report = response_from_inverse(
+        METHOD_NAME, np.arange(256.0), table, stack.saturation_level, params=params
+    )
+    return StepFit(
+        model,
+        {"peer": "colour-hdri", "colour_hdri_version": colour_hdri.__version__, **params, **report},
+    )
+
+
+register_peer(
+    "response",
+    METHOD_NAME,
+    characterise_response_ColourHDRIDebevec1997,
+    options=ColourHDRIDebevecOptions,
+    model=ResponseModel,
+    reference="colour_hdri.camera_response_functions_Debevec1997 (doi:10.1145/258734.258884)",
+    available=available,
+    requirement=REQUIREMENT,
+)
