@@ -130,6 +130,13 @@ class NoiseAwareMergeOptions:
         first pass with weights from the observed values (0 to 5; default 1).
     exclude_below_valid_min : bool
         Give no weight to values below the response's ``valid_min`` (default).
+    min_signal_dn : float
+        Values whose mean lies less than this many DN above the black level
+        get no weight (default 1.5: the first level). There the quantiser's
+        bin is as wide as the signal itself (a factor ≥ 3 in exposure) and
+        the clipping at 0 biases the mean, so the variance model (a first-order
+        propagation) does not hold; and a fitted ``g`` is least certain
+        there (regression dilution at the toe). 0 keeps every value.
     fallback : str
         The Debevec 1997 weighting used when the noise is unknown (``N = 1``
         and no ``gain``): ``"hat-quantisation"`` (default), ``"hat"`` or
@@ -140,6 +147,7 @@ class NoiseAwareMergeOptions:
     read_noise: float | list[float] | None = None
     iterations: int = 1
     exclude_below_valid_min: bool = True
+    min_signal_dn: float = 1.5
     fallback: str = "hat-quantisation"
 
     def __post_init__(self) -> None:
@@ -155,6 +163,14 @@ class NoiseAwareMergeOptions:
             raise InputError(
                 "`exclude_below_valid_min` must be true or false, "
                 f"got {self.exclude_below_valid_min!r}"
+            )
+        if (
+            isinstance(self.min_signal_dn, bool)
+            or not isinstance(self.min_signal_dn, int | float)
+            or not 0 <= self.min_signal_dn < 1e6
+        ):
+            raise InputError(
+                f"`min_signal_dn` must be a number in [0, 1e6), got {self.min_signal_dn!r}"
             )
         if self.fallback not in WEIGHTING_FUNCTIONS:
             raise InputError(
@@ -199,7 +215,14 @@ class _Scale:
     def __init__(self, response: ResponseModel) -> None:
         self.levels = response.levels
         self.g = response.log_inverse_response
-        self.slope_at_levels = np.stack([np.gradient(row, self.levels) for row in self.g])
+        # per level, the larger of the two one-sided slopes (per DN): an upper bound of g'
+        # over the level's neighbourhood where g is concave or convex, so that the first
+        # levels (a table's end, flattened or extrapolated) are not trusted beyond what
+        # their quantisation allows
+        seg = np.diff(self.g, axis=1) / np.diff(self.levels)
+        self.slope_at_levels = np.maximum(
+            np.concatenate([seg[:, :1], seg], axis=1), np.concatenate([seg, seg[:, -1:]], axis=1)
+        )
         sat = np.asarray(response.saturation_level, dtype=np.float64)
         black = np.asarray(response.black_level, dtype=np.float64)
         self.sat = sat
@@ -212,7 +235,7 @@ class _Scale:
         return np.interp(v, self.levels, self.g[ch])
 
     def slope(self, v: np.ndarray, ch: int) -> np.ndarray:
-        """``g'(v)`` per DN: central differences at the levels, linear between."""
+        """``g'(v)`` per DN: the larger one-sided slope at the levels, linear between."""
         return np.interp(v, self.levels, self.slope_at_levels[ch])
 
     def linear(self, log_x: np.ndarray, ch: int) -> np.ndarray:
@@ -246,14 +269,19 @@ def _per_channel(value: Any, n_ch: int, name: str) -> np.ndarray | None:
 
 
 def _valid_values(
-    stack: ExposureStack, response: ResponseModel, exclude_below_valid_min: bool
+    stack: ExposureStack,
+    response: ResponseModel,
+    exclude_below_valid_min: bool,
+    min_signal_dn: float = 0.0,
 ) -> np.ndarray:
-    """``(K, H, W, C)`` bool: no repeat clipped, mean below saturation (and above ``valid_min``)."""
+    """``(K, H, W, C)`` bool: no repeat clipped, mean below saturation (and above the minimum)."""
     mean = stack.mean()
     ok = ~stack.saturated(response.saturation_level) & ~stack.dark_clipped()
     ok &= mean < np.asarray(response.saturation_level)
     if exclude_below_valid_min:
         ok &= mean >= np.asarray(response.valid_min)
+    if min_signal_dn > 0:
+        ok &= mean >= np.asarray(response.black_level) + min_signal_dn
     return ok
 
 
@@ -309,19 +337,22 @@ def estimate_noise_parameters(
         return None
     scale = _Scale(response)
     valid = _valid_values(stack, response, exclude_below_valid_min)
-    sums = stack.repeat_sum().astype(np.float64)
-    sq = np.zeros(sums.shape, dtype=np.float64)
-    for k in range(stack.n_exposures):
-        f = stack.frames[:, k].astype(np.float64)
-        sq[k] = np.einsum("n...,n...->...", f, f)
-    s2 = (sq - sums * sums / n) / (n - 1)
-    mean = sums / n
     n_ch = stack.n_channels
+    means: list[list[np.ndarray]] = [[] for _ in range(n_ch)]
+    variances: list[list[np.ndarray]] = [[] for _ in range(n_ch)]
+    for k in range(stack.n_exposures):  # one exposure at a time: memory of one image
+        f = stack.frames[:, k].astype(np.int64)
+        s1 = f.sum(axis=0)
+        # exact integers: N·Σc² − (Σc)², then one division
+        s2 = (n * np.einsum("n...,n...->...", f, f) - s1 * s1) / (n * (n - 1))
+        for ch in range(n_ch):
+            ok = valid[k][..., ch]
+            means[ch].append(s1[..., ch][ok] / n)
+            variances[ch].append(s2[..., ch][ok])
     gains, reads, bins_used = np.zeros(n_ch), np.zeros(n_ch), []
     for ch in range(n_ch):
-        ok = valid[..., ch]
-        c = mean[..., ch][ok]
-        var_c = s2[..., ch][ok]
+        c = np.concatenate(means[ch])
+        var_c = np.concatenate(variances[ch])
         if c.size < 2 * _FIT_MIN_COUNT:
             return None
         y = scale.linear(scale.log_inverse(c, ch), ch)
@@ -335,7 +366,9 @@ def estimate_noise_parameters(
                 continue
             xs.append(y[idx].mean())
             vs.append(var_y[idx].mean())
-            ses.append(max(var_y[idx].std(ddof=1) / math.sqrt(idx.size), 1e-300))
+            # a standard error never below 0.1 % of the bin's value (identical values in a bin)
+            se = var_y[idx].std(ddof=1) / math.sqrt(idx.size)
+            ses.append(max(se, 1e-3 * abs(vs[-1]), 1e-12))
         fixed_k = None if gain is None else float(gain[ch])
         fixed_b = None if read_noise is None else float(read_noise[ch]) ** 2
         need = 2 if fixed_k is None and fixed_b is None else 1
@@ -407,8 +440,9 @@ def merge_stack_NoiseAware(
     Notes
     -----
     A value with any repeat clipped (saturation level or 0), a mean at or
-    above the saturation level, or (``exclude_below_valid_min``) below the
-    response's ``valid_min`` gets no weight. The result does not depend on
+    above the saturation level, less than ``min_signal_dn`` above the black
+    level, or (``exclude_below_valid_min``) below the response's
+    ``valid_min`` gets no weight. The result does not depend on
     the order of the exposures (they are summed in increasing exposure
     time), and scaling every exposure time by ``s`` shifts ``ln Ê`` by
     ``−ln s``. Deterministic: no random draw.
@@ -464,7 +498,7 @@ def merge_stack_NoiseAware(
 
     scale = _Scale(response)
     tables = ValueTables(stack)
-    valid = _valid_values(stack, response, opts.exclude_below_valid_min)
+    valid = _valid_values(stack, response, opts.exclude_below_valid_min, float(opts.min_signal_dn))
     saturated = stack.saturated(response.saturation_level)
     sat = np.asarray(response.saturation_level, dtype=np.float64)
     read2 = params.read_noise**2

@@ -426,6 +426,7 @@ def test_noise_parameters_survive_the_camera_file(tmp_path, capture_set):
         ("Noise-Aware", {"iterations": 9}, r"`iterations` must lie in \[0, 5\]"),
         ("Noise-Aware", {"iterations": 1.5}, "`iterations` must be an integer"),
         ("Noise-Aware", {"fallback": "nope"}, "`fallback` must be one of"),
+        ("Noise-Aware", {"min_signal_dn": -1}, "`min_signal_dn` must be a number in"),
         ("Noise-Aware", {"exclude_below_valid_min": "yes"}, "must be true or false"),
         ("Noise-Aware", {"weighting": "hat"}, "has no option"),
         ("Robertson 2003", {"weighting": "hat"}, "`weighting` must be one of gaussian"),
