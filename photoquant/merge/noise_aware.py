@@ -97,6 +97,10 @@ variance is no longer the noise's plus 1/12 (Sheppard's correction fails)."""
 _FIT_MIN_COUNT = 32
 """Fewest values in a photon-transfer bin for its mean variance to be used."""
 
+_FIT_MAX_PIXELS = 1 << 16
+"""Pixels per exposure the photon-transfer fit reads at most (a regular stride over
+the image beyond; 65 536 × K values per channel fix the line to well under 1 %)."""
+
 
 def _number_or_list(value: Any, name: str, *, positive: bool) -> tuple[float, ...] | None:
     """An option given as one number or a list of per-channel numbers, as a tuple."""
@@ -268,21 +272,16 @@ def _per_channel(value: Any, n_ch: int, name: str) -> np.ndarray | None:
     return np.asarray(value, dtype=np.float64)
 
 
-def _valid_values(
-    stack: ExposureStack,
-    response: ResponseModel,
-    exclude_below_valid_min: bool,
-    min_signal_dn: float = 0.0,
+def _lowest_valid(
+    response: ResponseModel, exclude_below_valid_min: bool, min_signal_dn: float
 ) -> np.ndarray:
-    """``(K, H, W, C)`` bool: no repeat clipped, mean below saturation (and above the minimum)."""
-    mean = stack.mean()
-    ok = ~stack.saturated(response.saturation_level) & ~stack.dark_clipped()
-    ok &= mean < np.asarray(response.saturation_level)
+    """``(C,)``: the lowest mean value that gets a weight."""
+    lo = np.full(response.n_channels, -np.inf)
     if exclude_below_valid_min:
-        ok &= mean >= np.asarray(response.valid_min)
+        lo = np.maximum(lo, np.asarray(response.valid_min, dtype=np.float64))
     if min_signal_dn > 0:
-        ok &= mean >= np.asarray(response.black_level) + min_signal_dn
-    return ok
+        lo = np.maximum(lo, np.asarray(response.black_level, dtype=np.float64) + min_signal_dn)
+    return lo
 
 
 def estimate_noise_parameters(
@@ -336,19 +335,24 @@ def estimate_noise_parameters(
     if n < 2:
         return None
     scale = _Scale(response)
-    valid = _valid_values(stack, response, exclude_below_valid_min)
     n_ch = stack.n_channels
+    lo = _lowest_valid(response, exclude_below_valid_min, 0.0)
+    sat = np.asarray(response.saturation_level, dtype=np.float64)
+    clipped = stack.saturated(response.saturation_level) | stack.dark_clipped()
+    h, w = stack.image_shape
+    stride = max(1, (h * w) // _FIT_MAX_PIXELS)
     means: list[list[np.ndarray]] = [[] for _ in range(n_ch)]
     variances: list[list[np.ndarray]] = [[] for _ in range(n_ch)]
-    for k in range(stack.n_exposures):  # one exposure at a time: memory of one image
-        f = stack.frames[:, k].astype(np.int64)
+    for k in range(stack.n_exposures):  # one exposure at a time, every stride-th pixel
+        f = stack.frames[:, k].reshape(n, h * w, n_ch)[:, ::stride].astype(np.int64)
         s1 = f.sum(axis=0)
         # exact integers: N·Σc² − (Σc)², then one division
         s2 = (n * np.einsum("n...,n...->...", f, f) - s1 * s1) / (n * (n - 1))
+        m = s1 / n
+        ok = ~clipped[k].reshape(h * w, n_ch)[::stride] & (m >= lo) & (m < sat)
         for ch in range(n_ch):
-            ok = valid[k][..., ch]
-            means[ch].append(s1[..., ch][ok] / n)
-            variances[ch].append(s2[..., ch][ok])
+            means[ch].append(m[:, ch][ok[:, ch]])
+            variances[ch].append(s2[:, ch][ok[:, ch]])
     gains, reads, bins_used = np.zeros(n_ch), np.zeros(n_ch), []
     for ch in range(n_ch):
         c = np.concatenate(means[ch])
@@ -498,24 +502,30 @@ def merge_stack_NoiseAware(
 
     scale = _Scale(response)
     tables = ValueTables(stack)
-    valid = _valid_values(stack, response, opts.exclude_below_valid_min, float(opts.min_signal_dn))
-    saturated = stack.saturated(response.saturation_level)
+    clipped = stack.saturated(response.saturation_level)
+    excluded = clipped | stack.dark_clipped()
     sat = np.asarray(response.saturation_level, dtype=np.float64)
+    lo = _lowest_valid(response, opts.exclude_below_valid_min, float(opts.min_signal_dn))
     read2 = params.read_noise**2
     log_t = np.log(stack.exposure_s)
 
     def first_weight(v: np.ndarray, ch: int) -> np.ndarray:
         y = scale.linear(scale.log_inverse(v, ch), ch)
-        return 1.0 / _log_variance(y, scale.slope(v, ch), params.gain[ch], read2[ch], n)
+        w = 1.0 / _log_variance(y, scale.slope(v, ch), params.gain[ch], read2[ch], n)
+        return np.where((v >= lo[ch]) & (v < sat[ch]), w, 0.0)
+
+    def at_saturation(v: np.ndarray, ch: int) -> np.ndarray:
+        return (v >= sat[ch]).astype(np.float64)
 
     g_table = tables.table(scale.log_inverse)
     slope_table = tables.table(scale.slope)
     w_table = tables.table(first_weight)
+    sat_table = tables.table(at_saturation)
 
-    shape = stack.mean().shape[1:]
+    shape = (*stack.image_shape, n_ch)
     any_unsat = np.zeros(shape, dtype=bool)
     for k in range(stack.n_exposures):
-        any_unsat |= ~(saturated[k] | (tables.mean(k) >= sat))
+        any_unsat |= ~(clipped[k] | (tables.take(sat_table, k) > 0))
 
     log_e = np.zeros(shape)
     den = np.zeros(shape)
@@ -524,8 +534,9 @@ def merge_stack_NoiseAware(
         den = np.zeros(shape)
         for k in range(stack.n_exposures):
             g_k = tables.take(g_table, k)
+            w_first = tables.take(w_table, k)  # 0 exactly where the value is out of range
             if it == 0:
-                w = tables.take(w_table, k)
+                w = w_first
             else:
                 slope = tables.take(slope_table, k)
                 w = np.empty(shape)
@@ -534,7 +545,7 @@ def merge_stack_NoiseAware(
                     w[..., ch] = 1.0 / _log_variance(
                         y, slope[..., ch], params.gain[ch], read2[ch], n
                     )
-            w = np.where(valid[k], w, 0.0)
+            w = np.where(excluded[k] | (w_first == 0), 0.0, w)
             num += w * (g_k - log_t[k])
             den += w
         mask = den <= 0

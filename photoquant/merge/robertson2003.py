@@ -180,7 +180,12 @@ def merge_stack_Robertson2003(
     saturated = stack.saturated(response.saturation_level)
     dark = stack.dark_clipped()
     t_max = float(stack.exposure_s.max())
-    shape = stack.mean().shape[1:]
+    shape = (*stack.image_shape, stack.n_channels)
+
+    def at_saturation(v: np.ndarray, ch: int) -> np.ndarray:
+        return (v >= sat[ch]).astype(np.float64)
+
+    sat_table = tables.table(at_saturation)
     num = np.zeros(shape)
     den = np.zeros(shape)
     any_unsat = np.zeros(shape, dtype=bool)
@@ -191,7 +196,7 @@ def merge_stack_Robertson2003(
         wi = np.where(excluded, 0.0, tables.take(wi_table, k))
         num += t * wi
         den += t * t * w
-        any_unsat |= ~(saturated[k] | (tables.mean(k) >= sat))
+        any_unsat |= ~(saturated[k] | (tables.take(sat_table, k) > 0))
     mask = (den <= 0) | (num <= 0)
     with np.errstate(invalid="ignore", divide="ignore"):
         log_e = np.where(
