@@ -28,6 +28,15 @@ identically when the per-frame noise is ``σ_c`` DN (the first harmonic of the
 quantiser's error, [Widrow2008]_); with ``σ_c ≳ 0.5`` DN it is ``1/(12N)``,
 the noise model of :mod:`validation.noise_model`.
 
+``g'`` is taken per level as the larger of its two one-sided slopes (an
+upper bound over the level's neighbourhood), so that a table's flattened or
+extrapolated end is not trusted beyond its quantisation; and values less
+than ``min_signal_dn`` (1.5 DN) above the black level get no weight: at the
+first level the quantiser's bin spans a factor ≥ 3 of exposure, the clipping
+at 0 biases the mean, the first-order propagation above does not hold, and a
+fitted ``g`` is least certain (on the ``ccd`` preset's HDR test scene this
+level alone, weighted by its photon noise, doubled the deep shadow's error).
+
 Weights computed from the observed ``c̄_k`` correlate with its noise (a
 brighter draw gets more weight, a bias of order ``Var/E``); as in
 [Granados2010]_ the merge is iterated: the variances are evaluated at the

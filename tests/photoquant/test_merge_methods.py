@@ -448,3 +448,18 @@ def test_the_methods_are_registered_with_their_references():
     assert list(MERGE_METHODS)[:3] == ["Debevec 1997", "Noise-Aware", "Robertson 2003"]
     assert "doi:10.1109/CVPR.2010.5540208" in MERGE_METHODS["noise-aware"].reference
     assert "doi:10.1117/1.1557695" in MERGE_METHODS["robertson 2003"].reference
+
+
+def test_noise_aware_gives_the_first_level_no_weight_unless_asked():
+    """``min_signal_dn`` (1.5 DN): a mean of 1 DN is left out; with 0 it counts."""
+    resp = _linear_response()
+    good = np.array([[80, 79, 83]], dtype=np.uint8)  # t = 4
+    low = np.array([[1, 1, 2]], dtype=np.uint8)  # t = 0.05: mean 1.33 DN
+    both = _stack(np.vstack([low, good]).T[:, :, None, None, None], [0.05, 4.0])
+    alone = _stack(good.T[:, :, None, None, None], [4.0])
+    opts = {"gain": GAIN, "read_noise": READ_DN}
+    ref = MergeModel("Noise-Aware", opts).merge(alone, resp).log_photoquantity
+    res = MergeModel("Noise-Aware", opts).merge(both, resp).log_photoquantity
+    np.testing.assert_array_equal(res, ref)
+    kept = MergeModel("Noise-Aware", opts | {"min_signal_dn": 0}).merge(both, resp)
+    assert not np.array_equal(kept.log_photoquantity, ref)
