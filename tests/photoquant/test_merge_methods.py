@@ -284,9 +284,14 @@ def test_merges_are_deterministic_and_leave_the_stack_unchanged(noisy):
 # ---------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("preset", ["ccd", "cmos"])
-def test_noise_aware_merge_reaches_the_inverse_variance_floor_of_the_synthetic_cameras(preset):
-    """Each preset (linear CCD, S-curve CMOS), true camera model, N = 4, the quick exposures, log-uniform scene.
+@pytest.mark.parametrize("preset,bit_depth,n", [("ccd", 8, 4), ("cmos", 8, 4), ("cmos", 16, 2)])
+def test_noise_aware_merge_reaches_the_inverse_variance_floor_of_the_synthetic_cameras(
+    preset, bit_depth, n
+):
+    """Each preset (linear CCD, S-curve CMOS), true model, the quick exposures, log-uniform scene.
+
+    8 bits with N = 4 (the quick configuration) and 16 bits with N = 2 (a raw
+    camera: the photon-transfer fit on 2 repeats, no quantisation to speak of).
 
     The floor is :mod:`validation.noise_model`'s physics (shot, read, dark and
     quantisation noise per exposure) combined with inverse-variance weights,
@@ -302,20 +307,20 @@ def test_noise_aware_merge_reaches_the_inverse_variance_floor_of_the_synthetic_c
     from validation.truth_model import camera_model_from_truth
 
     shape = (60, 80)
-    camera = camera_from_preset(preset)
+    camera = camera_from_preset(preset, bit_depth=bit_depth)
     truth = camera.truth(shape)
     rng = np.random.default_rng(8)
     # 2.5 decades of photoquantity, every pixel its own value (no flat region, where
     # quantisation would act as one common bias rather than as noise)
     l = np.exp(rng.uniform(-2.5 * math.log(10), 0.0, (*shape, 3))) * 30.0
     t = np.asarray(PAPER_EXPOSURES_S)
-    stack = camera.capture(l, t, 4, rng=9).to_stack()
+    stack = camera.capture(l, t, n, rng=9).to_stack()
     model = camera_model_from_truth(truth)
 
-    bias, var_hat = predicted_log_error(truth, l, t, 4)
+    bias, var_hat = predicted_log_error(truth, l, t, n)
     inv = np.zeros(l.shape)
     for tk in t:
-        _, v = predicted_log_error(truth, l, np.array([tk]), 4)
+        _, v = predicted_log_error(truth, l, np.array([tk]), n)
         with np.errstate(divide="ignore"):
             inv += np.where(np.isfinite(v) & (v > 0), 1.0 / v, 0.0)
     with np.errstate(divide="ignore"):
