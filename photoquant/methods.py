@@ -428,10 +428,10 @@ def resolve_method(
     >>> method, options = resolve_method("merge", {"weighting": "hat"}, ("Debevec 1997", {}))
     >>> method.name, options.weighting, options.exclude_below_valid_min
     ('Debevec 1997', 'hat', True)
-    >>> resolve_method("merge", "Nope", ("Debevec 1997", {}))
+    >>> resolve_method("merge", "Nope", ("Debevec 1997", {}))  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    photoquant.errors.InputError: unknown merge method 'Nope'; valid methods are: Debevec 1997
+    photoquant.errors.InputError: unknown merge method 'Nope'; valid methods are: Debevec 1997, ...
     """
     reg = registry(step)
     default_name, default_options = default

@@ -16,69 +16,24 @@ References
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import cast
 
 import numpy as np
 
 from photoquant._checks import check_array, check_exposure_times, check_int
 from photoquant.errors import InputError
-from photoquant.methods import REGISTRIES, Method, options_from_mapping, options_to_dict
+from photoquant.merge._base import MergeResult, apply_log_inverse_response
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
 
 __all__ = [
-    "MERGE_METHODS",
     "DebevecMergeOptions",
-    "MergeModel",
-    "MergeResult",
     "merge_Debevec1997",
     "merge_stack_Debevec1997",
-    "merge_stack",
-    "apply_log_inverse_response",
 ]
-
-
-@dataclass(frozen=True, eq=False)
-class MergeResult:
-    """An HDR merge.
-
-    Attributes
-    ----------
-    log_photoquantity : ndarray, shape (H, W, C), float64
-        ``ln c_pλ``; NaN where ``mask`` is set.
-    mask : ndarray, shape (H, W, C), bool
-        True where the pixel has no valid exposure.
-    all_saturated : ndarray, shape (H, W, C), bool
-        Flagged because every exposure was saturated (too bright).
-    all_dark : ndarray, shape (H, W, C), bool
-        Flagged because no exposure rose above the dark floor (too dark).
-    weight_sum : ndarray, shape (H, W, C), float64
-        ``Σ_k w``: a confidence of each merged value.
-    """
-
-    log_photoquantity: np.ndarray
-    mask: np.ndarray
-    all_saturated: np.ndarray
-    all_dark: np.ndarray
-    weight_sum: np.ndarray
-
-    def photoquantity(self) -> np.ndarray:
-        """``exp(ln c)``: linear photoquantity, NaN at flagged pixels."""
-        return np.exp(self.log_photoquantity)
-
-
-def apply_log_inverse_response(
-    values: np.ndarray, levels: np.ndarray, log_inverse_response: np.ndarray
-) -> np.ndarray:
-    """Evaluate ``g_λ`` at pixel values ``(..., C)`` by linear interpolation."""
-    out = np.empty(values.shape, dtype=np.float64)
-    for ch in range(values.shape[-1]):
-        out[..., ch] = np.interp(values[..., ch], levels, log_inverse_response[ch])
-    return out
 
 
 _MAX_TABLE_SIZE = 1 << 22
@@ -315,106 +270,3 @@ def merge_stack_Debevec1997(
         c_min=np.asarray(response.black_level, dtype=np.float64),
         repeats=stack.n_repeats,
     )
-
-
-MERGE_METHODS = REGISTRIES["merge"]
-"""HDR merge methods by name: ``function(stack, response, options) -> MergeResult``."""
-
-MERGE_METHODS.add(
-    Method(
-        "merge",
-        "Debevec 1997",
-        merge_stack_Debevec1997,
-        options=DebevecMergeOptions,
-        reference="Debevec & Malik 1997, eq. 6; [PQ] eq. 6",
-    ),
-    replace=True,
-)
-
-
-@dataclass(frozen=True)
-class MergeModel:
-    """The merge a camera uses: a method of :data:`MERGE_METHODS` and its options.
-
-    Stored in the camera so that :func:`photoquant.correction` merges a scene
-    exactly as calibration merged the views.
-    """
-
-    method: str = "Debevec 1997"
-    options: Any = None
-
-    def __post_init__(self) -> None:
-        entry = MERGE_METHODS[self.method]
-        options = self.options
-        if options is None or isinstance(options, Mapping):
-            options = options_from_mapping(entry, dict(options or {}))
-        elif entry.options is not None and not isinstance(options, entry.options):
-            raise InputError(
-                f"merge method {entry.name!r} takes {entry.options.__name__}, "
-                f"got {type(options).__name__}"
-            )
-        object.__setattr__(self, "method", entry.name)
-        object.__setattr__(self, "options", options)
-
-    def merge(self, stack: ExposureStack, response: ResponseModel) -> MergeResult:
-        """Merge ``stack`` (any ``N``, any exposure times) with ``response``."""
-        if not isinstance(stack, ExposureStack):
-            raise InputError(f"`stack` must be an ExposureStack, got {type(stack).__name__}")
-        if stack.n_channels != response.n_channels:
-            raise InputError(
-                f"the stack has {stack.n_channels} channels, the response {response.n_channels}"
-            )
-        result = MERGE_METHODS[self.method].function(stack, response, self.options)
-        if not isinstance(result, MergeResult):
-            raise InputError(
-                f"merge method {self.method!r} must return a MergeResult, got {type(result).__name__}"
-            )
-        return result
-
-    def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        return {"options": options_to_dict(self.options)}, {}
-
-    @classmethod
-    def from_params(
-        cls, method: str, params: dict[str, Any], images: dict[str, np.ndarray]
-    ) -> MergeModel:
-        del images
-        options = params.get("options", {})
-        if not isinstance(options, dict):
-            raise InputError(f"the merge's `options` must be an object, got {options!r}")
-        return cls(method, options)
-
-
-def merge_stack(
-    stack: ExposureStack,
-    levels: np.ndarray,
-    log_inverse_response: np.ndarray,
-    saturation_level: np.ndarray,
-    *,
-    min_level: np.ndarray | None = None,
-    weighting: str = "hat",
-    method: str = "Debevec 1997",
-) -> MergeResult:
-    """Denoise (eq. 2) and merge (eq. 6) a stack with a response given as arrays.
-
-    A convenience over :class:`MergeModel` for a response that is not a
-    :class:`ResponseModel`: values are left out when any repeat is clipped,
-    and below ``min_level`` (when given). ``method`` is a key of
-    :data:`MERGE_METHODS` (case-insensitive); ``weighting`` is passed to
-    methods that have that option.
-    """
-    entry = MERGE_METHODS[method]
-    response = ResponseModel(
-        method="given",
-        levels=levels,
-        log_inverse_response=log_inverse_response,
-        saturation_level=saturation_level,
-        valid_min=min_level,
-    )
-    options: dict[str, Any] = {}
-    names = set() if entry.options is None else {f.name for f in dataclasses.fields(entry.options)}
-    if "weighting" in names:
-        options["weighting"] = weighting
-    if "exclude_below_valid_min" in names:
-        options["exclude_below_valid_min"] = min_level is not None
-    return MergeModel(entry.name, options).merge(stack, response)

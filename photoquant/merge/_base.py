@@ -1,0 +1,60 @@
+"""What every merge method returns, and the response evaluation they share.
+
+References
+----------
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 5-6.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["MergeResult", "apply_log_inverse_response"]
+
+
+@dataclass(frozen=True, eq=False)
+class MergeResult:
+    """An HDR merge.
+
+    Attributes
+    ----------
+    log_photoquantity : ndarray, shape (H, W, C), float64
+        ``ln c_pλ``; NaN where ``mask`` is set.
+    mask : ndarray, shape (H, W, C), bool
+        True where the pixel has no valid exposure.
+    all_saturated : ndarray, shape (H, W, C), bool
+        Flagged because every exposure was saturated (too bright).
+    all_dark : ndarray, shape (H, W, C), bool
+        Flagged because no exposure rose above the dark floor (too dark).
+    weight_sum : ndarray, shape (H, W, C), float64
+        ``Σ_k w``: a confidence of each merged value (its units are the
+        method's: for the noise-aware merge it is ``1 / Var(ln c)``).
+    report : dict
+        What the method did that a user should know (e.g. the noise
+        parameters the noise-aware merge used and where they came from);
+        JSON-able, empty for methods with nothing to say.
+    """
+
+    log_photoquantity: np.ndarray
+    mask: np.ndarray
+    all_saturated: np.ndarray
+    all_dark: np.ndarray
+    weight_sum: np.ndarray
+    report: dict[str, Any] = field(default_factory=dict)
+
+    def photoquantity(self) -> np.ndarray:
+        """``exp(ln c)``: linear photoquantity, NaN at flagged pixels."""
+        return np.exp(self.log_photoquantity)
+
+
+def apply_log_inverse_response(
+    values: np.ndarray, levels: np.ndarray, log_inverse_response: np.ndarray
+) -> np.ndarray:
+    """Evaluate ``g_λ`` at pixel values ``(..., C)`` by linear interpolation."""
+    out = np.empty(values.shape, dtype=np.float64)
+    for ch in range(values.shape[-1]):
+        out[..., ch] = np.interp(values[..., ch], levels, log_inverse_response[ch])
+    return out

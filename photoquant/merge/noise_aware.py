@@ -1,0 +1,572 @@
+"""Noise-aware HDR merge: inverse-variance weights from the camera's noise.
+
+Each exposure ``k`` of a pixel gives an estimate ``ln E_k = g(c̄_k) − ln t_k``
+of the log photoquantity; with independent noise the minimum-variance
+unbiased combination weighs each by the inverse of its variance
+([Granados2010]_, [Hanji2020]_),
+
+``ln Ê = Σ_k w_k (g(c̄_k) − ln t_k) / Σ_k w_k``,  ``w_k = 1 / Var(ln E_k)``,
+
+and then ``Var(ln Ê) = 1 / Σ_k w_k`` (the result's ``weight_sum``). The
+variance is propagated through the slope of ``g``,
+``Var(ln E_k) ≈ g'(c̄_k)² · Var(c̄_k)``, with the value's variance in DN²
+
+``Var(c̄_k) = [(K·y_k + σ_r²) / (y_k g'(c̄_k))² + q] / N``:
+
+shot noise proportional to the linear signal ``y_k`` (the gain ``K`` in DN/e⁻
+times the signal in DN), read noise ``σ_r²`` and quantisation ``q``, all
+before averaging the ``N`` repeats. ``y`` is the value on the camera's
+*linear DN scale*, ``y(c) = (c_sat − c_black) · exp(g(c) − g(c_sat))``:
+for a linear camera exactly ``c − c_black``, for a non-linear one the linear
+signal the response maps to ``c``, in units that span the same range; ``K``
+and ``σ_r`` are given, or estimated, on that scale. Shot and read noise pass
+through the response (they arise before it); quantisation happens after it,
+so in ``ln`` units it is ``g'² · q``. The quantisation error of the ``N``
+repeats averages out only when the noise dithers it: ``q = (1/12)(1/N +
+(1 − 1/N) ρ)``, ``ρ = exp(−4π² σ_c²)`` the share of the error that repeats
+identically when the per-frame noise is ``σ_c`` DN (the first harmonic of the
+quantiser's error, [Widrow2008]_); with ``σ_c ≳ 0.5`` DN it is ``1/(12N)``,
+the noise model of :mod:`validation.noise_model`.
+
+``g'`` is taken per level as the larger of its two one-sided slopes (an
+upper bound over the level's neighbourhood), so that a table's flattened or
+extrapolated end is not trusted beyond its quantisation; and values less
+than ``min_signal_dn`` (1.5 DN) above the black level get no weight: at the
+first level the quantiser's bin spans a factor ≥ 3 of exposure, the clipping
+at 0 biases the mean, the first-order propagation above does not hold, and a
+fitted ``g`` is least certain (on the ``ccd`` preset's HDR test scene this
+level alone, weighted by its photon noise, doubled the deep shadow's error).
+
+Weights computed from the observed ``c̄_k`` correlate with its noise (a
+brighter draw gets more weight, a bias of order ``Var/E``); as in
+[Granados2010]_ the merge is iterated: the variances are evaluated at the
+signal predicted from the previous estimate, ``y_k ∝ Ê t_k``
+(``iterations``, 1 by default: one pass with observed-value weights, one
+with predicted-signal weights).
+
+Noise parameters
+----------------
+Given in the options (``gain`` in DN/e⁻, ``read_noise`` in DN, one value or
+one per channel) or, when not given and ``N ≥ 2``, estimated from the stack
+itself by :func:`estimate_noise_parameters`: a photon-transfer curve
+([EMVA1288]_; the variance of the ``N`` repeats of each value against its
+mean, per channel, both taken to the linear DN scale through the response,
+binned, and a robust straight-line fit ``Var(y) = K·y + σ_r²``). With
+``N = 1`` and no gain given the stack carries no noise information: the
+merge falls back to the Debevec 1997 merge with the ``fallback`` weighting
+(``"hat-quantisation"`` by default) and says so in the result's ``report``.
+
+References
+----------
+.. [Granados2010] Granados, M., Ajdin, B., Wand, M., Theobalt, C., Seidel,
+   H.-P., & Lensch, H. P. A. (2010). Optimal HDR reconstruction with linear
+   digital cameras. CVPR 2010, 215-222. doi:10.1109/CVPR.2010.5540208
+.. [Hanji2020] Hanji, P., Zhong, F., & Mantiuk, R. K. (2020). Noise-aware
+   merging of high dynamic range image stacks without camera calibration.
+   ECCV 2020 Workshops, LNCS 12537, 376-391. doi:10.1007/978-3-030-67070-2_23
+.. [EMVA1288] EMVA Standard 1288, Release 4.0 (2021): the photon-transfer
+   method (variance against mean of the signal).
+.. [Widrow2008] Widrow, B., & Kollár, I. (2008). Quantization Noise.
+   Cambridge University Press, ch. 4-5 (the quantiser's error under
+   Gaussian input). doi:10.1017/CBO9780511754661
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from photoquant.errors import InputError
+from photoquant.merge._base import MergeResult
+from photoquant.merge._tables import ValueTables
+from photoquant.merge.debevec1997 import DebevecMergeOptions, merge_stack_Debevec1997
+from photoquant.response.model import ResponseModel
+from photoquant.stack import ExposureStack
+from photoquant.weighting import WEIGHTING_FUNCTIONS
+
+__all__ = [
+    "NoiseAwareMergeOptions",
+    "NoiseParameters",
+    "estimate_noise_parameters",
+    "merge_stack_NoiseAware",
+]
+
+_QUANTISATION = 1.0 / 12.0
+"""Variance of a uniform quantiser's error, DN²."""
+
+_FIT_MIN_VARIANCE = 0.25
+"""Photon-transfer bins whose mean variance of the repeats is below this (DN²,
+a noise of 0.5 DN) are left out of the fit: there the quantised repeats'
+variance is no longer the noise's plus 1/12 (Sheppard's correction fails)."""
+
+_FIT_MIN_COUNT = 32
+"""Fewest values in a photon-transfer bin for its mean variance to be used."""
+
+_FIT_MAX_PIXELS = 1 << 16
+"""Pixels per exposure the photon-transfer fit reads at most (a regular stride over
+the image beyond; 65 536 × K values per channel fix the line to well under 1 %)."""
+
+
+def _number_or_list(value: Any, name: str, *, positive: bool) -> tuple[float, ...] | None:
+    """An option given as one number or a list of per-channel numbers, as a tuple."""
+    if value is None:
+        return None
+    items = list(value) if isinstance(value, list | tuple) else [value]
+    if not items or any(isinstance(v, bool) or not isinstance(v, int | float) for v in items):
+        raise InputError(f"`{name}` must be a number or a list of numbers, got {value!r}")
+    out = tuple(float(v) for v in items)
+    bad = [v for v in out if not math.isfinite(v) or (v <= 0 if positive else v < 0)]
+    if bad:
+        rule = "positive" if positive else "non-negative"
+        raise InputError(f"`{name}` must be finite and {rule}, got {value!r}")
+    return out
+
+
+@dataclass(frozen=True)
+class NoiseAwareMergeOptions:
+    """Options of the ``"Noise-Aware"`` merge.
+
+    Attributes
+    ----------
+    gain : float or list of float, optional
+        ``K``, DN per electron on the linear DN scale (one value, or one per
+        channel). Estimated from the stack when not given (``N ≥ 2``).
+    read_noise : float or list of float, optional
+        ``σ_r``, the read noise in DN on the linear DN scale. Estimated with
+        the gain when not given (``N ≥ 2``); 0 with ``N = 1``.
+    iterations : int
+        Passes with weights from the predicted signal ``Ê·t_k`` after the
+        first pass with weights from the observed values (0 to 5; default 1).
+    exclude_below_valid_min : bool
+        Give no weight to values below the response's ``valid_min`` (default).
+    min_signal_dn : float
+        Values whose mean lies less than this many DN above the black level
+        get no weight (default 1.5: the first level). There the quantiser's
+        bin is as wide as the signal itself (a factor ≥ 3 in exposure) and
+        the clipping at 0 biases the mean, so the variance model (a first-order
+        propagation) does not hold; and a fitted ``g`` is least certain
+        there (regression dilution at the toe). 0 keeps every value.
+    fallback : str
+        The Debevec 1997 weighting used when the noise is unknown (``N = 1``
+        and no ``gain``): ``"hat-quantisation"`` (default), ``"hat"`` or
+        ``"uniform"``.
+    """
+
+    gain: float | list[float] | None = None
+    read_noise: float | list[float] | None = None
+    iterations: int = 1
+    exclude_below_valid_min: bool = True
+    min_signal_dn: float = 1.5
+    fallback: str = "hat-quantisation"
+
+    def __post_init__(self) -> None:
+        gain = _number_or_list(self.gain, "gain", positive=True)
+        read = _number_or_list(self.read_noise, "read_noise", positive=False)
+        object.__setattr__(self, "gain", None if gain is None else list(gain))
+        object.__setattr__(self, "read_noise", None if read is None else list(read))
+        if isinstance(self.iterations, bool) or not isinstance(self.iterations, int):
+            raise InputError(f"`iterations` must be an integer, got {self.iterations!r}")
+        if not 0 <= self.iterations <= 5:
+            raise InputError(f"`iterations` must lie in [0, 5], got {self.iterations}")
+        if not isinstance(self.exclude_below_valid_min, bool):
+            raise InputError(
+                "`exclude_below_valid_min` must be true or false, "
+                f"got {self.exclude_below_valid_min!r}"
+            )
+        if (
+            isinstance(self.min_signal_dn, bool)
+            or not isinstance(self.min_signal_dn, int | float)
+            or not 0 <= self.min_signal_dn < 1e6
+        ):
+            raise InputError(
+                f"`min_signal_dn` must be a number in [0, 1e6), got {self.min_signal_dn!r}"
+            )
+        if self.fallback not in WEIGHTING_FUNCTIONS:
+            raise InputError(
+                f"`fallback` must be one of {', '.join(WEIGHTING_FUNCTIONS)}, got {self.fallback!r}"
+            )
+
+
+@dataclass(frozen=True, eq=False)
+class NoiseParameters:
+    """The noise a merge assumes, per channel, on the linear DN scale.
+
+    Attributes
+    ----------
+    gain : ndarray, shape (C,)
+        ``K``, DN per electron (the slope of the photon-transfer curve).
+    read_noise : ndarray, shape (C,)
+        ``σ_r`` in DN (the square root of its intercept, 0 where negative).
+    source : str
+        ``"given"``, ``"estimated"`` or ``"given+estimated"``.
+    bins : list of int
+        Photon-transfer bins used per channel (estimates only).
+    """
+
+    gain: np.ndarray
+    read_noise: np.ndarray
+    source: str
+    bins: list[int] = dataclasses.field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able record (for :attr:`MergeResult.report`)."""
+        return {
+            "source": self.source,
+            "gain_dn_per_e": [float(v) for v in self.gain],
+            "read_noise_dn": [float(v) for v in self.read_noise],
+            "bins_used": list(self.bins),
+        }
+
+
+class _Scale:
+    """Per channel: ``g``, its slope and the linear DN scale of a response."""
+
+    def __init__(self, response: ResponseModel) -> None:
+        self.levels = response.levels
+        self.g = response.log_inverse_response
+        # per level, the larger of the two one-sided slopes (per DN): an upper bound of g'
+        # over the level's neighbourhood where g is concave or convex, so that the first
+        # levels (a table's end, flattened or extrapolated) are not trusted beyond what
+        # their quantisation allows
+        seg = np.diff(self.g, axis=1) / np.diff(self.levels)
+        self.slope_at_levels = np.maximum(
+            np.concatenate([seg[:, :1], seg], axis=1), np.concatenate([seg, seg[:, -1:]], axis=1)
+        )
+        sat = np.asarray(response.saturation_level, dtype=np.float64)
+        black = np.asarray(response.black_level, dtype=np.float64)
+        self.sat = sat
+        self.span = np.maximum(sat - black, 1.0)
+        self.g_sat = np.array(
+            [np.interp(s, self.levels, row) for s, row in zip(sat, self.g, strict=True)]
+        )
+
+    def log_inverse(self, v: np.ndarray, ch: int) -> np.ndarray:
+        return np.interp(v, self.levels, self.g[ch])
+
+    def slope(self, v: np.ndarray, ch: int) -> np.ndarray:
+        """``g'(v)`` per DN: the larger one-sided slope at the levels, linear between."""
+        return np.interp(v, self.levels, self.slope_at_levels[ch])
+
+    def linear(self, log_x: np.ndarray, ch: int) -> np.ndarray:
+        """``y`` on the linear DN scale from ``ln X = g(c)``."""
+        return self.span[ch] * np.exp(log_x - self.g_sat[ch])
+
+
+def _log_variance(
+    y: np.ndarray, slope: np.ndarray, gain: float, read2: float, n: int
+) -> np.ndarray:
+    """``Var(ln E_k)`` of a mean of ``n`` repeats at linear signal ``y`` (DN) and slope ``g'``."""
+    y = np.maximum(y, 1e-12)
+    noise_ln = (gain * y + read2) / (y * y)  # per frame, ln units
+    with np.errstate(divide="ignore", over="ignore"):
+        sigma_c2 = noise_ln / np.maximum(slope * slope, 1e-300)  # per frame, DN²
+    shared = np.exp(-4.0 * math.pi**2 * np.minimum(sigma_c2, 1e6))
+    q = _QUANTISATION * (1.0 / n + (1.0 - 1.0 / n) * shared)
+    return noise_ln / n + slope * slope * q
+
+
+def _per_channel(value: Any, n_ch: int, name: str) -> np.ndarray | None:
+    """An option's value (``None``, a number or a list, see the options) as ``(C,)``."""
+    if value is None:
+        return None
+    value = list(value) if isinstance(value, list | tuple) else [value]
+    if len(value) == 1:
+        return np.full(n_ch, value[0])
+    if len(value) != n_ch:
+        raise InputError(f"`{name}` has {len(value)} values but the stack has {n_ch} channels")
+    return np.asarray(value, dtype=np.float64)
+
+
+def _lowest_valid(
+    response: ResponseModel, exclude_below_valid_min: bool, min_signal_dn: float
+) -> np.ndarray:
+    """``(C,)``: the lowest mean value that gets a weight."""
+    lo = np.full(response.n_channels, -np.inf)
+    if exclude_below_valid_min:
+        lo = np.maximum(lo, np.asarray(response.valid_min, dtype=np.float64))
+    if min_signal_dn > 0:
+        lo = np.maximum(lo, np.asarray(response.black_level, dtype=np.float64) + min_signal_dn)
+    return lo
+
+
+def estimate_noise_parameters(
+    stack: ExposureStack,
+    response: ResponseModel,
+    *,
+    gain: np.ndarray | None = None,
+    read_noise: np.ndarray | None = None,
+    exclude_below_valid_min: bool = True,
+    n_bins: int = 32,
+) -> NoiseParameters | None:
+    """Estimate the gain and read noise from the ``N`` repeats (a photon-transfer curve).
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        ``N ≥ 2`` repeats of each exposure of a static scene.
+    response : ResponseModel
+        The camera's response, which takes values to the linear DN scale.
+    gain, read_noise : ndarray, shape (C,), optional
+        Known values, kept fixed (the other one is fitted).
+    exclude_below_valid_min : bool
+        Leave out values below the response's ``valid_min``.
+    n_bins : int
+        Quantile bins of the linear signal per channel.
+
+    Returns
+    -------
+    NoiseParameters or None
+        ``None`` when the stack cannot fix them (``N = 1``, or fewer than
+        two usable bins in a channel, or a non-positive fitted gain).
+
+    Notes
+    -----
+    Per value with no repeat clipped: the unbiased variance ``s²`` of its
+    ``N`` repeats (exact integer sums) less the quantisation variance
+    ``1/12`` (Sheppard's correction), taken to the linear DN scale with the
+    response's slope, ``Var(y) ≈ (s² − 1/12)(y g'(c̄))²``, against
+    ``y(c̄)``. The values of all exposures of a channel are pooled and cut
+    into ``n_bins`` quantile bins of ``y``; each bin's mean variance (an
+    unbiased estimate, with its standard error) is kept where the repeats'
+    own variance is at least 0.25 DN² (below, quantisation is not dithered
+    and Sheppard's correction fails) and the bin holds at least 32 values.
+    ``Var(y) = K y + σ_r²`` is fitted to the bins by weighted least squares
+    with Huber weights on the standardised residuals (a robust fit: a bin
+    spoilt by, e.g., hot pixels or a flicker does not pull the line). A
+    negative intercept gives ``σ_r = 0``. The dark current's shot noise,
+    small at these exposures, is absorbed in the fit.
+    """
+    n = stack.n_repeats
+    if n < 2:
+        return None
+    scale = _Scale(response)
+    n_ch = stack.n_channels
+    lo = _lowest_valid(response, exclude_below_valid_min, 0.0)
+    sat = np.asarray(response.saturation_level, dtype=np.float64)
+    clipped = stack.saturated(response.saturation_level) | stack.dark_clipped()
+    h, w = stack.image_shape
+    stride = max(1, (h * w) // _FIT_MAX_PIXELS)
+    means: list[list[np.ndarray]] = [[] for _ in range(n_ch)]
+    variances: list[list[np.ndarray]] = [[] for _ in range(n_ch)]
+    for k in range(stack.n_exposures):  # one exposure at a time, every stride-th pixel
+        f = stack.frames[:, k].reshape(n, h * w, n_ch)[:, ::stride].astype(np.int64)
+        s1 = f.sum(axis=0)
+        # exact integers: N·Σc² − (Σc)², then one division
+        s2 = (n * np.einsum("n...,n...->...", f, f) - s1 * s1) / (n * (n - 1))
+        m = s1 / n
+        ok = ~clipped[k].reshape(h * w, n_ch)[::stride] & (m >= lo) & (m < sat)
+        for ch in range(n_ch):
+            means[ch].append(m[:, ch][ok[:, ch]])
+            variances[ch].append(s2[:, ch][ok[:, ch]])
+    gains, reads, bins_used = np.zeros(n_ch), np.zeros(n_ch), []
+    for ch in range(n_ch):
+        c = np.concatenate(means[ch])
+        var_c = np.concatenate(variances[ch])
+        if c.size < 2 * _FIT_MIN_COUNT:
+            return None
+        y = scale.linear(scale.log_inverse(c, ch), ch)
+        dy_dc = y * scale.slope(c, ch)
+        var_y = (var_c - _QUANTISATION) * dy_dc * dy_dc
+        order = np.argsort(y, kind="stable")
+        groups = np.array_split(order, min(n_bins, max(1, c.size // _FIT_MIN_COUNT)))
+        xs, vs, ses = [], [], []
+        for idx in groups:
+            if idx.size < _FIT_MIN_COUNT or var_c[idx].mean() < _FIT_MIN_VARIANCE:
+                continue
+            xs.append(y[idx].mean())
+            vs.append(var_y[idx].mean())
+            # a standard error never below 0.1 % of the bin's value (identical values in a bin)
+            se = var_y[idx].std(ddof=1) / math.sqrt(idx.size)
+            ses.append(max(se, 1e-3 * abs(vs[-1]), 1e-12))
+        fixed_k = None if gain is None else float(gain[ch])
+        fixed_b = None if read_noise is None else float(read_noise[ch]) ** 2
+        need = 2 if fixed_k is None and fixed_b is None else 1
+        if len(xs) < need:
+            return None
+        k_fit, b_fit = _robust_line(np.array(xs), np.array(vs), np.array(ses), fixed_k, fixed_b)
+        if not k_fit > 0:
+            return None
+        gains[ch], reads[ch] = k_fit, math.sqrt(max(b_fit, 0.0))
+        bins_used.append(len(xs))
+    source = "estimated" if gain is None and read_noise is None else "given+estimated"
+    return NoiseParameters(gains, reads, source, bins_used)
+
+
+def _robust_line(
+    x: np.ndarray,
+    v: np.ndarray,
+    se: np.ndarray,
+    fixed_slope: float | None,
+    fixed_intercept: float | None,
+    *,
+    huber: float = 2.0,
+    iterations: int = 20,
+) -> tuple[float, float]:
+    """``v ≈ a·x + b`` by iteratively reweighted least squares with Huber weights."""
+    robust = np.ones_like(x)
+    a = fixed_slope if fixed_slope is not None else 0.0
+    b = fixed_intercept if fixed_intercept is not None else 0.0
+    for _ in range(iterations):
+        w = robust / se**2
+        if fixed_slope is None and fixed_intercept is None:
+            design = np.stack([x, np.ones_like(x)], axis=1) * np.sqrt(w)[:, None]
+            a, b = np.linalg.lstsq(design, v * np.sqrt(w), rcond=None)[0]
+        elif fixed_slope is None:
+            a = float(np.sum(w * x * (v - b)) / np.sum(w * x * x))
+        elif fixed_intercept is None:
+            b = float(np.sum(w * (v - a * x)) / np.sum(w))
+        r = np.abs(v - a * x - b) / se
+        new = np.where(r <= huber, 1.0, huber / np.maximum(r, 1e-300))
+        if np.allclose(new, robust):
+            break
+        robust = new
+    return float(a), float(b)
+
+
+def merge_stack_NoiseAware(
+    stack: ExposureStack,
+    response: ResponseModel,
+    options: NoiseAwareMergeOptions | None = None,
+) -> MergeResult:
+    """The ``"merge"`` step by inverse-variance weights (module notes, [Granados2010]_).
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        The exposures (any ``N``).
+    response : ResponseModel
+        ``g`` per channel (with the balance folded in or not: the linear DN
+        scale does not depend on it).
+    options : NoiseAwareMergeOptions, optional
+
+    Returns
+    -------
+    MergeResult
+        ``weight_sum`` is ``Σ_k 1/Var(ln E_k)``, the inverse of the merged
+        value's predicted variance; ``report["noise"]`` the noise parameters
+        used and their source (or, without any, the fallback taken).
+
+    Notes
+    -----
+    A value with any repeat clipped (saturation level or 0), a mean at or
+    above the saturation level, less than ``min_signal_dn`` above the black
+    level, or (``exclude_below_valid_min``) below the response's
+    ``valid_min`` gets no weight. The result does not depend on
+    the order of the exposures (they are summed in increasing exposure
+    time), and scaling every exposure time by ``s`` shifts ``ln Ê`` by
+    ``−ln s``. Deterministic: no random draw.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from photoquant.stack import ExposureStack
+    >>> from photoquant.response.model import ResponseModel
+    >>> levels = np.arange(256.0)
+    >>> g = np.log(np.maximum(levels, 0.5))[None]  # a linear camera
+    >>> response = ResponseModel("linear", levels, g, saturation_level=np.array([255.0]))
+    >>> frames = np.array([[[[[20]]], [[[80]]]]], dtype=np.uint8)  # N = 1, K = 2
+    >>> opts = NoiseAwareMergeOptions(gain=0.1, read_noise=1.0)
+    >>> stack = ExposureStack(frames, np.array([0.01, 0.04]), channels=("Y",))
+    >>> res = merge_stack_NoiseAware(stack, response, opts)
+    >>> round(float(np.exp(res.log_photoquantity[0, 0, 0])), 6)
+    2000.0
+    >>> res.report["noise"]["source"]
+    'given'
+    """
+    opts = options or NoiseAwareMergeOptions()
+    n_ch, n = stack.n_channels, stack.n_repeats
+    gain = _per_channel(opts.gain, n_ch, "gain")
+    read = _per_channel(opts.read_noise, n_ch, "read_noise")
+    if gain is not None and read is not None:
+        params: NoiseParameters | None = NoiseParameters(gain, read, "given")
+    else:
+        params = estimate_noise_parameters(
+            stack,
+            response,
+            gain=gain,
+            read_noise=read,
+            exclude_below_valid_min=opts.exclude_below_valid_min,
+        )
+        if params is None and gain is not None:
+            params = NoiseParameters(gain, np.zeros(n_ch), "given (read noise 0: N = 1)")
+    if params is None:
+        why = (
+            "N = 1: the stack holds no noise information"
+            if n < 2
+            else "the stack's repeats could not fix a photon-transfer curve"
+        )
+        fallback = merge_stack_Debevec1997(
+            stack,
+            response,
+            DebevecMergeOptions(
+                weighting=opts.fallback, exclude_below_valid_min=opts.exclude_below_valid_min
+            ),
+        )
+        note = f"{why} and no gain was given: merged by Debevec 1997 with {opts.fallback!r} weights"
+        return dataclasses.replace(fallback, report={"noise": {"source": "fallback", "note": note}})
+
+    scale = _Scale(response)
+    tables = ValueTables(stack)
+    clipped = stack.saturated(response.saturation_level)
+    excluded = clipped | stack.dark_clipped()
+    sat = np.asarray(response.saturation_level, dtype=np.float64)
+    lo = _lowest_valid(response, opts.exclude_below_valid_min, float(opts.min_signal_dn))
+    read2 = params.read_noise**2
+    log_t = np.log(stack.exposure_s)
+
+    def first_weight(v: np.ndarray, ch: int) -> np.ndarray:
+        y = scale.linear(scale.log_inverse(v, ch), ch)
+        w = 1.0 / _log_variance(y, scale.slope(v, ch), params.gain[ch], read2[ch], n)
+        return np.where((v >= lo[ch]) & (v < sat[ch]), w, 0.0)
+
+    def at_saturation(v: np.ndarray, ch: int) -> np.ndarray:
+        return (v >= sat[ch]).astype(np.float64)
+
+    g_table = tables.table(scale.log_inverse)
+    slope_table = tables.table(scale.slope)
+    w_table = tables.table(first_weight)
+    sat_table = tables.table(at_saturation)
+
+    shape = (*stack.image_shape, n_ch)
+    any_unsat = np.zeros(shape, dtype=bool)
+    for k in range(stack.n_exposures):
+        any_unsat |= ~(clipped[k] | (tables.take(sat_table, k) > 0))
+
+    log_e = np.zeros(shape)
+    den = np.zeros(shape)
+    for it in range(opts.iterations + 1):
+        num = np.zeros(shape)
+        den = np.zeros(shape)
+        for k in range(stack.n_exposures):
+            g_k = tables.take(g_table, k)
+            w_first = tables.take(w_table, k)  # 0 exactly where the value is out of range
+            if it == 0:
+                w = w_first
+            else:
+                slope = tables.take(slope_table, k)
+                w = np.empty(shape)
+                for ch in range(n_ch):
+                    y = scale.linear(log_e[..., ch] + log_t[k], ch)
+                    w[..., ch] = 1.0 / _log_variance(
+                        y, slope[..., ch], params.gain[ch], read2[ch], n
+                    )
+            w = np.where(excluded[k] | (w_first == 0), 0.0, w)
+            num += w * (g_k - log_t[k])
+            den += w
+        mask = den <= 0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            log_e = np.where(mask, 0.0, num / np.where(mask, 1.0, den))
+    mask = den <= 0
+    log_e = np.where(mask, np.nan, log_e)
+    return MergeResult(
+        log_photoquantity=log_e,
+        mask=mask,
+        all_saturated=mask & ~any_unsat,
+        all_dark=mask & any_unsat,
+        weight_sum=den,
+        report={"noise": params.to_dict() | {"repeats": n, "iterations": opts.iterations}},
+    )
