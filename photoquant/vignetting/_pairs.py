@@ -27,7 +27,7 @@ from scipy.optimize import least_squares
 
 from photoquant._checks import check_array, check_int, check_positive
 from photoquant.errors import CalibrationError, InputError
-from photoquant.vignetting.base import VignettingData
+from photoquant.vignetting.base import MAX_FALLOFF, VignettingData
 from photoquant.vignetting.extended_goldman_chen import (
     _check_image_shape,
     _pairs_within_tracks,
@@ -375,6 +375,13 @@ def fit_pair_model(
                 notes.append(
                     f"channel {ch}: fitted vignetting is below 0.5 everywhere in the image "
                     f"(maximum {v_max:.3g}): the fit has collapsed towards v = 0"
+                )
+            elif v_max > MAX_FALLOFF * v_min:
+                ok = False
+                notes.append(
+                    f"channel {ch}: fitted vignetting spans a factor {v_max / v_min:.3g} over "
+                    f"the image (more than {MAX_FALLOFF:g}): the polynomial diverged, no lens "
+                    "falls off so (check the response and the correspondences)"
                 )
             elif not uncertainty[ch] <= max_uncertainty:
                 ok = False

@@ -16,7 +16,13 @@ import numpy as np
 from photoquant.errors import InputError
 from photoquant.methods import REGISTRIES, Method, StepFit
 
-__all__ = ["VignettingModel", "VignettingData", "VIGNETTING_METHODS", "IdentityVignetting"]
+__all__ = [
+    "VignettingModel",
+    "VignettingData",
+    "VIGNETTING_METHODS",
+    "IdentityVignetting",
+    "MAX_FALLOFF",
+]
 
 
 class VignettingModel:
@@ -75,6 +81,13 @@ class VignettingData:
     image_shape: tuple[int, int]
     flat_field: np.ndarray | None = None
 
+
+MAX_FALLOFF = 100.0
+"""Largest ``max(v) / min(v)`` over the image a fitted vignetting may have.
+
+Natural vignetting (cos⁴) at a 60° half field is a factor 16; a fit whose
+map spans more than 100 has not found a lens's fall-off but a divergence of
+its polynomial (seen with a badly wrong response upstream), and is refused."""
 
 VIGNETTING_METHODS = REGISTRIES["vignetting"]
 """Vignetting methods by name: ``function(data: VignettingData, options) -> StepFit``."""

@@ -54,7 +54,12 @@ from scipy.optimize import least_squares
 from photoquant._checks import check_array, check_int, check_positive
 from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import Method, StepFit
-from photoquant.vignetting.base import VIGNETTING_METHODS, VignettingData, VignettingModel
+from photoquant.vignetting.base import (
+    MAX_FALLOFF,
+    VIGNETTING_METHODS,
+    VignettingData,
+    VignettingModel,
+)
 
 __all__ = [
     "VIGNETTING_PARAMETER_NAMES",
@@ -674,6 +679,13 @@ def fit_vignetting_ExtendedGoldmanChen(
                     f"channel {ch}: fitted vignetting is below 0.5 everywhere in the image "
                     f"(maximum {v_max:.3g}, centre ({result.x[4]:.3g}, {result.x[5]:.3g})): "
                     "the fit has collapsed towards v = 0"
+                )
+            elif v_max > MAX_FALLOFF * v_min:
+                ok = False
+                notes.append(
+                    f"channel {ch}: fitted vignetting spans a factor {v_max / v_min:.3g} over "
+                    f"the image (more than {MAX_FALLOFF:g}): the polynomial diverged, no lens "
+                    "falls off so (check the response and the correspondences)"
                 )
             elif not uncertainty[ch] <= max_uncertainty:
                 ok = False

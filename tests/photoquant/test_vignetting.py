@@ -395,6 +395,17 @@ def test_non_positive_model_is_flagged(rng):
     assert "not positive over the image" in fit.message
 
 
+def test_a_map_that_spans_more_than_any_lens_is_flagged(rng):
+    # v = 1 − 2.02 R: positive everywhere but 0.0047 at the corner pixels' centres
+    # (R = 0.4927), a factor 212 over the image; the fit is exact, the model is no
+    # lens's fall-off
+    truth = np.array([-2.02, 0.0, 0.0, 1.0, 0.5, 0.5])
+    obs = observe(truth, PAN_AND_TILT, 400, rng)
+    fit = fit_vignetting(obs.values, obs.xy, obs.view, obs.track, IMAGE_SHAPE)
+    assert not fit.converged[0]
+    assert "polynomial diverged" in fit.message
+
+
 def test_non_convergence_is_flagged(rng):
     obs = observe(DARKENING, PAN_AND_TILT, 200, rng)
     fit = fit_vignetting(
