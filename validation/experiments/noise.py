@@ -11,6 +11,10 @@ daylight), captured with the calibration exposures:
    (:func:`validation.truth_model.camera_model_from_truth`).
 2. ``N = 1`` against ``N = 10`` (paper: 4.9 %, 0.8 %, 0.4 %, Fig. 8): two
    independent captures, the ``N = 10`` result taken as the reference ``c_p``.
+   Every registered merge method (:data:`photoquant.merge.MERGE_METHODS`)
+   is scored on the same ``N = 4`` frames, with the calibrated and with the
+   true camera model, beside the physics floor (reported, not
+   baseline-checked).
 3. The ``1/√N`` law of appendix A on the measured standard deviation: for
    ``N`` in the configured set, two independent captures ``A``, ``B``; the
    temporal standard deviation is ``std(x_A − x_B)/√2`` over the pixels valid
@@ -55,6 +59,11 @@ PAPER = {
     "n1_vs_n10": {"e_max": 0.049, "e_mean": 0.008, "e_std": 0.004},
     "sqrt_n_exponent": -0.5,
 }
+
+
+def _slug(name: str) -> str:
+    """A method name as a metric key part (``"Noise-Aware"`` → ``noise_aware``)."""
+    return "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")
 
 
 def power_law_exponent(n: np.ndarray, sigma: np.ndarray) -> float:
@@ -165,6 +174,36 @@ def run(
             check=False,
             description="physics prediction of e_mean for a perfect calibration",
         )
+        # 1b. every registered merge method on the same N = 4 frames, calibrated and true model
+        from photoquant.errors import PhotoquantError
+        from photoquant.merge import MERGE_METHODS
+
+        for name in MERGE_METHODS:
+            cells = []
+            for label, cam_model in (("calibrated", model), ("true model", true_model)):
+                try:
+                    cm = correct(captures_a[4].to_stack(), cam_model, merge=name)
+                    _, sm, _ = relative_error_eq8(l, cm.photoquantity, cm.mask)
+                    value: float | None = sm.e_mean
+                except PhotoquantError as exc:
+                    value = None
+                    shared.say(f"  {preset}: merge {name!r} refused: {exc}")
+                key = "calibrated" if label == "calibrated" else "true_model"
+                res.metric(
+                    f"{preset}.merge.{_slug(name)}.{key}.e_mean",
+                    value,
+                    unit="fraction",
+                    check=False,
+                    description=f"N = 4 vs truth, merge {name!r}, {label} camera: e_mean",
+                )
+                cells.append(f"{label} {fmt_pct(value)}")
+            res.row(
+                f"{preset}: N = 4, merge {name}",
+                ", ".join(cells),
+                "–",
+                f"floor (hat weights) {fmt_pct(p4_mean)}",
+                detail=True,
+            )
         # 2. N = 1 against N = 10
         c1, c10 = corr_a[1], corr_a[10]
         e110, s110, _ = relative_error_eq8(c10.photoquantity, c1.photoquantity, c1.mask | c10.mask)
