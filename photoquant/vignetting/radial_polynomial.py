@@ -267,6 +267,8 @@ def characterise_vignetting_RadialPolynomial(
         scale_invariant=opts.scale_invariant,
         max_uncertainty=opts.max_uncertainty,
         max_nfev=opts.max_nfev,
+        view_gains=opts.view_gains,
+        view_gain_sigma=opts.view_gain_sigma,
     )
     if not np.all(fit.converged):
         raise CalibrationError(f"the vignetting fit cannot be trusted: {fit.message}")
