@@ -7,7 +7,8 @@ scene's eq. 8 error is measured after ``calibrate`` + ``correct``:
 
 * ``exact``: the same frames labelled with their actual times (the target),
 * ``nominal``: the nominal labels, no refinement,
-* ``refined``: the nominal labels, ``refine_exposures=True``.
+* ``refined``: the nominal labels, ``refine_exposures=True``;
+* a suffix ``-gains`` / ``-nogains`` sets the vignetting's ``view_gains``.
 
 Run: ``python benchmarks/bench_exposure_refinement.py [--shape H W] [--seeds 0 1]``.
 """
@@ -139,12 +140,13 @@ def main() -> None:
         row = []
         for name in args.variants:
             t0 = time.perf_counter()
-            if name == "exact":
-                e, model, _ = scene_error(data.exact(), refine_exposures=False)
-            elif name == "nominal":
-                e, model, _ = scene_error(data, refine_exposures=False)
-            else:
-                e, model, _ = scene_error(data, refine_exposures=True)
+            data_in = data.exact() if name.startswith("exact") else data
+            options: dict[str, Any] = {"refine_exposures": name.startswith("refined")}
+            if name.endswith("-gains"):
+                options["vignetting"] = {"view_gains": True}
+            elif name.endswith("-nogains"):
+                options["vignetting"] = {"view_gains": False}
+            e, model, _ = scene_error(data_in, **options)
             vig = map_relative_error(
                 data.camera.truth(tuple(args.shape)).vignetting, model.vignetting_map()
             )

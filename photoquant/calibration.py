@@ -125,11 +125,14 @@ def fit_vignetting_step(
     *,
     profile: str = DEFAULT_PROFILE,
     flat_field: np.ndarray | None = None,
+    exposure_scale_std: float | None = None,
 ) -> StepFit[VignettingModel]:
     """The vignetting step (§5.5) from sensor-uniformised views and correspondences.
 
     ``flat_field`` (``exp(merge) / u`` of a flat-field capture) is passed to
-    the methods that use one (e.g. ``"Flat Field"``).
+    the methods that use one (e.g. ``"Flat Field"``); ``exposure_scale_std``
+    (how well each view's exposure scale is known, relative) to the methods
+    whose ``view_gains`` is ``"auto"``.
     """
     views = [np.asarray(v) for v in uniform_views]
     if not views:
@@ -140,6 +143,7 @@ def fit_vignetting_step(
         [np.asarray(t, dtype=np.float64) for t in tracks],
         views[0].shape[:2],
         flat_field=None if flat_field is None else np.asarray(flat_field),
+        exposure_scale_std=exposure_scale_std,
     )
     return _checked_fit(method.function(data, options), method, VignettingModel)
 
@@ -366,6 +370,9 @@ def calibrate(
         resp_fit = fits[-1]
         views = [r.apply(v) for r, v in zip(refs, views, strict=True)]
         shutter = fit_affine_shutter(refs)[1]
+        # each view keeps its nominal geometric mean: its scale is off by the
+        # mean of its K jitters, σ/√K
+        scale_std = shutter.jitter_rms / np.sqrt(min(int(r.refined.sum()) for r in refs))
         exposures = {
             "refined": True,
             "views": [r.as_dict() for r in refs],
@@ -373,7 +380,9 @@ def calibrate(
                 "lag_s": shutter.lag_s,
                 "lag_std_s": shutter.lag_std_s,
                 "jitter_rms": shutter.jitter_rms,
+                "exponent_std": shutter.exponent_std,
             },
+            "view_scale_std": float(scale_std),
         }
     else:
         if refine_exposures:
@@ -474,6 +483,7 @@ def calibrate(
             tracks or [],
             (vig_spec[0].name, options_to_dict(vig_spec[1])),
             flat_field=flat,
+            exposure_scale_std=exposures.get("view_scale_std"),
         )
         report["vignetting"] = {
             "method": vig_fit.model.method,

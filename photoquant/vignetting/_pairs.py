@@ -34,7 +34,7 @@ import numpy as np
 
 from photoquant._checks import check_array, check_int, check_positive
 from photoquant.errors import CalibrationError, InputError
-from photoquant.vignetting.base import VignettingData
+from photoquant.vignetting.base import VignettingData, check_view_gains_option
 from photoquant.vignetting.extended_goldman_chen import (
     _check_image_shape,
     _pairs_within_tracks,
@@ -516,9 +516,12 @@ class PairFitOptions:
         Largest accepted mean relative first-order uncertainty of the map.
     max_nfev : int
         Most evaluations of the residuals per channel.
-    view_gains : bool
-        A free gain per view, fitted with the model (module notes; off by
-        default, see :class:`~photoquant.vignetting.ExtendedGoldmanChenOptions`).
+    view_gains : bool or "auto"
+        A free gain per view, fitted with the model (module notes); ``"auto"``
+        (default) as :class:`~photoquant.vignetting.ExtendedGoldmanChenOptions`.
+        These models fit gains and model jointly: a centred model
+        (``"Goldman-Chen 2005"``) determines them, a free centre
+        (``"Radial Polynomial"``) trades them for a ramp of ``v``.
     view_gain_sigma : float, optional
         Prior standard deviation of each gain about 1; ``None``: free gains.
     """
@@ -530,7 +533,7 @@ class PairFitOptions:
     min_spread: float = 0.25
     max_uncertainty: float = 0.02
     max_nfev: int = 2000
-    view_gains: bool = False
+    view_gains: bool | str = "auto"
     view_gain_sigma: float | None = None
 
     def __post_init__(self) -> None:
@@ -540,8 +543,7 @@ class PairFitOptions:
             raise InputError(
                 f"`scale_invariant` must be true or false, got {self.scale_invariant!r}"
             )
-        if not isinstance(self.view_gains, bool):
-            raise InputError(f"`view_gains` must be true or false, got {self.view_gains!r}")
+        check_view_gains_option(self.view_gains)
         if self.view_gain_sigma is not None:
             check_positive(self.view_gain_sigma, "view_gain_sigma")
         check_int(self.sample_radius, "sample_radius", 0, 64)

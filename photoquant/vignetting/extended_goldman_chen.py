@@ -55,7 +55,13 @@ from scipy.optimize import least_squares
 from photoquant._checks import check_array, check_int, check_positive
 from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import Method, StepFit
-from photoquant.vignetting.base import VIGNETTING_METHODS, VignettingData, VignettingModel
+from photoquant.vignetting.base import (
+    VIGNETTING_METHODS,
+    VignettingData,
+    VignettingModel,
+    check_view_gains_option,
+    wants_view_gains,
+)
 
 __all__ = [
     "VIGNETTING_PARAMETER_NAMES",
@@ -456,6 +462,46 @@ def _solve_pairs(
     return result, fun, cov
 
 
+def _centred_gains(
+    x_n: np.ndarray,
+    y_n: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    c: np.ndarray,
+    obs_track: np.ndarray,
+    pair_track: np.ndarray,
+    normalise: str,
+    scale_invariant: bool,
+    gain_index: np.ndarray,
+    n_gains: int,
+    max_nfev: int,
+    prior: float | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One channel's view gains (reference first, 1) and their std, centre held at the image's."""
+    if normalise == "track":
+        weight = 1.0 / (np.bincount(obs_track, weights=c) / np.bincount(obs_track))[pair_track]
+    else:
+        weight = np.ones(a.size)
+    problem = _PairProblem(
+        x_n, y_n, a, b, c[a], c[b], weight, scale_invariant, gain_index[a], gain_index[b], n_gains
+    )
+    free = np.r_[0, 1, 2, 3, np.arange(_N_PARAMS, _N_PARAMS + n_gains)]
+
+    def full(q: np.ndarray) -> np.ndarray:
+        return np.r_[q[:4], 0.5, 0.5, q[4:]]
+
+    result, _, cov = _solve_pairs(
+        lambda q: problem.residuals(full(q)),
+        lambda q: problem.jacobian(full(q))[:, free],
+        problem.linear_start()[free],
+        4,
+        max_nfev,
+        prior,
+    )
+    std = np.sqrt(np.maximum(np.diag(cov)[4:], 0.0))
+    return np.r_[1.0, result.x[4:]], np.r_[0.0, std]
+
+
 @dataclass(frozen=True)
 class _PairProblem:
     """Residuals ``w (c_a v_b − c_b v_a) / s`` of one channel and their Jacobian.
@@ -606,6 +652,7 @@ def fit_vignetting_ExtendedGoldmanChen(
     max_nfev: int = 2000,
     view_gains: bool = False,
     view_gain_sigma: float | None = None,
+    view_gain_centre: Literal["image", "free"] = "image",
 ) -> VignettingFit:
     """Fit the extended Goldman–Chen vignetting model to values seen from several views.
 
@@ -666,6 +713,13 @@ def fit_vignetting_ExtendedGoldmanChen(
         With ``view_gains``: the prior standard deviation of each gain about 1
         (how well the views' exposure scales are known beforehand), a
         Gaussian prior added to the least squares; ``None``: free gains.
+    view_gain_centre : {"image", "free"}
+        How the gains are told from the vignetting (see Notes). ``"image"``
+        (default): the gains are fitted with the model's centre held at the
+        image centre (``m5 = m6 = 0.5``), one gain per view is taken for all
+        channels (their geometric mean: an exposure error is common to the
+        channels), and the full model is then fitted to the values so
+        corrected. ``"free"``: gains and model jointly, per channel.
 
     Returns
     -------
@@ -746,7 +800,15 @@ def fit_vignetting_ExtendedGoldmanChen(
     vignetting (§6.3) gives gains to 0.1 % and its map to 0.3 %.
     ``map_uncertainty`` (marginal over the gains) reports how much freedom
     is left; ``view_gain_sigma`` adds what is known of the gains beforehand
-    as a Gaussian prior. The residual is divided by ``√(a_i a_j)`` so that
+    as a Gaussian prior. ``view_gain_centre="image"`` (default) resolves the
+    ambiguity by the physics of a lens instead: its vignetting is centred
+    on the optical axis, near the image centre, so the gains are those that
+    a vignetting centred there needs; a true centre off by ``δ`` biases them
+    by about ``2 |m1| m4 δ·d_j`` (0.3–0.5 % for pqsim's CCD preset, centre
+    2–3 % off, views 25 % apart: a map error of 0.5 % where 3 % exposure
+    jitter gave 9 %), and the full model, fitted with those gains held, is
+    free to put its centre where the data say. Its ``map_uncertainty`` is
+    then conditional on the gains. The residual is divided by ``√(a_i a_j)`` so that
     it is invariant to a common scale of the gains. A gain common to every
     view, the scale of ``l``, stays undetermined as before (view 0's is
     fixed).
@@ -772,6 +834,8 @@ def fit_vignetting_ExtendedGoldmanChen(
         raise InputError(f"`scale_invariant` must be a bool, got {scale_invariant!r}")
     if not isinstance(view_gains, bool | np.bool_):
         raise InputError(f"`view_gains` must be a bool, got {view_gains!r}")
+    if view_gain_centre not in ("image", "free"):
+        raise InputError(f"`view_gain_centre` must be 'image' or 'free', got {view_gain_centre!r}")
     if view_gain_sigma is not None and not (
         isinstance(view_gain_sigma, int | float | np.number) and view_gain_sigma > 0
     ):
@@ -856,6 +920,29 @@ def fit_vignetting_ExtendedGoldmanChen(
     n_view_slots = int(view.max()) + 1
     gains = np.full((n_channels, n_view_slots), np.nan) if view_gains else None
     gain_std = np.full((n_channels, n_view_slots), np.nan) if view_gains else None
+    if n_gains and view_gain_centre == "image" and gains is not None and gain_std is not None:
+        # the gains with the centre held at the image centre (no ramp to trade
+        # for them), then one gain per view for every channel, held in the fit
+        for ch in range(n_channels):
+            g, g_std = _centred_gains(
+                x_n,
+                y_n,
+                a,
+                b,
+                values[:, ch],
+                obs_track,
+                pair_track,
+                normalise,
+                bool(scale_invariant),
+                gain_index,
+                n_gains,
+                int(max_nfev),
+                view_gain_sigma,
+            )
+            gains[ch, present], gain_std[ch, present] = g, g_std
+        common = np.exp(np.mean(np.log(gains[:, present]), axis=0))
+        values = values * common[gain_index][:, None]
+        n_gains = 0
     for ch in range(n_channels):
         c = values[:, ch]
         if normalise == "track":
@@ -886,7 +973,7 @@ def fit_vignetting_ExtendedGoldmanChen(
             view_gain_sigma if n_gains else None,
         )
         params[ch] = result.x[:_N_PARAMS]
-        if gains is not None and gain_std is not None:
+        if n_gains and gains is not None and gain_std is not None:
             gains[ch, present] = np.r_[1.0, result.x[_N_PARAMS:]]
             gain_std[ch, present] = np.r_[0.0, np.sqrt(np.maximum(np.diag(cov)[_N_PARAMS:], 0.0))]
         rms[ch] = float(np.sqrt(np.mean(fun**2)))
@@ -1023,21 +1110,24 @@ class ExtendedGoldmanChenOptions:
         Half-size of the window averaged at each correspondence.
     min_pairs, min_spread, max_uncertainty, max_nfev
         See :func:`fit_vignetting_ExtendedGoldmanChen`.
-    view_gains : bool
-        A free gain per view: each view's exposure-scale error is fitted
-        beside the vignetting and reported (``view_gains``, ``view_gain_std``
-        and ``exposure_correction`` in the step's report) instead of being
-        read as vignetting. Off by default: for views related by shifts a
-        view gain trades against a ramp ``exp(a·x)`` of ``v``, which this
-        model's free centre reproduces to second order, so a mild, nearly
-        quadratic vignette (pqsim's presets) leaves the gains undetermined
-        (the fit is then refused as poorly constrained); a strongly curved
-        vignette, or a centred model (``"Goldman-Chen 2005"``), determines
-        them (:func:`fit_vignetting_ExtendedGoldmanChen`, Notes).
+    view_gains : bool or "auto"
+        A gain per view: each view's exposure-scale error is fitted beside
+        the vignetting and reported (``view_gains``, ``view_gain_std`` and
+        ``exposure_correction`` in the step's report) instead of being read
+        as vignetting (:func:`fit_vignetting_ExtendedGoldmanChen`, Notes).
+        ``"auto"`` (default; the paper's profile sets ``False``): when the
+        views' exposure scales are uncertain by more than
+        :data:`~photoquant.vignetting.base.AUTO_VIEW_GAIN_STD` (their
+        refinement says so, ``VignettingData.exposure_scale_std``); exact
+        or unknown exposures keep the fit without gains, which the gains'
+        centre assumption would bias by 0.3–0.5 %.
     view_gain_sigma : float, optional
         With ``view_gains``: the prior standard deviation of each gain about
         1 (how well the views' exposure scales are known beforehand);
         ``None`` (default): free gains.
+    view_gain_centre : {"image", "free"}
+        With ``view_gains``: the gains fitted with the centre held at the
+        image centre, then held in the full fit (default), or jointly.
     """
 
     normalise: str = "track"
@@ -1047,8 +1137,9 @@ class ExtendedGoldmanChenOptions:
     min_spread: float = 0.25
     max_uncertainty: float = 0.02
     max_nfev: int = 2000
-    view_gains: bool = False
+    view_gains: bool | str = "auto"
     view_gain_sigma: float | None = None
+    view_gain_centre: str = "image"
 
     def __post_init__(self) -> None:
         if self.normalise not in ("track", "none"):
@@ -1057,10 +1148,13 @@ class ExtendedGoldmanChenOptions:
             raise InputError(
                 f"`scale_invariant` must be true or false, got {self.scale_invariant!r}"
             )
-        if not isinstance(self.view_gains, bool):
-            raise InputError(f"`view_gains` must be true or false, got {self.view_gains!r}")
+        check_view_gains_option(self.view_gains)
         if self.view_gain_sigma is not None:
             check_positive(self.view_gain_sigma, "view_gain_sigma")
+        if self.view_gain_centre not in ("image", "free"):
+            raise InputError(
+                f"`view_gain_centre` must be 'image' or 'free', got {self.view_gain_centre!r}"
+            )
         check_int(self.sample_radius, "sample_radius", 0, 64)
         check_int(self.min_pairs, "min_pairs", 1)
         check_int(self.max_nfev, "max_nfev", 1)
@@ -1129,8 +1223,9 @@ def characterise_vignetting_ExtendedGoldmanChen(
         min_spread=opts.min_spread,
         max_uncertainty=opts.max_uncertainty,
         max_nfev=opts.max_nfev,
-        view_gains=opts.view_gains,
+        view_gains=wants_view_gains(opts.view_gains, data),
         view_gain_sigma=opts.view_gain_sigma,
+        view_gain_centre=opts.view_gain_centre,  # type: ignore[arg-type]
     )
     if not np.all(fit.converged):
         raise CalibrationError(f"the vignetting fit cannot be trusted: {fit.message}")
