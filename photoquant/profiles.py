@@ -147,6 +147,14 @@ DEVIATIONS: tuple[Deviation, ...] = (
         "the white chart read after the LUT and vignetting comes out exactly neutral",
     ),
     Deviation(
+        "vignetting with view gains",
+        "vignetting",
+        {"view_gains": "auto"},
+        "a gain per view fitted beside the vignetting (Goldman & Chen 2005) when the views' "
+        "refined exposure scales are uncertain beyond 0.2 %, so that a shutter's error is not "
+        "read as vignetting (with exact or unrefined times: no gains, as the paper)",
+    ),
+    Deviation(
         "track-normalised vignetting",
         "vignetting",
         {"normalise": "track"},
