@@ -302,7 +302,7 @@ def calibrate(
     scene's and flat field's times are then refined against that response
     (:func:`photoquant.exposure.refine_exposure_times`). Each view keeps its
     nominal geometric mean (the gauge), whose jitter (``σ/√K``) differs per
-    view: the vignetting methods' ``view_gains`` (on in the photoquant
+    view: the vignetting methods' ``view_gains`` (``"auto"`` in the photoquant
     profile) fit it [GC05]_. ``model.report["exposures"]`` holds the nominal
     and refined times with their uncertainties per stack, and
     ``model.parameters["refine_exposures"]`` whether refinement ran; with one

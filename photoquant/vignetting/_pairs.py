@@ -21,7 +21,9 @@ reported: a per-view exposure error (:mod:`photoquant.exposure`) is then not
 read as vignetting. Identifiability as in
 :func:`photoquant.vignetting.extended_goldman_chen.fit_vignetting_ExtendedGoldmanChen`
 (Notes): a gain is constant over its view, the vignetting ratio of a track
-varies with where the point lies, and every model here is 1 at its centre.
+varies with where the point lies — except for a ramp ``exp(a·x)`` of ``v``,
+which views related by shifts cannot tell from gains: a centred model
+excludes it, a free centre reproduces it to second order.
 """
 
 from __future__ import annotations
