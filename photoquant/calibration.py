@@ -305,7 +305,7 @@ def calibrate(
     view: the vignetting methods' ``view_gains`` (``"auto"`` in the photoquant
     profile) fit it [GC05]_. ``model.report["exposures"]`` holds the nominal
     and refined times with their uncertainties per stack, and
-    ``model.parameters["refine_exposures"]`` whether refinement ran; with one
+    ``model.parameters["refine_exposures"]`` whether it was on; with one
     view only (no independent shutter errors) the views keep their nominal
     times and a note says so.
 
