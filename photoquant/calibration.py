@@ -3,7 +3,11 @@
 :func:`calibrate` composes the steps, each a method of its step's registry
 (:mod:`photoquant.methods`) chosen by a *profile* and by per-step specs:
 
-1. response ``g_λ`` from the exposures of view 0 (:mod:`photoquant.response`),
+1. response ``g_λ`` from the exposures of view 0 (:mod:`photoquant.response`);
+   with exposure refinement (the photoquant profile's default,
+   ``refine_exposures``), from every view, alternating with the re-estimation
+   of every view's exposure times (:func:`photoquant.exposure.refine_jointly`),
+   and the irradiance scene's times refined against it,
 2. HDR merge of every view and of the irradiance scene (:mod:`photoquant.merge`),
 3. sensor LUT ``u`` from the irradiance scene (:mod:`photoquant.flatfield`),
 4. correspondences across the views, when not given
@@ -40,11 +44,17 @@ import numpy as np
 from photoquant import __version__
 from photoquant.balance import BalanceData, BalanceModel, check_roi
 from photoquant.errors import CalibrationError, InputError
+from photoquant.exposure import (
+    ExposureRefinement,
+    fit_affine_shutter,
+    refine_exposure_times,
+    refine_jointly,
+)
 from photoquant.flatfield import SensorLUTModel
 from photoquant.merge import MergeModel, MergeResult
 from photoquant.methods import STEPS, Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
-from photoquant.profiles import DEFAULT_PROFILE, profile_steps
+from photoquant.profiles import DEFAULT_PROFILE, profile_setting, profile_steps
 from photoquant.response import fit_response
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
@@ -115,11 +125,14 @@ def fit_vignetting_step(
     *,
     profile: str = DEFAULT_PROFILE,
     flat_field: np.ndarray | None = None,
+    exposure_scale_std: float | None = None,
 ) -> StepFit[VignettingModel]:
     """The vignetting step (§5.5) from sensor-uniformised views and correspondences.
 
     ``flat_field`` (``exp(merge) / u`` of a flat-field capture) is passed to
-    the methods that use one (e.g. ``"Flat Field"``).
+    the methods that use one (e.g. ``"Flat Field"``); ``exposure_scale_std``
+    (how well each view's exposure scale is known, relative) to the methods
+    whose ``view_gains`` is ``"auto"``.
     """
     views = [np.asarray(v) for v in uniform_views]
     if not views:
@@ -130,6 +143,7 @@ def fit_vignetting_step(
         [np.asarray(t, dtype=np.float64) for t in tracks],
         views[0].shape[:2],
         flat_field=None if flat_field is None else np.asarray(flat_field),
+        exposure_scale_std=exposure_scale_std,
     )
     return _checked_fit(method.function(data, options), method, VignettingModel)
 
@@ -227,6 +241,7 @@ def calibrate(
     vignetting: Any = None,
     correspondence_finder: Any = None,
     seed: int = 0,
+    refine_exposures: bool | None = None,
     progress: Progress | None = None,
     return_intermediates: bool = False,
 ) -> Any:
@@ -259,6 +274,10 @@ def calibrate(
         an options dataclass instance.
     seed : int
         Seed of the response's sample selection (results are deterministic).
+    refine_exposures : bool, optional
+        Re-estimate every stack's exposure times from the data (Notes).
+        ``None`` (default): the profile's setting (``"photoquant"``: on,
+        ``"paper"``: off, the nominal times as the paper uses them).
     progress : callable, optional
         Called with a short message as each step starts.
     return_intermediates : bool
@@ -268,8 +287,44 @@ def calibrate(
     Returns
     -------
     CameraModel or CalibrationResult
+
+    Notes
+    -----
+    *Exposure refinement.* A real shutter is off its label by a few percent
+    per exposure and a lag shifts the shortest ones most. With refinement the
+    response is recovered from every view at once, alternating with each
+    view's exposure times (:func:`photoquant.exposure.refine_jointly`): the
+    views' shutter errors are independent, so a response bent to absorb one
+    view's errors contradicts the others' [Mitsunaga1999]_; the exponent
+    ambiguity ``(g, ln t) → γ (g, ln t)`` that no data resolve
+    [Grossberg2003]_ is fixed by an affine shutter model (a gain per view and
+    one lag, :func:`photoquant.exposure.fit_affine_shutter`). The irradiance
+    scene's and flat field's times are then refined against that response
+    (:func:`photoquant.exposure.refine_exposure_times`). Each view keeps its
+    nominal geometric mean (the gauge), whose jitter (``σ/√K``) differs per
+    view: the vignetting methods' ``view_gains`` (``"auto"`` in the photoquant
+    profile) fit it [GC05]_. ``model.report["exposures"]`` holds the nominal
+    and refined times with their uncertainties per stack, and
+    ``model.parameters["refine_exposures"]`` whether it was on; with one
+    view only (no independent shutter errors) the views keep their nominal
+    times and a note says so.
+
+    References
+    ----------
+    .. [Mitsunaga1999] T. Mitsunaga, S. K. Nayar, "Radiometric self
+       calibration", CVPR 1999.
+    .. [Grossberg2003] M. D. Grossberg, S. K. Nayar, "Determining the camera
+       response from images: what is knowable?", IEEE PAMI 25(11), 2003.
+    .. [GC05] D. B. Goldman, J.-H. Chen, "Vignette and exposure calibration
+       and compensation", ICCV 2005. doi:10.1109/ICCV.2005.249
     """
     _check_views(views, irradiance)
+    if refine_exposures is None:
+        refine_exposures = bool(profile_setting(profile, "refine_exposures"))
+    elif not isinstance(refine_exposures, bool):
+        raise InputError(
+            f"`refine_exposures` must be true, false or None, got {refine_exposures!r}"
+        )
     if flat_field is not None:
         _check_views([views[0], flat_field], None)
     steps = resolve_steps(
@@ -292,10 +347,63 @@ def calibrate(
     say("response")
     t0 = time.perf_counter()
     method, options = steps["response"]
-    resp_fit = fit_response(ref, (method.name, options_to_dict(options)), rng=seed)
+    response_spec = (method.name, options_to_dict(options))
+    exposures: dict[str, Any] = {"refined": False}
+    if refine_exposures and len(views) >= 2:
+        say("response and exposure refinement")
+        fits: list[StepFit[Any]] = []
+
+        def recover(stack: ExposureStack) -> tuple[np.ndarray, ...]:
+            fit = fit_response(stack, response_spec, rng=seed)
+            fits.append(fit)
+            m = fit.model
+            vmin = m.valid_min if m.valid_min is not None else np.full(len(m.saturation_level), 0)
+            return m.levels, m.log_inverse_response, m.saturation_level, vmin
+
+        try:
+            refs, _ = refine_jointly(list(views), recover, rounds=4, seed=seed)
+        except CalibrationError as exc:
+            raise CalibrationError(
+                f"exposure refinement failed ({exc}); calibrate with refine_exposures=False "
+                "(--no-refine-exposures) to keep the nominal times"
+            ) from None
+        resp_fit = fits[-1]
+        views = [r.apply(v) for r, v in zip(refs, views, strict=True)]
+        shutter = fit_affine_shutter(refs)[1]
+        # each view keeps its nominal geometric mean: its scale is off by the
+        # mean of its K jitters, σ/√K
+        scale_std = shutter.jitter_rms / np.sqrt(min(int(r.refined.sum()) for r in refs))
+        exposures = {
+            "refined": True,
+            "views": [r.as_dict() for r in refs],
+            "shutter": {
+                "lag_s": shutter.lag_s,
+                "lag_std_s": shutter.lag_std_s,
+                "jitter_rms": shutter.jitter_rms,
+                "exponent_std": shutter.exponent_std,
+            },
+            "view_scale_std": float(scale_std),
+        }
+    else:
+        if refine_exposures:
+            notes.append(
+                "one view only: its exposure times cannot be told from its response; "
+                "nominal times kept"
+            )
+        resp_fit = fit_response(ref, response_spec, rng=seed)
+    ref = views[0]
     resp: ResponseModel = resp_fit.model
+    if refine_exposures and irradiance is not None:
+        irr_ref = _refine_against(irradiance, resp, seed)
+        irradiance = irr_ref.apply(irradiance)
+        exposures["irradiance"] = irr_ref.as_dict()
+    if refine_exposures and flat_field is not None:
+        flat_ref = _refine_against(flat_field, resp, seed)
+        flat_field = flat_ref.apply(flat_field)
+        exposures["flat_field"] = flat_ref.as_dict()
     timings["response"] = time.perf_counter() - t0
     report["response"] = {"method": method.name, **resp_fit.report}
+    report["exposures"] = exposures
 
     # 2. merge the views ------------------------------------------------------
     method, options = steps["merge"]
@@ -375,6 +483,7 @@ def calibrate(
             tracks or [],
             (vig_spec[0].name, options_to_dict(vig_spec[1])),
             flat_field=flat,
+            exposure_scale_std=exposures.get("view_scale_std"),
         )
         report["vignetting"] = {
             "method": vig_fit.model.method,
@@ -416,6 +525,7 @@ def calibrate(
         "profile": profile.lower(),
         "steps": {step: _spec_record(*spec) for step, spec in used.items()},
         "seed": int(seed),
+        "refine_exposures": bool(refine_exposures),
         "n_views": len(views),
         "white_roi": None if white_roi is None else [int(v) for v in white_roi],
     }
@@ -443,6 +553,24 @@ def calibrate(
             correspondence_source=source,
         ),
     )
+
+
+def _refine_against(stack: ExposureStack, response: ResponseModel, seed: int) -> ExposureRefinement:
+    """``stack``'s exposure times re-estimated against a known response (one-line errors)."""
+    try:
+        return refine_exposure_times(
+            stack,
+            response.levels,
+            response.log_inverse_response,
+            response.saturation_level,
+            valid_min=response.valid_min,
+            seed=seed,
+        )
+    except CalibrationError as exc:
+        raise CalibrationError(
+            f"exposure refinement failed ({exc}); use refine_exposures=False "
+            "(--no-refine-exposures) to keep the nominal times"
+        ) from None
 
 
 def calibrate_manifest(

@@ -132,6 +132,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         profile=args.profile,
         seed=args.seed,
         progress=step,
+        refine_exposures=False if args.no_refine_exposures else None,
         **specs,
     )
     done()
@@ -186,6 +187,13 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     ):
         for name, row in zip(model.channels, params, strict=True):
             lines.append(f"  {name}: {model.vignetting.method} {_fmt(row)}")
+    exposures = _section(rep, "exposures")
+    stacks = [("view " + str(i), e) for i, e in enumerate(exposures.get("views") or [])]
+    if isinstance(exposures.get("irradiance"), dict):
+        stacks.append(("irradiance", exposures["irradiance"]))
+    for name, e in stacks:
+        if isinstance(e, dict):
+            lines.append(f"exposures {name}: {_exposure_line(e)}")
     notes = rep.get("notes", [])
     for note in notes if isinstance(notes, list) else []:
         lines.append(f"note: {note}")
@@ -193,6 +201,23 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     if timings:
         lines.append("time: " + ", ".join(f"{k} {_fmt(v)} s" for k, v in timings.items()))
     print("\n".join(lines))
+
+
+def _exposure_line(record: dict[str, Any]) -> str:
+    """Refined exposure times beside the nominal ones, in ms: ``nominal -> refined ± std``."""
+    try:
+        nominal = np.asarray(record["nominal_s"], dtype=float)
+        refined = np.asarray(record["exposure_s"], dtype=float)
+        std = np.asarray(
+            [np.nan if v is None else v for v in record.get("log_std", [])], dtype=float
+        )
+    except (KeyError, TypeError, ValueError):
+        return "(unreadable record)"
+    parts = []
+    for k, (t0, t1) in enumerate(zip(nominal, refined, strict=False)):
+        err = f" ± {100 * std[k]:.2f} %" if k < std.size and np.isfinite(std[k]) else ""
+        parts.append(f"{1e3 * t0:.4g} -> {1e3 * t1:.4g}{err}")
+    return "ms nominal -> refined: " + ", ".join(parts)
 
 
 def printable(path: Any) -> str:
@@ -222,7 +247,11 @@ def _cmd_correct(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     model = load_camera(args.camera)
     result = correct_manifest(
-        args.manifest, model, allow_outside=args.allow_outside, progress_bars=not args.quiet
+        args.manifest,
+        model,
+        allow_outside=args.allow_outside,
+        progress_bars=not args.quiet,
+        refine_exposures=False if args.no_refine_exposures else None,
     )
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_output_file(out, overwrite=args.overwrite) as tmp:  # no replace without the flag
@@ -244,6 +273,10 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         f"{finite.max() if finite.size else float('nan'):.4g}], "
         f"{time.perf_counter() - t0:.2f} s"
     )
+    if result.exposures is not None:
+        print(f"scene exposures: {_exposure_line(result.exposures.as_dict())}")
+    for note in result.notes:
+        print(f"note: {note}")
     return 0
 
 
@@ -404,6 +437,12 @@ def build_parser() -> argparse.ArgumentParser:
             help="allow manifest paths outside the manifest's folder",
         )
         p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+        p.add_argument(
+            "--no-refine-exposures",
+            action="store_true",
+            help="keep the frames' nominal exposure times (the photoquant profile re-estimates "
+            "them from the data; the paper profile keeps them)",
+        )
 
     info = sub.add_parser("info", help="describe a calibrated camera")
     info.add_argument("camera", help="camera folder")

@@ -78,6 +78,7 @@ References
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -190,9 +191,26 @@ def rounding_variance(sigma: np.ndarray | float, terms: int = 64) -> np.ndarray:
     .. [Widrow2008] B. Widrow, I. Kollár, *Quantization Noise*, Cambridge
        University Press 2008, §§4–5 (the quantiser's characteristic function).
     """
-    s2 = np.square(np.asarray(sigma, dtype=np.float64))[..., None]
+    sigma = np.abs(np.asarray(sigma, dtype=np.float64))
+    if sigma.size <= 64 or terms != 64:
+        return _rounding_series(sigma, terms)
+    # many values (a whole stack): interpolate the series, tabulated on [0, 1] DN
+    # (the linear interpolation error is below 2e-6 of 1/12; above 1 DN the series
+    # is below 1e-18, i.e. 0)
+    table = _rounding_table()
+    return np.interp(sigma, table[0], table[1], right=0.0)
+
+
+def _rounding_series(sigma: np.ndarray, terms: int) -> np.ndarray:
+    s2 = np.square(sigma)[..., None]
     k = np.arange(1, terms + 1, dtype=np.float64)
     return np.sum(np.exp(-4 * np.pi**2 * k**2 * s2) / (2 * np.pi**2 * k**2), axis=-1)
+
+
+@functools.cache
+def _rounding_table() -> np.ndarray:
+    grid = np.linspace(0.0, 1.0, 16385)
+    return np.stack([grid, _rounding_series(grid, 64)])
 
 
 def _repeat_variance(stack: ExposureStack, ch: int, n_bins: int = 64) -> np.ndarray | None:

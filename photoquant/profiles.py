@@ -33,7 +33,15 @@ from typing import Any
 
 from photoquant.errors import InputError
 
-__all__ = ["PROFILES", "DEFAULT_PROFILE", "Deviation", "DEVIATIONS", "profile_steps"]
+__all__ = [
+    "PROFILES",
+    "PROFILE_SETTINGS",
+    "DEFAULT_PROFILE",
+    "Deviation",
+    "DEVIATIONS",
+    "profile_setting",
+    "profile_steps",
+]
 
 DEFAULT_PROFILE = "photoquant"
 
@@ -57,8 +65,10 @@ _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
     # §5.3: the balance from the linearised white chart
     "balance": ("White Chart", {"stage": "linearised"}),
     "sensor_lut": ("Irradiance Scene", {}),
-    # §5.5: the residual in value units (with the scale gauge only)
-    "vignetting": ("Extended Goldman-Chen", {"normalise": "none"}),
+    # §5.5: the residual in value units (with the scale gauge only), every view
+    # on its own exposure scale (no view gains; photoquant's default too, see
+    # ExtendedGoldmanChenOptions.view_gains)
+    "vignetting": ("Extended Goldman-Chen", {"normalise": "none", "view_gains": False}),
     "correspondences": ("SIFT Homography", {}),
 }
 
@@ -69,6 +79,16 @@ PROFILES: Mapping[str, Mapping[str, tuple[str, Mapping[str, Any]]]] = MappingPro
     }
 )
 """Profiles by name: step → ``(method, options)``."""
+
+PROFILE_SETTINGS: Mapping[str, Mapping[str, Any]] = MappingProxyType(
+    {
+        # exposure times re-estimated from the data (photoquant.exposure)
+        "photoquant": MappingProxyType({"refine_exposures": True}),
+        # the paper takes the exposure times as labelled
+        "paper": MappingProxyType({"refine_exposures": False}),
+    }
+)
+"""Pipeline settings of each profile that belong to no single step."""
 
 
 @dataclass(frozen=True)
@@ -127,6 +147,14 @@ DEVIATIONS: tuple[Deviation, ...] = (
         "the white chart read after the LUT and vignetting comes out exactly neutral",
     ),
     Deviation(
+        "vignetting with view gains",
+        "vignetting",
+        {"view_gains": "auto"},
+        "a gain per view fitted beside the vignetting (Goldman & Chen 2005) when the views' "
+        "refined exposure scales are uncertain beyond 0.2 %, so that a shutter's error is not "
+        "read as vignetting (with exact or unrefined times: no gains, as the paper)",
+    ),
+    Deviation(
         "track-normalised vignetting",
         "vignetting",
         {"normalise": "track"},
@@ -134,6 +162,22 @@ DEVIATIONS: tuple[Deviation, ...] = (
     ),
 )
 """The photoquant profile is the paper's with every deviation switched on."""
+
+
+def profile_setting(profile: str, key: str) -> Any:
+    """A pipeline setting of the named profile (:data:`PROFILE_SETTINGS`).
+
+    Examples
+    --------
+    >>> from photoquant.profiles import profile_setting
+    >>> profile_setting("paper", "refine_exposures")
+    False
+    """
+    profile_steps(profile)  # validates the name
+    settings = PROFILE_SETTINGS[profile.lower()]
+    if key not in settings:
+        raise InputError(f"unknown profile setting {key!r}; settings are: {', '.join(settings)}")
+    return settings[key]
 
 
 def profile_steps(profile: str) -> Mapping[str, tuple[str, Mapping[str, Any]]]:

@@ -241,3 +241,29 @@ def test_calibrate_method_and_option_flags(capture, tmp_path, capsys):
         assert main(["calibrate", str(capture), "-o", str(tmp_path / "x"), "-q", *bad]) == 2
         err = capsys.readouterr().err.strip()
         assert "\n" not in err and re.search(message, err), err
+
+
+def test_exposure_refinement_flags_and_summary(capture, tmp_path, capsys):
+    """The photoquant profile refines and prints refined beside nominal times;
+    ``--no-refine-exposures`` keeps the nominal times, in calibrate and in correct."""
+    cam = tmp_path / "cam"
+    assert main(["calibrate", str(capture), "-o", str(cam), "-q"]) == 0
+    out = capsys.readouterr().out
+    lines = [ln for ln in out.splitlines() if ln.startswith("exposures view")]
+    assert len(lines) == 3 and "nominal -> refined" in lines[0] and "1 -> " in lines[0]
+    assert "exposures irradiance:" in out
+    assert load_camera(cam).parameters["refine_exposures"] is True
+    exr = tmp_path / "scene.exr"
+    assert main(["correct", str(capture), "--camera", str(cam), "-o", str(exr), "-q"]) == 0
+    assert "scene exposures: ms nominal -> refined" in capsys.readouterr().out
+
+    plain = tmp_path / "plain"
+    assert main(["calibrate", str(capture), "-o", str(plain), "-q", "--no-refine-exposures"]) == 0
+    assert "exposures view" not in capsys.readouterr().out
+    model = load_camera(plain)
+    assert model.parameters["refine_exposures"] is False
+    assert model.report["exposures"] == {"refined": False}
+    exr2 = tmp_path / "plain.exr"
+    args = ["correct", str(capture), "--camera", str(cam), "-o", str(exr2), "-q"]
+    assert main([*args, "--no-refine-exposures"]) == 0
+    assert "scene exposures" not in capsys.readouterr().out

@@ -14,6 +14,16 @@ The observations are validated and paired as in the extended Goldman–Chen fit
 checks are the same: solver convergence, ``v > 0`` over every pixel centre of
 the image, no collapse towards ``v = 0`` and a bounded first-order map
 uncertainty.
+
+With ``view_gains`` every view but the reference gets a free gain ``a_j``
+(residual ``a_i c_is v_js − a_j c_js v_is``), fitted with the model and
+reported: a per-view exposure error (:mod:`photoquant.exposure`) is then not
+read as vignetting. Identifiability as in
+:func:`photoquant.vignetting.extended_goldman_chen.fit_vignetting_ExtendedGoldmanChen`
+(Notes): a gain is constant over its view, the vignetting ratio of a track
+varies with where the point lies — except for a ramp ``exp(a·x)`` of ``v``,
+which views related by shifts cannot tell from gains: a centred model
+excludes it, a free centre reproduces it to second order.
 """
 
 from __future__ import annotations
@@ -23,15 +33,18 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from photoquant._checks import check_array, check_int, check_positive
 from photoquant.errors import CalibrationError, InputError
-from photoquant.vignetting.base import MAX_FALLOFF, VignettingData
+from photoquant.vignetting.base import MAX_FALLOFF, VignettingData, check_view_gains_option
 from photoquant.vignetting.extended_goldman_chen import (
     _check_image_shape,
     _pairs_within_tracks,
+    _parameter_covariance,
+    _solve_pairs,
     _spread,
+    _view_gain_columns,
+    view_gain_report,
 )
 
 __all__ = [
@@ -95,6 +108,7 @@ class PairObservations:
     n_observations: int
     n_views: int
     dropped_note: str
+    obs_view: np.ndarray | None = None  # (n_obs,) the view of each observation
 
 
 def pair_observations(
@@ -199,12 +213,17 @@ def pair_observations(
         n_observations=n_obs,
         n_views=int(np.unique(view[usable][used]).size),
         dropped_note=dropped_note,
+        obs_view=np.asarray(view[usable][used], dtype=np.int64),
     )
 
 
 @dataclass(frozen=True)
 class _Problem:
-    """Residuals ``w (c_a v_b − c_b v_a) / s`` of one channel and their Jacobian."""
+    """Residuals ``w (c_a v_b − c_b v_a) / s`` of one channel and their Jacobian.
+
+    With view gains: ``w (a_i c_a v_b − a_j c_b v_a) / (s √(a_i a_j))``, invariant
+    to a common scale of the gains (see the extended Goldman–Chen ``_PairProblem``).
+    """
 
     model: PairModel
     x_n: np.ndarray
@@ -215,34 +234,78 @@ class _Problem:
     c_b: np.ndarray
     weight: np.ndarray
     scale_invariant: bool
+    gain_a: np.ndarray | None = None  # gain index of each pair's views (0: fixed at 1)
+    gain_b: np.ndarray | None = None
+    n_gains: int = 0
+
+    def _split(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray | float, np.ndarray]:
+        """The model's parameters, ``ρ = √(a_i / a_j)`` per pair (1 without gains), all gains."""
+        n = self.model.n_params
+        gains = np.r_[1.0, p[n:]]
+        if not self.n_gains or self.gain_a is None or self.gain_b is None:
+            return p[:n], 1.0, gains
+        return p[:n], np.sqrt(gains[self.gain_a] / gains[self.gain_b]), gains
 
     def residuals(self, p: np.ndarray) -> np.ndarray:
-        v = self.model.value(p, self.x_n, self.y_n)
-        u = self.weight * (self.c_a * v[self.b] - self.c_b * v[self.a])
+        q, rho, _ = self._split(p)
+        v = self.model.value(q, self.x_n, self.y_n)
+        u = self.weight * (rho * self.c_a * v[self.b] - self.c_b * v[self.a] / rho)
         return u / np.sqrt(np.mean(v**2)) if self.scale_invariant else u
 
     def jacobian(self, p: np.ndarray) -> np.ndarray:
-        v, jv = self.model.value_and_jacobian(p, self.x_n, self.y_n)
-        du = self.weight[:, None] * (
-            self.c_a[:, None] * jv[self.b] - self.c_b[:, None] * jv[self.a]
-        )
+        q, rho, gains = self._split(p)
+        v, jv = self.model.value_and_jacobian(q, self.x_n, self.y_n)
+        ca = np.broadcast_to(np.asarray(rho * self.c_a), self.c_a.shape)
+        cb = np.broadcast_to(np.asarray(self.c_b / rho), self.c_b.shape)
+        du = self.weight[:, None] * (ca[:, None] * jv[self.b] - cb[:, None] * jv[self.a])
+        if self.n_gains and self.gain_a is not None and self.gain_b is not None:
+            du = np.c_[
+                du,
+                _view_gain_columns(
+                    self.weight,
+                    self.c_a * v[self.b],
+                    self.c_b * v[self.a],
+                    rho,
+                    gains,
+                    self.gain_a,
+                    self.gain_b,
+                ),
+            ]
         if not self.scale_invariant:
             return du
-        # r = u / s with s = sqrt(mean(v²)): ∂r = (∂u − r ∂s) / s, ∂s = mean(v ∂v) / s.
+        # r = u / s with s = sqrt(mean(v²)): ∂r = (∂u − r ∂s) / s, ∂s = mean(v ∂v) / s
+        # (s does not depend on the gains).
         s = np.sqrt(np.mean(v**2))
-        r = self.weight * (self.c_a * v[self.b] - self.c_b * v[self.a]) / s
-        ds = (v @ jv) / (v.size * s)
+        r = self.weight * (ca * v[self.b] - cb * v[self.a]) / s
+        ds = np.r_[(v @ jv) / (v.size * s), np.zeros(du.shape[1] - q.size)]
         return (du - r[:, None] * ds[None, :]) / s
 
     def linear_start(self) -> np.ndarray:
-        """Least squares of the (linear) residual in the first three parameters."""
+        """Least squares of the (linear) residual in the first three parameters (and gains).
+
+        View gains ``a = 1 + δ`` enter to first order as ``(δ_i − δ_j)(c_a + c_b) / 2``.
+        """
         basis, tail = self.model.linear_start(self.x_n, self.y_n)
         design = self.weight[:, None] * (
             self.c_a[:, None] * basis[self.b] - self.c_b[:, None] * basis[self.a]
         )
+        if self.n_gains and self.gain_a is not None and self.gain_b is not None:
+            design = np.c_[
+                design,
+                _view_gain_columns(
+                    self.weight,
+                    self.c_a,
+                    self.c_b,
+                    1.0,
+                    np.ones(self.n_gains + 1),
+                    self.gain_a,
+                    self.gain_b,
+                ),
+            ]
         target = -self.weight * (self.c_a - self.c_b)
         coef, *_ = np.linalg.lstsq(design, target, rcond=None)
-        return np.r_[coef, tail]
+        k = basis.shape[1]
+        return np.r_[coef[:k], tail, 1.0 + coef[k:]]
 
 
 def pixel_grid(image_shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -259,6 +322,7 @@ def _map_uncertainty(
     fun: np.ndarray,
     jac: np.ndarray,
     image_shape: tuple[int, int],
+    cov: np.ndarray | None = None,
 ) -> float:
     """Mean first-order relative standard uncertainty of ``v`` over the image.
 
@@ -267,8 +331,9 @@ def _map_uncertainty(
     Goldman–Chen fit does).
     """
     h, w = image_shape
-    dof = max(fun.size - model.n_params, 1)
-    cov = float(fun @ fun) / dof * np.linalg.pinv(jac.T @ jac, rcond=1e-12)
+    n = model.n_params
+    cov = (_parameter_covariance(fun, jac) if cov is None else cov)[:n, :n]  # marginal
+    p = p[:n]
     xs = (np.unique(np.linspace(0, w - 1, min(w, 32)).round()) + 0.5) / w
     ys = (np.unique(np.linspace(0, h - 1, min(h, 32)).round()) + 0.5) / h
     gx, gy = np.meshgrid(xs, ys)
@@ -287,6 +352,8 @@ class PairFitResult:
     converged: np.ndarray
     message: str
     observations: PairObservations
+    view_gains: np.ndarray | None = None  # (C, V): see VignettingFit.view_gains
+    view_gain_std: np.ndarray | None = None
 
     def report(self, n_tracks_given: int) -> dict[str, Any]:
         """The step report stored in the camera."""
@@ -299,6 +366,7 @@ class PairFitResult:
             "residual_rms": self.residual_rms,
             "map_uncertainty": self.map_uncertainty,
             "message": self.message,
+            **view_gain_report(self.view_gains, self.view_gain_std),
         }
 
 
@@ -312,6 +380,8 @@ def fit_pair_model(
     max_uncertainty: float = 0.02,
     max_nfev: int = 2000,
     initial: np.ndarray | None = None,
+    view_gains: bool = False,
+    view_gain_sigma: float | None = None,
 ) -> PairFitResult:
     """Fit ``model`` per channel to the pair residuals by Levenberg–Marquardt.
 
@@ -322,9 +392,14 @@ def fit_pair_model(
     ``v`` is positive at every pixel centre, its maximum is at least 0.5 (no
     collapse towards ``v = 0``) and its mean relative first-order uncertainty is
     at most ``max_uncertainty``; ``message`` gives the reason for every other.
+    With ``view_gains`` every view but the lowest-numbered one has a free gain
+    (module notes), fitted per channel and returned in ``view_gains``;
+    ``initial`` then holds the model's parameters only.
     """
     if normalise not in ("track", "none"):
         raise InputError(f"`normalise` must be 'track' or 'none', got {normalise!r}")
+    if view_gains and obs.obs_view is None:
+        raise InputError("`view_gains` needs observations that know their views")
     h, w = image_shape
     n_channels = obs.values.shape[1]
     grid_x, grid_y = pixel_grid((h, w))
@@ -333,6 +408,15 @@ def fit_pair_model(
     uncertainty = np.full(n_channels, np.nan)
     converged = np.zeros(n_channels, dtype=bool)
     notes: list[str] = []
+    gains = gain_std = None
+    n_gains = 0
+    gain_index = np.zeros(obs.n_observations, dtype=np.int64)
+    present = np.zeros(1, dtype=np.int64)
+    if view_gains and obs.obs_view is not None:
+        present, gain_index = np.unique(obs.obs_view, return_inverse=True)
+        n_gains = int(present.size - 1)
+        gains = np.full((n_channels, int(present.max()) + 1), np.nan)
+        gain_std = np.full_like(gains, np.nan)
     for ch in range(n_channels):
         c = obs.values[:, ch]
         if normalise == "track":
@@ -341,28 +425,43 @@ def fit_pair_model(
         else:
             weight = np.ones(obs.n_pairs)
         problem = _Problem(
-            model, obs.x_n, obs.y_n, obs.a, obs.b, c[obs.a], c[obs.b], weight, scale_invariant
+            model,
+            obs.x_n,
+            obs.y_n,
+            obs.a,
+            obs.b,
+            c[obs.a],
+            c[obs.b],
+            weight,
+            scale_invariant,
+            gain_index[obs.a] if n_gains else None,
+            gain_index[obs.b] if n_gains else None,
+            n_gains,
         )
-        p0 = initial[ch] if initial is not None else problem.linear_start()
-        result = least_squares(
+        p0 = problem.linear_start()
+        if initial is not None:
+            p0 = np.r_[initial[ch], p0[model.n_params :]]
+        result, fun, cov = _solve_pairs(
             problem.residuals,
+            problem.jacobian,
             p0,
-            jac=problem.jacobian,
-            method="lm",
-            x_scale="jac",
-            ftol=1e-12,
-            xtol=1e-12,
-            gtol=1e-12,
-            max_nfev=int(max_nfev),
+            model.n_params,
+            int(max_nfev),
+            view_gain_sigma if n_gains else None,
         )
-        params[ch] = result.x
-        rms[ch] = float(np.sqrt(np.mean(result.fun**2)))
+        params[ch] = result.x[: model.n_params]
+        if gains is not None and gain_std is not None:
+            gains[ch, present] = np.r_[1.0, result.x[model.n_params :]]
+            gain_std[ch, present] = np.r_[
+                0.0, np.sqrt(np.maximum(np.diag(cov)[model.n_params :], 0.0))
+            ]
+        rms[ch] = float(np.sqrt(np.mean(fun**2)))
         ok = bool(result.success) and bool(np.all(np.isfinite(result.x)))
         if not ok:
             notes.append(f"channel {ch}: did not converge ({result.message})")
         else:
-            uncertainty[ch] = _map_uncertainty(model, result.x, result.fun, result.jac, (h, w))
-            v = model.value(result.x, grid_x, grid_y)
+            uncertainty[ch] = _map_uncertainty(model, result.x, fun, result.jac, (h, w), cov)
+            v = model.value(result.x[: model.n_params], grid_x, grid_y)
             v_min, v_max = float(np.min(v)), float(np.max(v))
             if not v_min > 0:
                 ok = False
@@ -395,13 +494,14 @@ def fit_pair_model(
     message = (
         f"{status}: {model.name} fit of {n_channels} channel(s) from {obs.n_tracks} tracks, "
         f"{obs.n_pairs} pairs, {obs.n_observations} observations in {obs.n_views} views "
-        f"(normalise={normalise!r}, scale_invariant={bool(scale_invariant)}); "
+        f"(normalise={normalise!r}, scale_invariant={bool(scale_invariant)}"
+        f"{', view gains' if n_gains else ''}); "
         f"{obs.dropped_note}; relative map uncertainty (1 sigma, image mean) "
         + ", ".join("n/a" if np.isnan(u) else f"{u:.2%}" for u in uncertainty)
     )
     if notes:
         message += "; " + "; ".join(notes)
-    return PairFitResult(params, rms, uncertainty, converged, message, obs)
+    return PairFitResult(params, rms, uncertainty, converged, message, obs, gains, gain_std)
 
 
 @dataclass(frozen=True)
@@ -425,6 +525,14 @@ class PairFitOptions:
         Largest accepted mean relative first-order uncertainty of the map.
     max_nfev : int
         Most evaluations of the residuals per channel.
+    view_gains : bool or "auto"
+        A free gain per view, fitted with the model (module notes); ``"auto"``
+        (default) as :class:`~photoquant.vignetting.ExtendedGoldmanChenOptions`.
+        These models fit gains and model jointly: a centred model
+        (``"Goldman-Chen 2005"``) determines them, a free centre
+        (``"Radial Polynomial"``) trades them for a ramp of ``v``.
+    view_gain_sigma : float, optional
+        Prior standard deviation of each gain about 1; ``None``: free gains.
     """
 
     normalise: str = "track"
@@ -434,6 +542,8 @@ class PairFitOptions:
     min_spread: float = 0.25
     max_uncertainty: float = 0.02
     max_nfev: int = 2000
+    view_gains: bool | str = "auto"
+    view_gain_sigma: float | None = None
 
     def __post_init__(self) -> None:
         if self.normalise not in ("track", "none"):
@@ -442,6 +552,9 @@ class PairFitOptions:
             raise InputError(
                 f"`scale_invariant` must be true or false, got {self.scale_invariant!r}"
             )
+        check_view_gains_option(self.view_gains)
+        if self.view_gain_sigma is not None:
+            check_positive(self.view_gain_sigma, "view_gain_sigma")
         check_int(self.sample_radius, "sample_radius", 0, 64)
         check_int(self.min_pairs, "min_pairs", 1)
         check_int(self.max_nfev, "max_nfev", 1)

@@ -74,12 +74,40 @@ class VignettingData:
     flat_field : ndarray, shape (H, W, C), optional
         ``exp(merge) / u`` of a uniformly lit target seen through the optics
         (a flat-field capture), for methods that need one; ``None`` otherwise.
+    exposure_scale_std : float, optional
+        How well each view's exposure scale is known, as a relative standard
+        deviation (the views' exposure refinement measures it:
+        :func:`photoquant.calibration.calibrate`); ``None``: unknown. Methods
+        whose ``view_gains`` option is ``"auto"`` fit a gain per view when it
+        exceeds :data:`AUTO_VIEW_GAIN_STD`.
     """
 
     uniform_views: list[np.ndarray]
     tracks: list[np.ndarray]
     image_shape: tuple[int, int]
     flat_field: np.ndarray | None = None
+    exposure_scale_std: float | None = None
+
+
+AUTO_VIEW_GAIN_STD = 0.002
+"""``view_gains="auto"`` fits view gains when the views' exposure scales are
+uncertain by more than this (relative std): above the 0.3–0.5 % by which the
+gains' centred estimate is biased for a lens centred 2–3 % off the image
+centre, so that exact exposures keep the fit without gains."""
+
+
+def wants_view_gains(option: bool | str, data: VignettingData) -> bool:
+    """Resolve a ``view_gains`` option (``True``, ``False`` or ``"auto"``) for ``data``."""
+    if option == "auto":
+        std = data.exposure_scale_std
+        return std is not None and bool(std > AUTO_VIEW_GAIN_STD)
+    return bool(option)
+
+
+def check_view_gains_option(value: Any) -> None:
+    """``view_gains`` must be true, false or ``"auto"`` (one-line error otherwise)."""
+    if not (isinstance(value, bool) or value == "auto"):
+        raise InputError(f"`view_gains` must be true, false or 'auto', got {value!r}")
 
 
 MAX_FALLOFF = 100.0

@@ -45,6 +45,7 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -59,6 +60,8 @@ from photoquant.vignetting.base import (
     VIGNETTING_METHODS,
     VignettingData,
     VignettingModel,
+    check_view_gains_option,
+    wants_view_gains,
 )
 
 __all__ = [
@@ -313,6 +316,14 @@ class VignettingFit:
         nearly free. Statistical only: it excludes systematic errors such as
         misregistered correspondences, and as a linearisation it understates
         the error of a badly constrained fit. ``None`` when not computed.
+    view_gains : ndarray, shape (C, V), optional
+        With ``view_gains=True``: the fitted gain ``a_j`` of each view, the
+        factor that puts view ``j``'s values on the scale of the reference
+        view (the lowest-numbered view with observations, gain 1): the
+        exposure correction of view ``j`` is ``t_j → t_j / a_j``. NaN for a
+        view without observations; ``None`` without view gains.
+    view_gain_std : ndarray, shape (C, V), optional
+        First-order standard uncertainty of ``view_gains`` (0 for the reference).
     """
 
     params: np.ndarray
@@ -323,6 +334,8 @@ class VignettingFit:
     converged: np.ndarray
     message: str
     map_uncertainty: np.ndarray | None = None
+    view_gains: np.ndarray | None = None
+    view_gain_std: np.ndarray | None = None
 
 
 def _pairs_within_tracks(
@@ -360,6 +373,136 @@ def _spread(coord: np.ndarray) -> float:
     return float(hi - lo)
 
 
+def _view_gain_columns(
+    weight: np.ndarray,
+    first: np.ndarray,
+    second: np.ndarray,
+    ratio: np.ndarray | float,
+    gains: np.ndarray,
+    gain_a: np.ndarray,
+    gain_b: np.ndarray,
+) -> np.ndarray:
+    """``∂u/∂a_k`` of ``u = w (ρ first − second / ρ)``, ``ρ = √(a_i / a_j)``, for ``k ≥ 1``.
+
+    ``gains`` are all the gains (``gains[0] = 1``, fixed); ``gain_a``/``gain_b``
+    the gain indices of each pair's two views; ``ratio`` is ``ρ`` per pair.
+    """
+    n_gains = gains.size - 1
+    cols = np.zeros((weight.size, n_gains))
+    rows = np.arange(weight.size)
+    rho = np.broadcast_to(np.asarray(ratio, dtype=np.float64), weight.shape)
+    common = weight * (first + second / rho**2) * rho / 2.0  # ∂u/∂ρ · ρ / 2
+    sel = gain_a > 0
+    np.add.at(cols, (rows[sel], gain_a[sel] - 1), common[sel] / gains[gain_a[sel]])
+    sel = gain_b > 0
+    np.add.at(cols, (rows[sel], gain_b[sel] - 1), -common[sel] / gains[gain_b[sel]])
+    return cols
+
+
+def _solve_pairs(
+    residuals: Callable[[np.ndarray], np.ndarray],
+    jacobian: Callable[[np.ndarray], np.ndarray],
+    p0: np.ndarray,
+    n_model: int,
+    max_nfev: int,
+    gain_prior: float | None = None,
+) -> tuple[Any, np.ndarray, np.ndarray]:
+    """Levenberg–Marquardt on the pair residuals, with an optional Gaussian prior on the gains.
+
+    The parameters are ``n_model`` of the model followed by the free view gains.
+    With ``gain_prior = σ_a`` the objective is ``Σ r² / σ_r² + Σ (a_j − 1)² / σ_a²``
+    (``σ_r`` the residuals' own scale, measured by a first fit with every gain
+    at 1): the rows ``(σ_r / σ_a)(a_j − 1)`` are appended. Returns the solver's
+    result, the data residuals at the solution and the parameters' covariance
+    ``σ_r² (JᵀJ)⁺`` over all rows (the posterior's, first order).
+    """
+    n_gains = p0.size - n_model
+    lam = 0.0
+    if n_gains and gain_prior is not None:
+        fixed = np.r_[p0[:n_model], np.ones(n_gains)]
+
+        def res_model(q: np.ndarray) -> np.ndarray:
+            return residuals(np.r_[q, fixed[n_model:]])
+
+        def jac_model(q: np.ndarray) -> np.ndarray:
+            return jacobian(np.r_[q, fixed[n_model:]])[:, :n_model]
+
+        first = least_squares(
+            res_model, p0[:n_model], jac=jac_model, method="lm", x_scale="jac", max_nfev=max_nfev
+        )
+        sigma_r = float(np.sqrt(first.fun @ first.fun / max(first.fun.size - n_model, 1)))
+        lam = sigma_r / float(gain_prior)
+        p0 = np.r_[first.x, np.ones(n_gains)]
+
+    def res(p: np.ndarray) -> np.ndarray:
+        r = residuals(p)
+        return np.r_[r, lam * (p[n_model:] - 1.0)] if lam else r
+
+    def jac(p: np.ndarray) -> np.ndarray:
+        j = jacobian(p)
+        if not lam:
+            return j
+        prior = np.zeros((n_gains, p.size))
+        prior[:, n_model:] = lam * np.eye(n_gains)
+        return np.r_[j, prior]
+
+    result = least_squares(
+        res,
+        p0,
+        jac=jac,
+        method="lm",
+        x_scale="jac",
+        ftol=1e-12,
+        xtol=1e-12,
+        gtol=1e-12,
+        max_nfev=int(max_nfev),
+    )
+    fun = result.fun[: result.fun.size - (n_gains if lam else 0)]
+    dof = max(fun.size - (n_model if lam else p0.size), 1)
+    cov = float(fun @ fun) / dof * np.linalg.pinv(result.jac.T @ result.jac, rcond=1e-12)
+    return result, fun, cov
+
+
+def _centred_gains(
+    x_n: np.ndarray,
+    y_n: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    c: np.ndarray,
+    obs_track: np.ndarray,
+    pair_track: np.ndarray,
+    normalise: str,
+    scale_invariant: bool,
+    gain_index: np.ndarray,
+    n_gains: int,
+    max_nfev: int,
+    prior: float | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One channel's view gains (reference first, 1) and their std, centre held at the image's."""
+    if normalise == "track":
+        weight = 1.0 / (np.bincount(obs_track, weights=c) / np.bincount(obs_track))[pair_track]
+    else:
+        weight = np.ones(a.size)
+    problem = _PairProblem(
+        x_n, y_n, a, b, c[a], c[b], weight, scale_invariant, gain_index[a], gain_index[b], n_gains
+    )
+    free = np.r_[0, 1, 2, 3, np.arange(_N_PARAMS, _N_PARAMS + n_gains)]
+
+    def full(q: np.ndarray) -> np.ndarray:
+        return np.r_[q[:4], 0.5, 0.5, q[4:]]
+
+    result, _, cov = _solve_pairs(
+        lambda q: problem.residuals(full(q)),
+        lambda q: problem.jacobian(full(q))[:, free],
+        problem.linear_start()[free],
+        4,
+        max_nfev,
+        prior,
+    )
+    std = np.sqrt(np.maximum(np.diag(cov)[4:], 0.0))
+    return np.r_[1.0, result.x[4:]], np.r_[0.0, std]
+
+
 @dataclass(frozen=True)
 class _PairProblem:
     """Residuals ``w (c_a v_b − c_b v_a) / s`` of one channel and their Jacobian.
@@ -367,6 +510,14 @@ class _PairProblem:
     ``s = sqrt(mean(v²))``, the RMS of ``v`` over the observations, when
     ``scale_invariant``, else 1: the residual is of degree 1 in ``v``, so
     dividing by ``s`` makes it invariant to a common scale of ``v``.
+
+    With ``n_gains > 0`` the parameters are the six of the model followed by
+    the free view gains ``a_1 … a_{n_gains}`` (``a_0 = 1``); ``gain_a`` and
+    ``gain_b`` give the gain index of the views of ``a`` and ``b``, and the
+    residual is ``w (a_i c_a v_b − a_j c_b v_a) / (s √(a_i a_j))``: dividing
+    by ``√(a_i a_j)`` makes it invariant to a common scale of the gains, as
+    ``s`` does for ``v`` (without it, shrinking every gain but the fixed one
+    would shrink the residuals).
     """
 
     x_n: np.ndarray
@@ -377,59 +528,113 @@ class _PairProblem:
     c_b: np.ndarray
     weight: np.ndarray
     scale_invariant: bool
+    gain_a: np.ndarray | None = None
+    gain_b: np.ndarray | None = None
+    n_gains: int = 0
+
+    def _ratio(self, p: np.ndarray) -> tuple[np.ndarray | float, np.ndarray]:
+        """``ρ = √(a_i / a_j)`` per pair (1 without gains) and all gains."""
+        gains = np.r_[1.0, p[_N_PARAMS:]]
+        if not self.n_gains or self.gain_a is None or self.gain_b is None:
+            return 1.0, gains
+        return np.sqrt(gains[self.gain_a] / gains[self.gain_b]), gains
 
     def residuals(self, p: np.ndarray) -> np.ndarray:
-        v = _evaluate(self.x_n, self.y_n, p)
-        u = self.weight * (self.c_a * v[self.b] - self.c_b * v[self.a])
+        v = _evaluate(self.x_n, self.y_n, p[:_N_PARAMS])
+        rho, _ = self._ratio(p)
+        u = self.weight * (rho * self.c_a * v[self.b] - self.c_b * v[self.a] / rho)
         return u / np.sqrt(np.mean(v**2)) if self.scale_invariant else u
 
     def jacobian(self, p: np.ndarray) -> np.ndarray:
-        v, jv = _model_and_jacobian(self.x_n, self.y_n, p)
-        du = self.weight[:, None] * (
-            self.c_a[:, None] * jv[self.b] - self.c_b[:, None] * jv[self.a]
-        )
+        v, jv = _model_and_jacobian(self.x_n, self.y_n, p[:_N_PARAMS])
+        rho, gains = self._ratio(p)
+        ca = np.broadcast_to(np.asarray(rho * self.c_a), self.c_a.shape)
+        cb = np.broadcast_to(np.asarray(self.c_b / rho), self.c_b.shape)
+        du = self.weight[:, None] * (ca[:, None] * jv[self.b] - cb[:, None] * jv[self.a])
+        if self.n_gains and self.gain_a is not None and self.gain_b is not None:
+            du = np.c_[
+                du,
+                _view_gain_columns(
+                    self.weight,
+                    self.c_a * v[self.b],
+                    self.c_b * v[self.a],
+                    rho,
+                    gains,
+                    self.gain_a,
+                    self.gain_b,
+                ),
+            ]
         if not self.scale_invariant:
             return du
-        # r = u / s with s = sqrt(mean(v²)): ∂r = (∂u − r ∂s) / s, ∂s = mean(v ∂v) / s.
+        # r = u / s with s = sqrt(mean(v²)): ∂r = (∂u − r ∂s) / s, ∂s = mean(v ∂v) / s
+        # (s does not depend on the gains).
         s = np.sqrt(np.mean(v**2))
-        r = self.weight * (self.c_a * v[self.b] - self.c_b * v[self.a]) / s
-        ds = (v @ jv) / (v.size * s)
+        r = self.weight * (ca * v[self.b] - cb * v[self.a]) / s
+        ds = np.r_[(v @ jv) / (v.size * s), np.zeros(du.shape[1] - _N_PARAMS)]
         return (du - r[:, None] * ds[None, :]) / s
 
     def linear_start(self) -> np.ndarray:
-        """Least-squares ``m1..m3`` at ``m4 = 1, m5 = m6 = 0.5``, where the residual is linear.
+        """Least-squares ``m1..m3`` (and gains) at ``m4 = 1, m5 = m6 = 0.5``.
 
-        ``c_a v_b − c_b v_a = (c_a − c_b) + Σ_k m_k (c_a R_b^k − c_b R_a^k)``.
+        ``c_a v_b − c_b v_a = (c_a − c_b) + Σ_k m_k (c_a R_b^k − c_b R_a^k)`` is
+        linear in ``m1..m3``; view gains ``a = 1 + δ`` add, to first order in
+        ``m`` and ``δ``, ``(δ_i − δ_j)(c_a + c_b) / 2``, also linear.
         """
         r = (self.x_n - 0.5) ** 2 + (self.y_n - 0.5) ** 2
         powers = np.stack([r, r**2, r**3], axis=1)
         design = self.weight[:, None] * (
             self.c_a[:, None] * powers[self.b] - self.c_b[:, None] * powers[self.a]
         )
+        if self.n_gains and self.gain_a is not None and self.gain_b is not None:
+            design = np.c_[
+                design,
+                _view_gain_columns(
+                    self.weight,
+                    self.c_a,
+                    self.c_b,
+                    1.0,
+                    np.ones(self.n_gains + 1),
+                    self.gain_a,
+                    self.gain_b,
+                ),
+            ]
         target = -self.weight * (self.c_a - self.c_b)
         coef, *_ = np.linalg.lstsq(design, target, rcond=None)
-        return np.r_[coef, 1.0, 0.5, 0.5]
+        return np.r_[coef[:3], 1.0, 0.5, 0.5, 1.0 + coef[3:]]
 
 
 def _map_uncertainty(
-    p: np.ndarray, fun: np.ndarray, jac: np.ndarray, image_shape: tuple[int, int]
+    p: np.ndarray,
+    fun: np.ndarray,
+    jac: np.ndarray,
+    image_shape: tuple[int, int],
+    cov: np.ndarray | None = None,
 ) -> float:
     """Mean first-order relative standard uncertainty of ``v`` over the image.
 
-    ``Cov(p) ≈ σ² (JᵀJ)⁺`` with ``σ² = Σ r² / (P − 6)``; the variance of ``v``
+    ``Cov(p) ≈ σ² (JᵀJ)⁺`` with ``σ² = Σ r² / (P − n_params)``; the variance of ``v``
     at a point is ``gᵀ Cov g`` with ``g = ∂v/∂p``, evaluated on a grid of at
     most 32 × 32 pixel centres. The pseudo-inverse ignores directions that do
     not change the map (e.g. the centre when ``m1 = m2 = m3 = 0``).
     """
     h, w = image_shape
-    dof = max(fun.size - _N_PARAMS, 1)
-    cov = float(fun @ fun) / dof * np.linalg.pinv(jac.T @ jac, rcond=1e-12)
+    cov = (_parameter_covariance(fun, jac) if cov is None else cov)[:_N_PARAMS, :_N_PARAMS]
     xs = (np.unique(np.linspace(0, w - 1, min(w, 32)).round()) + 0.5) / w
     ys = (np.unique(np.linspace(0, h - 1, min(h, 32)).round()) + 0.5) / h
     gx, gy = np.meshgrid(xs, ys)
-    v, g = _model_and_jacobian(gx.ravel(), gy.ravel(), p)
+    v, g = _model_and_jacobian(gx.ravel(), gy.ravel(), p[:_N_PARAMS])
     var = np.einsum("ij,jk,ik->i", g, cov, g)
     return float(np.mean(np.sqrt(np.maximum(var, 0.0)) / np.abs(v)))
+
+
+def _parameter_covariance(fun: np.ndarray, jac: np.ndarray) -> np.ndarray:
+    """``σ² (JᵀJ)⁺`` with ``σ² = Σ r² / (n − P)``: the first-order covariance of all parameters.
+
+    With view gains the model block of it is the covariance *marginal* over
+    the gains (their correlation with the map is accounted for).
+    """
+    dof = max(fun.size - jac.shape[1], 1)
+    return float(fun @ fun) / dof * np.linalg.pinv(jac.T @ jac, rcond=1e-12)
 
 
 def fit_vignetting_ExtendedGoldmanChen(
@@ -446,6 +651,9 @@ def fit_vignetting_ExtendedGoldmanChen(
     min_spread: float = 0.25,
     max_uncertainty: float = 0.02,
     max_nfev: int = 2000,
+    view_gains: bool = False,
+    view_gain_sigma: float | None = None,
+    view_gain_centre: Literal["image", "free"] = "image",
 ) -> VignettingFit:
     """Fit the extended Goldman–Chen vignetting model to values seen from several views.
 
@@ -496,6 +704,23 @@ def fit_vignetting_ExtendedGoldmanChen(
         a larger one marks the channel as not trustworthy.
     max_nfev : int
         Most evaluations of the residuals per channel.
+    view_gains : bool
+        Give every view but the reference (the lowest-numbered one) a free
+        gain ``a_j``, fitted per channel with the model: the residual becomes
+        ``a_i c_is v_js − a_j c_js v_is`` (normalised as above). It absorbs an
+        error of each view's exposure scale (see Notes), reported in
+        ``VignettingFit.view_gains``.
+    view_gain_sigma : float, optional
+        With ``view_gains``: the prior standard deviation of each gain about 1
+        (how well the views' exposure scales are known beforehand), a
+        Gaussian prior added to the least squares; ``None``: free gains.
+    view_gain_centre : {"image", "free"}
+        How the gains are told from the vignetting (see Notes). ``"image"``
+        (default): the gains are fitted with the model's centre held at the
+        image centre (``m5 = m6 = 0.5``), one gain per view is taken for all
+        channels (their geometric mean: an exposure error is common to the
+        channels), and the full model is then fitted to the values so
+        corrected. ``"free"``: gains and model jointly, per channel.
 
     Returns
     -------
@@ -547,6 +772,48 @@ def fit_vignetting_ExtendedGoldmanChen(
     reports the resulting first-order uncertainty, and ``max_uncertainty``
     flags it: pan *and* tilt the camera.
 
+    *View gains.* The views are merged from their own exposure brackets, and
+    a bracket's exposure scale is known only as well as its shutter: nominal
+    times off by a few percent, or times re-estimated from the data
+    (:mod:`photoquant.exposure`), which fix each bracket's scale only up to
+    its own gauge (about ``σ/√K`` of its jitter, different per view). A view
+    whose exposure is off by a factor ``e_j`` has values ``e_j v l``, and the
+    pair equations read ``e_i v_is − e_j v_js`` ∝ a vignetting ratio times a
+    view ratio, which a model without gains can only explain as vignetting
+    (a 1 % gauge difference gave a 4.7 % map error). This is the joint
+    exposure and vignetting estimation of Goldman & Chen [GC05]_ (their
+    per-image exposure ``t_j`` beside the vignetting). The two are
+    identifiable: a view gain is one constant factor over the whole view,
+    whereas the vignetting ratio ``v(x_is) / v(x_js)`` of a track varies with
+    where the point lies in the two views, and the model is normalised to
+    ``v = 1`` at its centre. With two or more views and tracks spread over
+    the image (pan *and* tilt), every track gives a different vignetting
+    ratio but the same gain ratio, so both are determined — up to one
+    exact ambiguity: for views related by shifts ``d_j``, ``v → v·exp(a·x)``,
+    ``l → l·exp(−a·X)``, ``a_j → a_j·exp(−a·d_j)`` leaves every value
+    unchanged. Only the model's form can exclude the ramp ``exp(a·x)``; a
+    centred model (``"Goldman-Chen 2005"``) does, but this model's free
+    centre ``(m5, m6)`` reproduces it to second order in ``R`` (moving the
+    centre by ``δ`` adds ``−2 m1 m4 δ·x``), so for a mild, nearly quadratic
+    vignette only the small ``m2, m3`` terms hold the gains, and a fit with
+    pqsim's CCD vignetting (``m1 = −0.35``) and 0.5 % noise is refused as
+    poorly constrained (map uncertainty ≈ 6 %), while the paper's fitted
+    vignetting (§6.3) gives gains to 0.1 % and its map to 0.3 %.
+    ``map_uncertainty`` (marginal over the gains) reports how much freedom
+    is left; ``view_gain_sigma`` adds what is known of the gains beforehand
+    as a Gaussian prior. ``view_gain_centre="image"`` (default) resolves the
+    ambiguity by the physics of a lens instead: its vignetting is centred
+    on the optical axis, near the image centre, so the gains are those that
+    a vignetting centred there needs; a true centre off by ``δ`` biases them
+    by about ``2 |m1| m4 δ·d_j`` (0.3–0.5 % for pqsim's CCD preset, centre
+    2–3 % off, views 25 % apart: a map error of 0.5 % where 3 % exposure
+    jitter gave 9 %), and the full model, fitted with those gains held, is
+    free to put its centre where the data say. Its ``map_uncertainty`` is
+    then conditional on the gains. The residual is divided by ``√(a_i a_j)`` so that
+    it is invariant to a common scale of the gains. A gain common to every
+    view, the scale of ``l``, stays undetermined as before (view 0's is
+    fixed).
+
     References
     ----------
     .. [PQ] The photoquantity paper, §5.5 "Vignetting".
@@ -566,6 +833,14 @@ def fit_vignetting_ExtendedGoldmanChen(
         raise InputError(f"`normalise` must be 'track' or 'none', got {normalise!r}")
     if not isinstance(scale_invariant, bool | np.bool_):
         raise InputError(f"`scale_invariant` must be a bool, got {scale_invariant!r}")
+    if not isinstance(view_gains, bool | np.bool_):
+        raise InputError(f"`view_gains` must be a bool, got {view_gains!r}")
+    if view_gain_centre not in ("image", "free"):
+        raise InputError(f"`view_gain_centre` must be 'image' or 'free', got {view_gain_centre!r}")
+    if view_gain_sigma is not None and not (
+        isinstance(view_gain_sigma, int | float | np.number) and view_gain_sigma > 0
+    ):
+        raise InputError(f"`view_gain_sigma` must be a positive number, got {view_gain_sigma!r}")
     min_pairs = check_int(min_pairs, "min_pairs", 1)
     max_nfev = check_int(max_nfev, "max_nfev", 1)
     if not isinstance(min_spread, int | float | np.number) or not 0.0 <= min_spread <= 1.0:
@@ -583,6 +858,8 @@ def fit_vignetting_ExtendedGoldmanChen(
     start: np.ndarray | None = None
     if initial is not None:
         start = _as_channel_params(initial, "initial")
+        if view_gains:
+            raise InputError("`initial` cannot be combined with `view_gains`")
         if start.shape[0] == 1:
             start = np.repeat(start, n_channels, axis=0)
         elif start.shape[0] != n_channels:
@@ -639,6 +916,34 @@ def fit_vignetting_ExtendedGoldmanChen(
     uncertainty = np.full(n_channels, np.nan)
     converged = np.zeros(n_channels, dtype=bool)
     notes: list[str] = []
+    present, gain_index = np.unique(obs_view, return_inverse=True)
+    n_gains = int(present.size - 1) if view_gains else 0
+    n_view_slots = int(view.max()) + 1
+    gains = np.full((n_channels, n_view_slots), np.nan) if view_gains else None
+    gain_std = np.full((n_channels, n_view_slots), np.nan) if view_gains else None
+    if n_gains and view_gain_centre == "image" and gains is not None and gain_std is not None:
+        # the gains with the centre held at the image centre (no ramp to trade
+        # for them), then one gain per view for every channel, held in the fit
+        for ch in range(n_channels):
+            g, g_std = _centred_gains(
+                x_n,
+                y_n,
+                a,
+                b,
+                values[:, ch],
+                obs_track,
+                pair_track,
+                normalise,
+                bool(scale_invariant),
+                gain_index,
+                n_gains,
+                int(max_nfev),
+                view_gain_sigma,
+            )
+            gains[ch, present], gain_std[ch, present] = g, g_std
+        common = np.exp(np.mean(np.log(gains[:, present]), axis=0))
+        values = values * common[gain_index][:, None]
+        n_gains = 0
     for ch in range(n_channels):
         c = values[:, ch]
         if normalise == "track":
@@ -646,27 +951,39 @@ def fit_vignetting_ExtendedGoldmanChen(
             weight = 1.0 / track_mean[pair_track]
         else:
             weight = np.ones(n_pairs)
-        problem = _PairProblem(x_n, y_n, a, b, c[a], c[b], weight, bool(scale_invariant))
-        p0 = start[ch] if start is not None else problem.linear_start()
-        result = least_squares(
-            problem.residuals,
-            p0,
-            jac=problem.jacobian,
-            method="lm",
-            x_scale="jac",
-            ftol=1e-12,
-            xtol=1e-12,
-            gtol=1e-12,
-            max_nfev=int(max_nfev),
+        problem = _PairProblem(
+            x_n,
+            y_n,
+            a,
+            b,
+            c[a],
+            c[b],
+            weight,
+            bool(scale_invariant),
+            gain_index[a] if n_gains else None,
+            gain_index[b] if n_gains else None,
+            n_gains,
         )
-        params[ch] = result.x
-        rms[ch] = float(np.sqrt(np.mean(result.fun**2)))
+        p0 = start[ch] if start is not None else problem.linear_start()
+        result, fun, cov = _solve_pairs(
+            problem.residuals,
+            problem.jacobian,
+            p0,
+            _N_PARAMS,
+            int(max_nfev),
+            view_gain_sigma if n_gains else None,
+        )
+        params[ch] = result.x[:_N_PARAMS]
+        if n_gains and gains is not None and gain_std is not None:
+            gains[ch, present] = np.r_[1.0, result.x[_N_PARAMS:]]
+            gain_std[ch, present] = np.r_[0.0, np.sqrt(np.maximum(np.diag(cov)[_N_PARAMS:], 0.0))]
+        rms[ch] = float(np.sqrt(np.mean(fun**2)))
         ok = bool(result.success) and bool(np.all(np.isfinite(result.x)))
         if not ok:
             notes.append(f"channel {ch}: did not converge ({result.message})")
         else:
-            uncertainty[ch] = _map_uncertainty(result.x, result.fun, result.jac, (h, w))
-            v_min, v_max = _range_over_image(result.x, (h, w))
+            uncertainty[ch] = _map_uncertainty(result.x, fun, result.jac, (h, w), cov)
+            v_min, v_max = _range_over_image(result.x[:_N_PARAMS], (h, w))
             if not v_min > 0:
                 ok = False
                 notes.append(
@@ -699,7 +1016,8 @@ def fit_vignetting_ExtendedGoldmanChen(
     message = (
         f"{status}: extended Goldman-Chen fit of {n_channels} channel(s) from {n_tracks} tracks, "
         f"{n_pairs} pairs, {n_obs} observations in {n_views} views "
-        f"(normalise={normalise!r}, scale_invariant={bool(scale_invariant)}); {dropped_note}; "
+        f"(normalise={normalise!r}, scale_invariant={bool(scale_invariant)}"
+        f"{', view gains' if view_gains else ''}); {dropped_note}; "
         "relative map uncertainty (1 sigma, image mean) "
         + ", ".join("n/a" if np.isnan(u) else f"{u:.2%}" for u in uncertainty)
     )
@@ -714,6 +1032,8 @@ def fit_vignetting_ExtendedGoldmanChen(
         converged=converged,
         message=message,
         map_uncertainty=uncertainty,
+        view_gains=gains,
+        view_gain_std=gain_std,
     )
 
 
@@ -798,6 +1118,24 @@ class ExtendedGoldmanChenOptions:
         Half-size of the window averaged at each correspondence.
     min_pairs, min_spread, max_uncertainty, max_nfev
         See :func:`fit_vignetting_ExtendedGoldmanChen`.
+    view_gains : bool or "auto"
+        A gain per view: each view's exposure-scale error is fitted beside
+        the vignetting and reported (``view_gains``, ``view_gain_std`` and
+        ``exposure_correction`` in the step's report) instead of being read
+        as vignetting (:func:`fit_vignetting_ExtendedGoldmanChen`, Notes).
+        ``"auto"`` (default; the paper's profile sets ``False``): when the
+        views' exposure scales are uncertain by more than
+        :data:`~photoquant.vignetting.base.AUTO_VIEW_GAIN_STD` (their
+        refinement says so, ``VignettingData.exposure_scale_std``); exact
+        or unknown exposures keep the fit without gains, which the gains'
+        centre assumption would bias by 0.3–0.5 %.
+    view_gain_sigma : float, optional
+        With ``view_gains``: the prior standard deviation of each gain about
+        1 (how well the views' exposure scales are known beforehand);
+        ``None`` (default): free gains.
+    view_gain_centre : {"image", "free"}
+        With ``view_gains``: the gains fitted with the centre held at the
+        image centre, then held in the full fit (default), or jointly.
     """
 
     normalise: str = "track"
@@ -807,6 +1145,9 @@ class ExtendedGoldmanChenOptions:
     min_spread: float = 0.25
     max_uncertainty: float = 0.02
     max_nfev: int = 2000
+    view_gains: bool | str = "auto"
+    view_gain_sigma: float | None = None
+    view_gain_centre: str = "image"
 
     def __post_init__(self) -> None:
         if self.normalise not in ("track", "none"):
@@ -815,11 +1156,42 @@ class ExtendedGoldmanChenOptions:
             raise InputError(
                 f"`scale_invariant` must be true or false, got {self.scale_invariant!r}"
             )
+        check_view_gains_option(self.view_gains)
+        if self.view_gain_sigma is not None:
+            check_positive(self.view_gain_sigma, "view_gain_sigma")
+        if self.view_gain_centre not in ("image", "free"):
+            raise InputError(
+                f"`view_gain_centre` must be 'image' or 'free', got {self.view_gain_centre!r}"
+            )
         check_int(self.sample_radius, "sample_radius", 0, 64)
         check_int(self.min_pairs, "min_pairs", 1)
         check_int(self.max_nfev, "max_nfev", 1)
         for name in ("min_spread", "max_uncertainty"):
             check_positive(getattr(self, name), name, allow_zero=True)
+
+
+def view_gain_report(gains: np.ndarray | None, std: np.ndarray | None) -> dict[str, Any]:
+    """The view gains of a fit as a step report's entries (nothing without gains).
+
+    ``view_gains`` and ``view_gain_std`` per channel and view (``None`` for a
+    view without observations); ``exposure_correction``, per view, the
+    geometric mean of its gains over the channels: one view's exposure error
+    is common to its channels, so ``t_j / exposure_correction_j`` puts view
+    ``j`` on the reference view's exposure scale.
+    """
+    if gains is None:
+        return {}
+
+    def listed(arr: np.ndarray) -> list[list[float | None]]:
+        return [[float(v) if np.isfinite(v) else None for v in row] for row in arr]
+
+    with np.errstate(invalid="ignore"):
+        common = np.exp(np.mean(np.log(gains), axis=0))
+    return {
+        "view_gains": listed(gains),
+        "view_gain_std": listed(std if std is not None else np.full_like(gains, np.nan)),
+        "exposure_correction": [float(v) if np.isfinite(v) else None for v in common],
+    }
 
 
 def characterise_vignetting_ExtendedGoldmanChen(
@@ -859,6 +1231,9 @@ def characterise_vignetting_ExtendedGoldmanChen(
         min_spread=opts.min_spread,
         max_uncertainty=opts.max_uncertainty,
         max_nfev=opts.max_nfev,
+        view_gains=wants_view_gains(opts.view_gains, data),
+        view_gain_sigma=opts.view_gain_sigma,
+        view_gain_centre=opts.view_gain_centre,  # type: ignore[arg-type]
     )
     if not np.all(fit.converged):
         raise CalibrationError(f"the vignetting fit cannot be trusted: {fit.message}")
@@ -870,6 +1245,7 @@ def characterise_vignetting_ExtendedGoldmanChen(
         "residual_rms": fit.residual_rms,
         "map_uncertainty": fit.map_uncertainty,
         "message": fit.message,
+        **view_gain_report(fit.view_gains, fit.view_gain_std),
     }
     return StepFit(ExtendedGoldmanChenVignetting("Extended Goldman-Chen", fit.params), report)
 

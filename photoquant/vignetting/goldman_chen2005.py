@@ -68,7 +68,12 @@ from photoquant.vignetting._pairs import (
     pixel_grid,
     sample_tracks,
 )
-from photoquant.vignetting.base import VIGNETTING_METHODS, VignettingData, VignettingModel
+from photoquant.vignetting.base import (
+    VIGNETTING_METHODS,
+    VignettingData,
+    VignettingModel,
+    wants_view_gains,
+)
 from photoquant.vignetting.extended_goldman_chen import _check_image_shape
 
 __all__ = [
@@ -308,6 +313,8 @@ def characterise_vignetting_GoldmanChen2005(
         scale_invariant=opts.scale_invariant,
         max_uncertainty=opts.max_uncertainty,
         max_nfev=opts.max_nfev,
+        view_gains=wants_view_gains(opts.view_gains, data),
+        view_gain_sigma=opts.view_gain_sigma,
     )
     if not np.all(fit.converged):
         raise CalibrationError(f"the vignetting fit cannot be trusted: {fit.message}")
