@@ -239,7 +239,7 @@ class ExposureStack:
         cls,
         frames: Sequence[np.ndarray] | np.ndarray,
         exposure_s: Sequence[float] | np.ndarray,
-        **kwargs,
+        **kwargs: Any,
     ) -> ExposureStack:
         """Build a stack from ``K`` images ``(H, W, C)`` (one repeat each) or ``(K, H, W, C)``."""
         arr = np.asarray(frames)
@@ -252,7 +252,8 @@ class ExposureStack:
     @property
     def shape(self) -> tuple[int, int, int, int, int]:
         """``(N, K, H, W, C)``."""
-        return tuple(self.frames.shape)  # type: ignore[return-value]
+        n, k, h, w, c = self.frames.shape
+        return int(n), int(k), int(h), int(w), int(c)
 
     @property
     def n_repeats(self) -> int:
