@@ -346,8 +346,7 @@ def calibrate(
     # 1. response -----------------------------------------------------------
     say("response")
     t0 = time.perf_counter()
-    method, options = steps["response"]
-    response_spec = (method.name, options_to_dict(options))
+    response_spec = steps["response"]
     exposures: dict[str, Any] = {"refined": False}
     if refine_exposures and len(views) >= 2:
         say("response and exposure refinement")
@@ -402,7 +401,7 @@ def calibrate(
         flat_field = flat_ref.apply(flat_field)
         exposures["flat_field"] = flat_ref.as_dict()
     timings["response"] = time.perf_counter() - t0
-    report["response"] = {"method": method.name, **resp_fit.report}
+    report["response"] = {"method": response_spec[0].name, **resp_fit.report}
     report["exposures"] = exposures
 
     # 2. merge the views ------------------------------------------------------
@@ -430,7 +429,7 @@ def calibrate(
     else:
         say("sensor LUT")
         irr = merge_model.merge(irradiance, resp)
-        lut_fit = fit_sensor_lut(irr, (lut_spec[0].name, options_to_dict(lut_spec[1])))
+        lut_fit = fit_sensor_lut(irr, lut_spec)
     lut = lut_fit.model
     report["sensor_lut"] = {"method": lut.method, **lut_fit.report}
     timings["sensor_lut"] = time.perf_counter() - t0
@@ -468,11 +467,8 @@ def calibrate(
         say("vignetting")
         if "tracks" in needs:
             if correspondences is None or len(correspondences) == 0:
-                finder, finder_options = steps["correspondences"]
-                tracks = find_correspondences(
-                    uniform, (finder.name, options_to_dict(finder_options))
-                )
-                source = f"automatic ({finder.name})"
+                tracks = find_correspondences(uniform, steps["correspondences"])
+                source = f"automatic ({steps['correspondences'][0].name})"
             else:
                 tracks = [np.asarray(tr, dtype=np.float64) for tr in correspondences]
                 source = "given"
@@ -481,7 +477,7 @@ def calibrate(
         vig_fit = fit_vignetting_step(
             uniform,
             tracks or [],
-            (vig_spec[0].name, options_to_dict(vig_spec[1])),
+            vig_spec,
             flat_field=flat,
             exposure_scale_std=exposures.get("view_scale_std"),
         )
@@ -510,7 +506,7 @@ def calibrate(
             uniformised,
             white_roi,
             merged[0].mask,
-            (bal_spec[0].name, options_to_dict(bal_spec[1])),
+            bal_spec,
         )
         bal_model, bal_report = bal_fit.model, bal_fit.report
     report["balance"] = {"method": bal_model.method, **bal_report}

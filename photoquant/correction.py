@@ -20,6 +20,7 @@ import numpy as np
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import ExposureRefinement, refine_exposure_times
 from photoquant.merge import MergeModel
+from photoquant.methods import resolve_method
 from photoquant.model import CameraModel
 from photoquant.stack import ExposureStack
 
@@ -81,9 +82,10 @@ def correct(
         Frames of the scene (any ``N`` and exposure times).
     model : CameraModel
         The calibrated camera.
-    merge : MergeModel or str or (str, mapping), optional
-        Another merge than the camera's (a :class:`~photoquant.merge.MergeModel`,
-        or a method name with its options).
+    merge : MergeModel or spec, optional
+        Another merge than the camera's: a :class:`~photoquant.merge.MergeModel`
+        or a spec as :func:`photoquant.calibrate` takes (a method name,
+        ``(name, options)``, ...).
     refine_exposures : bool, optional
         Re-estimate the scene's exposure times against the camera's response
         before merging (:func:`photoquant.exposure.refine_exposure_times`; the
@@ -125,14 +127,9 @@ def correct(
         merger = model.merge
     elif isinstance(merge, MergeModel):
         merger = merge
-    elif isinstance(merge, str):
-        merger = MergeModel(merge)
-    elif isinstance(merge, tuple) and len(merge) == 2:
-        merger = MergeModel(merge[0], dict(merge[1]))
-    else:
-        raise InputError(
-            f"`merge` must be a MergeModel, a method name or (name, options), got {merge!r}"
-        )
+    else:  # a spec, resolved as calibrate resolves its merge step
+        method, options = resolve_method("merge", merge, (model.merge.method, {}))
+        merger = MergeModel(method.name, options)
     if refine_exposures is not None and not isinstance(refine_exposures, bool):
         raise InputError(
             f"`refine_exposures` must be true, false or None, got {refine_exposures!r}"

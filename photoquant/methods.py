@@ -418,7 +418,8 @@ def resolve_method(
         ``None``: ``default`` as it is; a name: that method with its default
         options; ``(name, options)``; a mapping: options for ``default``'s
         method, merged over ``default``'s options; an options dataclass
-        instance: the method whose ``options`` class it is.
+        instance: the method whose ``options`` class it is; a ``(Method,
+        options)`` pair already resolved is returned as it is.
     default : (str, mapping)
         The profile's method and options for this step.
 
@@ -443,6 +444,10 @@ def resolve_method(
         # a profile's options stay when the user names the profile's own method
         same = method.name == reg[default_name].name
         return method, options_from_mapping(method, default_options if same else {})
+    if isinstance(spec, tuple) and len(spec) == 2 and isinstance(spec[0], Method):
+        if spec[0].step != step:
+            raise InputError(f"method {spec[0].name!r} is for step {spec[0].step!r}, not {step!r}")
+        return spec  # already resolved (by resolve_steps)
     if isinstance(spec, tuple):
         if len(spec) != 2 or not isinstance(spec[0], str):
             raise InputError(
