@@ -94,10 +94,6 @@ def chart_measurements(
     key = ("chart", preset, label)
     if key in shared.cache:
         return shared.cache[key]
-    import time
-
-    from photoquant.balance import colour_balance
-    from photoquant.correction import correct
     from validation.experiments.chart import patch_means
 
     cal = shared.calibration(preset)
@@ -110,19 +106,9 @@ def chart_measurements(
     sat = np.asarray(camera.saturation_dn, dtype=np.float64)
     ldr = patch_means(frame, chart.boxes)
     clipped = patch_means((frame >= sat).astype(np.float64), chart.boxes) > 0
-    hdr_cap = camera.capture(
-        chart.l,
-        np.asarray(config.exposure_s),
-        config.chart_repeats,
-        rng=shared.stream("chart_hdr", preset, label),
+    stack, hdr_raw, balance, correct_s = _corrected_chart(
+        config, shared, preset, label, camera, model, chart
     )
-    stack = hdr_cap.to_stack()
-    t0 = time.perf_counter()
-    corr = correct(stack, model)
-    correct_s = time.perf_counter() - t0
-    hdr_raw = patch_means(corr.photoquantity, chart.boxes)
-    white = chart.boxes[chart.white_index]
-    balance = colour_balance(corr.photoquantity, white.tolist(), mask=corr.mask)
     out = {
         "chart": chart,
         "ldr": ldr,
@@ -140,6 +126,43 @@ def chart_measurements(
     return out
 
 
+def _corrected_chart(
+    config: ValidationConfig,
+    shared: Shared,
+    preset: str,
+    label: str,
+    camera: Any,
+    model: Any,
+    chart: Any,
+) -> tuple[Any, np.ndarray, np.ndarray, float]:
+    """The chart's HDR capture (seed stream ``chart_hdr``) corrected with ``model``.
+
+    Returns the stack, the patch means (24, 3), the white patch's balance
+    factors and the correction's wall time: the corrected and the Hugin rows
+    score the same frames the same way.
+    """
+    import time
+
+    from photoquant.balance import colour_balance
+    from photoquant.correction import correct
+    from validation.experiments.chart import patch_means
+
+    hdr_cap = camera.capture(
+        chart.l,
+        np.asarray(config.exposure_s),
+        config.chart_repeats,
+        rng=shared.stream("chart_hdr", preset, label),
+    )
+    stack = hdr_cap.to_stack()
+    t0 = time.perf_counter()
+    corr = correct(stack, model)
+    correct_s = time.perf_counter() - t0
+    hdr_raw = patch_means(corr.photoquantity, chart.boxes)
+    white = chart.boxes[chart.white_index]
+    balance = colour_balance(corr.photoquantity, white.tolist(), mask=corr.mask)
+    return stack, hdr_raw, balance, correct_s
+
+
 def hugin_measurements(
     config: ValidationConfig, shared: Shared, preset: str, label: str, illuminant: str
 ) -> dict[str, Any]:
@@ -153,11 +176,8 @@ def hugin_measurements(
     """
     import time
 
-    from photoquant.balance import colour_balance
     from photoquant.calibration import calibrate
-    from photoquant.correction import correct
     from photoquant.io import load_manifest, load_stack
-    from validation.experiments.chart import patch_means
 
     key = ("chart-hugin", preset, label)
     if key in shared.cache:
@@ -179,19 +199,9 @@ def hugin_measurements(
         shared.cache[model_key] = (result, time.perf_counter() - t0)
     model, calibrate_s = shared.cache[model_key]
     chart = shared.chart(illuminant, preset)
-    hdr_cap = cal.camera.capture(
-        chart.l,
-        np.asarray(config.exposure_s),
-        config.chart_repeats,
-        rng=shared.stream("chart_hdr", preset, label),
+    _, hdr_raw, balance, correct_s = _corrected_chart(
+        config, shared, preset, label, cal.camera, model, chart
     )
-    stack = hdr_cap.to_stack()
-    t0 = time.perf_counter()
-    corr = correct(stack, model)
-    correct_s = time.perf_counter() - t0
-    hdr_raw = patch_means(corr.photoquantity, chart.boxes)
-    white = chart.boxes[chart.white_index]
-    balance = colour_balance(corr.photoquantity, white.tolist(), mask=corr.mask)
     out = {
         "hdr": hdr_raw * balance,
         "model": model,
