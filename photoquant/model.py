@@ -75,13 +75,8 @@ _STEP_TYPES: dict[str, type] = {
     "sensor_lut": SensorLUTModel,
     "vignetting": VignettingModel,
 }
-_DEFAULT_MODEL_CLASS: dict[str, Any] = {
-    "response": ResponseModel,
-    "merge": MergeModel,
-    "balance": BalanceModel,
-    "sensor_lut": SensorLUTModel,
-    "vignetting": ExtendedGoldmanChenVignetting,
-}
+_DEFAULT_MODEL_CLASS: dict[str, Any] = {**_STEP_TYPES, "vignetting": ExtendedGoldmanChenVignetting}
+"""The class that rebuilds a step whose method names no model class of its own."""
 
 
 @dataclass(frozen=True, eq=False)
