@@ -19,7 +19,14 @@ other). Unknown fields are refused, naming the valid ones.
 - ``"cmos"``: S-shaped responses that differ per channel, a smaller well and
   more read and dark noise, 8 bits, stronger vignetting.
 
-Both have extended Goldman–Chen vignetting (corners ~20–25 % darker, centre
+- ``"emor"``: the cmos camera with responses from the space of real ones,
+  one EMoR draw per channel (seeds 0, 1, 2, five components; see
+  :func:`~pqsim.synth_camera.responses.draw_emor_coefficients`) [GN04]_.
+- ``"film"``: the ccd camera with film-like characteristic curves (toe and
+  shoulder, :func:`~pqsim.synth_camera.responses.response_film`) and a
+  soft knee at 97 % of the range.
+
+All have extended Goldman–Chen vignetting (corners ~20–25 % darker, centre
 slightly off the image centre, per-channel differences) and a PRNU of about
 1 % per-pixel plus 1 % smooth. ``exposure_scale = 100 · full_well``: a
 photoquantity of 1 (the analytic scenes' white chart) fills the well in 10 ms.
@@ -48,6 +55,8 @@ References
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §6.1, Fig. 3.
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021) — typical CCD/CMOS data sheets
    give full wells of 5–40 ke⁻ and read noise of 2–20 e⁻.
+.. [GN04] M. D. Grossberg and S. K. Nayar, "Modeling the space of camera
+   response functions", IEEE TPAMI 26(10), 2004, doi:10.1109/TPAMI.2004.88.
 .. [NPL] M. Darrodi et al., "Reference data set for camera spectral sensitivity
    estimation", JOSA A 32(3), 2015 (``colour.MSDS_CAMERA_SENSITIVITIES``).
 """
@@ -125,7 +134,27 @@ _CMOS: dict[str, Any] = {
     "sensitivities": "nikon_d5100",
 }
 
-CAMERA_PRESETS: Mapping[str, Mapping[str, Any]] = MappingProxyType({"ccd": _CCD, "cmos": _CMOS})
+_EMOR: dict[str, Any] = {
+    **_CMOS,
+    "responses": [
+        {"kind": "emor", "params": {"seed": seed, "n_components": 5}} for seed in (0, 1, 2)
+    ],
+    "prnu_seed": 2004,
+}
+
+_FILM: dict[str, Any] = {
+    **_CCD,
+    "responses": [
+        {"kind": "film", "params": {"toe": 1.5, "shoulder": 1.1, "pivot": 0.32, "knee": 0.97}},
+        {"kind": "film", "params": {"toe": 1.6, "shoulder": 1.0, "pivot": 0.30, "knee": 0.97}},
+        {"kind": "film", "params": {"toe": 1.7, "shoulder": 0.9, "pivot": 0.28, "knee": 0.97}},
+    ],
+    "prnu_seed": 1890,
+}
+
+CAMERA_PRESETS: Mapping[str, Mapping[str, Any]] = MappingProxyType(
+    {"ccd": _CCD, "cmos": _CMOS, "emor": _EMOR, "film": _FILM}
+)
 """Preset name → field values of :class:`SyntheticCamera` (plain data), plus the
 name of the spectral sensitivities (``"sensitivities"``) used when rendering."""
 
