@@ -26,7 +26,11 @@ other). Unknown fields are refused, naming the valid ones.
   shoulder, :func:`~pqsim.synth_camera.responses.response_film`) and a
   soft knee at 97 % of the range.
 
-All have extended Goldman–Chen vignetting (corners ~20–25 % darker, centre
+A preset may give its vignetting as ``{"kind", "params"}`` record(s)
+(``"vignetting"``: ``"extended_goldman_chen"`` or ``"cos4"`` with a
+mechanical cut-off, one record or one per channel;
+:data:`~pqsim.synth_camera.optics.VIGNETTING_KINDS`) instead of
+``vignetting_params``. The built-in ones have extended Goldman–Chen vignetting (corners ~20–25 % darker, centre
 slightly off the image centre, per-channel differences) and a PRNU of about
 1 % per-pixel plus 1 % smooth. ``exposure_scale = 100 · full_well``: a
 photoquantity of 1 (the analytic scenes' white chart) fills the well in 10 ms.
@@ -216,6 +220,8 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
     if unknown:
         raise InputError(f"unknown camera field(s) {sorted(unknown)}; valid: {sorted(valid)}")
     noise = overrides.pop("noise", None)
+    if overrides.get("vignetting") is not None and "vignetting_params" not in overrides:
+        fields["vignetting_params"] = None  # records replace the base's m1..m6
     fields.update(overrides)
     noise_fields = dict(fields["noise"])
     if isinstance(noise, SensorNoise):
@@ -298,6 +304,8 @@ def _read_preset_file(path: Path) -> dict[str, Any]:
     except InputError as exc:
         raise InputError(f"preset file {path}: `base`: {exc}") from None
     fields.update({k: v for k, v in doc.items() if k not in _FILE_KEYS})
+    if doc.get("vignetting") is not None and "vignetting_params" not in doc:
+        fields["vignetting_params"] = None  # records replace the base's m1..m6
     return fields
 
 
