@@ -22,6 +22,9 @@ other). Unknown fields are refused, naming the valid ones.
 - ``"emor"``: the cmos camera with responses from the space of real ones,
   one EMoR draw per channel (seeds 0, 1, 2, five components; see
   :func:`~pqsim.synth_camera.responses.draw_emor_coefficients`) [GN04]_.
+- ``"emor-S"`` (S = 0, 1, …): the same camera with the draws of seeds
+  ``3S``, ``3S + 1``, ``3S + 2`` (``"emor-0"`` is ``"emor"``): as many
+  cameras from the space of real responses as a study needs.
 - ``"film"``: the ccd camera with film-like characteristic curves (toe and
   shoulder, :func:`~pqsim.synth_camera.responses.response_film`) and a
   soft knee at 97 % of the range.
@@ -69,6 +72,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from types import MappingProxyType
@@ -242,6 +246,18 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
     return SyntheticCamera(**fields)
 
 
+_EMOR_DRAW = re.compile(r"^emor-(\d{1,6})$")
+"""``emor-S``: the ``emor`` preset with the EMoR draws of seeds ``3S, 3S + 1, 3S + 2``."""
+
+
+def _emor_draw(seed: int) -> dict[str, Any]:
+    fields = dict(_EMOR)
+    fields["responses"] = [
+        {"kind": "emor", "params": {"seed": 3 * seed + ch, "n_components": 5}} for ch in range(3)
+    ]
+    return fields
+
+
 def _is_preset_file(name: str) -> bool:
     return name.lower().endswith(".json") or "/" in name or "\\" in name
 
@@ -270,12 +286,15 @@ def preset_fields(name: str | os.PathLike[str]) -> dict[str, Any]:
         return _read_preset_file(Path(name))
     if not isinstance(name, str):
         raise InputError(f"a camera preset is a name or a .json file, got {name!r}")
+    draw = _EMOR_DRAW.match(name.strip().lower())
+    if draw:
+        return _emor_draw(int(draw.group(1)))
     try:
         key = validate_method(name, CAMERA_PRESETS, "camera preset")
     except InputError:
         raise InputError(
-            f"unknown camera preset {name!r}: use one of {', '.join(sorted(CAMERA_PRESETS))} "
-            "or a preset file (.json; `pqsim preset ccd` prints one to start from)"
+            f"unknown camera preset {name!r}: use one of {', '.join(sorted(CAMERA_PRESETS))}, "
+            "emor-S (EMoR responses drawn from seed S) or a preset file (.json; `pqsim preset ccd` prints one to start from)"
         ) from None
     return dict(CAMERA_PRESETS[key])
 
