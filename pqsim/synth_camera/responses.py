@@ -613,7 +613,7 @@ def emor_coefficient_spread(n_components: int = 5) -> np.ndarray:
     film characteristic curves (:func:`response_film`, toe 1.3–2.2, shoulder
     0.8–2.0, pivot 0.2–0.5), each projected on the (orthonormal) basis. The
     spread is taken about ``f0`` (the DoRF mean), since draws are centred
-    there. For ``K = 5`` it is about ``(2.6, 0.96, 0.22, 0.12, 0.05)``: the
+    there. For ``K = 5`` it is about ``(2.95, 1.01, 0.26, 0.13, 0.05)``: the
     first component varies most, as in the database's ordering.
 
     Examples

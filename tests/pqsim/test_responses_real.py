@@ -216,3 +216,11 @@ def test_a_preset_file_gives_an_emor_record_by_seed(tmp_path) -> None:
     want = draw_emor_coefficients(7, 3)
     assert cam.responses[0].params["coefficients"] == tuple(want.tolist())
     assert preset_fields(str(path))["responses"][0]["kind"] == "emor"
+
+
+def test_emor_s_presets_are_further_seeded_draws() -> None:
+    assert camera_from_preset("emor-0").responses == camera_from_preset("emor").responses
+    cam = camera_from_preset("emor-2")
+    assert [r.params["seed"] for r in cam.responses] == [6, 7, 8]
+    with pytest.raises(InputError, match="emor-S"):
+        camera_from_preset("emor-x")
