@@ -14,7 +14,11 @@ from photoquant.flatfield import SensorLUTModel
 from photoquant.merge import MergeModel
 from photoquant.model import CameraModel
 from photoquant.response import ResponseModel, response_levels
-from photoquant.vignetting import IDENTITY_VIGNETTING, ExtendedGoldmanChenVignetting
+from photoquant.vignetting import (
+    IDENTITY_VIGNETTING,
+    ExtendedGoldmanChenVignetting,
+    FlatFieldVignetting,
+)
 
 __all__ = ["camera_model_from_truth", "white_reference"]
 
@@ -36,6 +40,11 @@ def camera_model_from_truth(camera, *, weighting: str = "hat-quantisation") -> C
     g = np.maximum.accumulate(g, axis=1)
     vig = camera.vignetting_params
     vig = np.tile(IDENTITY_VIGNETTING, (camera.n_channels, 1)) if vig is None else np.asarray(vig)
+    vignetting: ExtendedGoldmanChenVignetting | FlatFieldVignetting
+    if getattr(camera, "vignetting_model", None) is not None:  # a truth outside the family: its map
+        vignetting = FlatFieldVignetting("ground truth", np.asarray(camera.vignetting))
+    else:
+        vignetting = ExtendedGoldmanChenVignetting("ground truth", vig)
     return CameraModel(
         image_shape=camera.image_shape,
         channels=camera.channels,
@@ -52,7 +61,7 @@ def camera_model_from_truth(camera, *, weighting: str = "hat-quantisation") -> C
         ),
         balance=BalanceModel("ground truth", np.ones(camera.n_channels)),
         sensor_lut=SensorLUTModel("ground truth", np.asarray(camera.sensor_lut, np.float32)),
-        vignetting=ExtendedGoldmanChenVignetting("ground truth", vig),
+        vignetting=vignetting,
         parameters={"source": "ground truth"},
     )
 

@@ -87,6 +87,10 @@ class CameraTruth:
         Channel names.
     prnu : dict
         How ``u`` was made: ``{"seed", "sigma_pixel", "sigma_lowfreq", "lowfreq_scale"}``.
+    vignetting_model : dict or tuple of dict, optional
+        The vignetting's ``{"kind", "params"}`` record(s)
+        (:data:`~pqsim.synth_camera.optics.VIGNETTING_KINDS`) when the camera
+        was given them; ``None`` for ``vignetting_params`` or none.
     """
 
     responses: tuple[ResponseCurve, ...]
@@ -99,6 +103,7 @@ class CameraTruth:
     exposure_scale: float
     channels: tuple[str, ...] = ("R", "G", "B")
     prnu: dict[str, Any] = field(default_factory=dict)
+    vignetting_model: Any = None
 
     def __post_init__(self) -> None:
         c = len(self.responses)
@@ -247,7 +252,7 @@ class CameraTruth:
             if self.vignetting_params is None
             else [list(p) for p in self.vignetting_params],
             "prnu": dict(self.prnu),
-        }
+        } | ({} if self.vignetting_model is None else {"vignetting_model": self.vignetting_model})
 
     def save(self, folder: str | Path) -> Path:
         """Write this truth alone to ``folder`` (see :func:`save_truth`)."""
@@ -429,6 +434,15 @@ def _read_map(folder: Path, name: Any, shape: tuple[int, ...] | None) -> np.ndar
     return arr
 
 
+def _vignetting_model(doc: Any) -> Any:
+    """A vignetting record (or one per channel) as read from ``truth.json``."""
+    if doc is None or isinstance(doc, dict):
+        return doc
+    if isinstance(doc, list) and all(isinstance(r, dict) for r in doc):
+        return tuple(doc)
+    raise InputError(f"truth.json: `vignetting_model` must be a record or a list, got {doc!r}")
+
+
 def load_truth(folder: str | Path) -> TruthSet:
     """Read a ground truth written by :func:`save_truth`.
 
@@ -473,6 +487,7 @@ def load_truth(folder: str | Path) -> TruthSet:
             exposure_scale=float(cam["exposure_scale"]),
             channels=tuple(cam["channels"]),
             prnu=dict(cam.get("prnu", {})),
+            vignetting_model=_vignetting_model(cam.get("vignetting_model")),
         )
         captures = {}
         for name, cap in doc.get("captures", {}).items():
