@@ -55,7 +55,7 @@ def _helper(name: str) -> Callable[..., Any]:
         raise TestingUnavailableError(
             f"photoquant.testing.{name}: entry point {found[0].value!r} is not callable"
         )
-    return function  # type: ignore[no-any-return]
+    return function
 
 
 def check_against_baseline(

@@ -72,6 +72,7 @@ __all__ = [
     "describe_configuration",
     "check_configuration",
     "record_baseline",
+    "baseline_from_results",
     "run_check",
     "check_against_baseline",
     "junit_xml",
@@ -493,7 +494,6 @@ def record_baseline(
     if output is not None and Path(output).exists() and not overwrite:
         raise OutputExistsError(f"{output} already exists (use --overwrite to replace it)")
     config = configuration.validation_config()
-    description = describe_configuration(config, configuration.experiments)
     say = progress or _quiet
     results = []
     for s in seeds:
@@ -503,20 +503,40 @@ def record_baseline(
         if runs is not None:
             runs.append(run)
         say(f"baseline: seed {s} done in {time.perf_counter() - t0:.0f} s")
-    k = k_sigma_for(len(seeds))
-    base = make_baseline(results, k_sigma=k)
-    base["versions"] = current_versions()
-    base["tolerance_rule"]["n_seeds"] = len(seeds)
-    base["tolerance_rule"]["k_sigma_rule"] = (
-        "2.5 * sqrt((n - 1) / chi2.ppf(1 - p8, n - 1)), p8 = chi2.sf(1.75, 7): the false-alarm "
-        "rate of 5 spreads over 8 seeds (validation.baseline.k_sigma_for)"
-    )
-    doc = seal_baseline(base, description)
+    doc = baseline_from_results(results, config, configuration.experiments)
     if output is not None:
         write_text_atomic(
             output, json.dumps(doc, indent=1, allow_nan=False) + "\n", overwrite=overwrite
         )
     return doc
+
+
+def baseline_from_results(
+    results: Sequence[Mapping[str, Any]],
+    config: ValidationConfig,
+    experiments: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """A sealed format-2 baseline from the ``results.json`` dicts of runs with different seeds.
+
+    What :func:`record_baseline` does after its runs; runs made separately
+    (in parallel, each ``photoquant validate --seed S --json``) give the same
+    baseline. The first run gives the values; the tolerance is
+    ``k_sigma_for(len(results))`` spreads. The runs must share ``config``'s
+    conditions.
+    """
+    seeds = [r.get("seed") for r in results]
+    if len(set(seeds)) != len(seeds):
+        raise ValidationError(f"the runs of a baseline need distinct seeds, got {seeds}")
+    base = make_baseline(results, k_sigma=k_sigma_for(len(results)))
+    if base["conditions"] != _json(config.conditions()):
+        raise ValidationError("the runs were not made with this configuration's conditions")
+    base["versions"] = current_versions()
+    base["tolerance_rule"]["n_seeds"] = len(results)
+    base["tolerance_rule"]["k_sigma_rule"] = (
+        "2.5 * sqrt((n - 1) / chi2.ppf(1 - p8, n - 1)), p8 = chi2.sf(1.75, 7): the false-alarm "
+        "rate of 5 spreads over 8 seeds (validation.baseline.k_sigma_for)"
+    )
+    return seal_baseline(base, describe_configuration(config, experiments))
 
 
 def resolve_baseline(

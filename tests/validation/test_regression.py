@@ -444,3 +444,28 @@ def test_the_stored_baselines_apply_to_their_modes():
     assert Path(prep.name) == FULL_BASELINE
     for m in full["metrics"].values():
         assert m["tolerance"] >= full["tolerance_rule"]["k_sigma"] * m["spread"] * (1 - 1e-12)
+
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "test_my_method_baseline.py"
+EXAMPLE_CONFIG = {"methods": {"response": "Robertson 2003"}, "experiments": ["response"]}
+
+
+def test_the_example_baseline_applies_to_the_example_test():
+    base = EXAMPLE.with_name("my_method.baseline.json")
+    doc = load_baseline(base)
+    assert doc["seeds"] == list(range(8)) and doc["tolerance_rule"]["k_sigma"] == pytest.approx(5)
+    prepare_check(RunConfiguration(presets=("ccd",), **EXAMPLE_CONFIG), base)
+    with pytest.raises(ValidationError, match="response method"):
+        prepare_check(RunConfiguration(presets=("ccd",), experiments=["response"]), base)
+
+
+@pytest.mark.slow
+def test_the_example_test_passes():
+    import importlib.util
+
+    if not _has_testing_entry_point():
+        pytest.skip("the installed metadata predates the entry point: pip install -e .")
+    spec = importlib.util.spec_from_file_location("example_baseline_test", EXAMPLE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.test_my_method_holds_its_baseline()
