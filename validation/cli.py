@@ -221,6 +221,10 @@ def run_validate(args: argparse.Namespace) -> int:
     if out.exists() and not args.overwrite:
         raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
     for flag, target in (("--write-baseline", args.write_baseline), ("--junit", args.junit)):
+        if target and out.resolve() in Path(target).resolve().parents:
+            raise ValidationError(
+                f"{flag} {target} lies inside the report folder {out}, which is replaced whole"
+            )
         if target and Path(target).exists() and not args.overwrite:
             raise OutputExistsError(
                 f"{target} ({flag}) already exists (use --overwrite to replace it)"

@@ -550,6 +550,11 @@ def resolve_baseline(
                 f"{', '.join(STORED_BASELINES)}); give a baseline file"
             )
         path = STORED_BASELINES[mode]
+        if not path.is_file():
+            raise ValidationError(
+                f"no baseline of the {mode} configuration is stored with this photoquant "
+                f"({path.name}); record one with photoquant validate --{mode} --write-baseline FILE"
+            )
         return str(path), load_baseline(path)
     if isinstance(baseline, Mapping):
         doc = json.loads(json.dumps(dict(baseline), allow_nan=False))

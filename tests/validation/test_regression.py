@@ -47,6 +47,7 @@ from validation.regression import (
     prepare_check,
 )
 
+REPO = Path(__file__).resolve().parents[2]
 PLUGIN = "Smoothed (regression test)"
 TEST_RUN = ["--tiny", "--experiments", "response", "--preset", "ccd", "-q"]
 TEST_CONFIG = {"mode": "tiny", "experiments": ["response"], "presets": ["ccd"]}
@@ -95,11 +96,39 @@ def _has_testing_entry_point() -> bool:
     )
 
 
+@pytest.fixture
+def testing_entry_point(tmp_path_factory, monkeypatch):
+    """The ``photoquant.testing`` entry points of ``pyproject.toml``, installed or shimmed.
+
+    An editable install made before the group existed lacks it (as
+    ``tests/_commands.py`` explains for commands): a hand-written
+    ``.dist-info`` declares it, so the helper is reached as users reach it.
+    """
+    import tomllib
+
+    if _has_testing_entry_point():
+        return
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    declared = project["entry-points"]["photoquant.testing"]
+    site = tmp_path_factory.mktemp("testing-shim")
+    info = site / "photoquant_testing_shim-0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: photoquant-testing-shim\nVersion: 0\n"
+    )
+    lines = "".join(f"{k} = {v}\n" for k, v in sorted(declared.items()))
+    (info / "entry_points.txt").write_text(f"[photoquant.testing]\n{lines}")
+    monkeypatch.syspath_prepend(str(site))
+    assert _has_testing_entry_point()
+
+
 # --------------------------------------------------------------------------- end to end
 
 
 @pytest.mark.slow
-def test_a_plugin_baseline_passes_then_its_degraded_version_fails(plugin, tmp_path, capsys):
+def test_a_plugin_baseline_passes_then_its_degraded_version_fails(
+    plugin, testing_entry_point, tmp_path, capsys
+):
     base = tmp_path / "plugin.baseline.json"
     method = ["--method", f"response={PLUGIN}"]
     status = main(
@@ -144,18 +173,16 @@ def test_a_plugin_baseline_passes_then_its_degraded_version_fails(plugin, tmp_pa
     with pytest.raises(AssertionError, match=key.replace(".", r"\.")) as info:
         check_against_baseline(base, methods={"response": PLUGIN}, **TEST_CONFIG)
     assert all(f"REGRESSION {n}:" in str(info.value) for n in named)
-    if _has_testing_entry_point():  # the public helper, through its entry point
-        from photoquant.testing import check_against_baseline as public
+    from photoquant.testing import check_against_baseline as public  # through its entry point
 
-        with pytest.raises(AssertionError, match=key.replace(".", r"\.")):
-            public(base, methods={"response": PLUGIN}, **TEST_CONFIG)
+    with pytest.raises(AssertionError, match=key.replace(".", r"\.")) as info:
+        public(base, methods={"response": PLUGIN}, **TEST_CONFIG)
+    assert all(f"REGRESSION {n}:" in str(info.value) for n in named)
 
 
-def test_the_public_helper_is_found_through_its_entry_point():
+def test_the_public_helper_is_found_through_its_entry_point(testing_entry_point):
     from photoquant import testing
 
-    if not _has_testing_entry_point():
-        pytest.skip("the installed metadata predates the entry point: pip install -e .")
     with pytest.raises(ValidationError, match="does not exist"):
         testing.check_against_baseline("no-such-baseline.json")
 
@@ -351,6 +378,7 @@ def test_the_format_1_baseline_describes_the_default_pipeline_only(
         (["--seeds", "0", "1"], "--write-baseline"),
         (["--write-baseline", "b.json", "--seeds", "3"], "two distinct"),
         (["--write-baseline", "b.json", "--check"], "exclude each other"),
+        (["--write-baseline", "r/b.json"], "inside the report folder"),
     ],
 )
 def test_bad_options_exit_2_before_the_run(tmp_path, monkeypatch, capsys, options, expected):
@@ -438,6 +466,10 @@ def test_junit_has_one_case_per_metric():
 def test_the_stored_baselines_apply_to_their_modes():
     assert load_baseline(DEFAULT_BASELINE)["format"] == "photoquant.validation-baseline/1"
     prepare_check(RunConfiguration(mode="quick"), None)
+    if not FULL_BASELINE.is_file():
+        with pytest.raises(ValidationError, match="no baseline of the full configuration"):
+            prepare_check(RunConfiguration(mode="full"), None)
+        pytest.skip(f"{FULL_BASELINE.name} is not recorded yet (see the README)")
     full = load_baseline(FULL_BASELINE)
     assert full["format"] == BASELINE_FORMAT_2 and len(full["seeds"]) >= 3
     prep = prepare_check(RunConfiguration(mode="full"), None)
@@ -446,7 +478,7 @@ def test_the_stored_baselines_apply_to_their_modes():
         assert m["tolerance"] >= full["tolerance_rule"]["k_sigma"] * m["spread"] * (1 - 1e-12)
 
 
-EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "test_my_method_baseline.py"
+EXAMPLE = REPO / "examples" / "test_my_method_baseline.py"
 EXAMPLE_CONFIG = {"methods": {"response": "Robertson 2003"}, "experiments": ["response"]}
 
 
@@ -460,11 +492,9 @@ def test_the_example_baseline_applies_to_the_example_test():
 
 
 @pytest.mark.slow
-def test_the_example_test_passes():
+def test_the_example_test_passes(testing_entry_point):
     import importlib.util
 
-    if not _has_testing_entry_point():
-        pytest.skip("the installed metadata predates the entry point: pip install -e .")
     spec = importlib.util.spec_from_file_location("example_baseline_test", EXAMPLE)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
