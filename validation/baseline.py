@@ -377,6 +377,7 @@ def validate_baseline(data: Any, name: str = "baseline") -> dict[str, Any]:
             )
         if not isinstance(data.get("configuration"), dict):
             raise ValidationError(f"{name} lacks `configuration` (an object)")
+        _check_configuration(name, data["configuration"])
     if not isinstance(data.get("metrics"), dict) or not isinstance(data.get("conditions"), dict):
         raise ValidationError(f"{name} lacks `metrics` or `conditions` (objects)")
     if not data["metrics"]:
@@ -386,6 +387,35 @@ def validate_baseline(data: Any, name: str = "baseline") -> dict[str, Any]:
     for key, ref in data["metrics"].items():
         _check_metric(name, key, ref)
     return data
+
+
+_CONFIGURATION_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "name": str,
+    "conditions": dict,
+    "profile": str,
+    "steps": dict,
+    "presets": list,
+    "chart": str,
+    "rendered_capture": bool,
+    "experiments": list,
+}
+
+
+def _check_configuration(name: str, conf: Mapping[str, Any]) -> None:
+    """Refuse a format-2 ``configuration`` whose fields have the wrong types (one line)."""
+    for key, kind in _CONFIGURATION_FIELDS.items():
+        if not isinstance(conf.get(key), kind):
+            raise ValidationError(f"{name}: `configuration.{key}` is missing or of the wrong type")
+    for step, entry in conf["steps"].items():
+        if not isinstance(entry, dict) or not isinstance(entry.get("method"), str):
+            raise ValidationError(f"{name}: `configuration.steps.{step}` must name its method")
+        if not isinstance(entry.get("resolved_options", {}), dict):
+            raise ValidationError(f"{name}: `configuration.steps.{step}.resolved_options`")
+    for preset in conf["presets"]:
+        if not isinstance(preset, dict) or not isinstance(preset.get("name"), str):
+            raise ValidationError(f"{name}: each of `configuration.presets` must have a `name`")
+    if not all(isinstance(e, str) for e in conf["experiments"]):
+        raise ValidationError(f"{name}: `configuration.experiments` must be names")
 
 
 def _newer_format(got: Any) -> bool:

@@ -13,6 +13,7 @@ baselines sealed from synthetic results: nothing is simulated.
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -21,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.stats import chi2
 
 import photoquant as pq
@@ -37,11 +40,13 @@ from validation.baseline import (
     load_baseline,
     make_baseline,
     seal_baseline,
+    validate_baseline,
 )
 from validation.config import ValidationError
 from validation.regression import (
     RunConfiguration,
     check_against_baseline,
+    check_configuration,
     describe_configuration,
     junit_xml,
     prepare_check,
@@ -273,6 +278,16 @@ BAD_FILES = {
     ),
     "tampered value": (_bad(_set_metric_value), "edited after it was written"),
     "checksum removed": (_bad(lambda d: d.pop("checksum")), "lacks its `checksum`"),
+    "steps a list, resealed": (
+        lambda doc: _reseal(dict(doc, configuration=dict(doc["configuration"], steps=[1]))),
+        "`configuration.steps`",
+    ),
+    "a preset without a name, resealed": (
+        lambda doc: _reseal(
+            dict(doc, configuration=dict(doc["configuration"], presets=[{"source": "file"}]))
+        ),
+        "`configuration.presets`",
+    ),
     "configuration removed": (
         lambda doc: _reseal({k: v for k, v in doc.items() if k != "configuration"}),
         "lacks `configuration`",
@@ -499,3 +514,55 @@ def test_the_example_test_passes(testing_entry_point):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     module.test_my_method_holds_its_baseline()
+
+
+# --------------------------------------------------------------------------- property
+
+_leaf = st.none() | st.booleans() | st.integers(-3, 3) | st.floats(allow_nan=False)
+_any = st.recursive(
+    _leaf | st.text(max_size=5),
+    lambda kids: (
+        st.lists(kids, max_size=3) | st.dictionaries(st.text(max_size=5), kids, max_size=3)
+    ),
+    max_leaves=6,
+)
+_PLAIN = RunConfiguration(**TEST_CONFIG)
+
+
+@functools.cache
+def _plain() -> tuple[str, str]:
+    """The sealed baseline and the description of the plain test configuration (JSON, once)."""
+    config = _PLAIN.validation_config()
+    return json.dumps(_sealed(_PLAIN)), json.dumps(
+        describe_configuration(config, _PLAIN.experiments)
+    )
+
+
+@st.composite
+def _crafted(draw) -> dict:
+    """A sealed baseline with parts replaced, resealed (a crafted file) or not (an edited one)."""
+    doc = json.loads(_plain()[0])
+    conf = doc["configuration"]
+    for _ in range(draw(st.integers(1, 3))):
+        where = draw(st.sampled_from(["configuration", "step", "preset", "top"]))
+        if where == "configuration":
+            conf[draw(st.sampled_from(sorted(conf)))] = draw(_any)
+        elif where == "step" and isinstance(conf.get("steps"), dict) and conf["steps"]:
+            step = draw(st.sampled_from(sorted(conf["steps"])))
+            conf["steps"][step] = draw(_any)
+        elif where == "preset" and isinstance(conf.get("presets"), list) and conf["presets"]:
+            conf["presets"][0] = draw(_any)
+        else:
+            doc[draw(st.sampled_from(["format", "versions", "seeds", "metrics"]))] = draw(_any)
+    return _reseal(doc) if draw(st.booleans()) else doc
+
+
+@settings(max_examples=100, deadline=None)
+@given(doc=_crafted())
+def test_a_crafted_baseline_is_refused_in_one_line_or_checked(doc):
+    description = json.loads(_plain()[1])
+    try:
+        base = validate_baseline(json.loads(json.dumps(doc)), "baseline b.json")
+        check_configuration(base, description, name="baseline b.json")
+    except ValidationError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith("baseline b.json")
