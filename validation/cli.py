@@ -1,7 +1,9 @@
 """``photoquant validate``: the main job — reproduce the paper's results against ground truth.
 
 ``photoquant validate [--quick | --full] [-o REPORT_DIR] [--seed S]
-[--check BASELINE.json] [--json] [--overwrite] [--experiments NAME ...]``
+[--check [BASELINE.json] [--junit FILE]] [--write-baseline FILE [--seeds S ...]]
+[--json] [--overwrite] [--experiments NAME ...] [--profile P] [--method STEP=NAME ...]
+[--option STEP.NAME=VALUE ...] [--preset NAME|FILE.json ...]``
 
 Simulates the ``ccd`` and ``cmos`` camera presets, calibrates them with
 photoquant, corrects test scenes and compares every recovered quantity with
@@ -10,8 +12,11 @@ Prints a table (standard output; standard error with ``--json``), writes a
 report folder (``report.md``, ``results.json``, ``figures/*.png``) and, with
 ``--check``, compares the metrics with a stored baseline: exit status 1 and
 one line per regression when a metric moved the wrong way beyond its
-tolerance. Bad options exit with status 2 and one line (photoquant's CLI
-prints :class:`photoquant.errors.PhotoquantError` so).
+tolerance. ``--write-baseline`` records a baseline of the configuration
+given (any method, profile, preset file, mode), ``--junit`` writes the check
+as a JUnit XML report (:mod:`validation.regression`). Bad options exit with
+status 2 and one line (photoquant's CLI prints
+:class:`photoquant.errors.PhotoquantError` so), before anything runs.
 
 This module imports nothing heavy at import time: the ``photoquant``
 command builds its parser with :func:`add_validate_arguments` on every call.
@@ -205,6 +210,8 @@ def run_validate(args: argparse.Namespace) -> int:
         raise ValidationError("--write-baseline and --check exclude each other")
     if args.junit and not args.check:
         raise ValidationError("--junit writes the result of --check: add --check")
+    if args.write_baseline and args.seed != 0:
+        raise ValidationError("--write-baseline runs the seeds of --seeds, not --seed")
     if args.seeds and not args.write_baseline:
         raise ValidationError("--seeds are the master seeds of --write-baseline (use --seed)")
     # every choice is checked here, before anything runs (one line, exit 2)

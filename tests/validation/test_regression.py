@@ -394,6 +394,7 @@ def test_the_format_1_baseline_describes_the_default_pipeline_only(
         (["--write-baseline", "b.json", "--seeds", "3"], "two distinct"),
         (["--write-baseline", "b.json", "--check"], "exclude each other"),
         (["--write-baseline", "r/b.json"], "inside the report folder"),
+        (["--write-baseline", "b.json", "--seed", "3"], "not --seed"),
     ],
 )
 def test_bad_options_exit_2_before_the_run(tmp_path, monkeypatch, capsys, options, expected):
