@@ -20,13 +20,36 @@ one with a target (a slope, an exponent) fails either way. A metric missing
 from the run (its experiment failed, or a fit that was trusted in the
 baseline is now refused) fails too. Timings are never compared.
 
+Fewer seeds
+-----------
+With ``n`` seeds the sample spread ``s`` is less certain, so ``K_SIGMA``
+grows to keep the false-alarm rate of the ``n = 8`` rule
+(:func:`k_sigma_for`): ``K(n) = 2.5 · √((n − 1) / q)`` with ``q`` the
+``1 − p₈`` quantile of χ² with ``n − 1`` degrees of freedom and
+``p₈ = P(χ²₇ > 7 · 0.25) ≈ 0.97``, so that ``P(K(n) · s > 2.5 σ) = p₈``
+for every ``n``: ``K(8) = 5``, ``K(4) ≈ 9.0``, ``K(3) ≈ 14.9``, ``K(2) ≈ 72``.
+
+Formats
+-------
+``photoquant.validation-baseline/1`` (the stored quick baseline) holds the
+run's *conditions* only. ``photoquant.validation-baseline/2``
+(:func:`seal_baseline`, written by ``photoquant validate --write-baseline``,
+:mod:`validation.regression`) is self-describing: it adds the whole
+configuration (profile, each step's method and options, presets — a user
+preset file by its SHA-256 and content —, chart, experiments), the
+versions of photoquant, Python and the numeric libraries, and a SHA-256
+checksum over its canonical JSON, so that a hand-edited file is refused.
+A format newer than this code reads is refused, naming it.
+
 ``python -m validation.baseline --config quick --seeds 0 1 2 3 4 5 6 7 -o
-validation/baselines/default.json`` regenerates the baseline.
+validation/baselines/default.json`` regenerates the baseline (format 1;
+``photoquant validate --write-baseline`` writes format 2).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import sys
@@ -42,6 +65,11 @@ from validation.config import ValidationError
 
 __all__ = [
     "BASELINE_FORMAT",
+    "BASELINE_FORMAT_2",
+    "FULL_BASELINE",
+    "k_sigma_for",
+    "seal_baseline",
+    "baseline_checksum",
     "DEFAULT_BASELINE",
     "K_SIGMA",
     "Finding",
@@ -55,11 +83,39 @@ __all__ = [
 ]
 
 BASELINE_FORMAT = "photoquant.validation-baseline/1"
+BASELINE_FORMAT_2 = "photoquant.validation-baseline/2"
+"""The self-describing format (configuration, versions, checksum)."""
+_FORMAT_PREFIX = "photoquant.validation-baseline/"
+_FORMATS = {BASELINE_FORMAT: 1, BASELINE_FORMAT_2: 2}
 DEFAULT_BASELINE = Path(__file__).resolve().parent / "baselines" / "default.json"
 """The stored baseline of the default (quick) configuration."""
+FULL_BASELINE = Path(__file__).resolve().parent / "baselines" / "full.json"
+"""The stored baseline of the ``--full`` configuration (format 2)."""
 
 K_SIGMA = 5.0
-"""Tolerance in seed-to-seed standard deviations."""
+"""Tolerance in seed-to-seed standard deviations (with 8 seeds; :func:`k_sigma_for`)."""
+
+
+def k_sigma_for(n_seeds: int) -> float:
+    """``K_SIGMA`` for a spread from ``n_seeds`` seeds, at the false-alarm rate of 8 seeds.
+
+    ``K(n) = 2.5 · √((n − 1) / q)``, ``q`` the ``1 − p₈`` quantile of χ²
+    with ``n − 1`` degrees of freedom, ``p₈ = P(χ²₇ > 1.75)`` (module notes).
+
+    Examples
+    --------
+    >>> round(k_sigma_for(8), 6), round(k_sigma_for(3), 1)
+    (5.0, 14.9)
+    """
+    from scipy.stats import chi2
+
+    n = int(n_seeds)
+    if n < 2:
+        raise ValidationError("a baseline needs runs with at least two seeds for the spread")
+    p8 = float(chi2.sf(7 * (2.5 / K_SIGMA) ** 2, 7))
+    return float(2.5 * math.sqrt((n - 1) / chi2.ppf(1 - p8, n - 1)))
+
+
 REL_FLOOR = 1e-6
 """Smallest tolerance relative to the value (floating-point differences between machines)."""
 ABS_FLOOR = 1e-9
@@ -122,6 +178,8 @@ class CheckResult:
     compared: int = 0
     not_run: int = 0
     new: int = 0
+    notes: list[str] = field(default_factory=list)
+    """What differs without failing the check (versions, a method's resolved options)."""
 
     @property
     def ok(self) -> bool:
@@ -136,6 +194,7 @@ class CheckResult:
             + (f", {self.new} not in the baseline" if self.new else "")
         )
         lines = [("PASS — " if self.ok else "FAIL — ") + head]
+        lines += [f"  {n}" for n in self.notes]
         lines += [f"  REGRESSION {f.message()}" for f in self.regressions]
         if self.improvements:
             lines.append(
@@ -153,6 +212,7 @@ class CheckResult:
             "new": self.new,
             "regressions": [f.as_dict() for f in self.regressions],
             "improvements": [f.as_dict() for f in self.improvements],
+            "notes": list(self.notes),
         }
 
 
@@ -231,6 +291,7 @@ _NOT_CONDITIONS = (
     "skip_vignetting",
     "render_cache",
     "rendered_capture",
+    "preset_files",
 )
 """The fields :meth:`ValidationConfig.conditions` leaves out (a test keeps them in step)."""
 
@@ -291,14 +352,32 @@ def validate_baseline(data: Any, name: str = "baseline") -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValidationError(
             f"{name} is not a validation baseline (a JSON object of format "
-            f"{BASELINE_FORMAT!r} expected, got {type(data).__name__})"
+            f"{BASELINE_FORMAT_2!r} expected, got {type(data).__name__})"
         )
-    if data.get("format") != BASELINE_FORMAT:
-        got = data.get("format")
+    got = data.get("format")
+    if not isinstance(got, str) or got not in _FORMATS:
+        newer = _newer_format(got)
+        if newer:
+            raise ValidationError(
+                f"{name} is of a newer format ({got!r}) than this photoquant reads "
+                f"(up to {BASELINE_FORMAT_2!r}): upgrade photoquant"
+            )
         raise ValidationError(
-            f"{name} is not a validation baseline (format {BASELINE_FORMAT!r} expected, "
+            f"{name} is not a validation baseline (format {BASELINE_FORMAT_2!r} expected, "
             f"got {str(got)[:80]!r})"
         )
+    if _FORMATS[got] >= 2:
+        stored = data.get("checksum")
+        if not isinstance(stored, dict) or not isinstance(stored.get("sha256"), str):
+            raise ValidationError(f"{name} lacks its `checksum` (an object with `sha256`)")
+        if stored["sha256"] != baseline_checksum(data):
+            raise ValidationError(
+                f"{name} was edited after it was written (checksum mismatch): record it again "
+                "with photoquant validate --write-baseline"
+            )
+        if not isinstance(data.get("configuration"), dict):
+            raise ValidationError(f"{name} lacks `configuration` (an object)")
+        _check_configuration(name, data["configuration"])
     if not isinstance(data.get("metrics"), dict) or not isinstance(data.get("conditions"), dict):
         raise ValidationError(f"{name} lacks `metrics` or `conditions` (objects)")
     if not data["metrics"]:
@@ -308,6 +387,77 @@ def validate_baseline(data: Any, name: str = "baseline") -> dict[str, Any]:
     for key, ref in data["metrics"].items():
         _check_metric(name, key, ref)
     return data
+
+
+_CONFIGURATION_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "name": str,
+    "conditions": dict,
+    "profile": str,
+    "steps": dict,
+    "presets": list,
+    "chart": str,
+    "rendered_capture": bool,
+    "experiments": list,
+}
+
+
+def _check_configuration(name: str, conf: Mapping[str, Any]) -> None:
+    """Refuse a format-2 ``configuration`` whose fields have the wrong types (one line)."""
+    for key, kind in _CONFIGURATION_FIELDS.items():
+        if not isinstance(conf.get(key), kind):
+            raise ValidationError(f"{name}: `configuration.{key}` is missing or of the wrong type")
+    for step, entry in conf["steps"].items():
+        if not isinstance(entry, dict) or not isinstance(entry.get("method"), str):
+            raise ValidationError(f"{name}: `configuration.steps.{step}` must name its method")
+        if not isinstance(entry.get("resolved_options", {}), dict):
+            raise ValidationError(f"{name}: `configuration.steps.{step}.resolved_options`")
+    for preset in conf["presets"]:
+        if not isinstance(preset, dict) or not isinstance(preset.get("name"), str):
+            raise ValidationError(f"{name}: each of `configuration.presets` must have a `name`")
+    if not all(isinstance(e, str) for e in conf["experiments"]):
+        raise ValidationError(f"{name}: `configuration.experiments` must be names")
+
+
+def _newer_format(got: Any) -> bool:
+    """Whether ``got`` names a baseline format newer than this code reads."""
+    if not isinstance(got, str) or not got.startswith(_FORMAT_PREFIX):
+        return False
+    tail = got[len(_FORMAT_PREFIX) :]
+    return tail.isdigit() and int(tail) > max(_FORMATS.values())
+
+
+def baseline_checksum(data: Mapping[str, Any]) -> str:
+    """SHA-256 of a baseline's canonical JSON (sorted keys, no spaces), ``checksum`` left out."""
+    body = {k: v for k, v in data.items() if k != "checksum"}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+
+def seal_baseline(base: Mapping[str, Any], configuration: Mapping[str, Any]) -> dict[str, Any]:
+    """A format-2 baseline: ``base`` (:func:`make_baseline`) with its configuration and checksum.
+
+    Parameters
+    ----------
+    base : mapping
+        What :func:`make_baseline` returns.
+    configuration : mapping
+        JSON description of the run (:func:`validation.regression.describe_configuration`).
+
+    Returns
+    -------
+    dict
+        The baseline, values normalised to JSON, with ``checksum.sha256``
+        over everything else (:func:`baseline_checksum`).
+    """
+    from photoquant.utils import to_json_value
+
+    doc = dict(base)
+    doc["format"] = BASELINE_FORMAT_2
+    doc["configuration"] = configuration
+    doc = json.loads(json.dumps(to_json_value(doc), allow_nan=False))
+    doc.pop("checksum", None)
+    doc["checksum"] = {"sha256": baseline_checksum(doc)}
+    return doc
 
 
 def load_baseline(path: str | Path) -> dict[str, Any]:
@@ -352,7 +502,7 @@ def check_baseline_applies(
         )
 
 
-def _expected(key: str, results: Mapping[str, Any]) -> bool:
+def _expected(key: str, results: Mapping[str, Any], baseline: Mapping[str, Any]) -> bool:
     """Whether the run should have produced ``key``.
 
     Not when its experiment was not selected, was skipped for a missing
@@ -367,7 +517,9 @@ def _expected(key: str, results: Mapping[str, Any]) -> bool:
     skipped = (results.get("experiments", {}).get(parts[0]) or {}).get("skipped")
     if skipped and not str(skipped).startswith("failed"):
         return False
-    if len(parts) > 1 and parts[1] in CAMERA_PRESETS:
+    described = (baseline.get("configuration") or {}).get("presets") or []
+    labels = {p.get("name") for p in described if isinstance(p, dict)}
+    if len(parts) > 1 and (parts[1] in CAMERA_PRESETS or parts[1] in labels):
         return parts[1] in results.get("presets", [])
     return True
 
@@ -398,7 +550,7 @@ def check_results(
     metrics = results["metrics"]
     for key, ref in baseline["metrics"].items():
         if key not in metrics:
-            if _expected(key, results):
+            if _expected(key, results, baseline):
                 out.regressions.append(
                     Finding(
                         key,

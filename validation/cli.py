@@ -1,7 +1,9 @@
 """``photoquant validate``: the main job — reproduce the paper's results against ground truth.
 
 ``photoquant validate [--quick | --full] [-o REPORT_DIR] [--seed S]
-[--check BASELINE.json] [--json] [--overwrite] [--experiments NAME ...]``
+[--check [BASELINE.json] [--junit FILE]] [--write-baseline FILE [--seeds S ...]]
+[--json] [--overwrite] [--experiments NAME ...] [--profile P] [--method STEP=NAME ...]
+[--option STEP.NAME=VALUE ...] [--preset NAME|FILE.json ...]``
 
 Simulates the ``ccd`` and ``cmos`` camera presets, calibrates them with
 photoquant, corrects test scenes and compares every recovered quantity with
@@ -10,8 +12,11 @@ Prints a table (standard output; standard error with ``--json``), writes a
 report folder (``report.md``, ``results.json``, ``figures/*.png``) and, with
 ``--check``, compares the metrics with a stored baseline: exit status 1 and
 one line per regression when a metric moved the wrong way beyond its
-tolerance. Bad options exit with status 2 and one line (photoquant's CLI
-prints :class:`photoquant.errors.PhotoquantError` so).
+tolerance. ``--write-baseline`` records a baseline of the configuration
+given (any method, profile, preset file, mode), ``--junit`` writes the check
+as a JUnit XML report (:mod:`validation.regression`). Bad options exit with
+status 2 and one line (photoquant's CLI prints
+:class:`photoquant.errors.PhotoquantError` so), before anything runs.
 
 This module imports nothing heavy at import time: the ``photoquant``
 command builds its parser with :func:`add_validate_arguments` on every call.
@@ -28,6 +33,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 __all__ = ["add_validate_arguments", "run_validate", "EXIT_REGRESSION", "DEFAULT_REPORT_DIR"]
 
@@ -110,29 +116,107 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also calibrate each preset from a Mitsuba-rendered capture set (--full does)",
     )
+    from photoquant.profiles import PROFILES
+
+    parser.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        help="the methods and options of every calibration step (default photoquant)",
+    )
+    parser.add_argument(
+        "--method",
+        action="append",
+        metavar="STEP=NAME",
+        help="the method of a step in every preset's calibration (repeatable; any registered "
+        "method, plug-ins included: `photoquant methods`), e.g. --method response='Robertson 2003'",
+    )
+    parser.add_argument(
+        "--option",
+        action="append",
+        metavar="STEP.NAME=VALUE",
+        help="an option of a step's method (repeatable; VALUE is JSON or text)",
+    )
+    parser.add_argument(
+        "--preset",
+        action="append",
+        metavar="NAME|FILE.json",
+        help="the camera(s) to simulate instead of ccd and cmos: a built-in preset or a "
+        "pqsim.preset/1 file (repeatable; `pqsim preset ccd` prints one to start from)",
+    )
+    parser.add_argument(
+        "--write-baseline",
+        metavar="FILE",
+        help="run over the master seeds of --seeds and record a baseline of this configuration "
+        "(the first seed's report is written)",
+    )
+    parser.add_argument(
+        "--seeds",
+        type=int,
+        nargs="+",
+        metavar="S",
+        help="master seeds of --write-baseline (default 0 1 2 3 4 5 6 7; the first gives the "
+        "values, all the spread)",
+    )
+    parser.add_argument(
+        "--junit",
+        metavar="FILE",
+        help="with --check: also write a JUnit XML report, one test case per metric",
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
+
+
+def run_configuration(args: argparse.Namespace) -> Any:
+    """The :class:`validation.regression.RunConfiguration` of ``photoquant validate``'s options."""
+    from photoquant.cli import step_specs
+    from validation.regression import RunConfiguration
+
+    specs = step_specs(
+        argparse.Namespace(
+            method=args.method,
+            option=args.option,
+            smoothness=None,
+            samples=None,
+            merge_weighting=None,
+            balance_stage=None,
+            merge_method=None,
+        )
+    )
+    if "correspondence_finder" in specs:
+        specs["correspondences"] = specs.pop("correspondence_finder")
+    return RunConfiguration(
+        mode=args.mode,
+        profile=args.profile,
+        methods=specs,
+        presets=tuple(args.preset or ()),
+        chart=args.chart,
+        rendered_capture=bool(args.rendered_capture),
+        experiments=None if args.experiments is None else tuple(args.experiments),
+        cache_dir=args.cache_dir,
+    )
 
 
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``photoquant validate``; returns the exit status (0, or 1 for a regression)."""
     from photoquant.errors import OutputExistsError
-    from validation.baseline import (
-        DEFAULT_BASELINE,
-        check_baseline_applies,
-        check_results,
-        load_baseline,
-    )
-    from validation.config import ValidationError, get_config
+    from validation.baseline import check_results
+    from validation.config import ValidationError
     from validation.experiments import run_validation
+    from validation.regression import DEFAULT_SEEDS, prepare_check, record_baseline, write_junit
     from validation.report import format_table, results_json, write_report
 
     if args.seed < 0:
         raise ValidationError(f"--seed must be non-negative, got {args.seed}")
-    config = get_config(args.mode)
-    if args.chart is not None:
-        config = config.replace(chart=args.chart)
-    if args.rendered_capture:
-        config = config.replace(rendered_capture=True)
+    if args.write_baseline and args.check:
+        raise ValidationError("--write-baseline and --check exclude each other")
+    if args.junit and not args.check:
+        raise ValidationError("--junit writes the result of --check: add --check")
+    if args.write_baseline and args.seed != 0:
+        raise ValidationError("--write-baseline runs the seeds of --seeds, not --seed")
+    if args.seeds and not args.write_baseline:
+        raise ValidationError("--seeds are the master seeds of --write-baseline (use --seed)")
+    # every choice is checked here, before anything runs (one line, exit 2)
+    rc = run_configuration(args)
+    config = rc.validation_config()
     from pqsim.render import mitsuba_available
 
     if config.chart == "rendered" and not mitsuba_available():
@@ -140,17 +224,22 @@ def run_validate(args: argparse.Namespace) -> int:
             f"the {config.name} job renders the ColorChecker with Mitsuba 3, which is not "
             "installed: pip install 'photoquant[render]', or add --chart analytic"
         )
-    if args.cache_dir is not None:
-        config = config.replace(render_cache=str(Path(args.cache_dir).expanduser()))
     out = Path(args.output)
     if out.exists() and not args.overwrite:
         raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
-    baseline = None
+    for flag, target in (("--write-baseline", args.write_baseline), ("--junit", args.junit)):
+        if target and out.resolve() in Path(target).resolve().parents:
+            raise ValidationError(
+                f"{flag} {target} lies inside the report folder {out}, which is replaced whole"
+            )
+        if target and Path(target).exists() and not args.overwrite:
+            raise OutputExistsError(
+                f"{target} ({flag}) already exists (use --overwrite to replace it)"
+            )
+    prepared = None
     if args.check:
-        path = DEFAULT_BASELINE if args.check == "default" else Path(args.check)
-        baseline = (path, load_baseline(path))
         # before the run: a tampered, foreign or mismatched baseline fails now, with one line
-        check_baseline_applies(baseline[1], config.conditions(), name=f"baseline {path}")
+        prepared = prepare_check(rc, args.check)
     if (
         args.workdir is not None
         and args.workdir.exists()
@@ -164,13 +253,35 @@ def run_validate(args: argparse.Namespace) -> int:
             print(message, file=sys.stderr, flush=True)
 
     t0 = time.perf_counter()
-    run = run_validation(
-        config, args.seed, experiments=args.experiments, workdir=args.workdir, progress=say
-    )
+    if args.write_baseline:
+        runs: list[Any] = []
+        seeds = list(args.seeds or DEFAULT_SEEDS)
+        doc = record_baseline(
+            rc,
+            seeds=seeds,
+            output=args.write_baseline,
+            overwrite=args.overwrite,
+            progress=say,
+            runs=runs,
+        )
+        run = runs[0]
+        say(
+            f"validate: baseline of {len(doc['metrics'])} metrics over seeds "
+            f"{' '.join(map(str, seeds))} (tolerance {doc['tolerance_rule']['k_sigma']:.3g} "
+            f"spreads) written to {args.write_baseline}"
+        )
+    else:
+        seed = args.seed
+        run = run_validation(
+            config, seed, experiments=rc.experiments, workdir=args.workdir, progress=say
+        )
     check = None
-    if baseline is not None:
+    if prepared is not None:
         results = json.loads(results_json(run))
-        check = check_results(results, baseline[1], name=str(baseline[0]))
+        check = check_results(results, prepared.baseline, name=prepared.name)
+        check.notes = list(prepared.notes)
+        if args.junit:
+            write_junit(args.junit, results, check, prepared.baseline, overwrite=args.overwrite)
     folder = write_report(run, out, check=check, overwrite=args.overwrite, progress=say)
     table = format_table(run, check)
     stream = sys.stderr if args.json else sys.stdout

@@ -72,9 +72,11 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
     check = getattr(args, "check", None)
     kept = [getattr(args, "cache_dir", None), getattr(args, "workdir", None)]
+    presets = [p for p in getattr(args, "preset", None) or [] if p.lower().endswith(".json")]
     check_output_not_input(
         args.output,
         [check if check not in (None, "default") else None]
+        + presets
         + [Holder(Path(p).expanduser()) for p in kept if p is not None],
     )
     return run_validate(args)

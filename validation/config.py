@@ -139,6 +139,12 @@ class ValidationConfig:
     rendered_capture : bool
         Run the ``rendered`` experiment: calibrate each preset from a capture
         set of Mitsuba-rendered scenes (:mod:`validation.experiments.rendered`).
+    preset_files : tuple of (label, path) pairs
+        User presets (``pqsim.preset/1`` files, ``photoquant validate --preset
+        FILE.json``): the label named in :attr:`presets` (and in the metric
+        keys) → the file the camera is built from (:meth:`preset_source`).
+        Not a condition: a baseline describes a user preset by its content
+        (:mod:`validation.regression`).
     """
 
     name: str = "quick"
@@ -164,6 +170,7 @@ class ValidationConfig:
     chart_spp: int = 64
     render_cache: str | None = None
     rendered_capture: bool = False
+    preset_files: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         h, w = (int(v) for v in self.shape)
@@ -192,6 +199,16 @@ class ValidationConfig:
         object.__setattr__(self, "shape", (h, w))
         object.__setattr__(self, "exposure_s", tuple(float(t) for t in self.exposure_s))
         object.__setattr__(self, "calibrate_kwargs", dict(self.calibrate_kwargs))
+        object.__setattr__(
+            self, "preset_files", tuple((str(k), str(v)) for k, v in self.preset_files)
+        )
+
+    def preset_source(self, preset: str) -> str:
+        """What :func:`pqsim.synth_camera.presets.camera_from_preset` builds ``preset`` from.
+
+        The file of a user preset (:attr:`preset_files`), else the built-in name.
+        """
+        return dict(self.preset_files).get(preset, preset)
 
     # ------------------------------------------------------------------ helpers
 
@@ -217,8 +234,10 @@ class ValidationConfig:
         A stored baseline applies to runs with the same conditions. Left out:
         the presets run (a subset only omits metrics), the knobs that break
         the calibrator on purpose (they are what a regression check must see),
-        the render cache, and the rendered-capture experiment (its metrics are
-        reported, never checked).
+        the render cache, the rendered-capture experiment (its metrics are
+        reported, never checked) and the user presets' files (a baseline of
+        format 2 describes the methods and presets itself,
+        :mod:`validation.regression`).
         """
         d = self.as_dict()
         for key in (
@@ -228,6 +247,7 @@ class ValidationConfig:
             "skip_vignetting",
             "render_cache",
             "rendered_capture",
+            "preset_files",
         ):
             d.pop(key)
         return d

@@ -787,7 +787,9 @@ def run_leaderboard(
         from pqsim.synth_camera.presets import camera_from_preset
 
         for p in presets:
-            camera_from_preset(p)  # an unknown preset is a one-line error naming the valid ones
+            camera_from_preset(
+                config.preset_source(p)
+            )  # an unknown preset is a one-line error naming the valid ones
         config = config.replace(presets=presets)
     t_start = time.perf_counter()
     keep = workdir is not None or shared is not None

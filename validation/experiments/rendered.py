@@ -69,7 +69,7 @@ def run(
         t0 = time.perf_counter()
         manifest = write_rendered_capture_set(
             Path(workdir) / f"rendered-{preset}",
-            preset,
+            config.preset_source(preset),
             resolution=config.shape,
             exposure_s=np.asarray(config.exposure_s),
             n_repeats=config.n_repeats,

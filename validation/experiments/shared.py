@@ -169,7 +169,7 @@ class Shared:
         from pqsim.synth_camera.truth import load_truth
 
         cfg = self.config
-        camera = camera_from_preset(preset)
+        camera = camera_from_preset(cfg.preset_source(preset))
         capture_seed = self.stream("capture", preset)
         calibrate_seed = self.stream("calibrate", preset)
         folder = self.workdir / preset / "capture"
@@ -258,7 +258,7 @@ class Shared:
             return self.config.chart_sensitivities
         from pqsim.synth_camera.presets import preset_sensitivities
 
-        return preset_sensitivities(preset)
+        return preset_sensitivities(self.config.preset_source(preset))
 
     def chart(self, illuminant: str, preset: str) -> Any:
         """The ColorChecker seen by ``preset`` under ``illuminant`` (once), analytic or rendered.
