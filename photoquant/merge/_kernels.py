@@ -1,0 +1,210 @@
+"""Private inner loops of the table merge: ``Σ_k w·(g − ln t_k) / Σ_k w`` and ``Σ_k w`` per value.
+
+Two implementations with **bit-identical** results:
+
+* numba (optional, ``pip install numba``; used when it imports): one fused
+  pass per pixel, reading each value once and gathering ``w`` and
+  ``w·(g − ln t_k)`` from per-exposure float32 tables; ``nogil`` so that the
+  merge's row tiles run on every CPU. Measured on the issue's stack
+  (1024×768×3, K = 8, uint8, one thread): 28 ms against 72 ms for the best
+  numpy formulation below and 199 ms for the former numpy merge (an intp
+  index plus a length-3 offset array, float64 gathers and sums).
+* numpy (always there): per channel plane and exposure, the codes are cast
+  once into a reused intp buffer, gathered with ``take(out=, mode="clip")``
+  (no buffering) and added into float32 plane accumulators.
+
+Both add the K terms of a value in the order ``k = 0 … K−1`` starting from
+0 in float32 (numba compiles without ``fastmath``, so no reassociation), so
+they give the same bits; :mod:`tests.photoquant.test_merge_fast` checks it.
+
+A *code* is what indexes the tables: the integer value (or the sum of its
+``N`` repeats), or one of two extra codes past the grid for values that
+are excluded because a repeat clipped at the saturation level (``sat_code``)
+or at the dark floor (``dark_code``).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+__all__ = ["HAVE_NUMBA", "accumulate_codes", "accumulate_repeats", "repeat_codes"]
+
+_njit: Callable[..., Any] | None
+try:  # pragma: no cover - depends on the environment
+    if os.environ.get("PHOTOQUANT_NO_NUMBA"):
+        raise ImportError("disabled by PHOTOQUANT_NO_NUMBA")
+    _njit = importlib.import_module("numba").njit
+except ImportError:  # pragma: no cover - depends on the environment
+    _njit = None
+
+HAVE_NUMBA = _njit is not None
+"""Whether the numba kernels are available (``PHOTOQUANT_NO_NUMBA=1`` turns them off)."""
+
+
+def _direct_py(codes: Any, w: Any, wt: Any, num: Any, den: Any) -> None:  # pragma: no cover
+    """numba body: ``num = Σ_k wt[k, ch, code]``, ``den = Σ_k w[ch, code]`` per value."""
+    n_k, h, width, n_ch = codes.shape
+    for i in range(h):
+        for j in range(width):
+            for ch in range(n_ch):
+                s = np.float32(0.0)
+                d = np.float32(0.0)
+                for k in range(n_k):
+                    c = codes[k, i, j, ch]
+                    s += wt[k, ch, c]
+                    d += w[ch, c]
+                num[i, j, ch] = s / d if d > 0 else np.nan
+                den[i, j, ch] = d
+
+
+def _repeats_py(
+    frames: Any,
+    w: Any,
+    wt: Any,
+    sat_thr: Any,
+    dark_thr: Any,
+    sat_code: int,
+    dark_code: int,
+    num: Any,
+    den: Any,
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: the codes of ``N`` repeats (sum, or an exclusion code) and their sums."""
+    n_rep, n_k, h, width, n_ch = frames.shape
+    for i in range(h):
+        for j in range(width):
+            for ch in range(n_ch):
+                s = np.float32(0.0)
+                d = np.float32(0.0)
+                for k in range(n_k):
+                    tot = np.int64(0)
+                    hi = np.int64(0)
+                    lo = np.int64(1 << 62)
+                    for n in range(n_rep):
+                        f = np.int64(frames[n, k, i, j, ch])
+                        tot += f
+                        if f > hi:
+                            hi = f
+                        if f < lo:
+                            lo = f
+                    if hi >= sat_thr[ch]:
+                        c = np.int64(sat_code)
+                    elif lo <= dark_thr[ch]:
+                        c = np.int64(dark_code)
+                    else:
+                        c = tot
+                    s += wt[k, ch, c]
+                    d += w[ch, c]
+                num[i, j, ch] = s / d if d > 0 else np.nan
+                den[i, j, ch] = d
+
+
+if _njit is not None:  # pragma: no cover - depends on the environment
+    _direct_nb = _njit(nogil=True, cache=True)(_direct_py)
+    _repeats_nb = _njit(nogil=True, cache=True)(_repeats_py)
+
+
+def _direct_np(
+    codes: np.ndarray, w: np.ndarray, wt: np.ndarray, num: np.ndarray, den: np.ndarray
+) -> None:
+    n_k, h, width, n_ch = codes.shape
+    index = np.empty((h, width), dtype=np.intp)
+    tmp = np.empty((h, width), dtype=np.float32)
+    s = np.empty((h, width), dtype=np.float32)
+    d = np.empty((h, width), dtype=np.float32)
+    for ch in range(n_ch):
+        s.fill(0.0)
+        d.fill(0.0)
+        for k in range(n_k):
+            np.copyto(index, codes[k, :, :, ch], casting="unsafe")
+            np.take(wt[k, ch], index, out=tmp, mode="clip")  # codes are in range: no checks
+            s += tmp
+            np.take(w[ch], index, out=tmp, mode="clip")
+            d += tmp
+        np.divide(s, d, out=s, where=d > 0)
+        s[d <= 0] = np.nan
+        num[..., ch] = s
+        den[..., ch] = d
+
+
+def repeat_codes(
+    frames: np.ndarray,
+    sat_thr: np.ndarray,
+    dark_thr: np.ndarray,
+    sat_code: int,
+    dark_code: int,
+) -> np.ndarray:
+    """Codes ``(K, …, C)`` int64 of ``frames (N, K, …, C)``: the repeat sum or an exclusion code.
+
+    ``sat_code`` where any repeat is at or above ``sat_thr`` (per channel),
+    else ``dark_code`` where any repeat is at or below ``dark_thr``.
+    """
+    total = frames.sum(axis=0, dtype=np.int64)
+    hi = frames.max(axis=0)
+    lo = frames.min(axis=0)
+    codes = np.where(lo <= dark_thr, np.int64(dark_code), total)
+    return np.where(hi >= sat_thr, np.int64(sat_code), codes)
+
+
+def accumulate_codes(
+    codes: np.ndarray,
+    w: np.ndarray,
+    wt: np.ndarray,
+    num: np.ndarray,
+    den: np.ndarray,
+    *,
+    backend: str = "auto",
+) -> None:
+    """Write ``Σ_k wt[k, ch, code] / Σ_k w[ch, code]`` into ``num`` and the denominator into ``den``.
+
+    ``num`` is NaN where ``den`` is 0 (no exposure with weight); the float32
+    quotient is correctly rounded in both implementations (IEEE division).
+
+    Parameters
+    ----------
+    codes : ndarray, shape (K, h, W, C), integer
+        Table indices, all in range (not checked here).
+    w, wt : ndarray, shapes (C, G) and (K, C, G), float32
+    num, den : ndarray, shape (h, W, C), float32
+        Outputs (overwritten).
+    backend : {"auto", "numba", "numpy"}
+    """
+    if _use_numba(backend):
+        _direct_nb(codes, w, wt, num, den)
+    else:
+        _direct_np(codes, w, wt, num, den)
+
+
+def accumulate_repeats(
+    frames: np.ndarray,
+    w: np.ndarray,
+    wt: np.ndarray,
+    sat_thr: np.ndarray,
+    dark_thr: np.ndarray,
+    sat_code: int,
+    dark_code: int,
+    num: np.ndarray,
+    den: np.ndarray,
+    *,
+    backend: str = "auto",
+) -> None:
+    """As :func:`accumulate_codes` for ``frames (N, K, h, W, C)``, coded by :func:`repeat_codes`."""
+    if _use_numba(backend):
+        _repeats_nb(frames, w, wt, sat_thr, dark_thr, sat_code, dark_code, num, den)
+    else:
+        codes = repeat_codes(frames, sat_thr, dark_thr, sat_code, dark_code)
+        _direct_np(codes, w, wt, num, den)
+
+
+def _use_numba(backend: str) -> bool:
+    if backend == "numpy":
+        return False
+    if backend == "numba":
+        if not HAVE_NUMBA:
+            raise ImportError("the numba merge kernels need numba (pip install numba)")
+        return True
+    return HAVE_NUMBA
