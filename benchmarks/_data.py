@@ -46,9 +46,10 @@ def hdr_stack(
     seed: int = 0,
     preset: str = "ccd",
     t_range: tuple[float, float] = (2.5e-4, 0.64),
+    bit_depth: int = 8,
 ) -> HDRStack:
     """The HDR test scene (lamp, deep shadow) through a camera preset, seeded (cached)."""
-    cam = camera_from_preset(preset)
+    cam = camera_from_preset(preset, bit_depth=bit_depth)
     t = np.geomspace(t_range[0], t_range[1], exposures)
     scene = scene_test_hdr((height, width))
     cap = cam.capture(scene, t, repeats, rng=seed)
@@ -83,8 +84,46 @@ def true_log_inverse_response(data: HDRStack) -> tuple[np.ndarray, np.ndarray]:
     return levels, g
 
 
-def log_error_pct(estimate: np.ndarray, data: HDRStack) -> dict[str, float]:
+def camera_model(data: HDRStack, saturation: np.ndarray, *, valid_min: float = 2.0) -> Any:
+    """A :class:`photoquant.CameraModel` holding the synthetic camera's true parameters.
+
+    The true ``g`` (balance included: it is in the pixel values), the true
+    PRNU ``u`` and vignetting ``v`` (the extended Goldman-Chen parameters of
+    the preset), identity balance; the pipeline's merge (hat-quantisation).
+    """
+    from photoquant.balance import BalanceModel
+    from photoquant.flatfield import SensorLUTModel
+    from photoquant.merge import MergeModel
+    from photoquant.model import CameraModel
+    from photoquant.response.model import ResponseModel
+    from photoquant.vignetting import ExtendedGoldmanChenVignetting
+
+    levels, g = true_log_inverse_response(data)
+    n_ch = g.shape[0]
+    truth = data.camera.truth(data.frames.shape[2:4])
+    response = ResponseModel(
+        "Debevec 1997", levels, g, saturation, valid_min=np.full(n_ch, valid_min)
+    )
+    return CameraModel(
+        image_shape=tuple(data.frames.shape[2:4]),
+        channels=tuple(data.camera.channels),
+        bit_depth=data.bit_depth,
+        response=response,
+        merge=MergeModel("Debevec 1997", {"weighting": "hat-quantisation"}),
+        balance=BalanceModel.identity(n_ch),
+        sensor_lut=SensorLUTModel("Irradiance Scene", truth.sensor_lut.astype(np.float32)),
+        vignetting=ExtendedGoldmanChenVignetting(
+            "Extended Goldman-Chen", np.asarray(data.camera.vignetting_params, dtype=float)
+        ),
+    )
+
+
+def log_error_pct(
+    estimate: np.ndarray, data: HDRStack, truth: np.ndarray | None = None
+) -> dict[str, float]:
     """Median and RMS relative error (%) of a linear estimate of ``u·v·l`` on the measurable pixels.
+
+    ``truth`` replaces ``u·v·l`` (e.g. the scene's ``l`` for a corrected image).
 
     Per channel the unknown global scale is removed (the median of
     ``ln estimate − ln truth``); a measurable pixel the estimate leaves
@@ -98,7 +137,8 @@ def log_error_pct(estimate: np.ndarray, data: HDRStack) -> dict[str, float]:
         ok = np.isfinite(e) & (e > 0)
         invalid += int(np.count_nonzero(~ok))
         total += int(m.sum())
-        d = np.log(e[ok]) - np.log(data.exposure[..., ch][m][ok])
+        true = data.exposure if truth is None else truth
+        d = np.log(e[ok]) - np.log(true[..., ch][m][ok])
         d -= np.median(d)
         errs.append(d)
     rel = np.abs(np.expm1(np.concatenate(errs)))

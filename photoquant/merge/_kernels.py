@@ -46,32 +46,75 @@ HAVE_NUMBA = _njit is not None
 """Whether the numba kernels are available (``PHOTOQUANT_NO_NUMBA=1`` turns them off)."""
 
 
-def _direct_py(codes: Any, w: Any, wt: Any, num: Any, den: Any) -> None:  # pragma: no cover
-    """numba body: ``num = Σ_k wt[k, ch, code]``, ``den = Σ_k w[ch, code]`` per value."""
+def _direct_py(
+    codes: Any,
+    w: Any,
+    wt: Any,
+    clip: Any,
+    num: Any,
+    den: Any,
+    mask: Any,
+    all_sat: Any,
+    all_dark: Any,
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: ``num = Σ_k wt / Σ_k w``, ``den = Σ_k w`` and the flags per value."""
     n_k, h, width, n_ch = codes.shape
     for i in range(h):
         for j in range(width):
             for ch in range(n_ch):
                 s = np.float32(0.0)
                 d = np.float32(0.0)
+                unsat = False
                 for k in range(n_k):
                     c = codes[k, i, j, ch]
                     s += wt[k, ch, c]
                     d += w[ch, c]
-                num[i, j, ch] = s / d if d > 0 else np.nan
-                den[i, j, ch] = d
+                    if not clip[ch, c]:
+                        unsat = True
+                _store(num, den, mask, all_sat, all_dark, i, j, ch, s, d, unsat)
+
+
+def _store_py(
+    num: Any,
+    den: Any,
+    mask: Any,
+    all_sat: Any,
+    all_dark: Any,
+    i: int,
+    j: int,
+    ch: int,
+    s: Any,
+    d: Any,
+    unsat: bool,
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: the quotient (NaN without weight), the sum and the three flags."""
+    den[i, j, ch] = d
+    if d > 0:
+        num[i, j, ch] = s / d
+        mask[i, j, ch] = False
+        all_sat[i, j, ch] = False
+        all_dark[i, j, ch] = False
+    else:
+        num[i, j, ch] = np.nan
+        mask[i, j, ch] = True
+        all_sat[i, j, ch] = not unsat
+        all_dark[i, j, ch] = unsat
 
 
 def _repeats_py(
     frames: Any,
     w: Any,
     wt: Any,
+    clip: Any,
     sat_thr: Any,
     dark_thr: Any,
     sat_code: int,
     dark_code: int,
     num: Any,
     den: Any,
+    mask: Any,
+    all_sat: Any,
+    all_dark: Any,
 ) -> None:  # pragma: no cover - compiled by numba
     """numba body: the codes of ``N`` repeats (sum, or an exclusion code) and their sums."""
     n_rep, n_k, h, width, n_ch = frames.shape
@@ -80,6 +123,7 @@ def _repeats_py(
             for ch in range(n_ch):
                 s = np.float32(0.0)
                 d = np.float32(0.0)
+                unsat = False
                 for k in range(n_k):
                     tot = np.int64(0)
                     hi = np.int64(0)
@@ -99,17 +143,27 @@ def _repeats_py(
                         c = tot
                     s += wt[k, ch, c]
                     d += w[ch, c]
-                num[i, j, ch] = s / d if d > 0 else np.nan
-                den[i, j, ch] = d
+                    if not clip[ch, c]:
+                        unsat = True
+                _store(num, den, mask, all_sat, all_dark, i, j, ch, s, d, unsat)
 
 
 if _njit is not None:  # pragma: no cover - depends on the environment
+    _store = _njit(nogil=True, cache=True, inline="always")(_store_py)
     _direct_nb = _njit(nogil=True, cache=True)(_direct_py)
     _repeats_nb = _njit(nogil=True, cache=True)(_repeats_py)
 
 
 def _direct_np(
-    codes: np.ndarray, w: np.ndarray, wt: np.ndarray, num: np.ndarray, den: np.ndarray
+    codes: np.ndarray,
+    w: np.ndarray,
+    wt: np.ndarray,
+    clip: np.ndarray,
+    num: np.ndarray,
+    den: np.ndarray,
+    mask: np.ndarray,
+    all_sat: np.ndarray,
+    all_dark: np.ndarray,
 ) -> None:
     n_k, h, width, n_ch = codes.shape
     index = np.empty((h, width), dtype=np.intp)
@@ -129,6 +183,17 @@ def _direct_np(
         s[d <= 0] = np.nan
         num[..., ch] = s
         den[..., ch] = d
+    # the flags: "clipped" looked up only where no exposure has weight (few values)
+    np.less_equal(den, 0, out=mask)
+    all_sat.fill(False)
+    all_dark.fill(False)
+    if mask.any():
+        where = np.nonzero(mask)
+        unsat = np.zeros(where[0].size, dtype=bool)
+        for k in range(n_k):
+            unsat |= ~clip[where[-1], codes[k][where]]
+        all_sat[where] = ~unsat
+        all_dark[where] = unsat
 
 
 def repeat_codes(
@@ -154,50 +219,62 @@ def accumulate_codes(
     codes: np.ndarray,
     w: np.ndarray,
     wt: np.ndarray,
+    clip: np.ndarray,
     num: np.ndarray,
     den: np.ndarray,
+    mask: np.ndarray,
+    all_sat: np.ndarray,
+    all_dark: np.ndarray,
     *,
     backend: str = "auto",
 ) -> None:
-    """Write ``Σ_k wt[k, ch, code] / Σ_k w[ch, code]`` into ``num`` and the denominator into ``den``.
-
-    ``num`` is NaN where ``den`` is 0 (no exposure with weight); the float32
-    quotient is correctly rounded in both implementations (IEEE division).
+    """Merge the codes of a tile: ``ln c``, ``Σ_k w`` and the three flags.
 
     Parameters
     ----------
     codes : ndarray, shape (K, h, W, C), integer
         Table indices, all in range (not checked here).
-    w, wt : ndarray, shapes (C, G) and (K, C, G), float32
+    w, wt, clip : ndarray, shapes (C, G), (K, C, G) float32 and (C, G) bool
+        The tables (:class:`photoquant.merge._tiled.MergeTables`).
     num, den : ndarray, shape (h, W, C), float32
-        Outputs (overwritten).
+        Outputs: ``Σ_k wt / Σ_k w`` (NaN where ``Σ_k w = 0``: no exposure with
+        weight) and ``Σ_k w``. The float32 quotient is correctly rounded in
+        both implementations (IEEE division).
+    mask, all_sat, all_dark : ndarray, shape (h, W, C), bool
+        Outputs: no exposure with weight; that, with every exposure clipped;
+        that, with some exposure not clipped (too dark).
     backend : {"auto", "numba", "numpy"}
     """
     if _use_numba(backend):
-        _direct_nb(codes, w, wt, num, den)
+        _direct_nb(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
     else:
-        _direct_np(codes, w, wt, num, den)
+        _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
 
 
 def accumulate_repeats(
     frames: np.ndarray,
     w: np.ndarray,
     wt: np.ndarray,
+    clip: np.ndarray,
     sat_thr: np.ndarray,
     dark_thr: np.ndarray,
     sat_code: int,
     dark_code: int,
     num: np.ndarray,
     den: np.ndarray,
+    mask: np.ndarray,
+    all_sat: np.ndarray,
+    all_dark: np.ndarray,
     *,
     backend: str = "auto",
 ) -> None:
     """As :func:`accumulate_codes` for ``frames (N, K, h, W, C)``, coded by :func:`repeat_codes`."""
+    flags = (mask, all_sat, all_dark)
     if _use_numba(backend):
-        _repeats_nb(frames, w, wt, sat_thr, dark_thr, sat_code, dark_code, num, den)
+        _repeats_nb(frames, w, wt, clip, sat_thr, dark_thr, sat_code, dark_code, num, den, *flags)
     else:
         codes = repeat_codes(frames, sat_thr, dark_thr, sat_code, dark_code)
-        _direct_np(codes, w, wt, num, den)
+        _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
 
 
 def _use_numba(backend: str) -> bool:

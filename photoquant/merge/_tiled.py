@@ -105,10 +105,14 @@ class CodeSource(Protocol):
     bytes_per_row: int
 
     def accumulate(
-        self, rows: slice, tables: MergeTables, num: np.ndarray, den: np.ndarray, backend: str
+        self,
+        rows: slice,
+        tables: MergeTables,
+        num: np.ndarray,
+        den: np.ndarray,
+        flags: tuple[np.ndarray, np.ndarray, np.ndarray],
+        backend: str,
     ) -> None: ...
-
-    def codes_at(self, k: int, rows: slice, where: tuple[np.ndarray, ...]) -> np.ndarray: ...
 
 
 class DirectCodes:
@@ -144,21 +148,21 @@ class DirectCodes:
         return codes
 
     def accumulate(
-        self, rows: slice, tables: MergeTables, num: np.ndarray, den: np.ndarray, backend: str
+        self,
+        rows: slice,
+        tables: MergeTables,
+        num: np.ndarray,
+        den: np.ndarray,
+        flags: tuple[np.ndarray, np.ndarray, np.ndarray],
+        backend: str,
     ) -> None:
         codes = self._override(
             self.values[:, rows],
             None if self.saturated is None else self.saturated[:, rows],
             None if self.dark is None else self.dark[:, rows],
         )
-        accumulate_codes(codes, tables.w, tables.wt, num, den, backend=backend)
-
-    def codes_at(self, k: int, rows: slice, where: tuple[np.ndarray, ...]) -> np.ndarray:
-        return self._override(
-            self.values[k, rows][where],
-            None if self.saturated is None else self.saturated[k, rows][where],
-            None if self.dark is None else self.dark[k, rows][where],
-        )
+        w, wt, clip = tables.w, tables.wt, tables.clip
+        accumulate_codes(codes, w, wt, clip, num, den, *flags, backend=backend)
 
 
 class RepeatCodes:
@@ -176,28 +180,27 @@ class RepeatCodes:
         self.bytes_per_row = int(n * k * width * n_ch * frames.itemsize)
 
     def accumulate(
-        self, rows: slice, tables: MergeTables, num: np.ndarray, den: np.ndarray, backend: str
+        self,
+        rows: slice,
+        tables: MergeTables,
+        num: np.ndarray,
+        den: np.ndarray,
+        flags: tuple[np.ndarray, np.ndarray, np.ndarray],
+        backend: str,
     ) -> None:
         accumulate_repeats(
             self.frames[:, :, rows],
             tables.w,
             tables.wt,
+            tables.clip,
             self.sat_thr,
             self.dark_thr,
             tables.sat_code,
             tables.dark_code,
             num,
             den,
+            *flags,
             backend=backend,
-        )
-
-    def codes_at(self, k: int, rows: slice, where: tuple[np.ndarray, ...]) -> np.ndarray:
-        from photoquant.merge._kernels import repeat_codes
-
-        index: tuple[slice | np.ndarray, ...] = (slice(None), *where)
-        vals = self.frames[:, k, rows][index]  # (N, n)
-        return repeat_codes(
-            vals, self.sat_thr[where[-1]], self.dark_thr[where[-1]], self.sat_code, self.dark_code
         )
 
 
@@ -235,22 +238,11 @@ def merge_tiles(
 
     def job(rows: slice) -> None:
         num = log_out[rows]
-        den = weight_out[rows] if weight_out is not None else np.empty(num.shape, dtype=np.float32)
-        source.accumulate(rows, tables, num, den, backend)  # num: ln c (NaN where den = 0)
-        mask = mask_out[rows]
-        np.less_equal(den, 0, out=mask)
-        where = np.nonzero(mask)
-        unsat = np.zeros(where[0].size, dtype=bool)
-        if unsat.size:
-            for k in range(tables.wt.shape[0]):
-                unsat |= ~tables.clip[where[-1], source.codes_at(k, rows, where)]
-        sat_tile = all_saturated_out[rows]
-        dark_tile = all_dark_out[rows]
-        sat_tile.fill(False)
-        dark_tile.fill(False)
-        sat_tile[where] = ~unsat
-        dark_tile[where] = unsat
+        shape = num.shape
+        den = weight_out[rows] if weight_out is not None else np.empty(shape, dtype=np.float32)
+        flags = (mask_out[rows], all_saturated_out[rows], all_dark_out[rows])
+        source.accumulate(rows, tables, num, den, flags, backend)  # num: ln c (NaN: no weight)
         if on_tile is not None:
-            on_tile(rows, num, mask)
+            on_tile(rows, num, flags[0])
 
     thread_map(job, tiles, workers)
