@@ -181,11 +181,22 @@ class CaseResult:
     setup_s: float
 
     def ratios(self) -> dict[str, dict[str, float]]:
-        """``{peer: {"min": ours.min / peer.min, "median": ...}}`` (time ratios: < 1 is faster)."""
+        """``{peer: {"min": ours.min / peer.min, "median": ...}}`` (time ratios: < 1 is faster).
+
+        An untimed case's ratios are those of the ``wall_s`` its implementations
+        measured themselves (one run: min = median).
+        """
         ours = self.results[self.case.ours_name]
         out = {}
         for name, res in self.results.items():
-            if name == ours.name or not res.times_s or not ours.times_s:
+            if name == ours.name:
+                continue
+            if not self.case.timed:
+                a, b = ours.metrics.get("wall_s"), res.metrics.get("wall_s")
+                if a is not None and b:
+                    out[name] = {"min": a / b, "median": a / b}
+                continue
+            if not res.times_s or not ours.times_s:
                 continue
             out[name] = {"min": ours.min_s / res.min_s, "median": ours.median_s / res.median_s}
         return out

@@ -71,8 +71,8 @@ def markdown(results: list[CaseResult], header: dict[str, Any]) -> str:
             lines.append(
                 f"| {case.title if name == case.ours_name else ''} | {name} "
                 f"| {_fmt_time(r.min_s, case) if timed else '–'} "
-                f"| {_fmt_time(r.median_s, case) if timed else _fmt_time(r.min_s, case)} "
-                f"| {ratio_text if timed else ''} | {acc} | {other} |"
+                f"| {_fmt_time(r.median_s, case) if timed else '–'} "
+                f"| {ratio_text} | {acc} | {other} |"
             )
     notes = [f"* `{r.case.name}`: {r.case.notes}" for r in results if r.case.notes]
     if notes:
