@@ -113,12 +113,27 @@ def detect_saturation_levels(
     check = np.flatnonzero(top < c_max)
     if check.size == 0:
         return levels
-    # one pass: the values within `span` of their channel's maximum (few), binned per channel
-    low = np.maximum(top - span, 0)
-    near = np.flatnonzero(rows >= np.tile(low.astype(rows.dtype), rows.shape[1] // n_ch))
-    ch_of = near % n_ch  # rows hold whole pixels: the channel is the position mod C
-    bins = ch_of * (span + 1) + (rows.reshape(-1)[near].astype(np.int64) - (top - span)[ch_of])
-    counts = np.bincount(bins, minlength=n_ch * (span + 1)).reshape(n_ch, span + 1)
+    # per checked channel: the count of its maximum (the pile), and a histogram of the
+    # values just below it (few), in chunks of rows (bounded memory, no length-C loops)
+    reps = rows.shape[1] // n_ch
+    checked = np.zeros(n_ch, dtype=bool)
+    checked[check] = True
+    chk_row = np.tile(checked, reps)
+    top_row = np.tile(top.astype(rows.dtype), reps)
+    low_row = np.tile(np.maximum(top - span, 0).astype(rows.dtype), reps)
+    counts = np.zeros((n_ch, span + 1), dtype=np.int64)
+    pile_row = np.zeros(rows.shape[1], dtype=np.int64)
+    step = max(1, (1 << 22) // rows.shape[1])
+    for r in range(0, rows.shape[0], step):
+        chunk = rows[r : r + step]
+        at_top = (chunk == top_row) & chk_row
+        pile_row += at_top.sum(axis=0)
+        below = (chunk >= low_row) & (chunk < top_row) & chk_row
+        near = np.flatnonzero(below)
+        ch_of = near % n_ch  # rows hold whole pixels: the channel is the position mod C
+        bins = ch_of * (span + 1) + (chunk.reshape(-1)[near].astype(np.int64) - (top - span)[ch_of])
+        counts += np.bincount(bins, minlength=n_ch * (span + 1)).reshape(n_ch, span + 1)
+    counts[:, -1] = pile_row.reshape(-1, n_ch).sum(axis=0)
     n_values = rows.size // n_ch
     for ch in check:
         pile = counts[ch, -1]

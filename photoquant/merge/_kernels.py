@@ -148,10 +148,19 @@ def _repeats_py(
                 _store(num, den, mask, all_sat, all_dark, i, j, ch, s, d, unsat)
 
 
+def _compile(fn: Callable[..., Any], **options: Any) -> Any:  # pragma: no cover
+    """``njit`` with an on-disk cache where numba finds a writable place for one, else without."""
+    assert _njit is not None
+    try:
+        return _njit(nogil=True, cache=True, **options)(fn)
+    except RuntimeError:  # "cannot cache ... as it uses dynamic globals" / no cache locator
+        return _njit(nogil=True, **options)(fn)
+
+
 if _njit is not None:  # pragma: no cover - depends on the environment
-    _store = _njit(nogil=True, cache=True, inline="always")(_store_py)
-    _direct_nb = _njit(nogil=True, cache=True)(_direct_py)
-    _repeats_nb = _njit(nogil=True, cache=True)(_repeats_py)
+    _store = _compile(_store_py, inline="always")
+    _direct_nb = _compile(_direct_py)
+    _repeats_nb = _compile(_repeats_py)
 
 
 def _direct_np(
