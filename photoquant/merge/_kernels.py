@@ -6,9 +6,11 @@ Two implementations with **bit-identical** results:
   pass per pixel, reading each value once and gathering ``w`` and
   ``w·(g − ln t_k)`` from per-exposure float32 tables; ``nogil`` so that the
   merge's row tiles run on every CPU. Measured on the issue's stack
-  (1024×768×3, K = 8, uint8, one thread): 28 ms against 72 ms for the best
-  numpy formulation below and 199 ms for the former numpy merge (an intp
-  index plus a length-3 offset array, float64 gathers and sums).
+  (1024×768×3, K = 8, uint8, one thread, 2026-12-01 on the shared 2-core
+  machine): 25 ms against 72 ms for the best numpy formulation below and
+  199 ms for the former numpy merge (an intp index plus a length-3 offset
+  array, float64 gathers and sums), in the same run; flat ``(K, n)``
+  indexing is 2× faster than 4-d indexing.
 * numpy (always there): per channel plane and exposure, the codes are cast
   once into a reused intp buffer, gathered with ``take(out=, mode="clip")``
   (no buffering) and added into float32 plane accumulators.
@@ -57,21 +59,28 @@ def _direct_py(
     all_sat: Any,
     all_dark: Any,
 ) -> None:  # pragma: no cover - compiled by numba
-    """numba body: ``num = Σ_k wt / Σ_k w``, ``den = Σ_k w`` and the flags per value."""
-    n_k, h, width, n_ch = codes.shape
-    for i in range(h):
-        for j in range(width):
-            for ch in range(n_ch):
-                s = np.float32(0.0)
-                d = np.float32(0.0)
-                unsat = False
+    """numba body: ``num = Σ_k wt / Σ_k w``, ``den = Σ_k w`` and the flags per value.
+
+    Flat layouts: ``codes (K, n)``, outputs ``(n,)`` with the channel fastest
+    (``n = h·W·C``); flat indexing measured 2× faster than 4-d indexing.
+    """
+    n_k, n = codes.shape
+    n_ch = w.shape[0]
+    for p in range(n // n_ch):
+        for ch in range(n_ch):
+            q = p * n_ch + ch
+            s = np.float32(0.0)
+            d = np.float32(0.0)
+            for k in range(n_k):
+                c = codes[k, q]
+                s += wt[k, ch, c]
+                d += w[ch, c]
+            unsat = False
+            if not d > 0:  # flagged (rare): was some exposure not clipped?
                 for k in range(n_k):
-                    c = codes[k, i, j, ch]
-                    s += wt[k, ch, c]
-                    d += w[ch, c]
-                    if not clip[ch, c]:
+                    if not clip[ch, codes[k, q]]:
                         unsat = True
-                _store(num, den, mask, all_sat, all_dark, i, j, ch, s, d, unsat)
+            _store(num, den, mask, all_sat, all_dark, q, s, d, unsat)
 
 
 def _store_py(
@@ -80,25 +89,23 @@ def _store_py(
     mask: Any,
     all_sat: Any,
     all_dark: Any,
-    i: int,
-    j: int,
-    ch: int,
+    q: int,
     s: Any,
     d: Any,
     unsat: bool,
 ) -> None:  # pragma: no cover - compiled by numba
     """numba body: the quotient (NaN without weight), the sum and the three flags."""
-    den[i, j, ch] = d
+    den[q] = d
     if d > 0:
-        num[i, j, ch] = s / d
-        mask[i, j, ch] = False
-        all_sat[i, j, ch] = False
-        all_dark[i, j, ch] = False
+        num[q] = s / d
+        mask[q] = False
+        all_sat[q] = False
+        all_dark[q] = False
     else:
-        num[i, j, ch] = np.nan
-        mask[i, j, ch] = True
-        all_sat[i, j, ch] = not unsat
-        all_dark[i, j, ch] = unsat
+        num[q] = np.nan
+        mask[q] = True
+        all_sat[q] = not unsat
+        all_dark[q] = unsat
 
 
 def _repeats_py(
@@ -116,36 +123,37 @@ def _repeats_py(
     all_sat: Any,
     all_dark: Any,
 ) -> None:  # pragma: no cover - compiled by numba
-    """numba body: the codes of ``N`` repeats (sum, or an exclusion code) and their sums."""
-    n_rep, n_k, h, width, n_ch = frames.shape
-    for i in range(h):
-        for j in range(width):
-            for ch in range(n_ch):
-                s = np.float32(0.0)
-                d = np.float32(0.0)
-                unsat = False
-                for k in range(n_k):
-                    tot = np.int64(0)
-                    hi = np.int64(0)
-                    lo = np.int64(1 << 62)
-                    for n in range(n_rep):
-                        f = np.int64(frames[n, k, i, j, ch])
-                        tot += f
-                        if f > hi:
-                            hi = f
-                        if f < lo:
-                            lo = f
-                    if hi >= sat_thr[ch]:
-                        c = np.int64(sat_code)
-                    elif lo <= dark_thr[ch]:
-                        c = np.int64(dark_code)
-                    else:
-                        c = tot
-                    s += wt[k, ch, c]
-                    d += w[ch, c]
-                    if not clip[ch, c]:
-                        unsat = True
-                _store(num, den, mask, all_sat, all_dark, i, j, ch, s, d, unsat)
+    """numba body: the codes of ``N`` repeats ``frames (N, K, n)`` (sum, or an exclusion code)."""
+    n_rep, n_k, n = frames.shape
+    n_ch = w.shape[0]
+    for p in range(n // n_ch):
+        for ch in range(n_ch):
+            q = p * n_ch + ch
+            s = np.float32(0.0)
+            d = np.float32(0.0)
+            unsat = False
+            for k in range(n_k):
+                tot = np.int64(0)
+                hi = np.int64(0)
+                lo = np.int64(1 << 62)
+                for r in range(n_rep):
+                    f = np.int64(frames[r, k, q])
+                    tot += f
+                    if f > hi:
+                        hi = f
+                    if f < lo:
+                        lo = f
+                if hi >= sat_thr[ch]:
+                    c = np.int64(sat_code)
+                elif lo <= dark_thr[ch]:
+                    c = np.int64(dark_code)
+                else:
+                    c = tot
+                s += wt[k, ch, c]
+                d += w[ch, c]
+                if not clip[ch, c]:
+                    unsat = True
+            _store(num, den, mask, all_sat, all_dark, q, s, d, unsat)
 
 
 def _compile(fn: Callable[..., Any], **options: Any) -> Any:  # pragma: no cover
@@ -255,7 +263,8 @@ def accumulate_codes(
     backend : {"auto", "numba", "numpy"}
     """
     if _use_numba(backend):
-        _direct_nb(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
+        outs = _flat_outputs(num, den, mask, all_sat, all_dark)
+        _direct_nb(codes.reshape(codes.shape[0], -1), w, wt, clip, *outs)
     else:
         _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
 
@@ -280,10 +289,19 @@ def accumulate_repeats(
     """As :func:`accumulate_codes` for ``frames (N, K, h, W, C)``, coded by :func:`repeat_codes`."""
     flags = (mask, all_sat, all_dark)
     if _use_numba(backend):
-        _repeats_nb(frames, w, wt, clip, sat_thr, dark_thr, sat_code, dark_code, num, den, *flags)
+        outs = _flat_outputs(num, den, *flags)
+        flat = frames.reshape(*frames.shape[:2], -1)
+        _repeats_nb(flat, w, wt, clip, sat_thr, dark_thr, sat_code, dark_code, *outs)
     else:
         codes = repeat_codes(frames, sat_thr, dark_thr, sat_code, dark_code)
         _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
+
+
+def _flat_outputs(*arrays: np.ndarray) -> list[np.ndarray]:
+    """Flat views of the outputs (a reshape of a non-contiguous array would be a copy)."""
+    if not all(a.flags.c_contiguous for a in arrays):
+        raise ValueError("the merge kernels write into C-contiguous outputs only")
+    return [a.reshape(-1) for a in arrays]
 
 
 def _use_numba(backend: str) -> bool:
