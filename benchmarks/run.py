@@ -117,14 +117,23 @@ def main(argv: list[str] | None = None) -> int:
         cases = [c for c in cases if any(c.name.startswith(p) for p in args.only)]
         if not cases:
             parser.error(f"no case matches {args.only}")
+    from photoquant.merge._kernels import HAVE_NUMBA
+
+    kernels = "numpy"
+    if HAVE_NUMBA:
+        import numba
+
+        kernels = f"numba {numba.__version__}"
     header = {
         "date": time.strftime("%Y-%m-%d"),
+        "merge kernels": kernels,
         "size": f"{width}x{height}",
         "K": config.exposures,
         "repeats (interleaved)": config.repeats,
         "seed": config.seed,
         "python": platform.python_version(),
         "cpus": os.cpu_count(),
+        "load average (1 min) at start": round(os.getloadavg()[0], 1),
     }
     results = []
     for case in cases:
