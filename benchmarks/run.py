@@ -117,9 +117,12 @@ def main(argv: list[str] | None = None) -> int:
         cases = [c for c in cases if any(c.name.startswith(p) for p in args.only)]
         if not cases:
             parser.error(f"no case matches {args.only}")
-    from photoquant.merge._kernels import HAVE_NUMBA
-
-    kernels = "numpy"
+    try:
+        from photoquant.merge._kernels import HAVE_NUMBA
+    except ImportError:  # an older photoquant (a "before" run)
+        HAVE_NUMBA, kernels = False, "none (an older photoquant)"
+    else:
+        kernels = "numpy"
     if HAVE_NUMBA:
         import numba
 
