@@ -4,7 +4,10 @@ Given a calibrated :class:`~photoquant.model.CameraModel` and frames of a
 static scene at one or more exposure times, :func:`correct` denoises (eq. 2),
 linearises and balances (the camera's merge with ``g_λ + ln a_λ``) and
 uniformises (``÷ u·v``, §4.3). Pixels without a valid exposure are flagged
-and NaN. The scene's exposure times are first re-estimated against the
+and NaN. With a merge that treats each pixel on its own (``"Debevec 1997"``,
+both profiles' choice) it is one pass over the frames in row tiles, each
+tile merged and multiplied by the float32 gain ``1 / (u·v)`` straight into
+the result (bounded extra memory, the same bits for any tile size). The scene's exposure times are first re-estimated against the
 camera's response (:func:`photoquant.exposure.refine_exposure_times`) when the
 camera was calibrated with exposure refinement (the photoquant profile's
 default) or when asked.
@@ -20,11 +23,12 @@ import numpy as np
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import ExposureRefinement, refine_exposure_times
 from photoquant.merge import MergeModel
+from photoquant.merge._tiled import merge_tiles
 from photoquant.methods import resolve_method
 from photoquant.model import CameraModel
 from photoquant.stack import ExposureStack
 
-__all__ = ["Correction", "correct", "correct_manifest"]
+__all__ = ["Correction", "correct", "correct_manifest", "gain_map_f32"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,12 +71,34 @@ def _camera_refines(model: CameraModel) -> bool:
     return False
 
 
+def gain_map_f32(model: CameraModel) -> np.ndarray:
+    """``1 / (u·v)`` float32 ``(H, W, C)``, the uniformisation of §4.3, computed once per model.
+
+    Computed in float64 and rounded once (relative error 2⁻²⁴, far below the
+    PRNU it divides out); kept in the model's cache (4 bytes per value, half
+    of :meth:`CameraModel.gain_map`'s float64 map, which correct never makes).
+    """
+    cache = model._cache
+    if "gain_f32" not in cache:
+        u = model.sensor_lut.lut
+        v = model.vignetting_map()
+        gain = np.empty(u.shape, dtype=np.float32)
+        for r in range(0, u.shape[0], 256):  # float64 products a few rows at a time
+            rows = slice(r, r + 256)
+            gain[rows] = 1.0 / (u[rows].astype(np.float64) * v[rows])
+        gain.setflags(write=False)
+        cache["gain_f32"] = gain
+    return cache["gain_f32"]
+
+
 def correct(
     stack: ExposureStack,
     model: CameraModel,
     *,
     merge: Any = None,
     refine_exposures: bool | None = None,
+    tile_rows: int | None = None,
+    workers: int | None = None,
 ) -> Correction:
     """Measure the photoquantity of a scene with a calibrated camera (§4 of the paper).
 
@@ -95,6 +121,15 @@ def correct(
         its profile's setting); a scene whose exposures the data do not
         relate (one exposure, or no pixel valid in two) then keeps its nominal
         times, with a note. ``True`` refuses such a scene.
+    tile_rows : int, optional
+        Rows per tile of the one-pass correction (a merge method that merges
+        each pixel on its own, such as ``"Debevec 1997"``): frames → ``ln c``
+        (balance folded into ``g``) → ``l = exp(ln c) / (u·v)``, written tile
+        by tile into the result, so the extra memory is the result and the
+        float32 gain map. About 2 MiB of frames per tile by default; the
+        result does not depend on it, nor on ``workers`` (threads over tiles).
+    workers : int, optional
+        Threads (every CPU by default).
 
     Returns
     -------
@@ -155,14 +190,38 @@ def correct(
             notes.append(f"scene exposures not refined, nominal times kept: {exc}")
         else:
             stack = refinement.apply(stack)
-    merged = merger.merge(stack, model.balanced_response())
-    with np.errstate(invalid="ignore"):
-        photoquantity = np.exp(merged.log_photoquantity) * model.gain_map()
+    gain = gain_map_f32(model)
+    plan = merger.tile_plan(stack, model.balanced_response())
+    if plan is not None:  # one pass: frames -> ln c -> l, tile by tile
+        shape = (*stack.image_shape, stack.n_channels)
+        photoquantity = np.empty(shape, dtype=np.float32)
+        mask, all_saturated, all_dark = (np.empty(shape, dtype=bool) for _ in range(3))
+
+        def uniformise(rows: slice, log_c: np.ndarray, flagged: np.ndarray) -> None:
+            del flagged  # NaN there already, and exp(NaN) · gain stays NaN
+            np.exp(log_c, out=log_c)
+            log_c *= gain[rows]
+
+        merge_tiles(
+            *plan,
+            photoquantity,
+            mask,
+            all_saturated,
+            all_dark,
+            tile_rows=tile_rows,
+            workers=workers,
+            on_tile=uniformise,
+        )
+    else:  # a method that merges the whole image at once
+        merged = merger.merge(stack, model.balanced_response())
+        with np.errstate(invalid="ignore"):
+            photoquantity = np.exp(merged.log_photoquantity).astype(np.float32) * gain
+        mask, all_saturated, all_dark = merged.mask, merged.all_saturated, merged.all_dark
     return Correction(
-        photoquantity=photoquantity.astype(np.float32),
-        mask=merged.mask,
-        all_saturated=merged.all_saturated,
-        all_dark=merged.all_dark,
+        photoquantity=photoquantity,
+        mask=mask,
+        all_saturated=all_saturated,
+        all_dark=all_dark,
         exposures=refinement,
         notes=tuple(notes),
     )

@@ -105,20 +105,65 @@ def detect_saturation_levels(
     bit_depth = check_bit_depth(bit_depth)
     frames = check_array(frames, "frames", kind="iu")
     c_max = 2**bit_depth - 1
-    values = frames.reshape(-1, frames.shape[-1])
-    levels = np.full(values.shape[1], c_max, dtype=np.int64)
+    n_ch = frames.shape[-1]
+    levels = np.full(n_ch, c_max, dtype=np.int64)
+    rows = _channel_rows(frames)
+    top = _channel_reduce(np.maximum, rows, n_ch).astype(np.int64)
     span = max(2, (c_max + 1) // 64)
-    for ch in range(values.shape[1]):
-        v = values[:, ch]
-        top = int(v.max())
-        if top >= c_max:
-            continue
-        counts = np.bincount(v[v >= top - span].astype(np.int64) - (top - span), minlength=span + 1)
-        pile = counts[-1]
-        below = counts[:-1].mean()
-        if pile >= max(min_count, min_fraction * v.size) and pile >= pile_up_ratio * below:
-            levels[ch] = top
+    check = np.flatnonzero(top < c_max)
+    if check.size == 0:
+        return levels
+    # per checked channel: the count of its maximum (the pile), and a histogram of the
+    # values just below it (few), in chunks of rows (bounded memory, no length-C loops)
+    reps = rows.shape[1] // n_ch
+    checked = np.zeros(n_ch, dtype=bool)
+    checked[check] = True
+    chk_row = np.tile(checked, reps)
+    top_row = np.tile(top.astype(rows.dtype), reps)
+    low_row = np.tile(np.maximum(top - span, 0).astype(rows.dtype), reps)
+    counts = np.zeros((n_ch, span + 1), dtype=np.int64)
+    pile_row = np.zeros(rows.shape[1], dtype=np.int64)
+    step = max(1, (1 << 22) // rows.shape[1])
+    for r in range(0, rows.shape[0], step):
+        chunk = rows[r : r + step]
+        at_top = (chunk == top_row) & chk_row
+        pile_row += at_top.sum(axis=0)
+        below = (chunk >= low_row) & (chunk < top_row) & chk_row
+        near = np.flatnonzero(below)
+        ch_of = near % n_ch  # rows hold whole pixels: the channel is the position mod C
+        bins = ch_of * (span + 1) + (chunk.reshape(-1)[near].astype(np.int64) - (top - span)[ch_of])
+        counts += np.bincount(bins, minlength=n_ch * (span + 1)).reshape(n_ch, span + 1)
+    counts[:, -1] = pile_row.reshape(-1, n_ch).sum(axis=0)
+    n_values = rows.size // n_ch
+    for ch in check:
+        pile = counts[ch, -1]
+        below = counts[ch, :-1].mean()
+        if pile >= max(min_count, min_fraction * n_values) and pile >= pile_up_ratio * below:
+            levels[ch] = top[ch]
     return levels
+
+
+def _channel_rows(a: np.ndarray) -> np.ndarray:
+    """``a (..., W, C)`` as rows of ``W·C`` values (a view when it can be, else a copy).
+
+    Per-channel operations on the rows use a threshold row ``np.tile(x, W)``
+    and run over long contiguous rows, not numpy's inner loops of length C.
+    """
+    if a.ndim < 2:
+        return a.reshape(1, -1)
+    return a.reshape(-1, a.shape[-2] * a.shape[-1])
+
+
+def _channel_reduce(ufunc: np.ufunc, rows: np.ndarray, n_ch: int) -> np.ndarray:
+    """Per channel the ``ufunc`` reduction (max, min) of rows from :func:`_channel_rows`."""
+    return ufunc.reduce(ufunc.reduce(rows, axis=0).reshape(-1, n_ch), axis=0)
+
+
+def _compare_per_channel(ufunc: np.ufunc, a: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """``ufunc(a, level)`` for ``a (..., W, C)`` and a per-channel ``level (C,)``, bool."""
+    rows = _channel_rows(a)
+    reps = rows.shape[1] // a.shape[-1]
+    return ufunc(rows, np.tile(level, reps)).reshape(a.shape)
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,6 +213,7 @@ class ExposureStack:
     _mean: list = field(default_factory=list, init=False, repr=False)
     _sum: list = field(default_factory=list, init=False, repr=False)
     _extremes: list = field(default_factory=list, init=False, repr=False)
+    _masks: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         frames = check_array(self.frames, "frames", ndim=5, kind="iu")
@@ -179,7 +225,9 @@ class ExposureStack:
                 f"exposures (frames shape is (N, K, H, W, C) = {frames.shape})"
             )
         c_max = 2**bit_depth - 1
-        lo, hi = int(frames.min()), int(frames.max())
+        # unsigned frames cannot be negative; a dtype that cannot exceed c_max needs no scan
+        lo = 0 if frames.dtype.kind == "u" else int(frames.min())
+        hi = c_max if np.iinfo(frames.dtype).max <= c_max else int(frames.max())
         if lo < 0 or hi > c_max:
             raise InputError(
                 f"`frames` values must lie in [0, {c_max}] for bit_depth={bit_depth}, "
@@ -320,12 +368,13 @@ class ExposureStack:
         """``(K, H, W, C)`` bool: any repeat reached the channel's saturation level.
 
         ``saturation_level`` (C,) overrides the stack's own (e.g. a camera
-        model's calibrated levels).
+        model's calibrated levels). Computed once per level (read-only).
         """
         level = self.saturation_level if saturation_level is None else saturation_level
         level = check_array(level, "saturation_level", shape=(self.n_channels,), kind="iuf")
         # frames are integers: c >= level  <=>  c >= ceil(level)
-        return self._repeat_extremes()[1] >= np.ceil(level.astype(np.float64)).astype(np.int64)
+        thr = np.ceil(level.astype(np.float64)).astype(np.int64)
+        return self._mask("saturated", thr, np.greater_equal, 1)
 
     def dark_clipped(self, floor: float | np.ndarray | None = None) -> np.ndarray:
         """``(K, H, W, C)`` bool: any repeat at or below the floor (no measurable light).
@@ -335,10 +384,21 @@ class ExposureStack:
         floor : float or array_like (C,), optional
             Per-channel floor; the stack's :attr:`black_level` by default (0
             for data without an offset, where this is "any repeat is 0").
+            Computed once per floor (read-only).
         """
         level = self.black_level if floor is None else floor
         level = np.broadcast_to(np.asarray(level, dtype=np.float64), (self.n_channels,))
-        return self._repeat_extremes()[0] <= level
+        # frames are integers: c <= level  <=>  c <= floor(level)
+        thr = np.floor(level).astype(np.int64)
+        return self._mask("dark", thr, np.less_equal, 0)
+
+    def _mask(self, kind: str, thr: np.ndarray, ufunc: np.ufunc, extreme: int) -> np.ndarray:
+        key = (kind, tuple(int(x) for x in thr))
+        if key not in self._masks:
+            mask = _compare_per_channel(ufunc, self._repeat_extremes()[extreme], thr)
+            mask.setflags(write=False)
+            self._masks[key] = mask
+        return self._masks[key]
 
     def linear_mean(self) -> np.ndarray:
         """Denoised values above the black level, ``mean() - black_level`` (K, H, W, C).

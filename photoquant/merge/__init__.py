@@ -49,10 +49,12 @@ import numpy as np
 
 from photoquant.errors import InputError
 from photoquant.merge._base import MergeResult, apply_log_inverse_response
+from photoquant.merge._tiled import CodeSource, MergeTables
 from photoquant.merge.debevec1997 import (
     DebevecMergeOptions,
     merge_Debevec1997,
     merge_stack_Debevec1997,
+    plan_stack_Debevec1997,
 )
 from photoquant.merge.noise_aware import (
     NoiseAwareMergeOptions,
@@ -157,6 +159,20 @@ class MergeModel:
                 f"merge method {self.method!r} must return a MergeResult, got {type(result).__name__}"
             )
         return result
+
+    def tile_plan(
+        self, stack: ExposureStack, response: ResponseModel
+    ) -> tuple[CodeSource, MergeTables] | None:
+        """The row-tiled table merge of ``stack`` when this method has one, else ``None``.
+
+        Only ``"Debevec 1997"`` merges each pixel on its own (the noise-aware
+        merge estimates its noise from the whole image, Robertson iterates on
+        it); :func:`photoquant.correct` merges such a method's scenes in row
+        tiles straight into the corrected photoquantity.
+        """
+        if MERGE_METHODS[self.method].function is not merge_stack_Debevec1997:
+            return None
+        return plan_stack_Debevec1997(stack, response, self.options)
 
     def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         return {"options": options_to_dict(self.options)}, {}

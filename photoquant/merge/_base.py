@@ -21,15 +21,17 @@ class MergeResult:
 
     Attributes
     ----------
-    log_photoquantity : ndarray, shape (H, W, C), float64
-        ``ln c_pλ``; NaN where ``mask`` is set.
+    log_photoquantity : ndarray, shape (H, W, C), float64 or float32
+        ``ln c_pλ``; NaN where ``mask`` is set. Float32 from the table merge
+        of integer frames (``"Debevec 1997"``: its rounding, ~10⁻⁵ in ``ln c``,
+        is bounded in :mod:`photoquant.merge._tiled`), float64 otherwise.
     mask : ndarray, shape (H, W, C), bool
         True where the pixel has no valid exposure.
     all_saturated : ndarray, shape (H, W, C), bool
         Flagged because every exposure was saturated (too bright).
     all_dark : ndarray, shape (H, W, C), bool
         Flagged because no exposure rose above the dark floor (too dark).
-    weight_sum : ndarray, shape (H, W, C), float64
+    weight_sum : ndarray, shape (H, W, C), float64 or float32
         ``Σ_k w``: a confidence of each merged value (its units are the
         method's: for the noise-aware merge it is ``1 / Var(ln c)``).
     report : dict

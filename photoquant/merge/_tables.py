@@ -52,9 +52,13 @@ class ValueTables:
 
     def _indices(self, k: int) -> np.ndarray:
         if k not in self._index:
-            index = self._stack.repeat_sum()[k].astype(np.intp)
-            index += np.arange(self.n_channels, dtype=np.intp) * self._size
-            self._index[k] = index
+            values = self._stack.repeat_sum()[k]
+            # the channel offsets as one row of W·C (long inner loops, not numpy's
+            # length-C broadcast), added while casting to intp
+            offsets = np.arange(self.n_channels, dtype=np.intp) * self._size
+            rows = values.reshape(-1, values.shape[-2] * values.shape[-1])
+            index = np.add(rows, np.tile(offsets, values.shape[-2]), dtype=np.intp)
+            self._index[k] = index.reshape(values.shape)
         return self._index[k]
 
     def table(self, fn: ValueFunction) -> np.ndarray | ValueFunction:

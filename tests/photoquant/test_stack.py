@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from photoquant.errors import InputError
 from photoquant.stack import ExposureStack, denoise_mean, detect_saturation_levels
@@ -83,3 +85,50 @@ def test_bad_stacks_are_refused_with_a_named_reason(kwargs, match):
     args = {"frames": np.zeros((1, 2, 2, 2, 3), dtype=np.uint8), "exposure_s": [0.1, 0.2]} | kwargs
     with pytest.raises(InputError, match=match):
         ExposureStack(**args)
+
+
+def _detect_reference(frames, bit_depth, min_fraction=1e-4, min_count=3, pile_up_ratio=4.0):
+    """The readable per-channel detection (one channel at a time, a mask per channel)."""
+    c_max = 2**bit_depth - 1
+    values = frames.reshape(-1, frames.shape[-1])
+    levels = np.full(values.shape[1], c_max, dtype=np.int64)
+    span = max(2, (c_max + 1) // 64)
+    for ch in range(values.shape[1]):
+        v = values[:, ch]
+        top = int(v.max())
+        if top >= c_max:
+            continue
+        counts = np.bincount(v[v >= top - span].astype(np.int64) - (top - span), minlength=span + 1)
+        if counts[-1] >= max(min_count, min_fraction * v.size) and counts[-1] >= pile_up_ratio * (
+            counts[:-1].mean()
+        ):
+            levels[ch] = top
+    return levels
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    shape=st.tuples(st.integers(1, 3), st.integers(1, 6), st.integers(1, 5), st.integers(1, 4)),
+    bits=st.sampled_from([8, 10, 12, 16]),
+    clip=st.floats(0.0, 1.0),
+)
+def test_vectorised_saturation_detection_and_masks_equal_the_per_channel_reference(
+    seed, shape, bits, clip
+):
+    rng = np.random.default_rng(seed)
+    c_max = 2**bits - 1
+    dtype = np.uint8 if bits == 8 else np.uint16
+    white = rng.integers(c_max // 2, c_max + 1, shape[-1])
+    frames = np.minimum(rng.integers(0, c_max + 1, (2, *shape)), white).astype(dtype)
+    frames[rng.random(frames.shape) < clip * 0.2] = 0
+    np.testing.assert_array_equal(
+        detect_saturation_levels(frames, bits), _detect_reference(frames, bits)
+    )
+    stack = ExposureStack(
+        frames, np.geomspace(0.01, 1, shape[0]), bit_depth=bits, channels=tuple("RGBA"[: shape[-1]])
+    )
+    level = rng.uniform(1, c_max, shape[-1])
+    np.testing.assert_array_equal(stack.saturated(level), frames.max(axis=0) >= level)
+    np.testing.assert_array_equal(stack.dark_clipped(level), frames.min(axis=0) <= level)
+    assert stack.saturated(level) is stack.saturated(level)  # computed once

@@ -1,0 +1,151 @@
+"""The fast table merge against its readable float64 reference, and numba against numpy.
+
+* ``merge_stack_Debevec1997`` (float32 tables, codes for clipped repeats, row
+  tiles) equals the reference merge of the stack's means with the stack's
+  saturation and dark masks: the same values excluded and flagged, ``ln c``
+  within the float32 bound ``(2K + 3)·2⁻²⁴·max|g − ln t|`` derived in
+  :mod:`photoquant.merge._tiled`.
+* The numba and numpy kernels give the same bits; tiles and threads do not
+  change a bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from photoquant.merge import DebevecMergeOptions, merge_Debevec1997, merge_stack_Debevec1997
+from photoquant.merge._kernels import HAVE_NUMBA
+from photoquant.merge._tiled import merge_tiles
+from photoquant.merge.debevec1997 import plan_stack_Debevec1997
+from photoquant.response.model import ResponseModel
+from photoquant.stack import ExposureStack
+
+WEIGHTINGS = ["hat", "hat-quantisation", "uniform"]
+
+
+def f32_atol(g: np.ndarray, exposure_s: np.ndarray) -> float:
+    """The float32 bound on ``ln c`` of :mod:`photoquant.merge._tiled` (over every table entry)."""
+    t = np.asarray(exposure_s, dtype=float)
+    return (2 * t.size + 3) * 2.0**-24 * float(np.max(np.abs(g[..., None] - np.log(t))))
+
+
+@st.composite
+def stacks(draw):
+    """A small random stack and response: N, K, shape, bit depth, black and saturation levels."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    n = draw(st.integers(1, 4))
+    k = draw(st.integers(1, 5))
+    h, w, c = draw(st.integers(1, 7)), draw(st.integers(1, 6)), draw(st.integers(1, 3))
+    bits = draw(st.sampled_from([8, 10, 12]))
+    c_max = 2**bits - 1
+    black = draw(st.sampled_from([0.0, 3.0, 16.5]))
+    frames = rng.integers(0, c_max + 1, size=(n, k, h, w, c))
+    # pile some values at the extremes, as clipped data do
+    frames[rng.random(frames.shape) < 0.1] = c_max
+    frames[rng.random(frames.shape) < 0.1] = int(black)
+    # the longest exposure above the black level (a stack whose data lie below it is refused)
+    frames[:, -1] = rng.integers(int(black) + 1, c_max + 1, size=(n, h, w, c))
+    dtype = np.uint8 if bits == 8 else np.uint16
+    t = np.sort(rng.uniform(0.5, 2.0, k)) * np.geomspace(1e-3, 1.0, k)
+    sat = np.full(c, float(c_max)) - draw(st.sampled_from([0.0, 5.0, 40.5]))
+    stack = ExposureStack(
+        frames.astype(dtype),
+        t,
+        bit_depth=bits,
+        saturation_level=sat,
+        black_level=black,
+        channels=("R", "G", "B")[:c],
+    )
+    levels = np.linspace(0.0, c_max, draw(st.sampled_from([16, 256])))
+    steps = rng.uniform(0.01, 1.0, (c, levels.size))
+    span = draw(st.floats(1.0, 30.0))  # ln exposure spanned by the response (cameras: < 60)
+    g = span * np.cumsum(steps, axis=1) / steps.sum(axis=1, keepdims=True) - 5.0
+    valid_min = rng.uniform(0, 0.2 * c_max, c) if draw(st.booleans()) else None
+    response = ResponseModel(
+        "given", levels, g, sat, valid_min=valid_min, black_level=np.full(c, black)
+    )
+    weighting = draw(st.sampled_from(WEIGHTINGS))
+    exclude = draw(st.booleans())
+    return stack, response, DebevecMergeOptions(weighting, exclude)
+
+
+def _reference(stack: ExposureStack, response: ResponseModel, opts: DebevecMergeOptions):
+    """eq. 6 on the float means with the stack's masks: the per-pixel float64 reference."""
+    return merge_Debevec1997(
+        stack.mean(),
+        stack.exposure_s,
+        response.levels,
+        response.log_inverse_response,
+        saturation_level=response.saturation_level,
+        saturated=stack.saturated(response.saturation_level),
+        dark_clipped=stack.dark_clipped(),
+        min_level=response.valid_min if opts.exclude_below_valid_min else None,
+        weighting=opts.weighting,
+        c_min=np.asarray(response.black_level, dtype=np.float64),
+    )
+
+
+@settings(max_examples=60, deadline=None)
+@given(case=stacks())
+def test_table_merge_of_a_stack_equals_the_reference_within_the_float32_bound(case):
+    stack, response, opts = case
+    fast = merge_stack_Debevec1997(stack, response, opts)
+    ref = _reference(stack, response, opts)
+    assert ref.log_photoquantity.dtype == np.float64
+    assert fast.log_photoquantity.dtype == np.float32 and fast.weight_sum.dtype == np.float32
+    for field in ("mask", "all_saturated", "all_dark"):
+        np.testing.assert_array_equal(getattr(fast, field), getattr(ref, field), err_msg=field)
+    atol = f32_atol(response.log_inverse_response, stack.exposure_s)
+    np.testing.assert_allclose(fast.log_photoquantity, ref.log_photoquantity, rtol=0, atol=atol)
+    # Σw: one float32 rounding per term and per partial sum
+    rtol = (stack.n_exposures + 1) * 2.0**-24
+    np.testing.assert_allclose(fast.weight_sum, ref.weight_sum, rtol=rtol, atol=0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(case=stacks(), tile_rows=st.integers(1, 4), workers=st.integers(1, 3))
+def test_tiles_and_threads_change_no_bit(case, tile_rows, workers):
+    stack, response, opts = case
+    whole = merge_stack_Debevec1997(stack, response, opts, tile_rows=10**6, workers=1)
+    tiled = merge_stack_Debevec1997(stack, response, opts, tile_rows=tile_rows, workers=workers)
+    for field in ("log_photoquantity", "weight_sum", "mask", "all_saturated", "all_dark"):
+        np.testing.assert_array_equal(getattr(tiled, field), getattr(whole, field), err_msg=field)
+
+
+def _run(stack, response, opts, backend):
+    plan = plan_stack_Debevec1997(stack, response, opts)
+    assert plan is not None
+    shape = stack.image_shape + (stack.n_channels,)
+    out = [np.empty(shape, np.float32), np.empty(shape, bool), np.empty(shape, bool)]
+    out.append(np.empty(shape, bool))
+    weight = np.empty(shape, np.float32)
+    merge_tiles(*plan, *out, weight_out=weight, tile_rows=2, workers=1, backend=backend)
+    return [*out, weight]
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed (the numpy kernels are used)")
+@settings(max_examples=40, deadline=None)
+@given(case=stacks())
+def test_numba_and_numpy_kernels_give_the_same_bits(case):
+    stack, response, opts = case
+    for a, b in zip(
+        _run(stack, response, opts, "numba"), _run(stack, response, opts, "numpy"), strict=True
+    ):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_numpy_kernel_is_used_without_numba():
+    # the fallback is complete on its own: forcing it gives a full, finite result
+    stack = ExposureStack(
+        np.random.default_rng(1).integers(1, 250, (2, 3, 4, 5, 3)).astype(np.uint8),
+        [0.01, 0.1, 1.0],
+        saturation_level=np.full(3, 255),
+    )
+    levels = np.arange(256.0)
+    resp = ResponseModel("given", levels, np.tile(np.log(levels + 1), (3, 1)), np.full(3, 255.0))
+    log_c, mask, *_ = _run(stack, resp, DebevecMergeOptions("hat", False), "numpy")
+    assert not mask.any() and np.isfinite(log_c).all()

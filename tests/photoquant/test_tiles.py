@@ -1,0 +1,127 @@
+"""Large images in row tiles: ``correct`` tile by tile equals the untiled path.
+
+The one-pass correction (frames → ``ln c`` with the balance folded into
+``g`` → ``l = exp(ln c) / (u·v)``) is checked against the float64 reference
+(the per-pixel merge of the denoised means, then ``exp / (u·v)`` in
+float64) within the float32 bound, and tiles, threads and a camera loaded
+from disk change no bit of it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from photoquant.balance import BalanceModel
+from photoquant.correction import correct
+from photoquant.flatfield import SensorLUTModel
+from photoquant.merge import MergeModel, merge_Debevec1997
+from photoquant.model import CameraModel, load_camera
+from photoquant.response.model import ResponseModel
+from photoquant.stack import ExposureStack
+from photoquant.vignetting import ExtendedGoldmanChenVignetting
+from pqsim.synth_camera.presets import camera_from_preset
+
+from .analytic import capture, log_uniform_scene, true_g
+
+BALANCE = (0.85, 1.0, 0.75)
+EXPOSURES = np.geomspace(0.5, 500.0, 6)
+LEVELS = np.arange(256.0)
+EPS = 2.0**-24
+
+
+def _model(shape, rng, merge=None) -> CameraModel:
+    g = np.stack([true_g(np.maximum(LEVELS, 0.5), ch, balance=BALANCE) for ch in range(3)])
+    response = ResponseModel(
+        "Debevec 1997", LEVELS, g, np.round(np.array(BALANCE) * 255), valid_min=np.full(3, 2.0)
+    )
+    params = np.asarray(camera_from_preset("ccd").vignetting_params, dtype=float)
+    return CameraModel(
+        image_shape=shape,
+        channels=("R", "G", "B"),
+        bit_depth=8,
+        response=response,
+        merge=merge or MergeModel("Debevec 1997", {"weighting": "hat-quantisation"}),
+        balance=BalanceModel("White Chart", np.array([1.2, 1.0, 0.8])),
+        sensor_lut=SensorLUTModel("Irradiance Scene", rng.uniform(0.9, 1.1, (*shape, 3))),
+        vignetting=ExtendedGoldmanChenVignetting("Extended Goldman-Chen", params),
+    )
+
+
+def _stack(rng, shape, n_repeats) -> ExposureStack:
+    l = log_uniform_scene(rng, (*shape, 3), decades=4.0)
+    frames = capture(l, EXPOSURES, balance=BALANCE, noise_dn=1.5, n_repeats=n_repeats, rng=rng)
+    return ExposureStack(frames, EXPOSURES, saturation_level=np.round(np.array(BALANCE) * 255))
+
+
+def _reference(stack: ExposureStack, model: CameraModel) -> tuple[np.ndarray, np.ndarray]:
+    """float64: eq. 6 per pixel on the means with the stack's masks, then exp / (u·v)."""
+    resp = model.balanced_response()
+    ref = merge_Debevec1997(
+        stack.mean(),
+        stack.exposure_s,
+        resp.levels,
+        resp.log_inverse_response,
+        saturation_level=resp.saturation_level,
+        saturated=stack.saturated(resp.saturation_level),
+        dark_clipped=stack.dark_clipped(),
+        min_level=resp.valid_min,
+        weighting="hat-quantisation",
+        c_min=np.asarray(resp.black_level, dtype=float),
+    )
+    l = np.exp(ref.log_photoquantity) / (model.sensor_lut.lut * model.vignetting_map())
+    return l, ref.mask
+
+
+@pytest.mark.parametrize("n_repeats", [1, 3])
+def test_one_pass_correction_equals_the_float64_reference(rng, n_repeats):
+    shape = (9, 11)
+    model, stack = _model(shape, rng), _stack(rng, shape, n_repeats)
+    out = correct(stack, model, refine_exposures=False)
+    l_ref, mask_ref = _reference(stack, model)
+    np.testing.assert_array_equal(out.mask, mask_ref)
+    assert out.photoquantity.dtype == np.float32
+    # |Δ ln c| <= (2K + 3)·ε·max|g − ln t| (the merge), then exp, the float32 gain and
+    # the product: a few ε more
+    resp = model.balanced_response()
+    m = np.max(np.abs(resp.log_inverse_response[..., None] - np.log(EXPOSURES)))
+    rtol = (2 * EXPOSURES.size + 3) * EPS * m + 6 * EPS
+    ok = ~mask_ref
+    np.testing.assert_allclose(out.photoquantity[ok], l_ref[ok], rtol=rtol, atol=0)
+    assert np.isnan(out.photoquantity[~ok]).all()
+
+
+@pytest.mark.parametrize("n_repeats", [1, 2])
+@pytest.mark.parametrize(("tile_rows", "workers"), [(1, 1), (2, 3), (4, 2)])
+def test_tiles_and_threads_change_no_bit_of_the_correction(rng, n_repeats, tile_rows, workers):
+    shape = (7, 5)
+    model, stack = _model(shape, rng), _stack(rng, shape, n_repeats)
+    whole = correct(stack, model, refine_exposures=False, tile_rows=10**6, workers=1)
+    tiled = correct(stack, model, refine_exposures=False, tile_rows=tile_rows, workers=workers)
+    for field in ("photoquantity", "mask", "all_saturated", "all_dark"):
+        np.testing.assert_array_equal(getattr(tiled, field), getattr(whole, field), err_msg=field)
+
+
+def test_a_camera_loaded_from_disk_corrects_in_tiles_as_it_does_whole(rng, tmp_path):
+    shape = (8, 6)
+    model, stack = _model(shape, rng), _stack(rng, shape, 1)
+    model.save(tmp_path / "camera")
+    loaded = load_camera(tmp_path / "camera")
+    whole = correct(stack, loaded, refine_exposures=False, tile_rows=10**6)
+    tiled = correct(stack, loaded, refine_exposures=False, tile_rows=3)
+    np.testing.assert_array_equal(tiled.photoquantity, whole.photoquantity)
+    # and as the camera it was saved from: its maps went through float32 files
+    mem = correct(stack, model, refine_exposures=False)
+    np.testing.assert_array_equal(mem.mask, tiled.mask)
+    ok = ~mem.mask
+    np.testing.assert_allclose(tiled.photoquantity[ok], mem.photoquantity[ok], rtol=4 * EPS)
+
+
+def test_a_whole_image_merge_method_still_corrects(rng):
+    shape = (6, 7)
+    model = _model(shape, rng, merge=MergeModel("Robertson 2003"))
+    stack = _stack(rng, shape, 1)
+    assert model.merge.tile_plan(stack, model.balanced_response()) is None
+    out = correct(stack, model, refine_exposures=False, tile_rows=2)
+    assert out.photoquantity.dtype == np.float32 and out.photoquantity.shape == (*shape, 3)
+    assert np.isfinite(out.photoquantity[~out.mask]).all()
