@@ -654,7 +654,9 @@ def refine_exposure_times(
         )
 
     rng = np.random.default_rng(seed)
-    sample = stack if max_pixels is None else _pixel_sample(stack, int(max_pixels), rng)
+    if max_pixels is None:
+        return attempt(stack, rng)
+    sample = _pixel_sample(stack, int(max_pixels), rng)
     if sample is stack:
         return attempt(stack, rng)
     try:

@@ -417,9 +417,7 @@ def _solve_channel(
         except RuntimeError:  # pragma: no cover - active set did not terminate
             lb = np.zeros(n_g)
             lb[0] = -np.inf
-            x = scipy.optimize.lsq_linear(
-                design, y, bounds=(lb, np.full(n_g, np.inf)), tol=1e-12
-            ).x
+            x = scipy.optimize.lsq_linear(design, y, bounds=(lb, np.full(n_g, np.inf)), tol=1e-12).x
         g = np.cumsum(x)
         g -= g[gauge]
         constrained = True
