@@ -319,6 +319,7 @@ def calibrate(
        and compensation", ICCV 2005. doi:10.1109/ICCV.2005.249
     """
     _check_views(views, irradiance)
+    asked = refine_exposures is not None  # asked for, not the profile's default
     if refine_exposures is None:
         refine_exposures = bool(profile_setting(profile, "refine_exposures"))
     elif not isinstance(refine_exposures, bool):
@@ -348,6 +349,7 @@ def calibrate(
     t0 = time.perf_counter()
     response_spec = steps["response"]
     exposures: dict[str, Any] = {"refined": False}
+    refs: list[ExposureRefinement] | None = None
     if refine_exposures and len(views) >= 2:
         say("response and exposure refinement")
         fits: list[StepFit[Any]] = []
@@ -360,12 +362,22 @@ def calibrate(
             return m.levels, m.log_inverse_response, m.saturation_level, vmin
 
         try:
-            refs, _ = refine_jointly(list(views), recover, rounds=4, seed=seed)
+            # 3 rounds: the fourth changed no time (measured); 20 000 pixels per view
+            # for the response (README, exposure refinement)
+            refs, _ = refine_jointly(
+                list(views), recover, rounds=3, combine_pixels=20_000, seed=seed
+            )
         except CalibrationError as exc:
-            raise CalibrationError(
-                f"exposure refinement failed ({exc}); calibrate with refine_exposures=False "
-                "(--no-refine-exposures) to keep the nominal times"
-            ) from None
+            if asked:
+                raise CalibrationError(
+                    f"exposure refinement failed ({exc}); calibrate with refine_exposures=False "
+                    "(--no-refine-exposures) to keep the nominal times"
+                ) from None
+            # the profile's default, not a request: where the data do not
+            # determine the times (e.g. a response with no usable range), keep them
+            notes.append(f"exposure refinement failed ({exc}); nominal times kept")
+            refine_exposures = False
+    if refs is not None:
         resp_fit = fits[-1]
         views = [r.apply(v) for r, v in zip(refs, views, strict=True)]
         shutter = fit_affine_shutter(refs)[1]
@@ -384,7 +396,7 @@ def calibrate(
             "view_scale_std": float(scale_std),
         }
     else:
-        if refine_exposures:
+        if refine_exposures and len(views) < 2:
             notes.append(
                 "one view only: its exposure times cannot be told from its response; "
                 "nominal times kept"

@@ -443,7 +443,7 @@ def build_parser() -> argparse.ArgumentParser:
             action="store_true",
             default=None,
             help="re-estimate the frames' exposure times from the data (photoquant.exposure; "
-            "off by default in both profiles for now: it multiplies calibration time by ~50)",
+            "the photoquant profile's default, not the paper profile's)",
         )
         p.add_argument(
             "--no-refine-exposures",

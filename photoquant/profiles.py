@@ -82,10 +82,10 @@ PROFILES: Mapping[str, Mapping[str, tuple[str, Mapping[str, Any]]]] = MappingPro
 
 PROFILE_SETTINGS: Mapping[str, Mapping[str, Any]] = MappingProxyType(
     {
-        # exposure times re-estimated from the data (photoquant.exposure) only when asked:
-        # at 320x240 it takes a calibration from 0.4 s to 24 s (measured 2026-12-01), too
-        # slow to be the default until it is made faster
-        "photoquant": MappingProxyType({"refine_exposures": False}),
+        # exposure times re-estimated from the data (photoquant.exposure): real shutters
+        # are a few percent off their labels (issue 9); at 320x240 it costs ~0.9 s of CPU
+        # over a 0.5 s calibration (was 27 s; measured 2026-12-01)
+        "photoquant": MappingProxyType({"refine_exposures": True}),
         # the paper takes the exposure times as labelled
         "paper": MappingProxyType({"refine_exposures": False}),
     }

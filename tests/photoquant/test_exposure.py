@@ -125,6 +125,8 @@ def test_exposures_that_share_no_pixels_are_not_refined():
         ({"levels": np.arange(256.0)[::-1].copy()}, "increasing"),
         ({"gauge": "median"}, "gauge"),
         ({"huber_k": 0.0}, "huber_k"),
+        ({"max_pixels": 0}, "max_pixels"),
+        ({"max_pixels": 2.5}, "max_pixels"),
     ],
 )
 def test_bad_arguments_are_refused(kwargs, match):
@@ -257,3 +259,32 @@ def test_joint_refinement_removes_the_jitter_the_data_determine():
     for ref, t_act in zip(refs, actual, strict=True):
         assert np.abs(nonlinear_part(ref.exposure_s, t_act)).max() < 0.005  # 0.03 % seen
     assert max(np.abs(nonlinear_part(t_nom, t)).max() for t in actual) > 0.02
+
+
+def test_a_pixel_sample_refines_to_the_statistics_of_its_size():
+    """``max_pixels``: 4 000 of 19 200 pixels give the actual ratios within their (larger) noise.
+
+    The log times' statistical errors scale as 1/√pixels: the sample's reported
+    deviations must be about √(19200/4000) ≈ 2.2 times those of every pixel
+    (1.5–3.5 allows for the random draw), and both results must match the
+    actual times within 4 of their own deviations.
+    """
+    cam, stack, t_act, levels, g = _jittered_capture(shape=(120, 160), seed=11)
+    every = refine_exposure_times(stack, levels, g, cam.saturation_dn, max_pixels=None)
+    sample = refine_exposure_times(stack, levels, g, cam.saturation_dn, max_pixels=4000)
+    assert every.refined.all() and sample.refined.all()
+    truth = _gauge_free(np.log(t_act))
+    for ref in (every, sample):
+        err = _gauge_free(np.log(ref.exposure_s)) - truth
+        assert np.all(np.abs(err) < 4 * ref.log_std), (err, ref.log_std)
+    ratio = np.median(sample.log_std / every.log_std)
+    assert 1.5 < ratio < 3.5, ratio
+
+
+def test_a_sample_that_cannot_decide_falls_back_to_every_pixel():
+    """A sample too small for ``min_overlap`` refines from every pixel, exactly as ``max_pixels=None``."""
+    cam, stack, _, levels, g = _jittered_capture(shape=(48, 64), seed=13)
+    every = refine_exposure_times(stack, levels, g, cam.saturation_dn, max_pixels=None)
+    tiny = refine_exposure_times(stack, levels, g, cam.saturation_dn, max_pixels=40)
+    np.testing.assert_array_equal(tiny.exposure_s, every.exposure_s)
+    np.testing.assert_array_equal(tiny.n_values, every.n_values)

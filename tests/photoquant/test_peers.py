@@ -273,6 +273,9 @@ def test_hugin_pipeline_through_calibrate_and_the_cli(tmp_path, capsys):
     cam = tmp_path / "camera"
     args = ["calibrate", str(manifest), "-o", str(cam), "-q"]
     args += ["--method", "response=Hugin EMoR", "--method", "vignetting=Hugin"]
+    # the capture's times are exact: refining them against Hugin's EMoR fit (g rms
+    # ~0.08 on this camera) would move them by 1-2 % and test the refinement, not Hugin
+    args += ["--no-refine-exposures"]
     assert main(args) == 0
     model = pq.load_camera(cam)
     assert model.response.method == "Hugin EMoR"

@@ -758,3 +758,27 @@ def test_a_manifest_flatfield_set_feeds_the_flat_field_vignetting(round_trip_cap
     model = photoquant.calibrate_manifest(tmp_path / "capture.json", vignetting="Flat Field")
     e_mean, _ = map_errors(model.vignetting_map(), v_true)
     assert e_mean < 0.01, e_mean  # the bound of the in-memory flat-field test above
+
+
+def test_extended_goldman_chen_max_tracks_subsamples_evenly(rng):
+    """``max_tracks`` keeps every ``n/max``-th track; the fit stays within its own uncertainty.
+
+    With ``max_tracks`` at or above the number of tracks nothing changes (bit for
+    bit). With 300 of 1200 tracks the statistical error grows by about
+    √(1200/300) = 2, and the two fits differ by about the subsample's own
+    first-order map uncertainty: the mean difference must stay below 3× it.
+    """
+    truth = truth_maps()["Extended Goldman-Chen"]
+    data = make_data(truth, rng, n_tracks=1200)
+    n = len(data.tracks)
+    every = fit("Extended Goldman-Chen", data, max_tracks=None)
+    same = fit("Extended Goldman-Chen", data, max_tracks=n)
+    np.testing.assert_array_equal(every.model.params, same.model.params)
+    assert every.report["n_tracks_sampled"] == n
+    part = fit("Extended Goldman-Chen", data, max_tracks=300)
+    assert part.report["n_tracks_sampled"] == 300 and part.report["n_tracks_given"] == n
+    diff = np.abs(part.model.map(IMAGE_SHAPE) / every.model.map(IMAGE_SHAPE) - 1.0)
+    assert np.all(diff.mean(axis=(0, 1)) < 3 * part.report["map_uncertainty"])
+    # and the subsample is no toy: it is still within the noise of the truth
+    err = np.abs(part.model.map(IMAGE_SHAPE) / truth - 1.0).mean(axis=(0, 1))
+    assert np.all(err < 3 * part.report["map_uncertainty"]), err
