@@ -282,8 +282,13 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
             raise SweepError(
                 "--workers sizes the local cluster; it cannot be used with --scheduler"
             )
+        import dask
+        from dask.utils import parse_timedelta
+
+        # Dask's connect timeout (30 s by default), at most 10 s: a wrong address fails soon
+        timeout = min(parse_timedelta(dask.config.get("distributed.comm.timeouts.connect")), 10.0)
         try:
-            client = Client(scheduler, timeout="10s")
+            client = Client(scheduler, timeout=timeout)
         except (OSError, TimeoutError, ValueError) as exc:
             raise SweepError(
                 f"cannot reach the Dask scheduler at {scheduler}: {' '.join(str(exc).split())}"
@@ -296,7 +301,7 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
         n_workers=n,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        dashboard_address=":0",  # a free port: sweeps side by side never collide
         silence_logs=logging.ERROR,
     )
     return Client(cluster), cluster
