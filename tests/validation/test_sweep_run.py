@@ -127,3 +127,32 @@ def test_tiny_sweep_end_to_end_resumed_and_overwritten(cli, tmp_path, capsys):
     assert ok and {r["method"] for r in ok} == {"default"}
     assert np.isfinite([r["value"] for r in ok]).all()
     assert "Failed cells" in (out / "summary" / "index.html").read_text()
+
+
+@pytest.mark.slow
+@pytest.mark.render
+def test_rendered_cells_share_their_renders_through_the_cache(cli, tmp_path):
+    pytest.importorskip("mitsuba")
+    cache = tmp_path / "cache"
+    spec_path = tmp_path / "spec.toml"
+    spec_path.write_text(
+        '[sweep]\nrenderer = "mitsuba"\nspp = 4\nresolution = [64, 48]\nn_exposures = 5\n'
+        f'n_repeats = 2\ncache_dir = "{cache}"\n'
+        '[axes]\n"noise.read_noise_e" = [4.0, 8.0]\n'
+    )
+    out = tmp_path / "out"
+    assert cli(["sweep", str(spec_path), "-o", str(out), "--workers", "1", "-q"]) == 0
+    rows = _rows(out)
+    assert {r["status"] for r in rows} == {"ok"}
+    assert {r["renderer"] for r in rows} == {"mitsuba"} and {r["spp"] for r in rows} == {4}
+    by = {(r["noise.read_noise_e"], r["metric"]): r["value"] for r in rows}
+    for noise in (4.0, 8.0):
+        assert 0.8 * by[(noise, "scene_noise_floor")] < by[(noise, "scene_e_mean")]
+        assert (noise, "colorchecker_e_mean") in by  # a rendered set has its ColorChecker
+    # one cell's renders, cached once and reused by the other cell (same scenes, render seed 0)
+    cached = sorted(p.name for p in cache.rglob("*.exr"))
+    assert cached and len(cached) == len(set(cached))
+    again = tmp_path / "again"
+    spec_path.write_text(spec_path.read_text().replace("[4.0, 8.0]", "[4.0, 8.0, 16.0]"))
+    assert cli(["sweep", str(spec_path), "-o", str(again), "--workers", "1", "-q"]) == 0
+    assert sorted(p.name for p in cache.rglob("*.exr")) == cached  # nothing rendered anew

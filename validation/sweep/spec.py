@@ -294,7 +294,7 @@ def set_path(fields: dict[str, Any], key: str, value: Any) -> None:
                         f"unknown preset field `{key}`: {where or 'the preset'} has no "
                         f"{part!r} (valid: {', '.join(valid)})"
                     )
-            keys = [part]
+            keys: list[Any] = [part]
         elif isinstance(node, list):
             if part == "*":
                 keys = list(range(len(node)))
@@ -430,7 +430,8 @@ def _preset_data(name: str, base_dir: Path, files: dict[str, Any]) -> dict[str, 
                 raise _fail(f"`preset`: {exc}") from None
         return copy.deepcopy(files[name])
     try:
-        return to_json_value(preset_fields(name))  # type: ignore[no-any-return]
+        data: dict[str, Any] = to_json_value(preset_fields(name))
+        return data
     except InputError as exc:
         raise _fail(f"`preset`: {exc}") from None
 
