@@ -255,3 +255,13 @@ def test_cli_workers_with_scheduler_is_an_error(cli, tmp_path, capsys):
     assert rc == 2
     assert "--workers" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_table_sets_the_keys_it_names():
+    spec = parse_spec({"sweep": {"preset": "cmos"}, "axes": {"noise": [{"read_noise_e": 4.0}]}})
+    (cell,) = spec.cells()
+    assert cell["camera"]["noise"] == {
+        "full_well_e": 10000.0,  # the cmos preset's, kept
+        "read_noise_e": 4.0,
+        "dark_current_e_per_s": 60.0,
+    }

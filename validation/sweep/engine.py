@@ -48,6 +48,7 @@ __all__ = [
     "sweep_folder_problem",
     "read_results",
     "cell_columns",
+    "column_value",
 ]
 
 SWEEP_FORMAT = "photoquant.sweep/1"
@@ -158,7 +159,8 @@ def _create_output(output: Path, spec: SweepSpec, replace: bool) -> None:
 # ------------------------------------------------------------------ table
 
 
-def _column_value(key: str, value: Any) -> Any:
+def column_value(key: str, value: Any) -> Any:
+    """A setting's value as its table column holds it (``"160x120"``, a method's label, JSON)."""
     if key == "resolution":
         return f"{value[0]}x{value[1]}"
     if key == "method":
@@ -185,7 +187,7 @@ def _schema(spec: SweepSpec, columns: Sequence[str]) -> Any:
     def kind(key: str) -> Any:
         if key == "bit_depth":
             return pa.int64()
-        values = [_column_value(key, s[key]) for s in spec.settings() if key in s]
+        values = [column_value(key, s[key]) for s in spec.settings() if key in s]
         if values and all(isinstance(v, bool) for v in values):
             return pa.bool_()
         if values and all(isinstance(v, int) and not isinstance(v, bool) for v in values):
@@ -220,7 +222,7 @@ def _part_table(result: Mapping[str, Any], cell: Mapping[str, Any], index: int, 
     params: dict[str, Any] = {}
     for name in schema.names:
         if name in settings:
-            value = _column_value(name, settings[name])
+            value = column_value(name, settings[name])
             params[name] = str(value) if pa.types.is_string(schema.field(name).type) else value
     params["bit_depth"] = int(cell["camera"]["bit_depth"])
     metrics = list(result["metrics"]) or [(None, None)]
@@ -312,7 +314,7 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
 
 def _describe(spec: SweepSpec, cell: Mapping[str, Any]) -> str:
     s = cell["settings"]
-    parts = [f"{a}={_column_value(a, s[a])}" for a in spec.axes]
+    parts = [f"{a}={column_value(a, s[a])}" for a in spec.axes]
     return ", ".join([*parts, f"seed={cell['seed']}"])
 
 

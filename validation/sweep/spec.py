@@ -265,7 +265,8 @@ def set_path(fields: dict[str, Any], key: str, value: Any) -> None:
     ``fields`` holds plain data (lists and dicts, as :func:`photoquant.utils.to_json_value`
     gives). The path must exist in ``fields`` (``noise.*`` may name any
     :class:`pqsim.synth_camera.sensor.SensorNoise` field) and ``value`` must
-    have the type of the value it replaces.
+    have the type of the value it replaces; a table replacing a table sets
+    the keys it names and keeps the others.
 
     Raises
     ------
@@ -313,7 +314,9 @@ def set_path(fields: dict[str, Any], key: str, value: Any) -> None:
                 old = node[k]
                 if not _same_kind(old, value):
                     raise _fail(f"`{key}` must be {_kind_name(old)}, got {_label(value)}")
-                node[k] = copy.deepcopy(value)
+                # a table sets the keys it names (``noise = {read_noise_e = 4.0}``)
+                new = copy.deepcopy(value)
+                node[k] = dict(old) | new if isinstance(old, Mapping) else new
             else:
                 walk(node[k], i + 1, here)
 

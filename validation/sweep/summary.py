@@ -166,8 +166,14 @@ def _fmt(q: tuple[float, float, float], scale: float) -> str:
 
 
 def _html(
-    spec: Any, table: Any, rows: Sequence[Mapping[str, Any]], images: Mapping[str, bytes]
+    spec: Any,
+    table: Any,
+    rows: Sequence[Mapping[str, Any]],
+    images: Mapping[str, bytes],
+    columns: Sequence[str],
 ) -> str:
+    from validation.sweep.engine import column_value
+
     axes = list(spec.axes)
     status = _values(table, "status")
     cells = {}
@@ -194,9 +200,9 @@ def _html(
         + ".</p>",
         "<p>Fixed: "
         + ", ".join(
-            f"<code>{e(k)} = {e(str(v))}</code>"
+            f"<code>{e(k)} = {e(str(column_value(k, v)))}</code>"
             for k, v in sorted(spec.fixed.items())
-            if k not in spec.axes
+            if k not in spec.axes and k in columns
         )
         + ".</p>",
         "<h2>Errors per axis</h2>",
@@ -237,9 +243,8 @@ def write_summary(spec: Any, output: str | Path, table: Any, columns: Sequence[s
     table : pyarrow.Table
         Its consolidated results.
     columns : sequence of str
-        The parameter columns (unused beyond the axes; kept for the caller's symmetry).
+        The parameter columns (:func:`validation.sweep.engine.cell_columns`).
     """
-    del columns
     from photoquant.io.atomic import atomic_directory
     from validation.sweep.engine import summary_folder_problem
 
@@ -255,7 +260,8 @@ def write_summary(spec: Any, output: str | Path, table: Any, columns: Sequence[s
     ) as tmp:
         for axis, png in images.items():
             (tmp / f"{_file_name(axis)}.png").write_bytes(png)
-        (tmp / "index.html").write_text(_html(spec, table, rows, images), encoding="utf-8")
+        page = _html(spec, table, rows, images, columns)
+        (tmp / "index.html").write_text(page, encoding="utf-8")
     return target
 
 
