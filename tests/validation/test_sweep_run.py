@@ -97,7 +97,7 @@ def test_tiny_sweep_end_to_end_resumed_and_overwritten(cli, tmp_path, capsys):
     # the same spec again: nothing to run, the same table
     before = {p.name: p.stat().st_mtime_ns for p in (out / "parts").iterdir()}
     assert cli(["sweep", str(spec_path), "-o", str(out), "--workers", "1"]) == 0
-    assert "4 done already, 0 to run" in capsys.readouterr().err
+    assert "4 done already, 0 to run on no cluster" in capsys.readouterr().err
     assert {p.name: p.stat().st_mtime_ns for p in (out / "parts").iterdir()} == before
     assert _rows(out) == rows
     # a sweep of another spec replaces it with --overwrite (and only with it); here the

@@ -377,17 +377,26 @@ def run_sweep(
     ids = [c["cell_id"] for c in cells]
     if len(set(ids)) != len(ids):
         raise InputError("two cells of the spec have the same configuration")  # pragma: no cover
-    client, cluster = _client(scheduler, workers)
+    parts = output / _PARTS
+    done = set()
+    if mode == "resume":
+        done = {cid for cid in ids if _part_status(parts / f"{cid}.parquet") == "ok"}
+    pending = [(i, c) for i, c in enumerate(cells) if c["cell_id"] not in done]
+    columns = cell_columns(spec)
+    schema = _schema(spec, columns)
+    if workers is not None and scheduler is not None:
+        raise SweepError("--workers sizes the local cluster; it cannot be used with --scheduler")
+    # the cluster is reached before anything is written (and only when there is work)
+    client, cluster = _client(scheduler, workers) if pending else (None, None)
     try:
         if mode != "resume":
             _create_output(output, spec, replace=mode == "replace")
-        parts = output / _PARTS
         parts.mkdir(exist_ok=True)
-        done = {cid for cid in ids if _part_status(parts / f"{cid}.parquet") == "ok"}
-        pending = [(i, c) for i, c in enumerate(cells) if c["cell_id"] not in done]
-        columns = cell_columns(spec)
-        schema = _schema(spec, columns)
-        where = scheduler or f"a local cluster of {len(client.scheduler_info()['workers'])} workers"
+        if client is None:
+            where = "no cluster"
+        else:
+            n = len(client.scheduler_info()["workers"])
+            where = scheduler or f"a local cluster of {n} workers"
         _say(
             f"sweep: {len(cells)} cells, {len(done)} done already, {len(pending)} to run on {where}"
         )
@@ -403,6 +412,7 @@ def run_sweep(
         by_key = {}
         futures = []
         for index, cell in pending:
+            assert client is not None  # a client is made whenever a cell is pending
             fut = client.submit(
                 run_cell, cell, key=f"photoquant-sweep-{cell['cell_id']}", pure=False
             )
@@ -410,7 +420,7 @@ def run_sweep(
             futures.append(fut)
         from distributed import as_completed
 
-        for fut in as_completed(futures):
+        for fut in as_completed(futures) if futures else ():
             index, cell = by_key[fut.key]
             try:
                 result = fut.result()
@@ -431,7 +441,8 @@ def run_sweep(
             bar.update()
         bar.close()
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
     outcome = _consolidate(spec, output, cells, schema)
