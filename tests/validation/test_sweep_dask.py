@@ -140,8 +140,7 @@ def _free_port() -> int:
 
 
 def _dask(args: list[str], env: dict[str, str], log: Path) -> subprocess.Popen:
-    dask = Path(sys.executable).with_name("dask")
-    cmd = [str(dask)] if dask.exists() else [sys.executable, "-m", "distributed.cli.dask_spec"]
+    cmd = [sys.executable, "-m", "dask"]  # the dask command of this interpreter
     with log.open("w") as f:
         return subprocess.Popen(
             [*cmd, *args], env=env, stdout=f, stderr=subprocess.STDOUT, start_new_session=True

@@ -131,6 +131,16 @@ def test_a_preset_file_is_read_relative_to_the_spec(tmp_path):
         ({"axes": {"preset": ["nikon"]}}, "unknown camera preset 'nikon'"),
         ({"axes": {"balance.5": [1.0]}}, "use an index 0..2"),
         ({"axes": {"balance": [[1.0, -1.0, 1.0]]}}, "cannot be built"),
+        (
+            {"axes": {"method": [{"response": {"name": "Debevec 1997", "smoothnes": 1.0}}]}},
+            "has no option(s) smoothnes",
+        ),
+        (
+            {"axes": {"method": [{"response": {"name": "Debevec 1997", "smoothness": "x"}}]}},
+            "`smoothness` must be a number",
+        ),
+        ({"axes": {"responses.*": [{"kind": "cubic", "params": {}}]}}, "'cubic'"),
+        ({"axes": {"renderer": ["povray"]}}, "`renderer` must be one of"),
     ],
 )
 def test_bad_specs_are_one_line_errors_naming_the_problem(doc, needle):
