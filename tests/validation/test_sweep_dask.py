@@ -117,6 +117,7 @@ def test_killed_sweep_resumes_without_recomputing_finished_cells(tmp_path):
         _kill_group(proc)
     assert proc.returncode == 0, err
     assert f"{len(finished)} done already, {6 - len(finished)} to run" in err
+    assert "6/6" in err  # the progress bar counted up to every cell
     second_run = trace.read_text().split()[len(first_run) :]
     finished_ids = {name[: -len(".parquet")] for name in finished}
     assert len(second_run) == 6 - len(finished)  # counted by the workers: no finished cell again

@@ -13,6 +13,7 @@ import socket
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -213,16 +214,18 @@ def test_cli_bad_spec_exits_2_and_writes_nothing(cli, tmp_path, capsys, text, ne
     assert not out.exists()
 
 
-def test_cli_unreachable_scheduler_exits_2_and_writes_nothing(cli, tmp_path, capsys):
+@pytest.mark.parametrize("address", ["free port", "localhost-without-port"])
+def test_cli_unreachable_scheduler_exits_2_and_writes_nothing(cli, tmp_path, capsys, address):
     import dask
 
-    with socket.socket() as s:  # a port nothing listens on
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    if address == "free port":
+        with socket.socket() as s:  # a port nothing listens on
+            s.bind(("127.0.0.1", 0))
+            address = f"tcp://127.0.0.1:{s.getsockname()[1]}"
     spec = _write(tmp_path, "[sweep]\nresolution = [40, 30]\n[axes]\nn_repeats = [1]\n")
     out = tmp_path / "out"
     with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
-        rc = cli(["sweep", str(spec), "-o", str(out), "--scheduler", f"tcp://127.0.0.1:{port}"])
+        rc = cli(["sweep", str(spec), "-o", str(out), "--scheduler", address])
     assert rc == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot reach the Dask scheduler" in err[0]
@@ -275,3 +278,26 @@ def test_a_table_sets_the_keys_it_names():
         "read_noise_e": 4.0,
         "dark_current_e_per_s": 60.0,
     }
+
+
+def test_summary_lines_are_quartiles_over_the_seeds_and_pool_beyond_the_limit():
+    from validation.sweep.summary import MAX_SERIES, axis_series
+
+    rows = [
+        {"n": n, "pipeline": p, "k": k, "seed": seed, "metric": "m", "value": n + seed + 10 * k}
+        for n in (1, 4)
+        for p in ("a", "b")
+        for k in range(MAX_SERIES + 1)
+        for seed in (0, 1, 2)
+    ]
+    xs, series, note = axis_series(rows, ["n", "pipeline"], "n", "m")
+    # "k" is no axis here: its values are pooled with the seeds in each line
+    assert xs == [1, 4] and set(series) == {"pipeline=a", "pipeline=b"} and note == ""
+    values = [1 + s + 10 * k for k in range(MAX_SERIES + 1) for s in (0, 1, 2)]
+    q = np.percentile(values, [25, 50, 75])
+    assert series["pipeline=a"][0] == pytest.approx(tuple(q))
+    # with k an axis too, 2 x (MAX_SERIES + 1) lines are too many: k is pooled, pipeline kept
+    xs, series, note = axis_series(rows, ["n", "pipeline", "k"], "n", "m")
+    assert set(series) == {"pipeline=a", "pipeline=b"} and "pooled over k" in note
+    xs, series, note = axis_series(rows, ["n", "k"], "n", "m")
+    assert set(series) == {"all"} and "pooled over k" in note

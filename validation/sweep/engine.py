@@ -291,10 +291,9 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
         timeout = min(parse_timedelta(dask.config.get("distributed.comm.timeouts.connect")), 10.0)
         try:
             client = Client(scheduler, timeout=timeout)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise SweepError(
-                f"cannot reach the Dask scheduler at {scheduler}: {' '.join(str(exc).split())}"
-            ) from None
+        except Exception as exc:  # noqa: BLE001 - any failure to connect (address, protocol, network)
+            reason = " ".join(str(exc).split()) or type(exc).__name__
+            raise SweepError(f"cannot reach the Dask scheduler at {scheduler}: {reason}") from None
         return client, None
     n = workers if workers is not None else len(os.sched_getaffinity(0))
     if n < 1:
