@@ -295,7 +295,9 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
             reason = " ".join(str(exc).split()) or type(exc).__name__
             raise SweepError(f"cannot reach the Dask scheduler at {scheduler}: {reason}") from None
         return client, None
-    n = workers if workers is not None else len(os.sched_getaffinity(0))
+    affinity = getattr(os, "sched_getaffinity", None)  # the cores this process may use (Linux)
+    cores = len(affinity(0)) if affinity is not None else (os.cpu_count() or 1)
+    n = workers if workers is not None else cores
     if n < 1:
         raise SweepError(f"--workers must be at least 1, got {n}")
     cluster = LocalCluster(
