@@ -301,3 +301,29 @@ def test_summary_lines_are_quartiles_over_the_seeds_and_pool_beyond_the_limit():
     assert set(series) == {"pipeline=a", "pipeline=b"} and "pooled over k" in note
     xs, series, note = axis_series(rows, ["n", "k"], "n", "m")
     assert set(series) == {"all"} and "pooled over k" in note
+
+
+def test_a_method_registered_at_run_time_is_a_valid_axis_value():
+    """Method names come from the registries (plug-ins included), never from a list in the code."""
+    from photoquant.methods import register_method, registry
+    from validation.sweep.cells import run_cell
+
+    reg = registry("response")
+    gamma = reg["Gamma"]
+    name = "Sweep Test Gamma"
+    register_method("response", name, gamma.function, options=gamma.options, model=gamma.model)
+    try:
+        spec = parse_spec(
+            {
+                "sweep": {"resolution": [40, 30], "n_exposures": 5},
+                "axes": {"method": [f"response={name}"]},
+            }
+        )
+        (cell,) = spec.cells()
+        result = run_cell(cell)  # in this process, where the method is registered
+        assert result["status"] == "ok", result["error"]
+        assert dict(result["metrics"])["response_rms"] >= 0
+    finally:
+        reg.remove(name)
+    with pytest.raises(SweepSpecError, match="Sweep Test Gamma"):
+        parse_spec({"axes": {"method": [f"response={name}"]}})
