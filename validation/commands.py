@@ -1,6 +1,6 @@
 """The ``photoquant`` sub-commands the validation package provides.
 
-``validate``, ``demo``, ``compare`` and ``leaderboard``.
+``validate``, ``demo``, ``compare``, ``leaderboard`` and ``sweep``.
 
 They drive the simulator and read its ground truth, which the calibrator
 never imports, so they reach the ``photoquant`` command through the
@@ -18,7 +18,13 @@ from typing import Any
 
 from photoquant.errors import OutputExistsError
 
-__all__ = ["register_validate", "register_demo", "register_compare", "register_leaderboard"]
+__all__ = [
+    "register_validate",
+    "register_demo",
+    "register_compare",
+    "register_leaderboard",
+    "register_sweep",
+]
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -224,3 +230,55 @@ def register_leaderboard(sub: Any) -> None:
     )
     lb.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     lb.set_defaults(func=_cmd_leaderboard)
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from validation.sweep import load_spec, run_sweep
+
+    spec = load_spec(args.spec)
+    outcome = run_sweep(
+        spec,
+        args.output,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        overwrite=args.overwrite,
+        quiet=args.quiet,
+    )
+    if not args.quiet:
+        print(
+            f"sweep: {outcome.n_cells} cells ({outcome.skipped} done before, "
+            f"{outcome.computed} run now, {len(outcome.failed)} failed); "
+            f"table: {outcome.results}",
+            file=sys.stderr,
+        )
+    if outcome.failed:
+        for cid, where, error in outcome.failed:
+            print(f"photoquant: cell {cid} ({where}) failed: {error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def register_sweep(sub: Any) -> None:
+    """Add ``photoquant sweep`` (:mod:`validation.sweep`)."""
+    sw = sub.add_parser(
+        "sweep",
+        help="run a parameter sweep (TOML spec) on Dask: resumable, one tidy table, plots",
+    )
+    sw.add_argument("spec", metavar="SPEC.toml", help="the sweep specification (README: Sweeps)")
+    sw.add_argument("-o", "--output", metavar="DIR", required=True, help="the sweep folder")
+    sw.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a running Dask scheduler (tcp://HOST:PORT); a local cluster by default",
+    )
+    sw.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="worker processes of the local cluster (default: one per core)",
+    )
+    sw.add_argument(
+        "--overwrite", action="store_true", help="replace a sweep folder of another spec"
+    )
+    sw.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no messages")
+    sw.set_defaults(func=_cmd_sweep)
