@@ -327,3 +327,14 @@ def test_a_method_registered_at_run_time_is_a_valid_axis_value():
         reg.remove(name)
     with pytest.raises(SweepSpecError, match="Sweep Test Gamma"):
         parse_spec({"axes": {"method": [f"response={name}"]}})
+
+
+def test_a_cell_hash_changes_with_the_code(monkeypatch):
+    """A part written by other code is never reused: the source digest is in the hash."""
+    from validation.sweep import cells
+
+    config = {"preset": "ccd", "seed": 0, "code": cells.code_version()}
+    before = cells.cell_id(config)
+    other = dict(config, code=dict(config["code"], source="0" * 16))
+    assert cells.cell_id(other) != before
+    assert len(cells.source_digest()) == 16 and cells.source_digest() == cells.source_digest()

@@ -42,6 +42,7 @@ References
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -66,10 +67,46 @@ _TRACE_ENV = "PHOTOQUANT_SWEEP_TRACE"
 
 
 def code_version() -> dict[str, str]:
-    """The code version a cell's hash includes: photoquant's version and the cell format."""
+    """The code version a cell's hash includes.
+
+    photoquant's version, the cell format, the versions of numpy and scipy
+    (the numbers depend on them) and a digest of the source of the three
+    packages (:func:`source_digest`): a cell computed by other code is
+    computed again, never reused, even when the version number did not move.
+    """
+    import numpy as np
+    import scipy
+
     import photoquant
 
-    return {"photoquant": photoquant.__version__, "cell_format": str(CELL_FORMAT)}
+    return {
+        "photoquant": photoquant.__version__,
+        "cell_format": str(CELL_FORMAT),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "source": source_digest(),
+    }
+
+
+@functools.lru_cache(maxsize=1)
+def source_digest() -> str:
+    """SHA-256 (16 hex digits) of the files of ``photoquant``, ``pqsim`` and ``validation``.
+
+    Every file under the packages (code and shipped data, caches excluded),
+    by path relative to its package and content, in sorted order.
+    """
+    import importlib
+
+    digest = hashlib.sha256()
+    for name in ("photoquant", "pqsim", "validation"):
+        root = Path(importlib.import_module(name).__file__ or "").parent
+        for path in sorted(root.rglob("*")):
+            if not path.is_file() or "__pycache__" in path.parts or path.suffix == ".pyc":
+                continue
+            digest.update(f"{name}/{path.relative_to(root).as_posix()}\0".encode())
+            digest.update(path.read_bytes())
+            digest.update(b"\0")
+    return digest.hexdigest()[:16]
 
 
 def cell_config(spec: Any, settings: Mapping[str, Any], seed: int) -> dict[str, Any]:
