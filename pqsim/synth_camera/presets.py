@@ -164,7 +164,9 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
         Any :class:`SyntheticCamera` field, e.g. ``bit_depth=12``,
         ``balance=(1, 1, 1)``, ``vignetting_params=None``, ``prnu_seed=7``.
         ``responses`` may be given as ResponseCurve objects or dicts, ``noise``
-        as a SensorNoise or a dict of its fields (merged into the preset's).
+        as a SensorNoise or a dict of its fields (merged into the preset's),
+        ``disturbances`` as a SensorDisturbances or a dict of its fields
+        (merged into the preset's; :mod:`pqsim.synth_camera.disturbances`).
 
     Returns
     -------
@@ -187,7 +189,13 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
     if unknown:
         raise InputError(f"unknown camera field(s) {sorted(unknown)}; valid: {sorted(valid)}")
     noise = overrides.pop("noise", None)
+    disturbances = overrides.pop("disturbances", None)
     fields.update(overrides)
+    if isinstance(disturbances, Mapping) and isinstance(fields.get("disturbances"), Mapping):
+        # a mapping of disturbance fields is merged into the preset's, like `noise`
+        fields["disturbances"] = dict(fields["disturbances"]) | dict(disturbances)
+    elif disturbances is not None:
+        fields["disturbances"] = disturbances
     noise_fields = dict(fields["noise"])
     if isinstance(noise, SensorNoise):
         fields["noise"] = noise
