@@ -43,6 +43,7 @@ import numpy as np
 
 from photoquant import __version__
 from photoquant.balance import BalanceData, BalanceModel, check_roi
+from photoquant.defects import detect_defects, exclude_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import (
     ExposureRefinement,
@@ -410,12 +411,17 @@ def calibrate(
     say(f"merge {len(views)} view(s)")
     t0 = time.perf_counter()
     merged = [merge_model.merge(view, resp) for view in views]
+    # hot and stuck pixels are flagged, not merged (photoquant.defects): zero weight, as a
+    # pixel without a valid exposure, in every later step; flagged where every view shows one
+    defects = detect_defects(views)
+    merged = [exclude_defects(m, defects) for m in merged]
     timings["merge_per_view"] = (time.perf_counter() - t0) / len(views)
     report["merge"] = {
         "method": merge_model.method,
         "flagged_fraction_view0": float(merged[0].mask.mean()),
         "all_saturated_view0": int(merged[0].all_saturated.sum()),
         "all_dark_view0": int(merged[0].all_dark.sum()),
+        "defects": defects.report(),
     }
 
     # 3. sensor LUT -----------------------------------------------------------
@@ -428,7 +434,7 @@ def calibrate(
         lut_fit = lut_spec[0].function(merged[0].log_photoquantity, None, None)
     else:
         say("sensor LUT")
-        irr = merge_model.merge(irradiance, resp)
+        irr = exclude_defects(merge_model.merge(irradiance, resp), defects)
         lut_fit = fit_sensor_lut(irr, lut_spec)
     lut = lut_fit.model
     report["sensor_lut"] = {"method": lut.method, **lut_fit.report}

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from photoquant.defects import detect_defects, exclude_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import ExposureRefinement, refine_exposure_times
 from photoquant.merge import MergeModel
@@ -156,6 +157,7 @@ def correct(
         else:
             stack = refinement.apply(stack)
     merged = merger.merge(stack, model.balanced_response())
+    merged = exclude_defects(merged, detect_defects(stack))  # hot/stuck pixels: not merged
     with np.errstate(invalid="ignore"):
         photoquantity = np.exp(merged.log_photoquantity) * model.gain_map()
     return Correction(

@@ -108,8 +108,11 @@ def detect_saturation_levels(
     values = frames.reshape(-1, frames.shape[-1])
     levels = np.full(values.shape[1], c_max, dtype=np.int64)
     span = max(2, (c_max + 1) // 64)
+    stuck = _stuck_pixels(frames, min_count)
     for ch in range(values.shape[1]):
         v = values[:, ch]
+        if stuck is not None and stuck[:, ch].any():  # a stuck pixel's frames are no clip
+            v = frames.reshape(-1, stuck.shape[0], frames.shape[-1])[:, ~stuck[:, ch], ch].ravel()
         top = int(v.max())
         if top >= c_max:
             continue
@@ -119,6 +122,29 @@ def detect_saturation_levels(
         if pile >= max(min_count, min_fraction * v.size) and pile >= pile_up_ratio * below:
             levels[ch] = top
     return levels
+
+
+def _stuck_pixels(frames: np.ndarray, min_count: int) -> np.ndarray | None:
+    """``(H·W, C)`` bool: pixels stuck at a value of their own, or None (fewer than 2 frames).
+
+    A stuck pixel (:mod:`photoquant.defects`) holds one value in every frame;
+    its ``N·K`` equal values would pass for a pile-up at a clip. A pixel
+    clipped in every frame is constant too, but at a value many pixels share,
+    so only constant pixels whose value fewer than ``min_count`` constant
+    pixels hold are left out of the pile-up count.
+    """
+    if frames.ndim != 5 or frames.shape[0] * frames.shape[1] < 2:
+        return None
+    flat = frames.reshape(frames.shape[0] * frames.shape[1], -1, frames.shape[-1])
+    lo, hi = flat.min(axis=0), flat.max(axis=0)
+    const = lo == hi
+    if not const.any():
+        return None
+    out = np.zeros(const.shape, dtype=bool)
+    for ch in range(const.shape[1]):
+        vals, inv, counts = np.unique(lo[const[:, ch], ch], return_inverse=True, return_counts=True)
+        out[const[:, ch], ch] = counts[inv] < min_count
+    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -357,8 +357,8 @@ def test_jpeg_artefacts_shrink_with_quality_and_reach_the_files(tmp_path) -> Non
     manifest = write_capture_set(tmp_path / "s", cam, shape=(24, 32), n_repeats=1, n_views=1)
     doc = json.loads(manifest.read_text())
     first = doc["scene"]["frames"][0]
-    from pqsim.capture_set import DEFAULT_SCENE_EXPOSURES_S
     from pqsim.analytic import scene_test_hdr
+    from pqsim.capture_set import DEFAULT_SCENE_EXPOSURES_S
 
     again = cam.capture(
         scene_test_hdr((24, 32)),

@@ -1,0 +1,214 @@
+"""Defective pixels: hot and stuck pixels found in exposure stacks, flagged and not merged.
+
+A real sensor has a few pixels that do not measure light: *stuck* (dead)
+pixels give the same value in every frame whatever the exposure, *hot*
+pixels collect a large dark charge and stand far above their neighbours in
+every frame [EMVA]_. Eq. 1 of [PQ] has no term for them; merged, they
+become spurious bright or flat points of the photoquantity, of the sensor
+LUT and of the vignetting fit's samples. This module finds them from the
+stacks themselves (no dark frames needed) and flags them, so that they get
+zero weight, as pixels with no valid exposure do
+(:func:`exclude_defects`).
+
+Criteria, per pixel and channel, from the repeat means ``c̄_k`` of a stack:
+
+- **stuck**: every frame (all exposures, all repeats) holds the same value,
+  strictly between the black level and the saturation level (a pixel
+  saturated or dark in every frame is flagged by the merge already), while
+  the median of its 8 neighbours moves by more than ``stuck_min_change_dn``
+  between the shortest and the longest exposure (the scene's light did
+  change: a real pixel's value would have followed it);
+- **hot**: in every exposure where it is not saturated (at least
+  ``hot_min_exposures`` of them), ``c̄_k`` exceeds the *largest* of its 8
+  neighbours by more than ``max(hot_min_dn, hot_sigmas · σ_k)``, where
+  ``σ_k`` is a robust spread (1.4826 · MAD) of ``c̄_k − max_8(c̄_k)`` over the
+  image. A scene's bright spot is wider than one pixel behind any lens, so
+  it never exceeds all 8 neighbours; an edge or a corner has neighbours on
+  its bright side.
+
+With several stacks (the calibration views, which see the scene shifted),
+a pixel is defective only where it is flagged in every stack: a defect is a
+property of the sensor, the scene content is not.
+
+References
+----------
+.. [EMVA] EMVA Standard 1288, release 4.0 (2021), §8.3 (defect pixels: hot,
+   dead and stuck pixels, found from dark and flat images).
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, §5.2 (merge).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from photoquant.errors import InputError
+from photoquant.stack import ExposureStack
+from photoquant.utils import check_positive
+
+__all__ = ["DefectMap", "detect_defects", "exclude_defects"]
+
+_RING = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], dtype=bool)
+"""The 8 neighbours of a pixel."""
+
+
+@dataclass(frozen=True, eq=False)
+class DefectMap:
+    """Hot and stuck pixels of a sensor, per pixel and channel.
+
+    Attributes
+    ----------
+    hot, stuck : ndarray, shape (H, W, C), bool
+        The flagged pixels (disjoint).
+    """
+
+    hot: np.ndarray
+    stuck: np.ndarray
+
+    @property
+    def mask(self) -> np.ndarray:
+        """``(H, W, C)`` bool: hot or stuck."""
+        return self.hot | self.stuck
+
+    def report(self) -> dict[str, Any]:
+        """Counts for a calibration report (JSON-ready)."""
+        return {"hot": int(self.hot.sum()), "stuck": int(self.stuck.sum())}
+
+
+def _ring_max(image: np.ndarray) -> np.ndarray:
+    """Largest of the 8 neighbours of every pixel, per channel (edges mirrored, without the pixel)."""
+    return ndimage.maximum_filter(image, footprint=_RING[..., None], mode="mirror")
+
+
+def _ring_median(image: np.ndarray) -> np.ndarray:
+    return ndimage.median_filter(image, footprint=_RING[..., None], mode="mirror")
+
+
+def _one_stack(
+    stack: ExposureStack,
+    hot_sigmas: float,
+    hot_min_dn: float,
+    hot_min_exposures: int,
+    stuck_min_change_dn: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    frames = stack.frames  # (N, K, H, W, C)
+    black = np.asarray(stack.black_level, dtype=np.float64)
+    sat = np.asarray(stack.saturation_level, dtype=np.float64)
+    lo, hi = frames.min(axis=(0, 1)), frames.max(axis=(0, 1))
+    order = np.argsort(stack.exposure_s)
+    mean = stack.mean()[order]  # (K, H, W, C), shortest first
+    stuck = (lo == hi) & (lo > black) & (lo < sat)
+    if stack.n_exposures >= 2:
+        change = np.abs(_ring_median(mean[-1]) - _ring_median(mean[0]))
+        stuck &= change > stuck_min_change_dn
+    else:
+        stuck[:] = False
+    unsat = mean < sat - 0.5  # repeat mean below the clip
+    hot = np.ones(stuck.shape, dtype=bool)
+    n_ok = np.zeros(stuck.shape, dtype=np.int64)
+    for k in range(mean.shape[0]):
+        excess = mean[k] - _ring_max(mean[k])
+        spread = np.empty(excess.shape[-1])
+        for ch in range(excess.shape[-1]):
+            e = excess[..., ch]
+            spread[ch] = 1.4826 * np.median(np.abs(e - np.median(e)))
+        thr = np.maximum(hot_min_dn, hot_sigmas * spread)
+        hot &= (excess > thr) | ~unsat[k]
+        n_ok += unsat[k]
+    hot &= (n_ok >= hot_min_exposures) & ~stuck
+    return hot, stuck
+
+
+def detect_defects(
+    stacks: ExposureStack | Sequence[ExposureStack],
+    *,
+    hot_sigmas: float = 8.0,
+    hot_min_dn: float = 4.0,
+    hot_min_exposures: int = 2,
+    stuck_min_change_dn: float = 2.0,
+) -> DefectMap:
+    """Find hot and stuck pixels in one or more stacks of the same sensor.
+
+    Parameters
+    ----------
+    stacks : ExposureStack or sequence of ExposureStack
+        Bracketed captures of the same image size (e.g. the calibration
+        views); a pixel is flagged only where every stack flags it.
+    hot_sigmas : float
+        Hot threshold in robust standard deviations of the excess over the
+        neighbours' maximum (8: a clean pixel's chance of passing it in two
+        exposures is far below 1e-10 for Gaussian noise).
+    hot_min_dn : float
+        Smallest excess (DN) that counts as hot, whatever the noise.
+    hot_min_exposures : int
+        Unsaturated exposures a hot pixel must stand out in.
+    stuck_min_change_dn : float
+        How much the neighbours' median must change between the shortest and
+        the longest exposure for a constant pixel to count as stuck.
+
+    Returns
+    -------
+    DefectMap
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from photoquant.stack import ExposureStack
+    >>> t = np.array([1e-3, 4e-3, 16e-3])
+    >>> frames = np.broadcast_to((t * 5e3)[None, :, None, None, None], (2, 3, 8, 8, 1))
+    >>> frames = np.rint(frames).astype(np.uint8)
+    >>> frames[:, :, 3, 4, 0] = 77  # stuck
+    >>> frames[:, :, 5, 2, 0] += 60  # hot
+    >>> d = detect_defects(ExposureStack(frames, t, bit_depth=8, channels=("Y",)))
+    >>> np.argwhere(d.stuck[..., 0]).tolist(), np.argwhere(d.hot[..., 0]).tolist()
+    ([[3, 4]], [[5, 2]])
+    """
+    seq = [stacks] if isinstance(stacks, ExposureStack) else list(stacks)
+    if not seq or not all(isinstance(s, ExposureStack) for s in seq):
+        raise InputError("`stacks` must be an ExposureStack or a non-empty sequence of them")
+    shape = seq[0].frames.shape[2:]
+    if any(s.frames.shape[2:] != shape for s in seq):
+        raise InputError("`stacks` must all have the same image size and channels")
+    hs = check_positive(hot_sigmas, "hot_sigmas")
+    hm = check_positive(hot_min_dn, "hot_min_dn", allow_zero=True)
+    sc = check_positive(stuck_min_change_dn, "stuck_min_change_dn", allow_zero=True)
+    if isinstance(hot_min_exposures, bool) or not isinstance(hot_min_exposures, int | np.integer):
+        raise InputError(f"`hot_min_exposures` must be an integer, got {hot_min_exposures!r}")
+    if hot_min_exposures < 1:
+        raise InputError(f"`hot_min_exposures` must be at least 1, got {hot_min_exposures}")
+    hot = np.ones(shape, dtype=bool)
+    stuck = np.ones(shape, dtype=bool)
+    for s in seq:
+        h, st = _one_stack(s, hs, hm, int(hot_min_exposures), sc)
+        hot &= h
+        stuck &= st
+    return DefectMap(hot=hot, stuck=stuck)
+
+
+def exclude_defects(merged: Any, defects: DefectMap | None) -> Any:
+    """A merge result (:class:`photoquant.merge.MergeResult`) with the defects flagged.
+
+    Flagged pixels get the merge's own treatment of a pixel without a valid
+    exposure: ``mask`` set, ``log_photoquantity`` NaN, ``weight_sum`` 0, so
+    that every later step (sensor LUT, vignetting, balance, correction)
+    leaves them out. ``None`` or an empty map returns ``merged`` unchanged.
+    """
+    if defects is None or not defects.mask.any():
+        return merged
+    bad = defects.mask
+    if bad.shape != merged.mask.shape:
+        raise InputError(
+            f"the defect map has shape {bad.shape}, the merged image {merged.mask.shape}"
+        )
+    return dataclasses.replace(
+        merged,
+        log_photoquantity=np.where(bad, np.nan, merged.log_photoquantity),
+        mask=merged.mask | bad,
+        weight_sum=np.where(bad, 0.0, merged.weight_sum),
+        report={**merged.report, "defects": defects.report()},
+    )

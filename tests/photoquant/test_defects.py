@@ -1,0 +1,115 @@
+"""Hot and stuck pixels: found in the stacks, flagged and not merged (photoquant.defects).
+
+The synthetic camera's truth (pqsim's fixed pattern) says where the defects
+are; the detector never sees it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from photoquant.defects import DefectMap, detect_defects, exclude_defects
+from photoquant.errors import InputError
+from photoquant.stack import ExposureStack
+from pqsim.analytic import scene_test_hdr
+from pqsim.synth_camera import camera_from_preset
+from pqsim.synth_camera.disturbances import DEFECT_HOT, DEFECT_STUCK
+
+SHAPE = (60, 80)
+T = np.geomspace(1e-3, 0.2, 8)
+
+
+def smooth_scene(shape: tuple[int, int] = SHAPE) -> np.ndarray:
+    """A smooth gradient with a few soft blobs: content, but no one-pixel features."""
+    y, x = np.mgrid[0 : shape[0], 0 : shape[1]] / max(shape)
+    base = 0.05 + 0.6 * x + 0.2 * y
+    blob = 0.5 * np.exp(-((x - 0.3) ** 2 + (y - 0.4) ** 2) / 0.01)
+    return np.repeat((base + blob)[..., None], 3, axis=2) * np.array([1.0, 0.9, 0.7])
+
+
+def stack_of(cap) -> ExposureStack:  # noqa: ANN001
+    return ExposureStack(cap.frames, cap.exposure_s, bit_depth=8, channels=("R", "G", "B"))
+
+
+def test_finds_the_hot_and_stuck_pixels_of_the_truth() -> None:
+    cam = camera_from_preset(
+        "ccd", disturbances={"hot_pixel_fraction": 0.003, "stuck_pixel_fraction": 0.003}
+    )
+    cap = cam.capture(smooth_scene(), T, 2, rng=0)
+    found = detect_defects(stack_of(cap))
+    truth = cap.truth.camera.fixed_pattern.defects
+    hot, stuck = truth == DEFECT_HOT, truth == DEFECT_STUCK
+    assert hot.sum() > 0 and stuck.sum() > 0
+    # every true defect in every channel, and nothing else, except where a stuck value
+    # happens to equal a saturated or dark pixel's (the merge flags those anyway)
+    sat = cap.truth.camera.saturation_dn
+    stuck_values = cap.truth.camera.fixed_pattern.stuck_dn.astype(np.int64)[..., None]
+    trivially_flagged = (stuck_values == 0) | (stuck_values >= sat)
+    np.testing.assert_array_equal(found.hot, np.repeat(hot[..., None], 3, axis=2))
+    expected_stuck = stuck[..., None] & ~trivially_flagged
+    np.testing.assert_array_equal(found.stuck, expected_stuck)
+
+
+def test_clean_captures_have_no_defects() -> None:
+    cam = camera_from_preset("cmos")
+    for scene in (smooth_scene(), scene_test_hdr(SHAPE)):
+        cap = cam.capture(scene, T, 2, rng=1)
+        assert not detect_defects(stack_of(cap)).mask.any()
+
+
+def test_a_defect_must_show_in_every_stack() -> None:
+    frames = np.full((1, 2, 8, 8, 1), 10, dtype=np.uint8)
+    frames[:, 1] = 40
+    a = frames.copy()
+    a[:, 0, 2, 2], a[:, 1, 2, 2] = 50, 90  # hot in the first stack only
+    t = np.array([1e-3, 4e-3])
+    one = ExposureStack(a, t, bit_depth=8, channels=("Y",))
+    two = ExposureStack(frames, t, bit_depth=8, channels=("Y",))
+    assert detect_defects(one).hot[2, 2, 0]
+    assert not detect_defects([one, two]).hot.any()
+
+
+def test_exclude_gives_zero_weight() -> None:
+    from photoquant.merge import MergeResult
+
+    shape = (4, 5, 1)
+    merged = MergeResult(
+        np.zeros(shape),
+        np.zeros(shape, bool),
+        np.zeros(shape, bool),
+        np.zeros(shape, bool),
+        np.ones(shape),
+    )
+    bad = np.zeros(shape, bool)
+    bad[1, 2, 0] = True
+    out = exclude_defects(merged, DefectMap(hot=bad, stuck=np.zeros(shape, bool)))
+    assert out.mask[1, 2, 0] and np.isnan(out.log_photoquantity[1, 2, 0])
+    assert out.weight_sum[1, 2, 0] == 0 and out.weight_sum.sum() == bad.size - 1
+    assert out.report["defects"] == {"hot": 1, "stuck": 0}
+    assert exclude_defects(merged, None) is merged
+
+
+def test_correct_does_not_merge_defects() -> None:
+    import photoquant as pq
+
+    cam = camera_from_preset("ccd", disturbances={"hot_pixel_fraction": 0.005})
+    views = [stack_of(cam.capture(smooth_scene(), T, 2, rng=s)) for s in (2, 3)]
+    model = pq.calibrate(views[:1])
+    res = pq.correct(views[1], model)
+    hot = cam.truth(SHAPE).fixed_pattern.defects == DEFECT_HOT
+    assert hot.any()
+    assert np.all(res.mask[hot]) and np.all(np.isnan(res.photoquantity[hot]))
+    assert model.report["merge"]["defects"]["hot"] == 3 * int(hot.sum())
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"hot_sigmas": 0}, {"hot_min_exposures": 0}, {"hot_min_dn": -1}]
+)
+def test_bad_options(kwargs: dict) -> None:
+    frames = np.zeros((1, 2, 6, 6, 1), dtype=np.uint8)
+    stack = ExposureStack(frames, [1e-3, 2e-3], bit_depth=8, channels=("Y",))
+    with pytest.raises(InputError):
+        detect_defects(stack, **kwargs)
+    with pytest.raises(InputError):
+        detect_defects([])
