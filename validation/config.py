@@ -139,6 +139,10 @@ class ValidationConfig:
     rendered_capture : bool
         Run the ``rendered`` experiment: calibrate each preset from a capture
         set of Mitsuba-rendered scenes (:mod:`validation.experiments.rendered`).
+    robustness : bool
+        Include the ``robustness`` experiment in a default run (each real-camera
+        disturbance alone and all together; :mod:`validation.experiments.robustness`).
+        Left out of :meth:`conditions`: its metrics are reported, never checked.
     """
 
     name: str = "quick"
@@ -164,6 +168,7 @@ class ValidationConfig:
     chart_spp: int = 64
     render_cache: str | None = None
     rendered_capture: bool = False
+    robustness: bool = False
 
     def __post_init__(self) -> None:
         h, w = (int(v) for v in self.shape)
@@ -228,6 +233,7 @@ class ValidationConfig:
             "skip_vignetting",
             "render_cache",
             "rendered_capture",
+            "robustness",
         ):
             d.pop(key)
         return d
@@ -251,7 +257,12 @@ QUICK = ValidationConfig()
 """The default: the paper's experiments on 320×240 images with ``N = 4``."""
 
 FULL = ValidationConfig(
-    name="full", shape=(768, 1024), n_repeats=10, chart="rendered", rendered_capture=True
+    name="full",
+    shape=(768, 1024),
+    n_repeats=10,
+    chart="rendered",
+    rendered_capture=True,
+    robustness=True,
 )
 """The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``; rendered chart and captures."""
 

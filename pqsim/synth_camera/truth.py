@@ -160,6 +160,13 @@ class CameraTruth:
             dtype=np.int64,
         )
 
+    def _pedestal(self, ch: int) -> float:
+        """The black level (DN) of channel ``ch``: the disturbances' pedestal, else 0."""
+        d = self.disturbances
+        if d is None:
+            return 0.0
+        return float(d.per_channel(d.black_level_dn, "black_level_dn", self.n_channels)[ch])
+
     def _channel(self, channel: Any) -> int:
         if isinstance(channel, str):
             if channel not in self.channels:
@@ -190,7 +197,8 @@ class CameraTruth:
         Returns
         -------
         ndarray, float64
-            Values in ``[0, a_λ c_max]`` (before rounding and clipping to ``c_max``).
+            Values in ``[0, a_λ c_max]`` (before rounding and clipping to ``c_max``),
+            plus the black level (pedestal) of a camera with disturbances.
         """
         X = check_array(X, "X", kind="iuf").astype(np.float64)
         if np.any(np.isnan(X)) or np.any(X < 0):
@@ -200,7 +208,7 @@ class CameraTruth:
 
         def one(x: np.ndarray, ch: int) -> np.ndarray:
             e = (x * self.exposure_scale + dark) / fw
-            return self.balance[ch] * self.c_max * self.responses[ch](e)
+            return self.balance[ch] * self.c_max * self.responses[ch](e) + self._pedestal(ch)
 
         if channel is not None:
             return one(X, self._channel(channel))
@@ -211,14 +219,16 @@ class CameraTruth:
     def inverse_response_exposure(self, levels: Any, channel: int | str) -> np.ndarray:
         """True ``f_λ⁻¹(c / a_λ)``: the exposure ``X`` whose noise-free value is ``c``.
 
-        ``X = full_well / exposure_scale · F_λ⁻¹(c / (a_λ c_max))``. Level 0
-        maps to 0; levels above ``a_λ c_max F_λ(∞)`` (never produced) give NaN.
+        ``X = full_well / exposure_scale · F_λ⁻¹((c − b_λ) / (a_λ c_max))``, ``b_λ``
+        the black level (pedestal; 0 for a clean camera). Levels at or below
+        ``b_λ`` map to 0; levels above ``b_λ + a_λ c_max F_λ(∞)`` (never
+        produced) give NaN.
         """
         ch = self._channel(channel)
         c = check_array(levels, "levels", kind="iuf", finite=True).astype(np.float64)
         if np.any(c < 0):
             raise InputError("`levels` must be non-negative pixel values")
-        F = c / (self.balance[ch] * self.c_max)
+        F = np.maximum(c - self._pedestal(ch), 0.0) / (self.balance[ch] * self.c_max)
         top = self.responses[ch].max_output
         ok = F <= top
         out = np.full(c.shape, np.nan)
