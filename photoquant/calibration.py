@@ -43,7 +43,7 @@ import numpy as np
 
 from photoquant import __version__
 from photoquant.balance import BalanceData, BalanceModel, check_roi
-from photoquant.defects import detect_defects, exclude_defects
+from photoquant.defects import detect_defects, exclude_defects, hide_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import (
     ExposureRefinement,
@@ -344,6 +344,10 @@ def calibrate(
     notes: list[str] = []
     report: dict[str, Any] = {"timings_s": timings, "notes": notes}
 
+    # hot and stuck pixels are flagged, not merged (photoquant.defects): where every view
+    # shows one, they are no response sample and get zero weight in every merge
+    defects = detect_defects(views)
+
     # 1. response -----------------------------------------------------------
     say("response")
     t0 = time.perf_counter()
@@ -354,7 +358,7 @@ def calibrate(
         fits: list[StepFit[Any]] = []
 
         def recover(stack: ExposureStack) -> tuple[np.ndarray, ...]:
-            fit = fit_response(stack, response_spec, rng=seed)
+            fit = fit_response(hide_defects(stack, defects), response_spec, rng=seed)
             fits.append(fit)
             m = fit.model
             vmin = m.valid_min if m.valid_min is not None else np.full(len(m.saturation_level), 0)
@@ -390,7 +394,7 @@ def calibrate(
                 "one view only: its exposure times cannot be told from its response; "
                 "nominal times kept"
             )
-        resp_fit = fit_response(ref, response_spec, rng=seed)
+        resp_fit = fit_response(hide_defects(ref, defects), response_spec, rng=seed)
     ref = views[0]
     resp: ResponseModel = resp_fit.model
     if refine_exposures and irradiance is not None:
@@ -411,10 +415,7 @@ def calibrate(
     say(f"merge {len(views)} view(s)")
     t0 = time.perf_counter()
     merged = [merge_model.merge(view, resp) for view in views]
-    # hot and stuck pixels are flagged, not merged (photoquant.defects): zero weight, as a
-    # pixel without a valid exposure, in every later step; flagged where every view shows one
-    defects = detect_defects(views)
-    merged = [exclude_defects(m, defects) for m in merged]
+    merged = [exclude_defects(m, defects) for m in merged]  # defects: not merged
     timings["merge_per_view"] = (time.perf_counter() - t0) / len(views)
     report["merge"] = {
         "method": merge_model.method,

@@ -19,12 +19,14 @@ Criteria, per pixel and channel, from the repeat means ``c̄_k`` of a stack:
   between the shortest and the longest exposure (the scene's light did
   change: a real pixel's value would have followed it);
 - **hot**: in every exposure where it is not saturated (at least
-  ``hot_min_exposures`` of them), ``c̄_k`` exceeds the *largest* of its 8
-  neighbours by more than ``max(hot_min_dn, hot_sigmas · σ_k)``, where
-  ``σ_k`` is a robust spread (1.4826 · MAD) of ``c̄_k − max_8(c̄_k)`` over the
-  image. A scene's bright spot is wider than one pixel behind any lens, so
-  it never exceeds all 8 neighbours; an edge or a corner has neighbours on
-  its bright side.
+  ``hot_min_exposures`` of them), ``c̄_k`` exceeds the ``r``-th largest of
+  its 8 neighbours by more than ``max(hot_min_dn, hot_sigmas · σ_k)``, where
+  ``σ_k`` is a robust spread (1.4826 · MAD) of that excess over the image.
+  With one stack ``r = 1`` (all 8 neighbours): a scene's bright spot is
+  wider than one pixel behind any lens, and an edge or a corner has
+  neighbours on its bright side. With several stacks ``r = 4``: a hot pixel
+  beside a bright edge is still found, and a scene corner is not flagged in
+  every view.
 
 With several stacks (the calibration views, which see the scene shifted),
 a pixel is defective only where it is flagged in every stack: a defect is a
@@ -51,7 +53,7 @@ from photoquant.errors import InputError
 from photoquant.stack import ExposureStack
 from photoquant.utils import check_positive
 
-__all__ = ["DefectMap", "detect_defects", "exclude_defects"]
+__all__ = ["DefectMap", "detect_defects", "exclude_defects", "hide_defects"]
 
 _RING = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], dtype=bool)
 """The 8 neighbours of a pixel."""
@@ -80,9 +82,11 @@ class DefectMap:
         return {"hot": int(self.hot.sum()), "stuck": int(self.stuck.sum())}
 
 
-def _ring_max(image: np.ndarray) -> np.ndarray:
-    """Largest of the 8 neighbours of every pixel, per channel (edges mirrored, without the pixel)."""
-    return ndimage.maximum_filter(image, footprint=_RING[..., None], mode="mirror")
+def _ring_rank(image: np.ndarray, rank: int) -> np.ndarray:
+    """``rank``-th largest of the 8 neighbours of every pixel, per channel (edges mirrored)."""
+    if rank == 1:
+        return ndimage.maximum_filter(image, footprint=_RING[..., None], mode="mirror")
+    return ndimage.rank_filter(image, -rank, footprint=_RING[..., None], mode="mirror")
 
 
 def _ring_median(image: np.ndarray) -> np.ndarray:
@@ -95,6 +99,7 @@ def _one_stack(
     hot_min_dn: float,
     hot_min_exposures: int,
     stuck_min_change_dn: float,
+    hot_rank: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     frames = stack.frames  # (N, K, H, W, C)
     black = np.asarray(stack.black_level, dtype=np.float64)
@@ -112,7 +117,7 @@ def _one_stack(
     hot = np.ones(stuck.shape, dtype=bool)
     n_ok = np.zeros(stuck.shape, dtype=np.int64)
     for k in range(mean.shape[0]):
-        excess = mean[k] - _ring_max(mean[k])
+        excess = mean[k] - _ring_rank(mean[k], hot_rank)
         spread = np.empty(excess.shape[-1])
         for ch in range(excess.shape[-1]):
             e = excess[..., ch]
@@ -131,6 +136,7 @@ def detect_defects(
     hot_min_dn: float = 4.0,
     hot_min_exposures: int = 2,
     stuck_min_change_dn: float = 2.0,
+    hot_rank: int | None = None,
 ) -> DefectMap:
     """Find hot and stuck pixels in one or more stacks of the same sensor.
 
@@ -150,6 +156,12 @@ def detect_defects(
     stuck_min_change_dn : float
         How much the neighbours' median must change between the shortest and
         the longest exposure for a constant pixel to count as stuck.
+    hot_rank : int, optional
+        A hot pixel exceeds the ``hot_rank``-th largest of its 8 neighbours
+        (1: all of them). Default: 4 with several stacks (a hot pixel beside
+        a scene edge has up to 3 bright neighbours; a scene corner that
+        passes in one view does not in the others, shifted), 1 with one stack
+        (a bright region's corner pixel has 3 bright neighbours).
 
     Returns
     -------
@@ -181,10 +193,13 @@ def detect_defects(
         raise InputError(f"`hot_min_exposures` must be an integer, got {hot_min_exposures!r}")
     if hot_min_exposures < 1:
         raise InputError(f"`hot_min_exposures` must be at least 1, got {hot_min_exposures}")
+    rank = (4 if len(seq) > 1 else 1) if hot_rank is None else hot_rank
+    if isinstance(rank, bool) or not isinstance(rank, int | np.integer) or not 1 <= rank <= 8:
+        raise InputError(f"`hot_rank` must be an integer in [1, 8], got {hot_rank!r}")
     hot = np.ones(shape, dtype=bool)
     stuck = np.ones(shape, dtype=bool)
     for s in seq:
-        h, st = _one_stack(s, hs, hm, int(hot_min_exposures), sc)
+        h, st = _one_stack(s, hs, hm, int(hot_min_exposures), sc, int(rank))
         hot &= h
         stuck &= st
     return DefectMap(hot=hot, stuck=stuck)
@@ -211,4 +226,32 @@ def exclude_defects(merged: Any, defects: DefectMap | None) -> Any:
         mask=merged.mask | bad,
         weight_sum=np.where(bad, 0.0, merged.weight_sum),
         report={**merged.report, "defects": defects.report()},
+    )
+
+
+def hide_defects(stack: ExposureStack, defects: DefectMap | None) -> ExposureStack:
+    """``stack`` with its defects at the saturation level in every frame: no response sample.
+
+    A pixel saturated in every frame carries no information to a response
+    method (zero weight, never sampled), which is what a defect should be
+    for the response fit; its histogram-based sampling would otherwise pick
+    hot pixels first, as the rarest bright values. The saturation and black
+    levels are kept. Returns ``stack`` itself when there is nothing to hide.
+    """
+    if defects is None or not defects.mask.any():
+        return stack
+    bad = defects.mask
+    if bad.shape != stack.frames.shape[2:]:
+        raise InputError(
+            f"the defect map has shape {bad.shape}, the stack {stack.frames.shape[2:]}"
+        )
+    sat = np.asarray(stack.saturation_level)
+    frames = np.where(bad[None, None], sat.astype(stack.frames.dtype), stack.frames)
+    return ExposureStack(
+        frames,
+        stack.exposure_s,
+        bit_depth=stack.bit_depth,
+        channels=stack.channels,
+        saturation_level=stack.saturation_level,
+        black_level=stack.black_level,
     )
