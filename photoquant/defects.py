@@ -18,8 +18,8 @@ Criteria, per pixel and channel, from the repeat means ``c̄_k`` of a stack:
   the median of its 8 neighbours moves by more than ``stuck_min_change_dn``
   between the shortest and the longest exposure (the scene's light did
   change: a real pixel's value would have followed it);
-- **hot**: in every exposure where it is not saturated (at least
-  ``hot_min_exposures`` of them), ``c̄_k`` exceeds the ``r``-th largest of
+- **hot**: in each of its ``max(hot_min_exposures, K // 3)`` shortest
+  unsaturated exposures (at least ``hot_min_exposures`` of them), ``c̄_k`` exceeds the ``r``-th largest of
   its 8 neighbours by more than ``max(hot_min_dn, hot_sigmas · σ_k)``, where
   ``σ_k`` is a robust spread (1.4826 · MAD) of that excess over the image.
   With one stack ``r = 1`` (all 8 neighbours): a scene's bright spot is
@@ -29,8 +29,11 @@ Criteria, per pixel and channel, from the repeat means ``c̄_k`` of a stack:
   every view.
 
 With several stacks (the calibration views, which see the scene shifted),
-a pixel is defective only where it is flagged in every stack: a defect is a
-property of the sensor, the scene content is not.
+a pixel is defective where one stack flags it and none clears it (a stack
+clears a pixel whose values change, or that stays below the threshold in
+enough unsaturated short exposures; a pixel saturated or dark in a view
+tells nothing there): a defect is a property of the sensor, the scene
+content is not.
 
 References
 ----------
@@ -100,33 +103,40 @@ def _one_stack(
     hot_min_exposures: int,
     stuck_min_change_dn: float,
     hot_rank: int,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(hot, not_hot, stuck, not_stuck)`` of one stack; neither: the stack cannot tell."""
     frames = stack.frames  # (N, K, H, W, C)
     black = np.asarray(stack.black_level, dtype=np.float64)
     sat = np.asarray(stack.saturation_level, dtype=np.float64)
     lo, hi = frames.min(axis=(0, 1)), frames.max(axis=(0, 1))
     order = np.argsort(stack.exposure_s)
     mean = stack.mean()[order]  # (K, H, W, C), shortest first
+    not_stuck = lo != hi
     stuck = (lo == hi) & (lo > black) & (lo < sat)
     if stack.n_exposures >= 2:
         change = np.abs(_ring_median(mean[-1]) - _ring_median(mean[0]))
         stuck &= change > stuck_min_change_dn
     else:
         stuck[:] = False
+    # a hot pixel's extra charge is fixed: it stands out most in its shortest unsaturated
+    # exposures, where the scene is darkest; the long ones may bury it under the texture
+    n_short = max(hot_min_exposures, mean.shape[0] // 3)
     unsat = mean < sat - 0.5  # repeat mean below the clip
-    hot = np.ones(stuck.shape, dtype=bool)
-    n_ok = np.zeros(stuck.shape, dtype=np.int64)
+    use = unsat & (np.cumsum(unsat, axis=0) <= n_short)
+    above = np.ones(stuck.shape, dtype=bool)
     for k in range(mean.shape[0]):
+        if not use[k].any():
+            continue
         excess = mean[k] - _ring_rank(mean[k], hot_rank)
         spread = np.empty(excess.shape[-1])
         for ch in range(excess.shape[-1]):
             e = excess[..., ch]
             spread[ch] = 1.4826 * np.median(np.abs(e - np.median(e)))
         thr = np.maximum(hot_min_dn, hot_sigmas * spread)
-        hot &= (excess > thr) | ~unsat[k]
-        n_ok += unsat[k]
-    hot &= (n_ok >= hot_min_exposures) & ~stuck
-    return hot, stuck
+        above &= (excess > thr) | ~use[k]
+    told = use.sum(axis=0) >= hot_min_exposures
+    hot = above & told & ~stuck
+    return hot, told & ~above, stuck, not_stuck
 
 
 def detect_defects(
@@ -144,7 +154,7 @@ def detect_defects(
     ----------
     stacks : ExposureStack or sequence of ExposureStack
         Bracketed captures of the same image size (e.g. the calibration
-        views); a pixel is flagged only where every stack flags it.
+        views); a pixel is flagged where one stack flags it and none clears it.
     hot_sigmas : float
         Hot threshold in robust standard deviations of the excess over the
         neighbours' maximum (8: a clean pixel's chance of passing it in two
@@ -196,13 +206,18 @@ def detect_defects(
     rank = (4 if len(seq) > 1 else 1) if hot_rank is None else hot_rank
     if isinstance(rank, bool) or not isinstance(rank, int | np.integer) or not 1 <= rank <= 8:
         raise InputError(f"`hot_rank` must be an integer in [1, 8], got {hot_rank!r}")
-    hot = np.ones(shape, dtype=bool)
-    stuck = np.ones(shape, dtype=bool)
+    hot = np.zeros(shape, dtype=bool)
+    stuck = np.zeros(shape, dtype=bool)
+    not_hot = np.zeros(shape, dtype=bool)
+    not_stuck = np.zeros(shape, dtype=bool)
     for s in seq:
-        h, st = _one_stack(s, hs, hm, int(hot_min_exposures), sc, int(rank))
-        hot &= h
-        stuck &= st
-    return DefectMap(hot=hot, stuck=stuck)
+        h, nh, st, nst = _one_stack(s, hs, hm, int(hot_min_exposures), sc, int(rank))
+        hot |= h
+        not_hot |= nh
+        stuck |= st
+        not_stuck |= nst
+    stuck &= ~not_stuck
+    return DefectMap(hot=hot & ~not_hot & ~stuck, stuck=stuck)
 
 
 def exclude_defects(merged: Any, defects: DefectMap | None) -> Any:

@@ -251,13 +251,11 @@ class SyntheticCamera:
         (:meth:`SensorDisturbances.saturation_dn`).
         """
         if self.disturbances is not None and self.disturbances.active:
-            clean = np.array(
-                [
-                    a * self.c_max * r.max_output
-                    for a, r in zip(self.balance, self.responses, strict=True)
-                ]
+            return self.disturbances.saturation_dn(
+                np.asarray(self.balance),
+                np.array([r.max_output for r in self.responses]),
+                self.c_max,
             )
-            return self.disturbances.saturation_dn(clean, self.c_max)
         return np.array(
             [
                 min(self.c_max, int(np.rint(a * self.c_max * r.max_output)))

@@ -14,9 +14,10 @@ For frame ``(n, k)`` with nominal exposure ``t_k`` the disturbed camera computes
     μ     = u·v·l · s · t_nk + D · t_nk                       mean electrons
     n     = Poisson(μ) + N(0, σ_r²) + σ_h · √((ν−2)/ν) · T_ν  heavy-tailed read noise [2]
             + d_p + h_p                                       DSNU, hot pixels [3]
-    c     = a_λ c_max F_λ(max(n, 0)/w) + b_λ + N(0, σ_b²) + r_i + q_j    pedestal, banding
-    c     = clip(round(c), 0, min(c_max, W_λ))               white level after balance
-    c     = s_p  on stuck pixels;  then CFA mosaic → demosaic, JPEG        [4] [5]
+    r     = clip(round(c_max F_λ(max(n, 0)/w) + b_λ + N(0, σ_b²) + r_i + q_j), 0, c_max)
+    r     = s_p  on stuck pixels                              the raw (converter) value
+    c     = clip(round(a_λ (r − b_λ) + b_λ), 0, min(c_max, W_λ))    balance, white level
+    c     → CFA mosaic → demosaic, JPEG                       [4] [5]
 
 with ``z ~ N(0, 1)``, ``T_ν`` Student's t with ``ν`` degrees of freedom
 (scaled so that its standard deviation is ``σ_h``), ``d_p ~ N(0, σ_d²)`` a
@@ -24,7 +25,12 @@ fixed per-pixel dark offset (DSNU, electrons), ``h_p`` the hot pixels'
 extra electrons, ``b_λ`` the black level (pedestal) with its temporal noise
 ``σ_b``, ``r_i ~ N(0, σ_row²)``, ``q_j ~ N(0, σ_col²)`` per-frame row and
 column offsets (DN; the same for every channel of a row or column, as one
-read-out line), ``W_λ`` a white level per channel.
+read-out line), ``W_λ`` a white level per channel. The pedestal, its noise
+and the banding are analog: added before the converter clips at ``c_max``;
+the colour balance ``a_λ`` is digital, after it (so a saturated channel
+holds one value, as when a camera white-balances clipped raw data), about
+the black level. A clean camera is the case ``b = 0`` without noises:
+``c = round(a_λ c_max F_λ)``.
 
 Randomness: the fixed patterns (DSNU, defect positions and stuck values)
 come from the camera's ``prnu_seed`` (a property of the sensor, like ``u``);
@@ -255,17 +261,20 @@ class SensorDisturbances:
             raise InputError(f"`{name}` must have 1 or {channels} values, got {len(value)}")
         return np.broadcast_to(np.asarray(value, dtype=np.float64), (channels,)).copy()
 
-    def saturation_dn(self, clean: np.ndarray, c_max: int) -> np.ndarray:
-        """The value of a saturated pixel: the clean one plus the pedestal, clipped at ``W_λ``.
+    def saturation_dn(self, balance: np.ndarray, max_output: np.ndarray, c_max: int) -> np.ndarray:
+        """The value of a saturated pixel, ``min(c_max, W_λ, round(a_λ (r − b_λ) + b_λ))``.
 
-        ``clean`` is the clean camera's ``(C,)`` saturation values (unrounded
-        ``a_λ c_max F_λ(∞)``); the result is ``min(c_max, W_λ, round(clean + b_λ))``
-        as int64 (without pedestal noise: its noise moves the saturated value
-        unless the clip at ``c_max`` or ``W_λ`` holds it).
+        ``r = min(c_max, round(c_max F_λ(∞) + b_λ))`` is the saturated raw value
+        (the converter clips at ``c_max``), ``balance`` the ``a_λ`` and
+        ``max_output`` the ``F_λ(∞)``, ``(C,)`` each; int64. Where
+        ``c_max F_λ(∞) + b_λ < c_max`` the pedestal noise and the banding
+        move a saturated value (no clip holds it), as on a real sensor whose
+        well fills below the converter's range.
         """
-        c = clean.size
-        top = np.rint(clean + self.per_channel(self.black_level_dn, "black_level_dn", c))
-        top = np.minimum(top, c_max)
+        c = balance.size
+        black = self.per_channel(self.black_level_dn, "black_level_dn", c)
+        raw = np.minimum(np.rint(c_max * max_output + black), c_max)
+        top = np.minimum(np.rint((raw - black) * balance + black), c_max)
         if self.white_level_dn is not None:
             white = self.per_channel(self.white_level_dn, "white_level_dn", c)
             top = np.minimum(top, np.floor(white))
@@ -315,18 +324,28 @@ class SensorDisturbances:
         np.maximum(e, 0, out=e)
         e /= f32(noise.full_well_e)
         h, w, c = e.shape
-        dn = np.empty(e.shape, dtype=np.float64)
-        for ch, (a, resp) in enumerate(zip(camera.balance, camera.responses, strict=True)):
-            dn[..., ch] = a * camera.c_max * resp(e[..., ch])
-        dn += self.per_channel(self.black_level_dn, "black_level_dn", c)
+        black = self.per_channel(self.black_level_dn, "black_level_dn", c)
+        # the raw value, as the ADC codes it: pedestal, its noise and banding are analog
+        # (before the converter clips), white balance is digital (after it)
+        raw = np.empty(e.shape, dtype=np.float64)
+        for ch, resp in enumerate(camera.responses):
+            raw[..., ch] = camera.c_max * resp(e[..., ch])
+        raw += black
         if self.black_noise_dn > 0:
             rng = np.random.default_rng([frame_seed, _TAG_BLACK])
-            dn += self.black_noise_dn * rng.standard_normal(dn.shape)
+            raw += self.black_noise_dn * rng.standard_normal(raw.shape)
         if self.row_noise_dn > 0 or self.column_noise_dn > 0:
             rng = np.random.default_rng([frame_seed, _TAG_BAND])
             rows = self.row_noise_dn * np.asarray(rng.standard_normal(h))
             cols = self.column_noise_dn * np.asarray(rng.standard_normal(w))
-            dn += (rows[:, None] + cols[None, :])[..., None]
+            raw += (rows[:, None] + cols[None, :])[..., None]
+        np.rint(raw, out=raw)
+        np.clip(raw, 0, camera.c_max, out=raw)
+        if pattern is not None and pattern.stuck_dn is not None:  # a stuck photosite
+            stuck = pattern.defects == DEFECT_STUCK
+            raw[stuck] = pattern.stuck_dn[stuck][:, None]
+        # white balance a_λ about the black level, then the white level W_λ
+        dn = (raw - black) * np.asarray(camera.balance) + black
         top = np.full(c, float(camera.c_max))
         if self.white_level_dn is not None:
             white = self.per_channel(self.white_level_dn, "white_level_dn", c)
@@ -334,15 +353,8 @@ class SensorDisturbances:
         np.rint(dn, out=dn)
         np.clip(dn, 0, top, out=dn)
         frame = dn.astype(camera.dtype)
-        if self.cfa is not None:
-            raw = _cfa.mosaic(frame, self.cfa)
-            if pattern is not None and pattern.stuck_dn is not None:
-                stuck = pattern.defects == DEFECT_STUCK
-                raw[stuck] = pattern.stuck_dn[stuck]
-            frame = _cfa.demosaic(raw, self.cfa, self.demosaic)
-        elif pattern is not None and pattern.stuck_dn is not None:
-            stuck = pattern.defects == DEFECT_STUCK
-            frame[stuck] = pattern.stuck_dn[stuck][:, None]
+        if self.cfa is not None:  # each photosite keeps its own channel, then demosaicing
+            frame = _cfa.demosaic(_cfa.mosaic(frame, self.cfa), self.cfa, self.demosaic)
         if self.jpeg_quality is not None:
             frame = _cfa.jpeg_roundtrip(frame, self.jpeg_quality)
         return frame
@@ -392,7 +404,8 @@ class FixedPattern:
     defects : ndarray (H, W), int8
         0 good, :data:`DEFECT_HOT`, :data:`DEFECT_STUCK`.
     stuck_dn : ndarray (H, W) or None
-        The stuck pixels' constant value (meaningful where ``defects`` is stuck).
+        The stuck pixels' constant raw value (meaningful where ``defects`` is
+        stuck); the written value is ``a_λ (s − b_λ) + b_λ``, rounded.
     """
 
     offset_e: np.ndarray

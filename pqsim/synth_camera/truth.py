@@ -145,13 +145,11 @@ class CameraTruth:
         With :attr:`disturbances`, the pedestal added and the white level applied.
         """
         if self.disturbances is not None:
-            clean = np.array(
-                [
-                    a * self.c_max * r.max_output
-                    for a, r in zip(self.balance, self.responses, strict=True)
-                ]
+            return self.disturbances.saturation_dn(
+                np.asarray(self.balance),
+                np.array([r.max_output for r in self.responses]),
+                self.c_max,
             )
-            return self.disturbances.saturation_dn(clean, self.c_max)
         return np.array(
             [
                 min(self.c_max, int(np.rint(a * self.c_max * r.max_output)))
@@ -198,7 +196,8 @@ class CameraTruth:
         -------
         ndarray, float64
             Values in ``[0, a_λ c_max]`` (before rounding and clipping to ``c_max``),
-            plus the black level (pedestal) of a camera with disturbances.
+            above the black level: a camera with a pedestal ``b_λ``
+            (:mod:`~pqsim.synth_camera.disturbances`) writes ``b_λ`` more.
         """
         X = check_array(X, "X", kind="iuf").astype(np.float64)
         if np.any(np.isnan(X)) or np.any(X < 0):
@@ -208,7 +207,7 @@ class CameraTruth:
 
         def one(x: np.ndarray, ch: int) -> np.ndarray:
             e = (x * self.exposure_scale + dark) / fw
-            return self.balance[ch] * self.c_max * self.responses[ch](e) + self._pedestal(ch)
+            return self.balance[ch] * self.c_max * self.responses[ch](e)
 
         if channel is not None:
             return one(X, self._channel(channel))
