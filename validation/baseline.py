@@ -231,6 +231,7 @@ _NOT_CONDITIONS = (
     "skip_vignetting",
     "render_cache",
     "rendered_capture",
+    "robustness",
 )
 """The fields :meth:`ValidationConfig.conditions` leaves out (a test keeps them in step)."""
 
