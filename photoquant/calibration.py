@@ -358,14 +358,15 @@ def calibrate(
         fits: list[StepFit[Any]] = []
 
         def recover(stack: ExposureStack) -> tuple[np.ndarray, ...]:
-            fit = fit_response(hide_defects(stack, defects), response_spec, rng=seed)
+            fit = fit_response(stack, response_spec, rng=seed)
             fits.append(fit)
             m = fit.model
             vmin = m.valid_min if m.valid_min is not None else np.full(len(m.saturation_level), 0)
             return m.levels, m.log_inverse_response, m.saturation_level, vmin
 
         try:
-            refs, _ = refine_jointly(list(views), recover, rounds=4, seed=seed)
+            hidden = [hide_defects(v, defects) for v in views]  # no response samples
+            refs, _ = refine_jointly(hidden, recover, rounds=4, seed=seed)
         except CalibrationError as exc:
             raise CalibrationError(
                 f"exposure refinement failed ({exc}); calibrate with refine_exposures=False "

@@ -37,7 +37,7 @@ content is not.
 
 References
 ----------
-.. [EMVA] EMVA Standard 1288, release 4.0 (2021), §8.3 (defect pixels: hot,
+.. [EMVA] EMVA Standard 1288, release 4.0 (2021) (defect pixels: hot,
    dead and stuck pixels, found from dark and flat images).
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, §5.2 (merge).
 """

@@ -29,8 +29,9 @@ read-out line), ``W_λ`` a white level per channel. The pedestal, its noise
 and the banding are analog: added before the converter clips at ``c_max``;
 the colour balance ``a_λ`` is digital, after it (so a saturated channel
 holds one value, as when a camera white-balances clipped raw data), about
-the black level. A clean camera is the case ``b = 0`` without noises:
-``c = round(a_λ c_max F_λ)``.
+the black level. Without any disturbance this is the clean camera's
+``c = round(a_λ c_max F_λ)`` but for the converter's own rounding of ``r``
+(the clean path, bit-identical to a camera without disturbances, rounds once).
 
 Randomness: the fixed patterns (DSNU, defect positions and stuck values)
 come from the camera's ``prnu_seed`` (a property of the sensor, like ``u``);
@@ -41,13 +42,13 @@ of the clean noise.
 
 References
 ----------
-.. [1] The photoquantity paper's exposures are nominal; real shutters are a
-   few percent off their label and lag: Grossberg & Nayar, "Modeling the
-   space of camera response functions", IEEE TPAMI 26(10), 2004, §7.
+.. [1] Nominal exposure times are a few percent off: T. Mitsunaga, S. K. Nayar,
+   "Radiometric self calibration", CVPR 1999 (exposure ratios re-estimated
+   from the data for that reason).
 .. [2] Gow et al., "A comprehensive tool for modeling CMOS image-sensor-noise
    performance", IEEE TED 54(6), 2007 (random telegraph / heavy-tailed read
-   noise); EMVA 1288 release 4.0 (2021), §4 (non-Gaussian temporal noise).
-.. [3] EMVA Standard 1288, release 4.0 (2021), §8 (DSNU, PRNU, defect pixels).
+   noise); EMVA 1288 release 4.0 (2021) (non-Gaussian temporal noise).
+.. [3] EMVA Standard 1288, release 4.0 (2021) (DSNU, PRNU, defect pixels).
 .. [4] :mod:`pqsim.synth_camera.cfa` (Bayer 1976; OpenCV demosaicing).
 .. [5] ITU-T T.81 (JPEG).
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, §3.2.
@@ -137,8 +138,9 @@ class SensorDisturbances:
     hot_pixel_fraction, stuck_pixel_fraction : float
         Fractions of pixels that are hot (``hot_pixel_level · full_well``
         electrons added in every frame, scaled per pixel by a uniform draw in
-        ``[0.5, 1]``) or stuck at a constant value (uniform in
-        ``[0, c_max]``; with a CFA, the photosite). Positions from
+        ``[0.5, 1]``) or stuck at a constant raw value (uniform in
+        ``[0, c_max]``, then balanced like any raw value; with a CFA, the
+        photosite). Positions from
         ``prnu_seed``; each pixel is at most one of the two.
     hot_pixel_level : float
         Hot pixels' extra charge as a fraction of the full well (``<= 10``).

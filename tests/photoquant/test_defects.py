@@ -171,3 +171,18 @@ def test_calibration_with_hot_pixels_keeps_the_response() -> None:
         model.report["merge"]["defects"]["hot"]
         >= 3 * int((truth.fixed_pattern.defects == DEFECT_HOT).sum()) - 3
     )
+
+
+def test_exposure_refinement_sees_no_defects() -> None:
+    """The joint response/exposure fit gets the views with their defects hidden."""
+    import photoquant as pq
+
+    cam = camera_from_preset("ccd", disturbances={"stuck_pixel_fraction": 2e-3})
+    views = [
+        stack_of(cam.capture(np.roll(smooth_scene(), 4 * s, axis=1), T, 2, rng=s)) for s in range(2)
+    ]
+    model = pq.calibrate(views, refine_exposures=True, vignetting="None")
+    assert model.report["exposures"]["refined"]
+    stuck = cam.truth(SHAPE).fixed_pattern.defects == DEFECT_STUCK
+    assert model.report["merge"]["defects"]["stuck"] <= 3 * int(stuck.sum())
+    assert model.report["merge"]["defects"]["stuck"] > 0
