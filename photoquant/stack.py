@@ -111,7 +111,8 @@ def detect_saturation_levels(
     stuck = _stuck_pixels(frames, min_count)
     for ch in range(values.shape[1]):
         v = values[:, ch]
-        if stuck is not None and stuck[:, ch].any():  # a stuck pixel's frames are no clip
+        if stuck is not None and stuck[:, ch].any() and not stuck[:, ch].all():
+            # a stuck pixel's frames are no clip (with nothing else left, keep them all)
             v = frames.reshape(-1, stuck.shape[0], frames.shape[-1])[:, ~stuck[:, ch], ch].ravel()
         top = int(v.max())
         if top >= c_max:

@@ -186,3 +186,15 @@ def test_exposure_refinement_sees_no_defects() -> None:
     stuck = cam.truth(SHAPE).fixed_pattern.defects == DEFECT_STUCK
     assert model.report["merge"]["defects"]["stuck"] <= 3 * int(stuck.sum())
     assert model.report["merge"]["defects"]["stuck"] > 0
+
+
+def test_a_stuck_pixel_is_no_clip_for_the_saturation_detection() -> None:
+    from photoquant.stack import detect_saturation_levels
+
+    ramp = np.linspace(5, 60, 16)[None, :] * np.ones((12, 1))
+    frames = np.stack([np.minimum(np.rint(ramp * f), 217) for f in (1, 4, 16)])[None, ..., None]
+    frames = frames.astype(np.uint8)  # clipped at 217 over many pixels
+    frames[:, :, 3, 3, 0] = 238  # one stuck pixel above the clip
+    assert detect_saturation_levels(frames, 8).tolist() == [217]
+    one = np.full((1, 3, 1, 1, 1), 255, dtype=np.uint8)  # a lone clipped pixel stays clipped
+    assert detect_saturation_levels(one, 8).tolist() == [255]
