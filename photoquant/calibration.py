@@ -43,6 +43,7 @@ import numpy as np
 
 from photoquant import __version__
 from photoquant.balance import BalanceData, BalanceModel, check_roi
+from photoquant.defects import detect_defects, exclude_defects, hide_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import (
     ExposureRefinement,
@@ -344,6 +345,10 @@ def calibrate(
     notes: list[str] = []
     report: dict[str, Any] = {"timings_s": timings, "notes": notes}
 
+    # hot and stuck pixels are flagged, not merged (photoquant.defects): where every view
+    # shows one, they are no response sample and get zero weight in every merge
+    defects = detect_defects(views)
+
     # 1. response -----------------------------------------------------------
     say("response")
     t0 = time.perf_counter()
@@ -363,10 +368,9 @@ def calibrate(
 
         try:
             # 3 rounds: the fourth changed no time (measured); 20 000 pixels per view
-            # for the response (README, exposure refinement)
-            refs, _ = refine_jointly(
-                list(views), recover, rounds=3, combine_pixels=20_000, seed=seed
-            )
+            # for the response (README, exposure refinement); defects give no samples
+            hidden = [hide_defects(v, defects) for v in views]
+            refs, _ = refine_jointly(hidden, recover, rounds=3, combine_pixels=20_000, seed=seed)
         except CalibrationError as exc:
             if asked:
                 raise CalibrationError(
@@ -401,7 +405,7 @@ def calibrate(
                 "one view only: its exposure times cannot be told from its response; "
                 "nominal times kept"
             )
-        resp_fit = fit_response(ref, response_spec, rng=seed)
+        resp_fit = fit_response(hide_defects(ref, defects), response_spec, rng=seed)
     ref = views[0]
     resp: ResponseModel = resp_fit.model
     if refine_exposures and irradiance is not None:
@@ -422,12 +426,14 @@ def calibrate(
     say(f"merge {len(views)} view(s)")
     t0 = time.perf_counter()
     merged = [merge_model.merge(view, resp) for view in views]
+    merged = [exclude_defects(m, defects) for m in merged]  # defects: not merged
     timings["merge_per_view"] = (time.perf_counter() - t0) / len(views)
     report["merge"] = {
         "method": merge_model.method,
         "flagged_fraction_view0": float(merged[0].mask.mean()),
         "all_saturated_view0": int(merged[0].all_saturated.sum()),
         "all_dark_view0": int(merged[0].all_dark.sum()),
+        "defects": defects.report(),
     }
 
     # 3. sensor LUT -----------------------------------------------------------
@@ -440,7 +446,7 @@ def calibrate(
         lut_fit = lut_spec[0].function(merged[0].log_photoquantity, None, None)
     else:
         say("sensor LUT")
-        irr = merge_model.merge(irradiance, resp)
+        irr = exclude_defects(merge_model.merge(irradiance, resp), defects)
         lut_fit = fit_sensor_lut(irr, lut_spec)
     lut = lut_fit.model
     report["sensor_lut"] = {"method": lut.method, **lut_fit.report}

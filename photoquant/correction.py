@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from photoquant.defects import detect_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import ExposureRefinement, refine_exposure_times
 from photoquant.merge import MergeModel
@@ -217,6 +218,10 @@ def correct(
         with np.errstate(invalid="ignore"):
             photoquantity = np.exp(merged.log_photoquantity).astype(np.float32) * gain
         mask, all_saturated, all_dark = merged.mask, merged.all_saturated, merged.all_dark
+    defects = detect_defects(stack)  # hot/stuck pixels: not merged (NaN, flagged)
+    if defects is not None and defects.mask.any():
+        photoquantity[defects.mask] = np.nan
+        mask |= defects.mask
     return Correction(
         photoquantity=photoquantity,
         mask=mask,

@@ -110,6 +110,11 @@ def detect_saturation_levels(
     rows = _channel_rows(frames)
     top = _channel_reduce(np.maximum, rows, n_ch).astype(np.int64)
     span = max(2, (c_max + 1) // 64)
+    stuck = _stuck_pixels(frames, min_count)
+    if stuck is not None and stuck.any():
+        return _saturation_levels_without_stuck(
+            frames, stuck, c_max, span, min_fraction, min_count, pile_up_ratio
+        )
     check = np.flatnonzero(top < c_max)
     if check.size == 0:
         return levels
@@ -164,6 +169,61 @@ def _compare_per_channel(ufunc: np.ufunc, a: np.ndarray, level: np.ndarray) -> n
     rows = _channel_rows(a)
     reps = rows.shape[1] // a.shape[-1]
     return ufunc(rows, np.tile(level, reps)).reshape(a.shape)
+
+
+def _saturation_levels_without_stuck(
+    frames: np.ndarray,
+    stuck: np.ndarray,
+    c_max: int,
+    span: int,
+    min_fraction: float,
+    min_count: int,
+    pile_up_ratio: float,
+) -> np.ndarray:
+    """:func:`detect_saturation_levels` channel by channel, stuck pixels left out.
+
+    The per-channel reference path, taken only when the stacks hold stuck
+    pixels (rare: the vectorised path serves every other stack).
+    """
+    values = frames.reshape(-1, frames.shape[-1])
+    levels = np.full(values.shape[1], c_max, dtype=np.int64)
+    for ch in range(values.shape[1]):
+        v = values[:, ch]
+        if stuck[:, ch].any() and not stuck[:, ch].all():
+            # a stuck pixel's frames are no clip (with nothing else left, keep them all)
+            v = frames.reshape(-1, stuck.shape[0], frames.shape[-1])[:, ~stuck[:, ch], ch].ravel()
+        top = int(v.max())
+        if top >= c_max:
+            continue
+        counts = np.bincount(v[v >= top - span].astype(np.int64) - (top - span), minlength=span + 1)
+        pile = counts[-1]
+        below = counts[:-1].mean()
+        if pile >= max(min_count, min_fraction * v.size) and pile >= pile_up_ratio * below:
+            levels[ch] = top
+    return levels
+
+
+def _stuck_pixels(frames: np.ndarray, min_count: int) -> np.ndarray | None:
+    """``(H·W, C)`` bool: pixels stuck at a value of their own, or None (fewer than 2 frames).
+
+    A stuck pixel (:mod:`photoquant.defects`) holds one value in every frame;
+    its ``N·K`` equal values would pass for a pile-up at a clip. A pixel
+    clipped in every frame is constant too, but at a value many pixels share,
+    so only constant pixels whose value fewer than ``min_count`` constant
+    pixels hold are left out of the pile-up count.
+    """
+    if frames.ndim != 5 or frames.shape[0] * frames.shape[1] < 2:
+        return None
+    flat = frames.reshape(frames.shape[0] * frames.shape[1], -1, frames.shape[-1])
+    lo, hi = flat.min(axis=0), flat.max(axis=0)
+    const = lo == hi
+    if not const.any():
+        return None
+    out = np.zeros(const.shape, dtype=bool)
+    for ch in range(const.shape[1]):
+        vals, inv, counts = np.unique(lo[const[:, ch], ch], return_inverse=True, return_counts=True)
+        out[const[:, ch], ch] = counts[inv] < min_count
+    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -424,6 +424,12 @@ def _write_capture_contents(
         manifest["correspondences"] = correspondences
     if write_saturation_level:
         manifest["saturation_level"] = camera.saturation_dn.tolist()
+    dist = camera.disturbances
+    if dist is not None and any(dist.black_level_dn):
+        # the pedestal is the frames' black level, as a raw file's metadata gives it
+        manifest["black_level"] = dist.per_channel(
+            dist.black_level_dn, "black_level_dn", camera.n_channels
+        ).tolist()
     manifest["truth"] = "truth/truth.json"
     manifest["generator"] = dict(generator)
     bar.close()

@@ -292,6 +292,7 @@ _NOT_CONDITIONS = (
     "render_cache",
     "rendered_capture",
     "preset_files",
+    "robustness",
 )
 """The fields :meth:`ValidationConfig.conditions` leaves out (a test keeps them in step)."""
 

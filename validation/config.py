@@ -145,6 +145,10 @@ class ValidationConfig:
         keys) → the file the camera is built from (:meth:`preset_source`).
         Not a condition: a baseline describes a user preset by its content
         (:mod:`validation.regression`).
+    robustness : bool
+        Include the ``robustness`` experiment in a default run (each real-camera
+        disturbance alone and all together; :mod:`validation.experiments.robustness`).
+        Left out of :meth:`conditions`: its metrics are reported, never checked.
     """
 
     name: str = "quick"
@@ -171,6 +175,7 @@ class ValidationConfig:
     render_cache: str | None = None
     rendered_capture: bool = False
     preset_files: tuple[tuple[str, str], ...] = ()
+    robustness: bool = False
 
     def __post_init__(self) -> None:
         h, w = (int(v) for v in self.shape)
@@ -248,6 +253,7 @@ class ValidationConfig:
             "render_cache",
             "rendered_capture",
             "preset_files",
+            "robustness",
         ):
             d.pop(key)
         return d
@@ -271,7 +277,12 @@ QUICK = ValidationConfig()
 """The default: the paper's experiments on 320×240 images with ``N = 4``."""
 
 FULL = ValidationConfig(
-    name="full", shape=(768, 1024), n_repeats=10, chart="rendered", rendered_capture=True
+    name="full",
+    shape=(768, 1024),
+    n_repeats=10,
+    chart="rendered",
+    rendered_capture=True,
+    robustness=True,
 )
 """The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``; rendered chart and captures."""
 

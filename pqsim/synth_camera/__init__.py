@@ -2,7 +2,8 @@
 
 ``c_pkλn = a_λ · f_λ(u_pλ · v_pλ · t_k · l_pλ) + b_pkλn``: response curves
 (:mod:`.responses`), sensor noise (:mod:`.sensor`), vignetting and PRNU
-(:mod:`.optics`), the camera (:mod:`.camera`), its ground truth
+(:mod:`.optics`), real-camera disturbances (:mod:`.disturbances`, :mod:`.cfa`),
+the camera (:mod:`.camera`), its ground truth
 (:mod:`.truth`) and presets (:mod:`.presets`).
 
 This package implements its own physics and never imports photoquant's method
@@ -10,6 +11,7 @@ modules, only its input checks, errors and I/O formats.
 """
 
 from pqsim.synth_camera.camera import Capture, SyntheticCamera, as_generator
+from pqsim.synth_camera.disturbances import SensorDisturbances
 from pqsim.synth_camera.optics import (
     prnu_field,
     vignetting_cos4,
@@ -43,6 +45,7 @@ __all__ = [
     "Capture",
     "CaptureTruth",
     "ResponseCurve",
+    "SensorDisturbances",
     "SensorNoise",
     "SyntheticCamera",
     "TruthSet",

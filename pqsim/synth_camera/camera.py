@@ -45,6 +45,11 @@ from photoquant.utils import (
     check_workers,
     thread_map,
 )
+from pqsim.synth_camera.disturbances import (
+    SensorDisturbances,
+    actual_exposure_times,
+    fixed_pattern,
+)
 from pqsim.synth_camera.optics import (
     check_shape,
     prnu_field,
@@ -188,6 +193,11 @@ class SyntheticCamera:
         cut-off): one record for every channel or one per channel. Exclusive
         with ``vignetting_params`` (which stays the extended Goldman–Chen
         shortcut); recorded in the truth.
+    disturbances : SensorDisturbances or mapping, optional
+        What real sensors add to eq. 1 (pedestal, white levels, heavy-tailed
+        read noise, banding, DSNU, hot and stuck pixels, exposure-time error,
+        Bayer CFA, JPEG; :mod:`pqsim.synth_camera.disturbances`). ``None`` or
+        all off: the clean camera, bit-identical.
 
     Examples
     --------
@@ -209,6 +219,7 @@ class SyntheticCamera:
     channels: tuple[str, ...] = ("R", "G", "B")
     prnu_lowfreq_scale: float = 0.15
     vignetting: Any = None
+    disturbances: SensorDisturbances | None = None
 
     def __post_init__(self) -> None:
         responses = tuple(self.responses) if isinstance(self.responses, Sequence) else None
@@ -256,6 +267,10 @@ class SyntheticCamera:
             "prnu_lowfreq_scale",
             check_positive(self.prnu_lowfreq_scale, "prnu_lowfreq_scale"),
         )
+        dist = SensorDisturbances.from_value(self.disturbances)
+        if dist is not None:
+            dist.check_camera(self)
+        object.__setattr__(self, "disturbances", dist)
 
     # -- properties of the camera ------------------------------------------------
 
@@ -275,7 +290,17 @@ class SyntheticCamera:
 
     @property
     def saturation_dn(self) -> np.ndarray:
-        """``(C,)`` int64: the value of a saturated pixel, ``min(c_max, round(a_λ c_max F_λ(∞)))``."""
+        """``(C,)`` int64: the value of a saturated pixel, ``min(c_max, round(a_λ c_max F_λ(∞)))``.
+
+        With :attr:`disturbances`: the pedestal added and the white level applied
+        (:meth:`SensorDisturbances.saturation_dn`).
+        """
+        if self.disturbances is not None and self.disturbances.active:
+            return self.disturbances.saturation_dn(
+                np.asarray(self.balance),
+                np.array([r.max_output for r in self.responses]),
+                self.c_max,
+            )
         return np.array(
             [
                 min(self.c_max, int(np.rint(a * self.c_max * r.max_output)))
@@ -318,6 +343,7 @@ class SyntheticCamera:
 
     def truth(self, shape: Sequence[int]) -> CameraTruth:
         """The camera's ground truth for images of ``shape`` (H, W)."""
+        h, w = check_shape(shape)
         return CameraTruth(
             responses=self.responses,
             balance=self.balance,
@@ -335,7 +361,13 @@ class SyntheticCamera:
                 "sigma_lowfreq": self.prnu_sigma_lowfreq,
                 "lowfreq_scale": self.prnu_lowfreq_scale,
             },
+            disturbances=self.disturbances if self._disturbed else None,
+            fixed_pattern=fixed_pattern(self, (h, w)) if self._disturbed else None,
         )
+
+    @property
+    def _disturbed(self) -> bool:
+        return self.disturbances is not None and self.disturbances.active
 
     # -- simulation ------------------------------------------------------------------
 
@@ -430,7 +462,21 @@ class SyntheticCamera:
             mu += np.float32(self.noise.dark_current_e_per_s * t[k])
             frames[i, k] = self._dn(self.noise.draw_electrons(mu, frame_rng))
 
-        thread_map(simulate, [(k, i) for k in range(t.size) for i in range(n)], n_workers)
+        dist = self.disturbances if self._disturbed else None
+        actual = actual_exposure_times(dist, t, seeds)
+        pattern = fixed_pattern(self, shape)
+
+        def simulate_disturbed(job: tuple[int, int]) -> None:
+            # the disturbed path (pqsim.synth_camera.disturbances); the clean one above is
+            # left untouched so that a camera without disturbances stays bit-identical
+            k, i = job
+            assert dist is not None
+            frames[i, k] = dist.simulate_frame(
+                self, rate32, float(actual[i, k]), int(seeds[k, i]), pattern
+            )
+
+        jobs = [(k, i) for k in range(t.size) for i in range(n)]
+        thread_map(simulate if dist is None else simulate_disturbed, jobs, n_workers)
         truth = CaptureTruth(
             l=arr,
             exposure_s=t,
@@ -439,5 +485,6 @@ class SyntheticCamera:
             rng_state=state,
             optics=bool(optics),
             camera=cam_truth,
+            actual_exposure_s=actual if dist is not None and dist.has_exposure_error else None,
         )
         return Capture(frames=frames, exposure_s=t.copy(), truth=truth)

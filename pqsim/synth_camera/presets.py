@@ -201,7 +201,9 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
         Any :class:`SyntheticCamera` field, e.g. ``bit_depth=12``,
         ``balance=(1, 1, 1)``, ``vignetting_params=None``, ``prnu_seed=7``.
         ``responses`` may be given as ResponseCurve objects or dicts, ``noise``
-        as a SensorNoise or a dict of its fields (merged into the preset's).
+        as a SensorNoise or a dict of its fields (merged into the preset's),
+        ``disturbances`` as a SensorDisturbances or a dict of its fields
+        (merged into the preset's; :mod:`pqsim.synth_camera.disturbances`).
 
     Returns
     -------
@@ -226,7 +228,13 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
     noise = overrides.pop("noise", None)
     if overrides.get("vignetting") is not None and "vignetting_params" not in overrides:
         fields["vignetting_params"] = None  # records replace the base's m1..m6
+    disturbances = overrides.pop("disturbances", None)
     fields.update(overrides)
+    if isinstance(disturbances, Mapping) and isinstance(fields.get("disturbances"), Mapping):
+        # a mapping of disturbance fields is merged into the preset's, like `noise`
+        fields["disturbances"] = dict(fields["disturbances"]) | dict(disturbances)
+    elif disturbances is not None:
+        fields["disturbances"] = disturbances
     noise_fields = dict(fields["noise"])
     if isinstance(noise, SensorNoise):
         fields["noise"] = noise

@@ -36,6 +36,7 @@ import numpy as np
 
 from photoquant.errors import InputError
 from photoquant.utils import check_array, check_bit_depth
+from pqsim.synth_camera.disturbances import FixedPattern, SensorDisturbances
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import SensorNoise
 
@@ -91,6 +92,13 @@ class CameraTruth:
         The vignetting's ``{"kind", "params"}`` record(s)
         (:data:`~pqsim.synth_camera.optics.VIGNETTING_KINDS`) when the camera
         was given them; ``None`` for ``vignetting_params`` or none.
+    disturbances : SensorDisturbances, optional
+        The camera's disturbances when any is on
+        (:mod:`pqsim.synth_camera.disturbances`); ``None`` for a clean camera.
+    fixed_pattern : FixedPattern, optional
+        Its sensor's DSNU, hot-pixel charge, defect map (0 good, 1 hot, 2
+        stuck) and stuck values, when it has any; written as
+        ``fixed_pattern.exr``.
     """
 
     responses: tuple[ResponseCurve, ...]
@@ -104,6 +112,8 @@ class CameraTruth:
     channels: tuple[str, ...] = ("R", "G", "B")
     prnu: dict[str, Any] = field(default_factory=dict)
     vignetting_model: Any = None
+    disturbances: SensorDisturbances | None = None
+    fixed_pattern: FixedPattern | None = None
 
     def __post_init__(self) -> None:
         c = len(self.responses)
@@ -135,7 +145,16 @@ class CameraTruth:
 
     @property
     def saturation_dn(self) -> np.ndarray:
-        """``(C,)`` int64: value of a saturated pixel, ``min(c_max, round(a_λ c_max F_λ(∞)))``."""
+        """``(C,)`` int64: value of a saturated pixel, ``min(c_max, round(a_λ c_max F_λ(∞)))``.
+
+        With :attr:`disturbances`, the pedestal added and the white level applied.
+        """
+        if self.disturbances is not None:
+            return self.disturbances.saturation_dn(
+                np.asarray(self.balance),
+                np.array([r.max_output for r in self.responses]),
+                self.c_max,
+            )
         return np.array(
             [
                 min(self.c_max, int(np.rint(a * self.c_max * r.max_output)))
@@ -143,6 +162,13 @@ class CameraTruth:
             ],
             dtype=np.int64,
         )
+
+    def _pedestal(self, ch: int) -> float:
+        """The black level (DN) of channel ``ch``: the disturbances' pedestal, else 0."""
+        d = self.disturbances
+        if d is None:
+            return 0.0
+        return float(d.per_channel(d.black_level_dn, "black_level_dn", self.n_channels)[ch])
 
     def _channel(self, channel: Any) -> int:
         if isinstance(channel, str):
@@ -174,7 +200,9 @@ class CameraTruth:
         Returns
         -------
         ndarray, float64
-            Values in ``[0, a_λ c_max]`` (before rounding and clipping to ``c_max``).
+            Values in ``[0, a_λ c_max]`` (before rounding and clipping to ``c_max``),
+            above the black level: a camera with a pedestal ``b_λ``
+            (:mod:`~pqsim.synth_camera.disturbances`) writes ``b_λ`` more.
         """
         X = check_array(X, "X", kind="iuf").astype(np.float64)
         if np.any(np.isnan(X)) or np.any(X < 0):
@@ -195,14 +223,16 @@ class CameraTruth:
     def inverse_response_exposure(self, levels: Any, channel: int | str) -> np.ndarray:
         """True ``f_λ⁻¹(c / a_λ)``: the exposure ``X`` whose noise-free value is ``c``.
 
-        ``X = full_well / exposure_scale · F_λ⁻¹(c / (a_λ c_max))``. Level 0
-        maps to 0; levels above ``a_λ c_max F_λ(∞)`` (never produced) give NaN.
+        ``X = full_well / exposure_scale · F_λ⁻¹((c − b_λ) / (a_λ c_max))``, ``b_λ``
+        the black level (pedestal; 0 for a clean camera). Levels at or below
+        ``b_λ`` map to 0; levels above ``b_λ + a_λ c_max F_λ(∞)`` (never
+        produced) give NaN.
         """
         ch = self._channel(channel)
         c = check_array(levels, "levels", kind="iuf", finite=True).astype(np.float64)
         if np.any(c < 0):
             raise InputError("`levels` must be non-negative pixel values")
-        F = c / (self.balance[ch] * self.c_max)
+        F = np.maximum(c - self._pedestal(ch), 0.0) / (self.balance[ch] * self.c_max)
         top = self.responses[ch].max_output
         ok = F <= top
         out = np.full(c.shape, np.nan)
@@ -252,7 +282,10 @@ class CameraTruth:
             if self.vignetting_params is None
             else [list(p) for p in self.vignetting_params],
             "prnu": dict(self.prnu),
-        } | ({} if self.vignetting_model is None else {"vignetting_model": self.vignetting_model})
+        } | (
+            ({} if self.vignetting_model is None else {"vignetting_model": self.vignetting_model})
+            | ({} if self.disturbances is None else {"disturbances": self.disturbances.to_dict()})
+        )
 
     def save(self, folder: str | Path) -> Path:
         """Write this truth alone to ``folder`` (see :func:`save_truth`)."""
@@ -281,6 +314,10 @@ class CaptureTruth:
         scene of §5.4 of [PQ].
     camera : CameraTruth
         The camera that captured it.
+    actual_exposure_s : ndarray, shape (N, K), optional
+        The frames' actual exposure times when the camera has an exposure-time
+        error (:mod:`pqsim.synth_camera.disturbances`); ``exposure_s`` and
+        the manifest keep the nominal ones.
     """
 
     l: np.ndarray  # noqa: E741 - the paper's symbol
@@ -290,9 +327,19 @@ class CaptureTruth:
     rng_state: dict[str, Any] | None
     optics: bool
     camera: CameraTruth
+    actual_exposure_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         h, w = self.camera.image_shape
+        if self.actual_exposure_s is not None:
+            t = check_array(
+                self.actual_exposure_s,
+                "actual_exposure_s",
+                shape=(int(self.n_repeats), len(self.exposure_s)),
+                kind="f",
+                finite=True,
+            )
+            object.__setattr__(self, "actual_exposure_s", _readonly(t))
         l = check_array(self.l, "l", shape=(h, w, self.camera.n_channels), kind="f")  # noqa: E741
         object.__setattr__(self, "l", _readonly(l))
         object.__setattr__(self, "exposure_s", _readonly(np.asarray(self.exposure_s)))
@@ -322,7 +369,11 @@ class CaptureTruth:
             "seed": self.seed,
             "rng_state": self.rng_state,
             "optics": bool(self.optics),
-        }
+        } | (
+            {}
+            if self.actual_exposure_s is None
+            else {"actual_exposure_s": self.actual_exposure_s.tolist()}
+        )
 
     def save(self, folder: str | Path, name: str = "capture") -> Path:
         """Write this capture's truth (and its camera's) to ``folder``."""
@@ -401,6 +452,17 @@ def save_truth(
         folder / "v.exr", camera.vignetting, channels=ch, metadata={"pqsim": "vignetting v"}
     )
     cam = camera.to_dict() | {"sensor_lut": "u.exr", "vignetting": "v.exr"}
+    fp = camera.fixed_pattern
+    if fp is not None:  # only for a camera with DSNU or defects: clean truths are unchanged
+        stuck = np.zeros(fp.defects.shape) if fp.stuck_dn is None else fp.stuck_dn
+        maps = np.stack([fp.offset_e, fp.dsnu_e, fp.defects, stuck], axis=-1)
+        pqio.write_exr(
+            folder / "fixed_pattern.exr",
+            maps,
+            channels=_FIXED_PATTERN_CHANNELS,
+            metadata={"pqsim": "fixed pattern: offset, DSNU (e-), defects (1 hot, 2 stuck), stuck"},
+        )
+        cam["fixed_pattern"] = "fixed_pattern.exr"
     caps: dict[str, Any] = {}
     for name, cap in captures.items():
         fname = f"l_{name}.exr"
@@ -413,6 +475,25 @@ def save_truth(
     path = folder / "truth.json"
     _write_text_atomic(path, text + "\n")
     return path
+
+
+_FIXED_PATTERN_CHANNELS = ("offset_e", "dsnu_e", "defects", "stuck_dn")
+
+
+def _read_fixed_pattern(folder: Path, cam: Mapping[str, Any], shape: tuple[int, int]) -> Any:
+    name = cam.get("fixed_pattern")
+    if name is None:
+        return None
+    maps = _read_map(folder, name, (*shape, len(_FIXED_PATTERN_CHANNELS)))
+    dist = cam.get("disturbances") or {}
+    defects = maps[..., 2].astype(np.int8)
+    stuck = maps[..., 3] if float(dist.get("stuck_pixel_fraction", 0.0)) > 0 else None
+    return FixedPattern(
+        offset_e=maps[..., 0].astype(np.float32),
+        dsnu_e=maps[..., 1],
+        defects=defects,
+        stuck_dn=None if stuck is None else stuck.astype(np.uint16),
+    )
 
 
 def _write_text_atomic(path: Path, text: str) -> None:
@@ -488,6 +569,8 @@ def load_truth(folder: str | Path) -> TruthSet:
             channels=tuple(cam["channels"]),
             prnu=dict(cam.get("prnu", {})),
             vignetting_model=_vignetting_model(cam.get("vignetting_model")),
+            disturbances=SensorDisturbances.from_value(cam.get("disturbances")),
+            fixed_pattern=_read_fixed_pattern(folder, cam, (h, w)),
         )
         captures = {}
         for name, cap in doc.get("captures", {}).items():
@@ -501,6 +584,9 @@ def load_truth(folder: str | Path) -> TruthSet:
                 rng_state=cap.get("rng_state"),
                 optics=bool(cap["optics"]),
                 camera=camera,
+                actual_exposure_s=None
+                if cap.get("actual_exposure_s") is None
+                else np.asarray(cap["actual_exposure_s"], dtype=np.float64),
             )
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, InputError):

@@ -88,13 +88,23 @@ def test_bad_stacks_are_refused_with_a_named_reason(kwargs, match):
 
 
 def _detect_reference(frames, bit_depth, min_fraction=1e-4, min_count=3, pile_up_ratio=4.0):
-    """The readable per-channel detection (one channel at a time, a mask per channel)."""
+    """The readable per-channel detection (one channel at a time, a mask per channel).
+
+    Stuck pixels (constant in every frame at a value of their own,
+    ``photoquant.stack._stuck_pixels``, tested in test_defects) are left out
+    of a channel's values, as :func:`detect_saturation_levels` does.
+    """
+    from photoquant.stack import _stuck_pixels
+
     c_max = 2**bit_depth - 1
     values = frames.reshape(-1, frames.shape[-1])
     levels = np.full(values.shape[1], c_max, dtype=np.int64)
     span = max(2, (c_max + 1) // 64)
+    stuck = _stuck_pixels(frames, min_count)
     for ch in range(values.shape[1]):
         v = values[:, ch]
+        if stuck is not None and stuck[:, ch].any() and not stuck[:, ch].all():
+            v = frames.reshape(-1, stuck.shape[0], frames.shape[-1])[:, ~stuck[:, ch], ch].ravel()
         top = int(v.max())
         if top >= c_max:
             continue

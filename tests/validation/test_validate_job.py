@@ -66,7 +66,11 @@ def test_default_quick_job_passes_the_stored_baseline(quick):
 def test_report_files(quick):
     run, _, folder = quick
     report = (folder / "report.md").read_text(encoding="utf-8")
-    for name in EXPERIMENTS:
+    from validation.experiments import OPT_IN
+
+    # every experiment but the opt-in ones (robustness: --full or on request)
+    assert set(run.experiments) == set(EXPERIMENTS) - set(OPT_IN)
+    for name in run.experiments:
         assert run.experiments[name].title in report, name
         if name != "rendered":  # the quick job leaves the rendered capture set out
             assert not run.experiments[name].skipped, (name, run.experiments[name].skipped)

@@ -20,6 +20,11 @@ preset is simulated and calibrated once) and gathers every metric.
 | ``rendered`` | calibration from a Mitsuba-rendered capture set (``--full``) | §5, §6 |
 | ``ablation`` | the paper's profile, photoquant's, each deviation alone | §5, §6 |
 | ``leaderboard`` | every registered method ranked against the truth | issue 11 |
+| ``robustness`` | each real-camera disturbance alone and all together (``--full``) | issue 12 |
+
+Experiments in :data:`OPT_IN` run by default only when their configuration
+flag is on (``robustness``: :attr:`ValidationConfig.robustness`, set by
+``--full``); naming them in ``experiments`` runs them on any configuration.
 """
 
 from __future__ import annotations
@@ -54,8 +59,12 @@ EXPERIMENTS: dict[str, str] = {
     "rendered": "validation.experiments.rendered",
     "ablation": "validation.experiments.ablation",
     "leaderboard": "validation.experiments.leaderboard",
+    "robustness": "validation.experiments.robustness",
 }
 """Experiment key → module, in the order of the report (the paper's §6)."""
+
+OPT_IN: dict[str, str] = {"robustness": "robustness"}
+"""Experiment key → the :class:`ValidationConfig` flag that includes it in a default run."""
 
 
 @dataclass
@@ -125,9 +134,13 @@ def package_versions() -> dict[str, str | None]:
     return out
 
 
-def _select(names: Sequence[str] | None) -> list[str]:
+def _select(names: Sequence[str] | None, config: ValidationConfig | None = None) -> list[str]:
     if names is None:
-        return list(EXPERIMENTS)
+        return [
+            n
+            for n in EXPERIMENTS
+            if n not in OPT_IN or (config is not None and getattr(config, OPT_IN[n]))
+        ]
     unknown = [n for n in names if n not in EXPERIMENTS]
     if unknown:
         raise ValidationError(f"unknown experiment(s) {unknown}; valid: {list(EXPERIMENTS)}")
@@ -165,7 +178,7 @@ def run_validation(
     from photoquant.errors import PhotoquantError
     from validation.experiments.shared import Shared
 
-    names = _select(experiments)
+    names = _select(experiments, config)
     keep = workdir is not None
     root = Path(workdir) if keep else Path(tempfile.mkdtemp(prefix="photoquant-validate-"))
     shared = Shared(config, seed, root, progress)

@@ -1,0 +1,55 @@
+"""The robustness experiment (issue 12): rows, metrics, selection."""
+
+from __future__ import annotations
+
+import pytest
+
+from validation.config import FULL, QUICK, TINY
+from validation.experiments import EXPERIMENTS, _select
+from validation.experiments.robustness import DISTURBANCES, QUANTITIES, run
+
+
+def test_every_row_switches_something_on_for_both_presets() -> None:
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    keys = [d.key for d in DISTURBANCES]
+    assert len(set(keys)) == len(keys) and keys[-1] == "all"
+    assert {"issue", "issue_refined"} <= set(keys)
+    for preset in ("ccd", "cmos"):
+        clean = camera_from_preset(preset)
+        for dist in DISTURBANCES:
+            cam = camera_from_preset(preset, **dist.overrides)
+            assert clean.disturbances is None
+            assert cam.disturbances is not None and cam.disturbances.active
+    # "all" holds every other row's fields
+    every = DISTURBANCES[-1].overrides["disturbances"]
+    for dist in DISTURBANCES[:-1]:
+        for key, value in dist.overrides["disturbances"].items():
+            assert every[key] == value
+
+
+def test_in_full_and_on_request_not_in_quick() -> None:
+    assert "robustness" in EXPERIMENTS
+    assert "robustness" not in _select(None, QUICK)
+    assert "robustness" in _select(None, FULL)
+    assert _select(["robustness"], QUICK) == ["robustness"]
+    assert "robustness" not in QUICK.conditions() and "robustness" not in FULL.conditions()
+
+
+@pytest.mark.slow
+def test_run_reports_each_quantity_against_the_clean_camera(tmp_path) -> None:
+    rows = [d for d in DISTURBANCES if d.key in ("defects", "issue")]
+    cfg = TINY.replace(presets=("ccd",))
+    res = run(cfg, 0, tmp_path, disturbances=rows)
+    m = res.metrics
+    for key in ("clean", "defects", "issue"):
+        for q, _, _ in QUANTITIES:
+            assert m[f"robustness.ccd.{key}.{q}"] is not None
+    assert m["robustness.ccd.clean.scene_ratio"] == pytest.approx(1.0)
+    floor = m["robustness.ccd.scene_noise_floor"]
+    assert 0 < floor <= m["robustness.ccd.clean.scene"] * 1.5
+    # the issue's set costs accuracy: 3 % exposure jitter per frame is a gain error per
+    # exposure, far above the scene's noise floor
+    assert m["robustness.ccd.issue.scene"] > 1.2 * m["robustness.ccd.clean.scene"]
+    assert len(res.rows) == 3
+    assert not any((tmp_path / "robustness" / "ccd").iterdir())  # capture sets removed
