@@ -157,7 +157,11 @@ def correct(
             stack = refinement.apply(stack)
     merged = merger.merge(stack, model.balanced_response())
     with np.errstate(invalid="ignore"):
-        photoquantity = np.exp(merged.log_photoquantity) * model.gain_map()
+        if model.glare.is_identity:
+            photoquantity = np.exp(merged.log_photoquantity) * model.gain_map()
+        else:  # veiling glare: deconvolve on the sensor (÷ u first), then ÷ v (photoquant.glare)
+            sensor = np.exp(merged.log_photoquantity) / model.sensor_lut.lut
+            photoquantity = model.glare.remove(sensor) / model.vignetting_map()
     return Correction(
         photoquantity=photoquantity.astype(np.float32),
         mask=merged.mask,

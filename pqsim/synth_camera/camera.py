@@ -45,6 +45,7 @@ from photoquant.utils import (
     check_workers,
     thread_map,
 )
+from pqsim.synth_camera.glare import GlareSpread
 from pqsim.synth_camera.optics import check_shape, prnu_field, vignetting_extended_goldman_chen
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import POISSON_MEAN_CAP_E, SensorNoise
@@ -148,6 +149,13 @@ class SyntheticCamera:
         Channel names, ``("R", "G", "B")``.
     prnu_lowfreq_scale : float
         Correlation length of the smooth PRNU component, fraction of ``min(H, W)``.
+    glare : GlareSpread, mapping or None
+        Veiling glare of the optics (:mod:`pqsim.synth_camera.glare`): a
+        fraction of the vignetted light spread by a long-tailed kernel before
+        the sensor, ``u·((1−f)·v·l + f·K⊛(v·l))``; a mapping of its fields
+        (a preset's ``"glare": {"fraction": 0.015, "width_px": 40}``) is
+        accepted. ``None`` (default): no glare. Only captures through the
+        optics (``optics=True``) have it.
 
     Examples
     --------
@@ -168,6 +176,7 @@ class SyntheticCamera:
     prnu_seed: int = 0
     channels: tuple[str, ...] = ("R", "G", "B")
     prnu_lowfreq_scale: float = 0.15
+    glare: GlareSpread | None = None
 
     def __post_init__(self) -> None:
         responses = tuple(self.responses) if isinstance(self.responses, Sequence) else None
@@ -197,6 +206,10 @@ class SyntheticCamera:
         channels = tuple(str(s) for s in self.channels)
         if len(channels) != c:
             raise InputError(f"`channels` names {len(channels)} channels but `responses` has {c}")
+        glare = GlareSpread.from_value(self.glare)
+        if glare is not None:
+            glare.check_channels(c)
+        object.__setattr__(self, "glare", glare)
         object.__setattr__(self, "responses", responses)
         object.__setattr__(self, "balance", tuple(float(a) for a in bal))
         object.__setattr__(self, "vignetting_params", vp)
@@ -287,6 +300,7 @@ class SyntheticCamera:
                 "sigma_lowfreq": self.prnu_sigma_lowfreq,
                 "lowfreq_scale": self.prnu_lowfreq_scale,
             },
+            glare=self.glare,
         )
 
     # -- simulation ------------------------------------------------------------------
@@ -362,8 +376,13 @@ class SyntheticCamera:
             raise InputError(f"`optics` must be a bool, got {optics!r}")
         shape = arr.shape[:2]
         cam_truth = self.truth(shape)
-        gain = cam_truth.sensor_lut * cam_truth.vignetting if optics else cam_truth.sensor_lut
-        photo_rate = gain * arr * self.exposure_scale  # photo-electrons per second
+        if optics and self.glare is not None and not self.glare.is_identity:
+            # veiling glare: the lens spreads part of the vignetted light, then the sensor's u
+            lens = self.glare.apply(cam_truth.vignetting * arr)
+            photo_rate = cam_truth.sensor_lut * lens * self.exposure_scale
+        else:
+            gain = cam_truth.sensor_lut * cam_truth.vignetting if optics else cam_truth.sensor_lut
+            photo_rate = gain * arr * self.exposure_scale  # photo-electrons per second
         if not np.isfinite(float(photo_rate.max(initial=0.0)) * float(t.max())):
             raise InputError("`l` is too large: its photo-electron counts overflow float64")
         n = int(n_repeats)
