@@ -77,7 +77,9 @@ _MAX_BETA = 20.0
 _MIN_WIDTH_PX = 1.0
 
 
-def _check_glare_params(fraction: Any, width_px: Any, beta: Any) -> tuple[np.ndarray, ...]:
+def _check_glare_params(
+    fraction: Any, width_px: Any, beta: Any
+) -> tuple[np.ndarray, np.ndarray, float]:
     f = np.asarray(fraction, dtype=np.float64)
     w = np.asarray(width_px, dtype=np.float64)
     if f.ndim != 1 or f.size == 0 or w.shape != f.shape:
@@ -96,7 +98,7 @@ def _check_glare_params(fraction: Any, width_px: Any, beta: Any) -> tuple[np.nda
     b = float(beta)
     if not (math.isfinite(b) and 1.0 < b <= _MAX_BETA):
         raise InputError(f"glare `beta` must lie in (1, {_MAX_BETA:g}], got {beta!r}")
-    return f, w, np.float64(b)
+    return f, w, b
 
 
 @functools.lru_cache(maxsize=16)

@@ -70,7 +70,8 @@ _MAX_BETA = 20.0
 
 
 def _per_channel(value: Any, name: str) -> tuple[float, ...]:
-    arr = np.atleast_1d(check_array(value, name, kind="iuf", finite=True)).astype(np.float64)
+    arr = np.atleast_1d(check_array(value, f"glare.{name}", kind="iuf", finite=True))
+    arr = arr.astype(np.float64)
     if arr.ndim != 1 or arr.size == 0:
         raise InputError(f"`glare.{name}` must be a number or one number per channel")
     return tuple(float(a) for a in arr)
