@@ -318,11 +318,10 @@ class GlareData:
     all_saturated: np.ndarray
 
 
-def characterise_glare_None(data: GlareData | None, options: None = None) -> StepFit[GlareModel]:
+def characterise_glare_None(data: GlareData, options: None = None) -> StepFit[GlareModel]:
     """No glare correction (no glare capture): every fraction 0."""
     del options
-    n = 3 if data is None else int(np.shape(data.image)[-1])
-    return StepFit(GlareModel.identity(n))
+    return StepFit(GlareModel.identity(int(np.shape(data.image)[-1])))
 
 
 GLARE_METHODS = REGISTRIES["glare"]
