@@ -4,8 +4,8 @@ The glare capture is a bracketed HDR capture of a small bright source on a
 dark background, as in the glare-spread-function measurements of [TAHL07]_
 and the stray-light calibration of [BJA07]_. Merged and divided by ``u`` it
 is ``y = (1 − f) x + f K ⊛ x`` (:mod:`photoquant.glare.base`), with ``x``
-the source alone. The source's *core* (pixels above ``core_threshold`` of the
-peak, grown by one pixel) is measured directly, ``x ≈ y / (1 − f)`` there
+the source alone. The source's *core* (the connected pixels above ``core_threshold`` of the
+peak that hold it, grown by one pixel) is measured directly, ``x ≈ y / (1 − f)`` there
 (the glare landing on the core is ``≈ f · A · K(0)`` of it, below 10⁻⁴ for a
 source of ``A`` ≈ 50 pixels and ``w`` ≥ 10 px), so the source's own size and
 shape need not be known. Away from the core, ``y = f / (1 − f) · K ⊛ y_core``:
@@ -22,7 +22,10 @@ the best grid point is refined by :func:`scipy.optimize.least_squares` in
 uncertainties in the report. Annuli where fewer than ``min_valid_fraction``
 of the pixels have a valid exposure (the far tail sinking into the dark) are
 left out: a mean over the pixels that noise lifted above the dark level would
-be biased up. A constant background ``b ≥ 0`` is fitted beside the tail
+be biased up. Within an annulus, values more than 8 robust standard
+deviations (1.4826 · MAD) from its median are left out: hot and stuck
+pixels are no glare (the tail varies by ~±15 % across an annulus, well
+inside that band). A constant background ``b ≥ 0`` is fitted beside the tail
 (``fit_background``): the dark current's mean ``D·t`` electrons reads, at
 every exposure alike, as the constant photoquantity ``D / scale``, and stray
 ambient light on the dark background is nearly constant too; left out, it
@@ -46,7 +49,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.ndimage import binary_dilation, distance_transform_edt
+from scipy.ndimage import binary_dilation, distance_transform_edt, label
 from scipy.optimize import least_squares
 
 from photoquant._checks import check_array, check_int, check_positive
@@ -171,7 +174,10 @@ def _channel_fit(
     if not valid.any():
         raise CalibrationError(f"glare capture, channel {ch}: no pixel has a valid exposure")
     peak = float(np.max(y[valid]))
-    core = valid & (y >= opts.core_threshold * peak)
+    bright = valid & (y >= opts.core_threshold * peak)
+    # the source is the bright region holding the peak (a hot pixel elsewhere is not)
+    labels, _ = label(bright)
+    core = labels == labels[np.unravel_index(np.argmax(np.where(valid, y, -np.inf)), y.shape)]
     core = binary_dilation(core) & valid
     source = np.where(core, y, 0.0)
     yy, xx = np.nonzero(core)
@@ -204,6 +210,12 @@ def _channel_fit(
         if ok.mean() < opts.min_valid_fraction:
             continue
         members = members[ok]
+        # hot and stuck pixels are no glare: drop values beyond 8 robust sigmas
+        values = y.ravel()[members]
+        med = np.median(values)
+        mad = 1.4826 * np.median(np.abs(values - med))
+        if mad > 0:
+            members = members[np.abs(values - med) <= 8.0 * mad]
         stride = max(1, int(np.ceil(members.size / opts.max_per_annulus)))
         members = members[::stride]
         samples.append(members)
