@@ -6,9 +6,10 @@ and the stray-light calibration of [BJA07]_. Merged and divided by ``u`` it
 is ``y = (1 − f) x + f K ⊛ x`` (:mod:`photoquant.glare.base`), with ``x``
 the source alone. The source's *core* (the connected pixels above ``core_threshold`` of the
 peak that hold it, grown by one pixel) is measured directly, ``x ≈ y / (1 − f)`` there
-(the glare landing on the core is ``≈ f · A · K(0)`` of it, below 10⁻⁴ for a
-source of ``A`` ≈ 50 pixels and ``w`` ≥ 10 px), so the source's own size and
-shape need not be known. Away from the core, ``y = f / (1 − f) · K ⊛ y_core``:
+(the glare landing on the core is ``≈ f · A · K(0)`` of it, which biases
+``f`` low by that fraction: 7·10⁻⁵ for a source of ``A`` ≈ 50 pixels with
+``f`` = 1.5 %, ``w`` = 40 px; 0.2 % with ``f`` = 2 %, ``w`` = 10 px), so the
+source's own size and shape need not be known. Away from the core, ``y = f / (1 − f) · K ⊛ y_core``:
 the tail is the measured core spread by the kernel.
 
 The fit compares that prediction with the tail in log-spaced annuli about the

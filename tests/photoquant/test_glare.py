@@ -84,7 +84,7 @@ def test_fit_recovers_a_noise_free_glare_exactly():
     y = GlareSpread(f, w).apply(scene_glare_source((120, 160)))
     fit = fit_glare_ParametricPSF(y)
     # the core is taken as y/(1 − f); the glare landing on the core itself,
-    # f·A·K(0) ≈ 0.015 · 50 · 1e-4 relative, is the only approximation
+    # f·A·K(0) ≈ 0.015 · 50 · 1e-4 = 7e-5 relative, is the only approximation
     np.testing.assert_allclose(fit.fraction, f, rtol=1e-3)
     np.testing.assert_allclose(fit.width_px, w, rtol=1e-3)
     assert np.all(fit.rms_log_residual < 1e-3)
@@ -294,4 +294,4 @@ def test_fit_ignores_hot_pixels():
     # 40 of 4800 pixels left out of the annuli changes the noise-free fit by round-off only
     np.testing.assert_allclose(fit.fraction, clean.fraction, rtol=1e-4)
     np.testing.assert_allclose(fit.width_px, clean.width_px, rtol=1e-4)
-    np.testing.assert_allclose(clean.fraction, f, rtol=5e-3)  # f·A·K(0) ≈ 0.3 %: module notes
+    np.testing.assert_allclose(clean.fraction, f, rtol=5e-3)  # f·A·K(0) ≈ 0.2 %: module notes
