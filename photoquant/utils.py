@@ -23,6 +23,7 @@ naming the argument, never a numpy traceback):
 
 Other helpers:
 
+- :func:`emor_basis` — the EMoR basis of real camera responses shipped in the package (data, Grossberg & Nayar 2004).
 - :func:`to_json_value` — numpy scalars and arrays, tuples and paths as plain JSON values.
 - :func:`thread_map` — ``[fn(x) for x in items]`` on threads, in order.
 - :func:`handle_signals`, :class:`Terminated` — SIGTERM and Ctrl-C as clean exits (temporaries removed), for a command's ``main()``.
@@ -54,6 +55,7 @@ from photoquant._checks import (
     safe_stdio,
     validate_method,
 )
+from photoquant._emor_data import emor_basis
 from photoquant._json import load_json, to_json_value
 from photoquant._signals import Terminated, handle_signals
 from photoquant._threads import thread_map
@@ -70,6 +72,7 @@ __all__ = [
     "check_positive",
     "check_workers",
     "default_workers",
+    "emor_basis",
     "thread_map",
     "to_json_value",
     "validate_method",

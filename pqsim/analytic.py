@@ -371,7 +371,11 @@ def views_by_pan(
 
 
 def scene_irradiance(
-    shape: Sequence[int], level: float = 1.0, nonuniformity: float = 0.0, channels: int = 3
+    shape: Sequence[int],
+    level: float = 1.0,
+    nonuniformity: float = 0.0,
+    channels: int = 3,
+    falloff: float = 0.0,
 ) -> np.ndarray:
     """The irradiance scene of §5.4 of [PQ]: a (nearly) uniform field on the bare sensor.
 
@@ -387,10 +391,29 @@ def scene_irradiance(
         0 (default) gives the ideal uniform illumination the paper assumes.
     channels : int
         Number of channels ``C``.
+    falloff : float
+        Relative radial fall-off of the illumination, in ``[0, 1)``: the
+        field is multiplied by ``1 − falloff · r²``, ``r`` the distance to the
+        image centre in half-diagonals (the corners get ``1 − falloff``) — a
+        lamp or an integrating sphere's port that lights the centre more than
+        the edges, the most common flaw of a flat-field set-up [Ref]_.
 
     Returns
     -------
     ndarray, shape (H, W, C), float64
+        ``level · (1 + nonuniformity · ((x_n − ½) + (y_n − ½)) / 2) · (1 − falloff · r²)``.
+
+    Notes
+    -----
+    The sensor LUT of §5.4 is the irradiance scene's frames normalised to
+    mean 1, so any non-uniformity of the illumination goes into the LUT: the
+    LUT's error against the true ``u`` grows with both parameters.
+
+    References
+    ----------
+    .. [Ref] EMVA Standard 1288, release 4.0 (2021), §8.1 and §B.2 (the
+       illumination of the flat field must be uniform to better than 3 %
+       for PRNU measurements; non-uniformity appears as PRNU).
     """
     h, w = check_shape(shape)
     c = _channels(channels)
@@ -398,8 +421,15 @@ def scene_irradiance(
     nu = check_positive(nonuniformity, "nonuniformity", allow_zero=True)
     if nu >= 1:
         raise InputError(f"`nonuniformity` must lie in [0, 1), got {nonuniformity}")
+    fo = check_positive(falloff, "falloff", allow_zero=True)
+    if fo >= 1:
+        raise InputError(f"`falloff` must lie in [0, 1), got {falloff}")
     xn, yn = normalised_coordinates((h, w))
     field = lv * (1.0 + nu * ((xn - 0.5) + (yn - 0.5)) / 2.0)
+    if fo > 0:
+        # r² in half-diagonals: ((x_n − ½)² W² + (y_n − ½)² H²) / ((W² + H²) / 4)
+        r2 = ((xn - 0.5) ** 2 * w * w + (yn - 0.5) ** 2 * h * h) / ((w * w + h * h) / 4.0)
+        field = field * (1.0 - fo * r2)
     return np.repeat(field[..., None], c, axis=2)
 
 

@@ -454,6 +454,7 @@ def write_capture_set(
     scene_exposure_s: Any = None,
     irradiance_level: float = 1.0,
     irradiance_nonuniformity: float = 0.0,
+    irradiance_falloff: float = 0.0,
     correspondence_stride: int = 2,
     max_tracks: int | None = None,
     frame_format: str = "png",
@@ -493,9 +494,11 @@ def write_capture_set(
         :func:`~pqsim.analytic.scene_ramp`, or a given photoquantity field.
     scene_exposure_s : array_like (K',), optional
         Exposures of the test scene; :data:`DEFAULT_SCENE_EXPOSURES_S` by default.
-    irradiance_level, irradiance_nonuniformity : float
-        Photoquantity and gradient of the irradiance scene
-        (:func:`~pqsim.analytic.scene_irradiance`); captured with ``optics=False``.
+    irradiance_level, irradiance_nonuniformity, irradiance_falloff : float
+        Photoquantity, gradient and radial fall-off of the irradiance scene's
+        illumination (:func:`~pqsim.analytic.scene_irradiance`; a non-uniform
+        flat field, recorded in the truth's ``meta`` and its ``l_irradiance``);
+        captured with ``optics=False``.
     correspondence_stride, max_tracks : int
         Density and cap of the correspondences (:func:`~pqsim.analytic.views_by_pan`).
     frame_format : {"png", "tiff"}
@@ -588,7 +591,11 @@ def write_capture_set(
         for i in range(int(n_views))
     ]
     l_irr = scene_irradiance(
-        (h, w), irradiance_level, irradiance_nonuniformity, channels=camera.n_channels
+        (h, w),
+        irradiance_level,
+        irradiance_nonuniformity,
+        channels=camera.n_channels,
+        falloff=irradiance_falloff,
     )
     irr = camera.capture(l_irr, t, n_repeats, gens[n_views + 1], optics=False, workers=workers)
     test = camera.capture(l_scene, t_scene, n_repeats, gens[n_views + 2], workers=workers)
@@ -614,6 +621,7 @@ def write_capture_set(
         "scene": scene_name,
         "irradiance_level": float(irradiance_level),
         "irradiance_nonuniformity": float(irradiance_nonuniformity),
+        "irradiance_falloff": float(irradiance_falloff),
     }
     if glare_source is not None:
         meta["glare_capture"] = {"exposure_s": glare_source[1].tolist()}

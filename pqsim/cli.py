@@ -141,6 +141,7 @@ def _cmd_capture(args: argparse.Namespace) -> int:
             seed=args.seed,
             scene=args.scene or "hdr",
             irradiance_nonuniformity=args.irradiance_nonuniformity,
+            irradiance_falloff=args.irradiance_falloff,
             frame_format=args.format,
             overwrite=args.overwrite,
             workers=args.workers,
@@ -159,6 +160,8 @@ def _capture_rendered(
     from pqsim.rendered_capture import DEFAULT_ROTATION_DEG, write_rendered_capture_set
     from pqsim.synth_camera.presets import preset_sensitivities
 
+    if args.irradiance_falloff:
+        raise PhotoquantError("--irradiance-falloff applies to the analytic renderer only")
     variant = args.variant or render.choose_variant()
     cache = Path(args.cache_dir).expanduser() if args.cache_dir else render.default_cache_dir()
     sens = args.sensitivities or preset_sensitivities(args.preset)
@@ -317,6 +320,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=0.0,
         help="relative illumination gradient of the irradiance scene (0)",
+    )
+    cap.add_argument(
+        "--irradiance-falloff",
+        type=float,
+        default=0.0,
+        help="analytic: radial fall-off of the irradiance scene's illumination, corners 1 - F (0)",
     )
     cap.add_argument("--bit-depth", type=int, default=None, help="override the preset's bit depth")
     cap.add_argument("--format", default="png", choices=["png", "tiff"], help="frame file format")

@@ -195,7 +195,10 @@ def register_leaderboard(sub: Any) -> None:
         "--methods", nargs="+", metavar="NAME", help="rank only these methods (registered names)"
     )
     lb.add_argument(
-        "--presets", nargs="+", metavar="PRESET", help="camera presets (default: ccd cmos)"
+        "--presets",
+        nargs="+",
+        metavar="PRESET",
+        help="camera presets (default: ccd cmos emor emor-1 film)",
     )
     lb.add_argument(
         "--real",

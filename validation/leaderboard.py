@@ -5,7 +5,10 @@ cameras, with known truth, how does this method rank, in accuracy and in
 time?" for **whatever is registered** (:func:`photoquant.registry`), plug-ins
 included, without naming any method:
 
-* each camera preset's capture set is simulated and written once
+* each camera's capture set is simulated and written once (a standalone
+  run's default cameras are :data:`DEFAULT_CAMERAS`: the ``ccd`` and
+  ``cmos`` presets, two cameras whose responses are drawn from the EMoR
+  space of real responses and a film-like camera)
   (:class:`validation.experiments.shared.Shared`, the validation job's own
   capture sets: :func:`pqsim.capture_set.write_capture_set`, the same
   seed streams) and read back through photoquant's file formats;
@@ -43,8 +46,10 @@ numbers are deterministic for a seed (timings aside).
 
 Outputs: a text table per step (:func:`format_leaderboard`), JSON
 (:meth:`Leaderboard.to_json`) and a report folder (:func:`write_report`:
-``leaderboard.md``, ``leaderboard.json`` and a bar chart per step,
-written atomically).
+``leaderboard.md``, ``leaderboard.json``, a bar chart per step, the
+response methods' recovered curves over the truth per camera and every
+method's error against its time (:mod:`validation.plots`), written
+atomically).
 """
 
 from __future__ import annotations
@@ -67,6 +72,7 @@ from validation.config import QUICK, ValidationConfig
 
 __all__ = [
     "RANKED_STEPS",
+    "DEFAULT_CAMERAS",
     "PRIMARY",
     "LEADERBOARD_FORMAT",
     "BOARD_QUICK",
@@ -88,6 +94,13 @@ LEADERBOARD_FORMAT = "photoquant.leaderboard/1"
 
 RANKED_STEPS: tuple[str, ...] = ("response", "merge", "vignetting")
 """The steps the leaderboard ranks (``--step all`` runs each)."""
+
+DEFAULT_CAMERAS: tuple[str, ...] = ("ccd", "cmos", "emor", "emor-1", "film")
+"""The cameras of a standalone run (no manifests, no presets, no shared run):
+the two presets, two cameras with responses drawn from the EMoR space of
+real ones (:mod:`pqsim.synth_camera.presets`: ``emor`` = seeds 0–2, ``emor-1``
+= seeds 3–5, one draw per channel) and the film-like camera (toe, shoulder
+and a knee)."""
 
 PRIMARY: dict[str, tuple[str, str, str]] = {
     "response": ("g_rms", "g rms (ln, worst channel)", "ln"),
@@ -164,6 +177,9 @@ class Entry:
     crossval: dict[str, float | None] = field(default_factory=dict)
     crossval_notes: dict[str, str] = field(default_factory=dict)
     rank: int | None = None
+    curves: dict[str, dict[str, np.ndarray]] = field(default_factory=dict, repr=False)
+    """Per preset (response step): ``levels``, ``g_est``, ``g_true``, ``weights`` (C, L),
+    for the plots; not in the JSON."""
 
     def mean(self, key: str) -> float | None:
         """The mean of score ``key`` over the presets (``None`` unless scored on every one)."""
@@ -594,6 +610,31 @@ def _score_into(
     if step_t is not None:
         entry.step_time_s[cap.preset] = float(step_t)
     floors.setdefault(cap.preset, float(rep["scene"]["noise_floor_mean"]))
+    if step == "response":
+        entry.curves[cap.preset] = _curves(model, cap.truth.camera)
+
+
+def _curves(model: Any, cam: Any) -> dict[str, np.ndarray]:
+    """The recovered and the true ``g`` per channel on the model's levels, with the weights
+    :func:`validation.compare.compare_with_truth` scores them with (hat ≥ 0.05)."""
+    from photoquant.weighting import weighting_hat_Debevec1997
+
+    levels = np.asarray(model.response.levels, dtype=np.float64)
+    n = len(model.channels)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g_true = np.array([cam.inverse_response_ln(levels, ch) for ch in range(n)])
+    w = np.array(
+        [
+            weighting_hat_Debevec1997(levels, 0, model.response.saturation_level[ch])
+            for ch in range(n)
+        ]
+    )
+    return {
+        "levels": levels,
+        "g_est": np.asarray(model.response.log_inverse_response, dtype=np.float64),
+        "g_true": g_true,
+        "weights": np.where(w >= 0.05, w, 0.0),
+    }
 
 
 def _unavailable(method: Any) -> str | None:
@@ -689,7 +730,8 @@ def run_leaderboard(
         Only these methods (names of any of the steps; unknown names are an
         error listing the registered ones).
     presets : sequence of str, optional
-        Camera presets (``config.presets`` by default).
+        Camera presets; by default :data:`DEFAULT_CAMERAS`, or the shared
+        run's ``config.presets`` when ``shared`` is given.
     config : ValidationConfig
         Image size, ``N``, exposures, views of the capture sets
         (:data:`validation.config.QUICK` by default, :data:`BOARD_QUICK`
@@ -737,7 +779,9 @@ def run_leaderboard(
         presets = tuple(labels)
     else:
         given = []
-        presets = tuple(presets if presets is not None else config.presets)
+        if presets is None:
+            presets = config.presets if shared is not None else DEFAULT_CAMERAS
+        presets = tuple(presets)
         if not presets:
             raise InputError("no camera preset to rank on")
         from pqsim.synth_camera.presets import camera_from_preset
@@ -931,6 +975,9 @@ def format_markdown(lb: Leaderboard, figures: dict[str, str]) -> str:
             out.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
         if board.step in figures:
             out += ["", f"![{board.step}]({figures[board.step]})"]
+    for key, caption in _EXTRA_FIGURES.items():
+        if key in figures:
+            out += ["", f"## {caption}", "", f"![{key}]({figures[key]})"]
     if lb.notes:
         out += [""] + [f"- {n}" for n in lb.notes]
     out.append("")
@@ -974,8 +1021,58 @@ def _bar_chart(board: Board, lb: Leaderboard, path: Path) -> bool:
     return True
 
 
+_EXTRA_FIGURES = {
+    "response_curves": "Recovered responses over the truth (G channel; residual below)",
+    "error_vs_time": "Error against calibration time (median over the cameras)",
+}
+
+
+def _extra_figures(lb: Leaderboard, folder: Path) -> dict[str, str]:
+    """The curves-over-truth and error-vs-time plots (:mod:`validation.plots`)."""
+    from validation.plots import plot_error_vs_time, plot_response_curves
+
+    out: dict[str, str] = {}
+    try:
+        board = lb.board("response")
+    except KeyError:
+        board = None
+    if board is not None:
+        curves = {
+            p: {e.method: e.curves[p] for e in board.entries if e.status == "ok" and p in e.curves}
+            for p in lb.presets
+        }
+        if plot_response_curves(curves, folder / "response_curves.png"):
+            out["response_curves"] = "response_curves.png"
+    panels = []
+    for b in lb.boards:
+        _, label, unit = PRIMARY[b.step]
+        points = [
+            (e.method, e.time_median_s, e.primary)
+            for e in b.entries
+            if e.status == "ok" and e.primary is not None
+        ]
+        floor = (
+            float(np.mean(list(b.noise_floor.values())))
+            if b.step == "merge" and b.noise_floor
+            else None
+        )
+        panels.append(
+            {
+                "title": b.step,
+                "xlabel": "calibration time (s, median over the cameras)",
+                "ylabel": f"{label}, mean over the cameras",
+                "points": points,
+                "floor": floor,
+            }
+        )
+    if plot_error_vs_time(panels, folder / "error_vs_time.png"):
+        out["error_vs_time"] = "error_vs_time.png"
+    return out
+
+
 def write_report(lb: Leaderboard, folder: str | Path, *, overwrite: bool = False) -> Path:
-    """Write ``leaderboard.md``, ``leaderboard.json`` and ``<step>.png`` into ``folder``.
+    """Write ``leaderboard.md``, ``leaderboard.json``, ``<step>.png``, ``response_curves.png``
+    and ``error_vs_time.png`` into ``folder``.
 
     Written atomically (:func:`photoquant.io.atomic.atomic_directory`): an
     existing folder is refused without ``overwrite`` (before anything runs,
@@ -989,6 +1086,7 @@ def write_report(lb: Leaderboard, folder: str | Path, *, overwrite: bool = False
             name = f"{board.step}.png"
             if _bar_chart(board, lb, tmp / name):
                 figures[board.step] = name
+        figures.update(_extra_figures(lb, tmp))
         (tmp / "leaderboard.json").write_text(json.dumps(lb.to_json(), indent=1) + "\n")
         (tmp / "leaderboard.md").write_text(format_markdown(lb, figures))
     return Path(folder)

@@ -381,7 +381,26 @@ def _fig_scatter(plt, spec: FigureSpec):
     return fig
 
 
-_DRAW = {"response": _fig_response, "maps": _fig_maps, "sweep": _fig_sweep, "scatter": _fig_scatter}
+def _fig_response_curves(plt, spec: FigureSpec):
+    from validation.plots import figure_response_curves
+
+    return figure_response_curves(plt, spec.data["curves"], title=spec.title)
+
+
+def _fig_error_vs_time(plt, spec: FigureSpec):
+    from validation.plots import figure_error_vs_time
+
+    return figure_error_vs_time(plt, spec.data["panels"], title=spec.title)
+
+
+_DRAW = {
+    "response": _fig_response,
+    "maps": _fig_maps,
+    "sweep": _fig_sweep,
+    "scatter": _fig_scatter,
+    "response_curves": _fig_response_curves,
+    "error_vs_time": _fig_error_vs_time,
+}
 
 
 def draw_figure(spec: FigureSpec, path: str | os.PathLike[str]) -> Path:

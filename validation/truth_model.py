@@ -15,7 +15,11 @@ from photoquant.glare import GlareModel
 from photoquant.merge import MergeModel
 from photoquant.model import CameraModel
 from photoquant.response import ResponseModel, response_levels
-from photoquant.vignetting import IDENTITY_VIGNETTING, ExtendedGoldmanChenVignetting
+from photoquant.vignetting import (
+    IDENTITY_VIGNETTING,
+    ExtendedGoldmanChenVignetting,
+    FlatFieldVignetting,
+)
 
 __all__ = ["camera_model_from_truth", "white_reference"]
 
@@ -42,6 +46,11 @@ def camera_model_from_truth(camera, *, weighting: str = "hat-quantisation") -> C
     if getattr(camera, "glare", None) is not None:
         f, w = zip(*(camera.glare.channel(ch) for ch in range(camera.n_channels)), strict=True)
         glare = GlareModel("ground truth", np.array(f), np.array(w), camera.glare.beta)
+    vignetting: ExtendedGoldmanChenVignetting | FlatFieldVignetting
+    if getattr(camera, "vignetting_model", None) is not None:  # a truth outside the family: its map
+        vignetting = FlatFieldVignetting("ground truth", np.asarray(camera.vignetting))
+    else:
+        vignetting = ExtendedGoldmanChenVignetting("ground truth", vig)
     return CameraModel(
         image_shape=camera.image_shape,
         channels=camera.channels,
@@ -58,7 +67,7 @@ def camera_model_from_truth(camera, *, weighting: str = "hat-quantisation") -> C
         ),
         balance=BalanceModel("ground truth", np.ones(camera.n_channels)),
         sensor_lut=SensorLUTModel("ground truth", np.asarray(camera.sensor_lut, np.float32)),
-        vignetting=ExtendedGoldmanChenVignetting("ground truth", vig),
+        vignetting=vignetting,
         parameters={"source": "ground truth"},
         glare=glare,
     )

@@ -74,14 +74,13 @@ References
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
-from importlib import resources
 
 import numpy as np
 import scipy.optimize
 
 from photoquant._checks import check_int, check_positive, validate_method
+from photoquant._emor_data import emor_basis as _emor_basis
 from photoquant.errors import CalibrationError
 from photoquant.methods import StepFit
 from photoquant.response._common import (
@@ -112,9 +111,11 @@ _INVISIBLE_DIP = 0.1 / 65535
 tenth of a 16-bit step: no data can see it)."""
 
 
-@functools.cache
 def emor_basis() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The EMoR basis: ``E`` (1024,), ``f0`` (1024,) and ``h`` (25, 1024), read-only.
+
+    Read once from the package data (:mod:`photoquant._emor_data`, also public
+    as :func:`photoquant.utils.emor_basis`).
 
     Examples
     --------
@@ -122,12 +123,7 @@ def emor_basis() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     >>> e.shape, h.shape, float(f0[0]), float(f0[-1])
     ((1024,), (25, 1024), 0.0, 1.0)
     """
-    ref = resources.files("photoquant.response").joinpath("data", "emor.npz")
-    with ref.open("rb") as fh, np.load(fh) as data:
-        arrays = tuple(np.array(data[k], dtype=np.float64) for k in ("E", "f0", "h"))
-    for a in arrays:
-        a.setflags(write=False)
-    return arrays  # type: ignore[return-value]
+    return _emor_basis()
 
 
 def emor_response(coefficients: np.ndarray) -> np.ndarray:

@@ -46,7 +46,12 @@ from photoquant.utils import (
     thread_map,
 )
 from pqsim.synth_camera.glare import GlareSpread
-from pqsim.synth_camera.optics import check_shape, prnu_field, vignetting_extended_goldman_chen
+from pqsim.synth_camera.optics import (
+    check_shape,
+    prnu_field,
+    vignetting_extended_goldman_chen,
+    vignetting_from_records,
+)
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import POISSON_MEAN_CAP_E, SensorNoise
 from pqsim.synth_camera.truth import CameraTruth, CaptureTruth
@@ -72,6 +77,34 @@ def _sensor_lut(
     u = prnu_field(shape, channels, np.random.default_rng(seed), sp, sl, scale)
     u.setflags(write=False)
     return u
+
+
+def _freeze(value: Any) -> Any:
+    """JSON-like data as plain lists and dicts of floats/str/None (numpy values converted)."""
+    if isinstance(value, dict):
+        return {str(k): _freeze(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [_freeze(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _vignetting_records(records: Any, channels: int) -> Any:
+    """Validate ``vignetting`` records (one, or one per channel); ``None`` stays ``None``."""
+    if records is None:
+        return None
+    if isinstance(records, dict):
+        out: Any = _freeze(records)
+    elif isinstance(records, list | tuple) and all(isinstance(r, dict) for r in records):
+        out = tuple(_freeze(r) for r in records)
+    else:
+        raise InputError(
+            "`vignetting` must be a {'kind', 'params'} record or one per channel, "
+            f"got {type(records).__name__}"
+        )
+    vignetting_from_records(out, (9, 12), channels)  # the records' own errors, once
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,6 +189,13 @@ class SyntheticCamera:
         (a preset's ``"glare": {"fraction": 0.015, "width_px": 40}``) is
         accepted. ``None`` (default): no glare. Only captures through the
         optics (``optics=True``) have it.
+    vignetting : mapping or sequence of mappings, optional
+        The vignetting as ``{"kind", "params"}`` record(s) of
+        :data:`~pqsim.synth_camera.optics.VIGNETTING_KINDS`
+        (``"extended_goldman_chen"``, ``"cos4"`` with an optional mechanical
+        cut-off): one record for every channel or one per channel. Exclusive
+        with ``vignetting_params`` (which stays the extended Goldman–Chen
+        shortcut); recorded in the truth.
 
     Examples
     --------
@@ -177,6 +217,7 @@ class SyntheticCamera:
     channels: tuple[str, ...] = ("R", "G", "B")
     prnu_lowfreq_scale: float = 0.15
     glare: GlareSpread | None = None
+    vignetting: Any = None
 
     def __post_init__(self) -> None:
         responses = tuple(self.responses) if isinstance(self.responses, Sequence) else None
@@ -201,6 +242,10 @@ class SyntheticCamera:
             if v > 0.25:
                 raise InputError(f"`{name}` must be at most 0.25, got {v}")
             object.__setattr__(self, name, v)
+        records = _vignetting_records(self.vignetting, c)
+        if records is not None and vp is not None:
+            raise InputError("give `vignetting` or `vignetting_params`, not both")
+        object.__setattr__(self, "vignetting", records)
         seed = self.prnu_seed
         check_int(seed, "prnu_seed", 0)
         channels = tuple(str(s) for s in self.channels)
@@ -278,6 +323,8 @@ class SyntheticCamera:
     def vignetting_map(self, shape: Sequence[int]) -> np.ndarray:
         """The vignetting ``v`` (H, W, C); all ones without vignetting parameters."""
         h, w = check_shape(shape)
+        if self.vignetting is not None:
+            return vignetting_from_records(self.vignetting, (h, w), self.n_channels)
         if self.vignetting_params is None:
             return np.ones((h, w, self.n_channels))
         return vignetting_extended_goldman_chen(self.vignetting_params, (h, w))
@@ -294,6 +341,7 @@ class SyntheticCamera:
             bit_depth=self.bit_depth,
             exposure_scale=self.exposure_scale,
             channels=self.channels,
+            vignetting_model=self.vignetting,
             prnu={
                 "seed": self.prnu_seed,
                 "sigma_pixel": self.prnu_sigma_pixel,

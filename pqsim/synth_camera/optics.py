@@ -6,7 +6,11 @@ calibrator (photoquant's vignetting module is *not* used here):
 - ``v_pλ``, the vignetting of the optics (§3.2.1, §5.5 of [PQ]), either the
   extended Goldman–Chen polynomial the paper fits
   (:func:`vignetting_extended_goldman_chen`) or the natural ``cos⁴`` fall-off
-  of a thin lens (:func:`vignetting_cos4`), a truth *outside* the fitted family;
+  of a thin lens with an optional mechanical cut-off (the pupil clipped by a
+  barrel or hood, :func:`mechanical_vignetting`) and a fall-off of its own
+  per channel (:func:`vignetting_cos4`): truths *outside* the fitted family.
+  :func:`vignetting_from_record` builds either from a ``{"kind", "params"}``
+  record (:data:`VIGNETTING_KINDS`), as preset files give it;
 - ``u_pλ``, the sensor's photo-response non-uniformity (PRNU, §3.2.1 and §5.4
   of [PQ]; EMVA 1288 §8), :func:`prnu_field`.
 
@@ -20,11 +24,16 @@ References
    compensation", ICCV 2005, doi:10.1109/ICCV.2005.249.
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021), §8 (spatial non-uniformity,
    PRNU).
+.. [AAB96] N. Asada, A. Amano and M. Baba, "Photometric calibration of zoom
+   lens systems", ICPR 1996, doi:10.1109/ICPR.1996.546018 (mechanical
+   vignetting as the common area of the pupil and an obstructing aperture).
+.. [Ray02] S. F. Ray, *Applied Photographic Optics*, 3rd ed., Focal Press,
+   2002, §24 (natural ``cos⁴`` fall-off and mechanical vignetting).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -38,6 +47,10 @@ __all__ = [
     "normalised_coordinates",
     "vignetting_extended_goldman_chen",
     "vignetting_cos4",
+    "mechanical_vignetting",
+    "vignetting_from_record",
+    "vignetting_from_records",
+    "VIGNETTING_KINDS",
     "prnu_field",
 ]
 
@@ -106,47 +119,226 @@ def vignetting_extended_goldman_chen(params: Any, shape: Sequence[int]) -> np.nd
     return v
 
 
+def _per_channel(value: Any, name: str, channels: int) -> np.ndarray:
+    """A positive scalar or ``channels`` positive values, as a float64 array of ``channels``."""
+    arr = np.atleast_1d(check_array(value, name, kind="iuf", finite=True)).astype(np.float64)
+    if arr.ndim != 1 or arr.size not in (1, channels):
+        raise InputError(
+            f"`{name}` must be one number or {channels} (one per channel), got {value!r}"
+        )
+    if np.any(arr <= 0):
+        raise InputError(f"`{name}` must be positive, got {arr.tolist()}")
+    return np.broadcast_to(arr, (channels,)).copy()
+
+
+def mechanical_vignetting(r: Any, start: float, end: float) -> np.ndarray:
+    """Mechanical (pupil-clipping) vignetting: the unobstructed fraction of the pupil.
+
+    Parameters
+    ----------
+    r : array_like
+        Distance of the image point from the optical centre (any unit).
+    start, end : float
+        The cut starts at ``r = start`` (1 inside) and blocks the whole pupil
+        at ``r = end > start`` (0 beyond), same unit as ``r``.
+
+    Returns
+    -------
+    ndarray, float64
+        ``A(d) / π``, the common area of the pupil (a unit disc) and an
+        obstructing aperture (a disc of radius ``ρ``) whose centres are
+        ``d = a · r`` apart, over the pupil's area [AAB96]_; ``ρ`` and ``a``
+        make the cut start at ``start`` (``d = ρ − 1``) and end at ``end``
+        (``d = ρ + 1``): ``ρ = (end + start) / (end − start)``,
+        ``a = (ρ − 1) / start``. This is the "cat's eye" pupil of an
+        off-axis point seen through a lens barrel or hood [Ray02]_.
+
+    Examples
+    --------
+    >>> mechanical_vignetting([0.0, 0.5, 1.0, 1.5, 2.0], 0.5, 1.5).round(4).tolist()
+    [1.0, 1.0, 0.4466, 0.0, 0.0]
+    """
+    rr = check_array(r, "r", kind="iuf", finite=True).astype(np.float64)
+    a0 = check_positive(start, "start")
+    a1 = check_positive(end, "end")
+    if not a1 > a0:
+        raise InputError(f"the cut-off's `end` ({end}) must lie beyond its `start` ({start})")
+    rho = (a1 + a0) / (a1 - a0)
+    d = np.abs(rr) * (rho - 1.0) / a0
+    out = np.where(d <= rho - 1.0, 1.0, 0.0)
+    part = (d > rho - 1.0) & (d < rho + 1.0)
+    dp = d[part]
+    c1 = np.clip((dp * dp + 1.0 - rho * rho) / (2.0 * dp), -1.0, 1.0)
+    c2 = np.clip((dp * dp + rho * rho - 1.0) / (2.0 * dp * rho), -1.0, 1.0)
+    k = (-dp + 1.0 + rho) * (dp + 1.0 - rho) * (dp - 1.0 + rho) * (dp + 1.0 + rho)
+    area = np.arccos(c1) + rho * rho * np.arccos(c2) - 0.5 * np.sqrt(np.maximum(k, 0.0))
+    out[part] = np.clip(area / np.pi, 0.0, 1.0)
+    return out
+
+
 def vignetting_cos4(
     shape: Sequence[int],
-    focal_px: float,
-    channels: int = 3,
+    focal_px: Any,
+    channels: int | None = None,
     centre: tuple[float, float] | None = None,
+    *,
+    cutoff_start_px: Any = None,
+    cutoff_end_px: Any = None,
 ) -> np.ndarray:
-    """Natural vignetting of a thin lens, the ``cos⁴`` law.
+    """Natural vignetting of a thin lens, the ``cos⁴`` law, with an optional mechanical cut-off.
 
     Parameters
     ----------
     shape : (H, W)
         Image shape.
-    focal_px : float
-        Focal length in pixels (positive).
-    channels : int
-        Number of (identical) channels ``C``.
+    focal_px : float or sequence of C floats
+        Focal length in pixels (positive); one per channel gives each channel
+        a fall-off of its own (a lens whose pupil or stop acts differently by
+        wavelength).
+    channels : int, optional
+        Number of channels ``C``; ``len(focal_px)`` for a sequence, 3 otherwise.
     centre : (x, y), optional
         Optical centre in pixel coordinates; the image centre ``(W/2, H/2)`` by
         default (between pixels when a side is even).
+    cutoff_start_px, cutoff_end_px : float or sequence of C floats, optional
+        A mechanical cut-off (:func:`mechanical_vignetting`) starting at this
+        distance from the centre and blocking all light at the end distance,
+        in pixels; both or neither.
 
     Returns
     -------
     ndarray, shape (H, W, C), float64
-        ``cos⁴ θ = (f² / (f² + r²))²``, ``r`` the distance of the pixel centre
+        ``cos⁴ θ = (f² / (f² + r²))²`` times the cut-off's unobstructed
+        pupil fraction, ``r`` the distance of the pixel centre
         ``(x + 0.5, y + 0.5)`` to ``centre``; 1 at the centre.
 
     Notes
     -----
     Not a member of the Goldman–Chen family with three terms exactly (its
     series in ``r²`` is infinite), so it tests a calibrator on a truth outside
-    its model.
+    its model; the cut-off adds a kink (its onset) that no polynomial has.
     """
     h, w = check_shape(shape)
-    f = check_positive(focal_px, "focal_px")
-    channels = check_int(channels, "channels", 1)
+    seq = np.ndim(focal_px) > 0
+    c = check_int(
+        channels if channels is not None else (np.size(focal_px) if seq else 3), "channels", 1
+    )
+    f = _per_channel(focal_px, "focal_px", c)
     cx, cy = (w / 2.0, h / 2.0) if centre is None else (float(centre[0]), float(centre[1]))
     x = np.arange(w, dtype=np.float64) + 0.5 - cx
     y = np.arange(h, dtype=np.float64) + 0.5 - cy
     r2 = x[None, :] ** 2 + y[:, None] ** 2
-    v = (f * f / (f * f + r2)) ** 2
-    return np.repeat(v[..., None], int(channels), axis=2)
+    v = (f * f / (f * f + r2[..., None])) ** 2
+    if (cutoff_start_px is None) != (cutoff_end_px is None):
+        raise InputError("`cutoff_start_px` and `cutoff_end_px` go together (give both or neither)")
+    if cutoff_start_px is not None:
+        a0 = _per_channel(cutoff_start_px, "cutoff_start_px", c)
+        a1 = _per_channel(cutoff_end_px, "cutoff_end_px", c)
+        r = np.sqrt(r2)
+        cut = np.stack([mechanical_vignetting(r, a0[i], a1[i]) for i in range(c)], axis=2)
+        v = v * cut
+    return v
+
+
+def _half_diagonal(shape: Sequence[int]) -> float:
+    h, w = check_shape(shape)
+    return float(np.hypot(w, h) / 2.0)
+
+
+def _record_egc(params: Mapping[str, Any], shape: Sequence[int], channels: int) -> np.ndarray:
+    m = check_array(params.get("m"), "m", kind="iuf", finite=True).astype(np.float64)
+    m = np.broadcast_to(m, (channels, 6)) if m.shape == (6,) else m
+    if m.shape != (channels, 6):
+        raise InputError(f"`m` must be 6 numbers or {channels} rows of 6 (m1..m6), got {m.shape}")
+    return vignetting_extended_goldman_chen(m, shape)
+
+
+def _record_cos4(params: Mapping[str, Any], shape: Sequence[int], channels: int) -> np.ndarray:
+    h, w = check_shape(shape)
+    hd = _half_diagonal(shape)
+    centre = params.get("centre") or (0.5, 0.5)
+    cn = check_array(centre, "centre", shape=(2,), kind="iuf", finite=True)
+
+    def px(name: str) -> Any:
+        value = params.get(name)
+        return None if value is None else _per_channel(value, name, channels) * hd
+
+    return vignetting_cos4(
+        shape,
+        px("focal"),
+        channels,
+        centre=(float(cn[0]) * w, float(cn[1]) * h),
+        cutoff_start_px=px("cutoff_start"),
+        cutoff_end_px=px("cutoff_end"),
+    )
+
+
+VIGNETTING_KINDS: Mapping[str, tuple[Callable[..., np.ndarray], frozenset[str]]] = {
+    "extended_goldman_chen": (_record_egc, frozenset({"m"})),
+    "cos4": (_record_cos4, frozenset({"focal", "centre", "cutoff_start", "cutoff_end"})),
+}
+"""Vignetting truths by kind: ``kind → (map builder, parameter names)``.
+
+- ``"extended_goldman_chen"``: ``{"m": [m1..m6]}`` (or one row per channel),
+  :func:`vignetting_extended_goldman_chen`.
+- ``"cos4"``: ``{"focal", "centre", "cutoff_start", "cutoff_end"}``:
+  :func:`vignetting_cos4` with lengths in half-diagonals of the image (so a
+  record means the same lens at every resolution; the corner is at 1),
+  ``centre`` in normalised coordinates (``[0.5, 0.5]`` by default), each
+  length one number or one per channel, the cut-off optional.
+"""
+
+
+def vignetting_from_record(
+    record: Mapping[str, Any], shape: Sequence[int], channels: int
+) -> np.ndarray:
+    """The map ``v`` (H, W, C) of a ``{"kind", "params"}`` record of :data:`VIGNETTING_KINDS`.
+
+    Examples
+    --------
+    >>> rec = {"kind": "cos4", "params": {"focal": 2.0}}
+    >>> v = vignetting_from_record(rec, (3, 4), 3)
+    >>> v.shape, round(float(v[0, 0, 0]), 6)  # f = 2 · 2.5 px, r² = 1.5² + 1²: (25 / 28.25)²
+    ((3, 4, 3), 0.783147)
+    """
+    if not isinstance(record, Mapping) or "kind" not in record:
+        raise InputError(
+            f"a vignetting record is {{'kind': ..., 'params': {{...}}}}, got {record!r}"
+        )
+    kind = str(record["kind"]).lower()
+    if kind not in VIGNETTING_KINDS:
+        raise InputError(
+            f"unknown vignetting kind {record['kind']!r}; valid: {sorted(VIGNETTING_KINDS)}"
+        )
+    build, names = VIGNETTING_KINDS[kind]
+    params = record.get("params", {})
+    if not isinstance(params, Mapping):
+        raise InputError(f"vignetting {kind!r}: `params` must be a mapping, got {params!r}")
+    unknown = set(params) - names
+    if unknown:
+        raise InputError(
+            f"vignetting {kind!r}: unknown parameter(s) {sorted(unknown)}; valid: {sorted(names)}"
+        )
+    if kind == "cos4" and params.get("focal") is None:
+        raise InputError("vignetting 'cos4' needs `focal` (in half-diagonals of the image)")
+    v = build(params, shape, check_int(channels, "channels", 1))
+    if np.any(v <= 0) or not np.all(np.isfinite(v)):
+        raise InputError(
+            f"vignetting {kind!r}: the map is not positive inside the image (cut too deep?)"
+        )
+    return v
+
+
+def vignetting_from_records(records: Any, shape: Sequence[int], channels: int) -> np.ndarray:
+    """``v`` from one record (every channel) or a sequence of ``channels`` records (one each)."""
+    if isinstance(records, Mapping):
+        return vignetting_from_record(records, shape, channels)
+    recs = list(records)
+    if len(recs) != channels:
+        raise InputError(
+            f"`vignetting` must be one record or {channels} (one per channel), got {len(recs)}"
+        )
+    return np.concatenate([vignetting_from_record(r, shape, 1) for r in recs], axis=2)
 
 
 def _unit(field: np.ndarray) -> np.ndarray:

@@ -19,7 +19,21 @@ other). Unknown fields are refused, naming the valid ones.
 - ``"cmos"``: S-shaped responses that differ per channel, a smaller well and
   more read and dark noise, 8 bits, stronger vignetting.
 
-Both have extended Goldman–Chen vignetting (corners ~20–25 % darker, centre
+- ``"emor"``: the cmos camera with responses from the space of real ones,
+  one EMoR draw per channel (seeds 0, 1, 2, five components; see
+  :func:`~pqsim.synth_camera.responses.draw_emor_coefficients`) [GN04]_.
+- ``"emor-S"`` (S = 0, 1, …): the same camera with the draws of seeds
+  ``3S``, ``3S + 1``, ``3S + 2`` (``"emor-0"`` is ``"emor"``): as many
+  cameras from the space of real responses as a study needs.
+- ``"film"``: the ccd camera with film-like characteristic curves (toe and
+  shoulder, :func:`~pqsim.synth_camera.responses.response_film`) and a
+  soft knee at 97 % of the range.
+
+A preset may give its vignetting as ``{"kind", "params"}`` record(s)
+(``"vignetting"``: ``"extended_goldman_chen"`` or ``"cos4"`` with a
+mechanical cut-off, one record or one per channel;
+:data:`~pqsim.synth_camera.optics.VIGNETTING_KINDS`) instead of
+``vignetting_params``. The built-in ones have extended Goldman–Chen vignetting (corners ~20–25 % darker, centre
 slightly off the image centre, per-channel differences) and a PRNU of about
 1 % per-pixel plus 1 % smooth. ``exposure_scale = 100 · full_well``: a
 photoquantity of 1 (the analytic scenes' white chart) fills the well in 10 ms.
@@ -48,6 +62,8 @@ References
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §6.1, Fig. 3.
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021) — typical CCD/CMOS data sheets
    give full wells of 5–40 ke⁻ and read noise of 2–20 e⁻.
+.. [GN04] M. D. Grossberg and S. K. Nayar, "Modeling the space of camera
+   response functions", IEEE TPAMI 26(10), 2004, doi:10.1109/TPAMI.2004.88.
 .. [NPL] M. Darrodi et al., "Reference data set for camera spectral sensitivity
    estimation", JOSA A 32(3), 2015 (``colour.MSDS_CAMERA_SENSITIVITIES``).
 """
@@ -56,6 +72,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from types import MappingProxyType
@@ -125,7 +142,27 @@ _CMOS: dict[str, Any] = {
     "sensitivities": "nikon_d5100",
 }
 
-CAMERA_PRESETS: Mapping[str, Mapping[str, Any]] = MappingProxyType({"ccd": _CCD, "cmos": _CMOS})
+_EMOR: dict[str, Any] = {
+    **_CMOS,
+    "responses": [
+        {"kind": "emor", "params": {"seed": seed, "n_components": 5}} for seed in (0, 1, 2)
+    ],
+    "prnu_seed": 2004,
+}
+
+_FILM: dict[str, Any] = {
+    **_CCD,
+    "responses": [
+        {"kind": "film", "params": {"toe": 1.5, "shoulder": 1.1, "pivot": 0.32, "knee": 0.97}},
+        {"kind": "film", "params": {"toe": 1.6, "shoulder": 1.0, "pivot": 0.30, "knee": 0.97}},
+        {"kind": "film", "params": {"toe": 1.7, "shoulder": 0.9, "pivot": 0.28, "knee": 0.97}},
+    ],
+    "prnu_seed": 1890,
+}
+
+CAMERA_PRESETS: Mapping[str, Mapping[str, Any]] = MappingProxyType(
+    {"ccd": _CCD, "cmos": _CMOS, "emor": _EMOR, "film": _FILM}
+)
 """Preset name → field values of :class:`SyntheticCamera` (plain data), plus the
 name of the spectral sensitivities (``"sensitivities"``) used when rendering."""
 
@@ -187,6 +224,8 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
     if unknown:
         raise InputError(f"unknown camera field(s) {sorted(unknown)}; valid: {sorted(valid)}")
     noise = overrides.pop("noise", None)
+    if overrides.get("vignetting") is not None and "vignetting_params" not in overrides:
+        fields["vignetting_params"] = None  # records replace the base's m1..m6
     fields.update(overrides)
     noise_fields = dict(fields["noise"])
     if isinstance(noise, SensorNoise):
@@ -205,6 +244,18 @@ def camera_from_preset(name: str, **overrides: Any) -> SyntheticCamera:
         for r in fields["responses"]
     )
     return SyntheticCamera(**fields)
+
+
+_EMOR_DRAW = re.compile(r"^emor-(\d{1,6})$")
+"""``emor-S``: the ``emor`` preset with the EMoR draws of seeds ``3S, 3S + 1, 3S + 2``."""
+
+
+def _emor_draw(seed: int) -> dict[str, Any]:
+    fields = dict(_EMOR)
+    fields["responses"] = [
+        {"kind": "emor", "params": {"seed": 3 * seed + ch, "n_components": 5}} for ch in range(3)
+    ]
+    return fields
 
 
 def _is_preset_file(name: str) -> bool:
@@ -235,12 +286,15 @@ def preset_fields(name: str | os.PathLike[str]) -> dict[str, Any]:
         return _read_preset_file(Path(name))
     if not isinstance(name, str):
         raise InputError(f"a camera preset is a name or a .json file, got {name!r}")
+    draw = _EMOR_DRAW.match(name.strip().lower())
+    if draw:
+        return _emor_draw(int(draw.group(1)))
     try:
         key = validate_method(name, CAMERA_PRESETS, "camera preset")
     except InputError:
         raise InputError(
-            f"unknown camera preset {name!r}: use one of {', '.join(sorted(CAMERA_PRESETS))} "
-            "or a preset file (.json; `pqsim preset ccd` prints one to start from)"
+            f"unknown camera preset {name!r}: use one of {', '.join(sorted(CAMERA_PRESETS))}, "
+            "emor-S (EMoR responses drawn from seed S) or a preset file (.json; `pqsim preset ccd` prints one to start from)"
         ) from None
     return dict(CAMERA_PRESETS[key])
 
@@ -269,6 +323,8 @@ def _read_preset_file(path: Path) -> dict[str, Any]:
     except InputError as exc:
         raise InputError(f"preset file {path}: `base`: {exc}") from None
     fields.update({k: v for k, v in doc.items() if k not in _FILE_KEYS})
+    if doc.get("vignetting") is not None and "vignetting_params" not in doc:
+        fields["vignetting_params"] = None  # records replace the base's m1..m6
     return fields
 
 

@@ -18,6 +18,14 @@ Public objects
   ``F(1)=1``.
 - :func:`response_table`: a curve given by a monotonic table (piecewise linear);
   :func:`load_response_table` reads one from a CSV/text or JSON file.
+- :func:`response_emor`: a response from the space of real ones, the EMoR
+  model ``f0 + Σ c_k h_k`` of [GN04]; :func:`draw_emor_coefficients` draws
+  monotone coefficients within the spread of real cameras
+  (:func:`emor_coefficient_spread`).
+- :func:`response_film`: a film-like characteristic (H&D) curve with a toe
+  and a shoulder in log exposure.
+- ``knee``: the ``"emor"`` and ``"film"`` kinds take, like ``"linear"``, a
+  knee just below saturation (:func:`apply_knee`).
 - :class:`ResponseCurve`: a frozen ``(kind, params)`` record, callable, with an
   exact vectorised :meth:`~ResponseCurve.inverse`.
 - :data:`RESPONSE_MODELS`: the registry ``kind → ResponseModel``.
@@ -31,11 +39,18 @@ References
 .. [GN04] M. D. Grossberg and S. K. Nayar, "Modeling the space of camera
    response functions", IEEE TPAMI 26(10), 2004, doi:10.1109/TPAMI.2004.88
    (real response curves are monotonic, most are S-shaped in log exposure).
+.. [HD1890] F. Hurter and V. C. Driffield, "Photo-chemical investigations and
+   a new method of determination of the sensitiveness of photographic
+   plates", J. Soc. Chem. Ind. 9, 1890 (the characteristic curve: toe,
+   straight line, shoulder in log exposure).
+.. [MJ77] C. E. K. Mees and T. H. James (eds.), *The Theory of the
+   Photographic Process*, 4th ed., Macmillan, 1977, ch. 17 (sensitometry).
 """
 
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import math
@@ -47,7 +62,7 @@ from typing import Any
 import numpy as np
 
 from photoquant.errors import InputError
-from photoquant.utils import check_array, check_positive, validate_method
+from photoquant.utils import check_array, check_int, check_positive, emor_basis, validate_method
 
 __all__ = [
     "response_linear",
@@ -57,6 +72,15 @@ __all__ = [
     "response_s_curve",
     "response_s_curve_inverse",
     "response_table",
+    "response_emor",
+    "response_emor_table",
+    "response_emor_inverse",
+    "emor_coefficient_spread",
+    "draw_emor_coefficients",
+    "response_film",
+    "response_film_inverse",
+    "apply_knee",
+    "apply_knee_inverse",
     "response_table_forward",
     "response_table_inverse",
     "load_response_table",
@@ -438,6 +462,439 @@ def load_response_table(path: str | Path) -> ResponseCurve:
 
 
 # ---------------------------------------------------------------------------
+# Knee just below saturation, for any curve
+# ---------------------------------------------------------------------------
+
+
+def _knee_point(
+    forward: Callable[[np.ndarray], np.ndarray],
+    inverse: Callable[[np.ndarray], np.ndarray],
+    k: float,
+) -> tuple[float, float]:
+    """``(e_k, s)``: the exposure where the curve reaches ``k`` and its slope there (from the left)."""
+    e_k = float(inverse(np.array([k]))[0])
+    if not e_k > 0:
+        raise InputError(f"`knee` {k} is reached at exposure 0: no room for a shoulder")
+    de = 1e-7 * e_k
+    s = float((k - forward(np.array([e_k - de]))[0]) / de)
+    if not (math.isfinite(s) and s > 0):
+        raise InputError(f"the curve is flat below the knee {k}: no shoulder can join it")
+    return e_k, s
+
+
+def apply_knee(
+    e: np.ndarray,
+    forward: Callable[[np.ndarray], np.ndarray],
+    inverse: Callable[[np.ndarray], np.ndarray],
+    knee: float | None,
+) -> np.ndarray:
+    """A curve ``F`` with a soft knee at output ``knee`` (just below saturation).
+
+    Parameters
+    ----------
+    e : ndarray
+        Normalised exposures (already checked).
+    forward, inverse : callable
+        The curve without knee and its inverse.
+    knee : float in (0, 1) or None
+        Output level ``k`` where the shoulder starts; ``None`` returns ``F(e)``.
+
+    Returns
+    -------
+    ndarray
+        ``F(e)`` up to ``e_k = F⁻¹(k)``; above, the quadratic shoulder of
+        :func:`response_linear` generalised to the slope ``s = F'(e_k)``:
+        ``G = k + s d − s² d² / (4 (1 − k))`` for ``d = e − e_k``, which
+        joins ``F`` with a continuous slope and reaches 1 with zero slope at
+        ``e_k + 2 (1 − k) / s`` (then clips). For ``F(e) = e`` it is
+        ``response_linear(e, knee)`` exactly.
+
+    Notes
+    -----
+    The gain compression of a sensor close to its full well, or a camera's
+    highlight roll-off, bends the response just below saturation; this adds
+    it to a curve of any family.
+    """
+    k = _knee(knee)
+    if k is None:
+        return forward(e)
+    e_k, s = _knee_point(forward, inverse, k)
+    span = 2.0 * (1.0 - k) / s
+    d = np.clip(e - e_k, 0.0, span)
+    shoulder = np.minimum(k + s * d - (s * d) ** 2 / (4.0 * (1.0 - k)), 1.0)
+    base = forward(np.minimum(e, e_k))
+    return np.where(e <= e_k, base, np.where(e >= e_k + span, 1.0, shoulder))
+
+
+def apply_knee_inverse(
+    F: np.ndarray,
+    forward: Callable[[np.ndarray], np.ndarray],
+    inverse: Callable[[np.ndarray], np.ndarray],
+    knee: float | None,
+) -> np.ndarray:
+    """Exact inverse of :func:`apply_knee` on ``[0, 1]`` (``F = 1`` → the saturation exposure)."""
+    k = _knee(knee)
+    if k is None:
+        return inverse(F)
+    e_k, s = _knee_point(forward, inverse, k)
+    span = 2.0 * (1.0 - k) / s
+    q = np.clip((F - k) / (1.0 - k), 0.0, 1.0)
+    shoulder = np.minimum(e_k + span * (1.0 - np.sqrt(1.0 - q)), e_k + span)
+    return np.where(F <= k, inverse(np.minimum(F, k)), np.where(F >= 1.0, e_k + span, shoulder))
+
+
+# ---------------------------------------------------------------------------
+# EMoR: responses from the space of real ones
+# ---------------------------------------------------------------------------
+
+EMOR_MIN_STEP = 1e-9
+"""Smallest rise of a drawn EMoR curve between adjacent grid points: a curve
+rising less anywhere is not strictly monotone (it is redrawn)."""
+
+
+def _film_reference(e: np.ndarray, toe: float, shoulder: float, pivot: float) -> np.ndarray:
+    return response_film(e, toe=toe, shoulder=shoulder, pivot=pivot)
+
+
+@functools.cache
+def _reference_responses() -> tuple[tuple[str, np.ndarray], ...]:
+    """The reference curves behind :func:`emor_coefficient_spread`, on the EMoR grid."""
+    e, _, _ = emor_basis()
+    refs: list[tuple[str, np.ndarray]] = []
+    for g in np.linspace(1.0, 2.6, 9):  # gamma-encoded cameras, linear to 1/2.6
+        refs.append((f"gamma 1/{g:.1f}", e ** (1.0 / g)))
+    srgb = np.where(e <= 0.0031308, 12.92 * e, 1.055 * e ** (1 / 2.4) - 0.055)
+    rec709 = np.where(e < 0.018, 4.5 * e, 1.099 * e**0.45 - 0.099)
+    refs += [("sRGB", srgb), ("Rec. 709", rec709)]
+    for toe, shoulder, pivot in (
+        (1.6, 1.0, 0.3),
+        (2.2, 1.5, 0.4),
+        (1.3, 0.8, 0.2),
+        (1.8, 2.0, 0.5),
+    ):
+        refs.append((f"film {toe}/{shoulder}/{pivot}", _film_reference(e, toe, shoulder, pivot)))
+    return tuple(refs)
+
+
+@functools.cache
+def _spread(n: int) -> np.ndarray:
+    e, f0, h = emor_basis()
+    curves = np.array([c for _, c in _reference_responses()])
+    coeffs = (curves - f0) @ h[:n].T  # orthonormal basis: least-squares coefficients
+    out = np.sqrt(np.mean(coeffs**2, axis=0))
+    out.setflags(write=False)
+    return out
+
+
+def emor_coefficient_spread(n_components: int = 5) -> np.ndarray:
+    """Standard deviations ``σ_k`` of the EMoR coefficients of real-like responses.
+
+    Parameters
+    ----------
+    n_components : int
+        ``K``, 1 to 25.
+
+    Returns
+    -------
+    ndarray, shape (K,), read-only
+        ``σ_k = sqrt(mean_j c_{jk}²)``, the root mean square of the
+        coefficients ``c_jk = h_k · (f_j − f0)`` of a documented set of
+        reference responses ``f_j`` about the EMoR mean ``f0`` [GN04].
+
+    Notes
+    -----
+    **Which spread, and why.** The EMoR file (``emor.txt`` of the DoRF
+    database) holds the mean and the components but not their eigenvalues,
+    and the 201 DoRF curves are not shipped, so the variance per component
+    cannot be read off the database. It is derived instead from curves of
+    the categories DoRF collects [GN04] (§3: video and digital cameras with
+    gamma encodings, and films): power laws ``E^(1/γ)`` for ``γ`` from 1.0
+    (linear) to 2.6 in nine steps, the sRGB and Rec. 709 encodings, and four
+    film characteristic curves (:func:`response_film`, toe 1.3–2.2, shoulder
+    0.8–2.0, pivot 0.2–0.5), each projected on the (orthonormal) basis. The
+    spread is taken about ``f0`` (the DoRF mean), since draws are centred
+    there. For ``K = 5`` it is about ``(2.95, 1.01, 0.26, 0.13, 0.05)``: the
+    first component varies most, as in the database's ordering.
+
+    Examples
+    --------
+    >>> s = emor_coefficient_spread(3)
+    >>> s.shape, bool(s[0] > s[1] > s[2] > 0)
+    ((3,), True)
+    """
+    n = check_int(n_components, "n_components", 1, 25)
+    return _spread(n)
+
+
+def draw_emor_coefficients(
+    rng: np.random.Generator | int,
+    n_components: int = 5,  # noqa: ARG001 - recorded beside the coefficients
+    *,
+    spread_scale: float = 1.0,
+    max_draws: int = 1000,
+) -> np.ndarray:
+    """Draw EMoR coefficients of a strictly monotone response, seeded.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator or int
+        Source of randomness (an int seeds ``default_rng``).
+    n_components : int
+        ``K``, 1 to 25.
+    spread_scale : float
+        Multiplies the spread of :func:`emor_coefficient_spread` (1: real cameras).
+    max_draws : int
+        Most proposals before giving up.
+
+    Returns
+    -------
+    ndarray, shape (K,)
+        ``c_k = spread_scale · σ_k · z_k``, ``z ~ N(0, I)``, redrawn until
+        ``f0 + Σ c_k h_k`` rises by more than :data:`EMOR_MIN_STEP` at every
+        grid step: a sample of the normal distribution restricted to monotone
+        responses (about 70 % of the proposals are accepted for ``K = 5``).
+        The curve passes through ``(0, 0)`` and ``(1, 1)`` (every ``h_k``
+        vanishes there), so a monotone one lies within ``[0, 1]``.
+
+    Examples
+    --------
+    >>> c = draw_emor_coefficients(3, 4)
+    >>> c.shape, bool(np.all(np.diff(response_emor_table(c)) > 0))
+    ((4,), True)
+    """
+    n = check_int(n_components, "n_components", 1, 25)
+    scale = check_positive(spread_scale, "spread_scale")
+    tries = check_int(max_draws, "max_draws", 1)
+    if isinstance(rng, np.random.Generator):
+        gen = rng
+    elif isinstance(rng, int | np.integer) and not isinstance(rng, bool) and int(rng) >= 0:
+        gen = np.random.default_rng(int(rng))
+    else:
+        raise InputError(
+            f"`rng` must be a numpy.random.Generator or a non-negative int, got {rng!r}"
+        )
+    sigma = scale * emor_coefficient_spread(n)
+    for _ in range(tries):
+        c = sigma * gen.standard_normal(n)
+        if np.all(np.diff(response_emor_table(c)) > EMOR_MIN_STEP):
+            return c
+    raise InputError(f"no monotone EMoR response in {tries} draws (spread_scale {scale})")
+
+
+def response_emor_table(coefficients: Any) -> np.ndarray:
+    """``f = f0 + Σ_k c_k h_k`` on the EMoR grid of 1024 exposures [GN04]."""
+    c = check_array(coefficients, "coefficients", ndim=1, kind="iuf", finite=True).astype(
+        np.float64
+    )
+    if not 1 <= c.size <= 25:
+        raise InputError(f"`coefficients` must hold 1 to 25 EMoR coefficients, got {c.size}")
+    _, f0, h = emor_basis()
+    return f0 + c @ h[: c.size]
+
+
+@functools.lru_cache(maxsize=64)
+def _emor_curve(coefficients: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    e, _, _ = emor_basis()
+    f = response_emor_table(np.asarray(coefficients))
+    if not np.all(np.diff(f) > 0):
+        raise InputError(
+            "`coefficients` give an EMoR response that is not strictly increasing "
+            f"(its smallest step is {np.diff(f).min():.3g})"
+        )
+    f = f.copy()
+    f.setflags(write=False)
+    return e, f
+
+
+def _emor_params(coefficients: Any) -> tuple[float, ...]:
+    if coefficients is None:
+        raise InputError("`coefficients`: an EMoR response needs coefficients or a seed")
+    return tuple(float(v) for v in np.asarray(coefficients, dtype=np.float64).ravel())
+
+
+def response_emor(
+    e: Any,
+    coefficients: Any = None,
+    seed: int | None = None,  # noqa: ARG001 - recorded beside the coefficients
+    n_components: int = 5,  # noqa: ARG001 - recorded beside the coefficients
+    knee: float | None = None,
+) -> np.ndarray:
+    """A response from the space of real ones: the EMoR model of [GN04].
+
+    Parameters
+    ----------
+    e : array_like
+        Normalised exposure, ``>= 0``; exposures above 1 saturate.
+    coefficients : array_like, shape (K,)
+        ``c_1 … c_K``; the curve ``f = f0 + Σ c_k h_k`` on the basis' 1024
+        exposures must be strictly increasing.
+    seed, n_components : int
+        How the coefficients were drawn (:func:`draw_emor_coefficients`),
+        recorded beside them; a :class:`ResponseCurve` of kind ``"emor"``
+        given a seed and no coefficients draws them.
+    knee : float in (0, 1), optional
+        A soft knee just below saturation (:func:`apply_knee`).
+
+    Returns
+    -------
+    ndarray, float64
+        ``F(e)``, linear between the grid points (as the basis is tabulated).
+
+    Examples
+    --------
+    >>> F = response_emor([0.0, 1.0, 2.0], coefficients=[0.5, -0.2])
+    >>> F.tolist()
+    [0.0, 1.0, 1.0]
+    """
+    x = _exposure(e)
+    grid, f = _emor_curve(_emor_params(coefficients))
+
+    def fwd(v: np.ndarray) -> np.ndarray:
+        return np.interp(np.minimum(v, 1.0), grid, f)
+
+    def inv(F: np.ndarray) -> np.ndarray:
+        return np.interp(F, f, grid)
+
+    return apply_knee(x, fwd, inv, knee)
+
+
+def response_emor_inverse(
+    F: Any,
+    coefficients: Any = None,
+    seed: int | None = None,  # noqa: ARG001 - recorded beside the coefficients
+    n_components: int = 5,  # noqa: ARG001 - recorded beside the coefficients
+    knee: float | None = None,
+) -> np.ndarray:
+    """Exact inverse of :func:`response_emor` on ``[0, 1]`` (``F = 1`` → ``e = 1``, or the knee's end)."""
+    Fa = _output(F)
+    grid, f = _emor_curve(_emor_params(coefficients))
+
+    def fwd(v: np.ndarray) -> np.ndarray:
+        return np.interp(np.minimum(v, 1.0), grid, f)
+
+    def inv(y: np.ndarray) -> np.ndarray:
+        return np.interp(y, f, grid)
+
+    return apply_knee_inverse(Fa, fwd, inv, knee)
+
+
+def _resolve_emor(params: dict[str, Any]) -> dict[str, Any]:
+    """Draw the coefficients of an ``"emor"`` record that gives only a seed."""
+    n = check_int(params["n_components"], "n_components", 1, 25)
+    out = dict(params, n_components=n)
+    if params["coefficients"] is None:
+        seed = params["seed"]
+        if seed is None:
+            raise InputError("`params`: response 'emor' needs `coefficients` or a `seed`")
+        check_int(seed, "seed", 0)
+        out["coefficients"] = tuple(float(v) for v in draw_emor_coefficients(int(seed), n))
+    elif params["seed"] is not None:
+        check_int(params["seed"], "seed", 0)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Film characteristic curve (toe and shoulder)
+# ---------------------------------------------------------------------------
+
+
+def _film_params(toe: Any, shoulder: Any, pivot: Any) -> tuple[float, float, float]:
+    return (
+        check_positive(toe, "toe"),
+        check_positive(shoulder, "shoulder"),
+        check_positive(pivot, "pivot"),
+    )
+
+
+def _film_log_r(e: np.ndarray, t: float, s: float, p: float) -> np.ndarray:
+    """``ln R(e)`` with ``R = (1 + (p/e)^s)^(−t/s)``, stable for every ``e >= 0``."""
+    with np.errstate(divide="ignore"):
+        z = s * (math.log(p) - np.log(e))
+    return -(t / s) * np.logaddexp(0.0, z)
+
+
+def response_film(
+    e: Any, toe: float = 1.6, shoulder: float = 1.0, pivot: float = 0.3, knee: float | None = None
+) -> np.ndarray:
+    """A film-like characteristic curve: a toe and a shoulder in log exposure [HD1890]_.
+
+    Parameters
+    ----------
+    e : array_like
+        Normalised exposure, ``>= 0``; exposures above 1 saturate (the
+        scanner's or printer's white).
+    toe : float
+        Positive exponent of the toe: ``F ∝ e^toe`` for ``e ≪ pivot`` (a
+        slope ``toe`` in log–log; ``> 1`` gives the film's slow start).
+    shoulder : float
+        Positive rate of the shoulder: ``1 − R ∝ (pivot/e)^shoulder`` for
+        ``e ≫ pivot``; smaller values give a longer, softer shoulder.
+    pivot : float
+        Exposure where the toe turns into the shoulder.
+    knee : float in (0, 1), optional
+        A soft knee just below saturation (:func:`apply_knee`).
+
+    Returns
+    -------
+    ndarray, float64
+        ``F(e) = R(min(e, 1)) / R(1)`` with
+        ``R(e) = (1 + (pivot / e)^shoulder)^(−toe / shoulder)``.
+
+    Notes
+    -----
+    ``R`` is the Richards (generalised logistic) curve in ``ln e``, the usual
+    analytic stand-in for a film's H&D characteristic curve: straight in
+    log–log between a toe and a shoulder, asymmetric when ``toe ≠
+    shoulder`` [MJ77]_. Its inverse is analytic:
+    ``e = pivot · (R^(−shoulder/toe) − 1)^(−1/shoulder)``.
+
+    Examples
+    --------
+    >>> F = response_film([0.0, 0.3, 1.0], toe=2.0, shoulder=2.0, pivot=0.3)
+    >>> [round(float(v), 6) for v in F]
+    [0.0, 0.545, 1.0]
+    """
+    x = _exposure(e)
+    t, s, p = _film_params(toe, shoulder, pivot)
+    log_r1 = float(_film_log_r(np.array([1.0]), t, s, p)[0])
+
+    def fwd(v: np.ndarray) -> np.ndarray:
+        return np.minimum(np.exp(_film_log_r(np.minimum(v, 1.0), t, s, p) - log_r1), 1.0)
+
+    def inv(F: np.ndarray) -> np.ndarray:
+        return _film_inverse(F, t, s, p, log_r1)
+
+    return apply_knee(x, fwd, inv, knee)
+
+
+def _film_inverse(F: np.ndarray, t: float, s: float, p: float, log_r1: float) -> np.ndarray:
+    out = np.zeros_like(F)
+    pos = F > 0
+    with np.errstate(divide="ignore"):
+        log_r = np.log(F[pos]) + log_r1  # ln R < 0
+    # R^(-s/t) - 1 = expm1(-(s/t) ln R) > 0
+    out[pos] = p * np.expm1(-(s / t) * log_r) ** (-1.0 / s)
+    return np.where(F >= 1.0, 1.0, np.minimum(out, 1.0))
+
+
+def response_film_inverse(
+    F: Any, toe: float = 1.6, shoulder: float = 1.0, pivot: float = 0.3, knee: float | None = None
+) -> np.ndarray:
+    """Exact inverse of :func:`response_film` on ``[0, 1]`` (``F = 1`` → the saturation exposure)."""
+    Fa = _output(F)
+    t, s, p = _film_params(toe, shoulder, pivot)
+    log_r1 = float(_film_log_r(np.array([1.0]), t, s, p)[0])
+
+    def fwd(v: np.ndarray) -> np.ndarray:
+        return np.minimum(np.exp(_film_log_r(np.minimum(v, 1.0), t, s, p) - log_r1), 1.0)
+
+    def inv(y: np.ndarray) -> np.ndarray:
+        return _film_inverse(y, t, s, p, log_r1)
+
+    return apply_knee_inverse(Fa, fwd, inv, knee)
+
+
+# ---------------------------------------------------------------------------
 # Numeric inverse, registry and the curve record
 # ---------------------------------------------------------------------------
 
@@ -510,12 +967,16 @@ class ResponseModel:
         The parameters and their default values; any other key is refused.
     max_output : callable
         ``max_output(**params) -> float``: ``F(∞)``, the saturation output.
+    resolve : callable or None
+        ``resolve(params) -> params``: completes a record's parameters once
+        (the ``"emor"`` kind draws its coefficients from its seed).
     """
 
     forward: Callable[..., np.ndarray]
     inverse: Callable[..., np.ndarray] | None
     defaults: Mapping[str, Any]
     max_output: Callable[..., float] = lambda **_: 1.0  # noqa: E731
+    resolve: Callable[[dict[str, Any]], dict[str, Any]] | None = None
 
 
 RESPONSE_MODELS: dict[str, ResponseModel] = {
@@ -529,6 +990,17 @@ RESPONSE_MODELS: dict[str, ResponseModel] = {
         response_table_inverse,
         {"x": None, "y": None},
         lambda **p: float(_table(p["x"], p["y"])[1][-1]),
+    ),
+    "emor": ResponseModel(
+        response_emor,
+        response_emor_inverse,
+        {"coefficients": None, "seed": None, "n_components": 5, "knee": None},
+        resolve=_resolve_emor,
+    ),
+    "film": ResponseModel(
+        response_film,
+        response_film_inverse,
+        {"toe": 1.6, "shoulder": 1.0, "pivot": 0.3, "knee": None},
     ),
 }
 """Registry of response families: ``kind → ResponseModel``."""
@@ -551,7 +1023,10 @@ class ResponseCurve:
     ----------
     kind : str
         A key of :data:`RESPONSE_MODELS` (``"linear"``, ``"gamma"``,
-        ``"s_curve"``, ``"table"``), case-insensitive.
+        ``"s_curve"``, ``"table"``, ``"emor"``, ``"film"``), case-insensitive.
+        An ``"emor"`` record may give a ``seed`` (and ``n_components``)
+        instead of ``coefficients``: they are drawn once
+        (:func:`draw_emor_coefficients`) and kept in ``params``.
     params : dict
         Keyword parameters of the family; missing ones take their defaults,
         unknown ones are refused. Arrays are stored as tuples of floats.
@@ -581,6 +1056,8 @@ class ResponseCurve:
         missing = [k for k, v in params.items() if v is None and k in ("x", "y")]
         if missing:
             raise InputError(f"`params`: response {kind!r} needs {missing}")
+        if model.resolve is not None:
+            params = {k: _jsonable(v) for k, v in model.resolve(params).items()}
         object.__setattr__(self, "kind", kind)
         object.__setattr__(self, "params", params)
         # validate the parameters once, by evaluating the curve
@@ -634,6 +1111,32 @@ class ResponseCurve:
     def gamma(cls, gamma: float = 1.0 / 2.2) -> ResponseCurve:
         """Shortcut for ``ResponseCurve("gamma", {"gamma": gamma})``."""
         return cls("gamma", {"gamma": gamma})
+
+    @classmethod
+    def emor(
+        cls,
+        seed: int | None = None,
+        n_components: int = 5,
+        coefficients: Any = None,
+        knee: float | None = None,
+    ) -> ResponseCurve:
+        """An EMoR response: drawn from ``seed`` or given by its ``coefficients``."""
+        return cls(
+            "emor",
+            {
+                "coefficients": coefficients,
+                "seed": seed,
+                "n_components": n_components,
+                "knee": knee,
+            },
+        )
+
+    @classmethod
+    def film(
+        cls, toe: float = 1.6, shoulder: float = 1.0, pivot: float = 0.3, knee: float | None = None
+    ) -> ResponseCurve:
+        """A film characteristic curve (:func:`response_film`)."""
+        return cls("film", {"toe": toe, "shoulder": shoulder, "pivot": pivot, "knee": knee})
 
     @classmethod
     def s_curve(cls, contrast: float = 1.5, pivot: float = 0.25) -> ResponseCurve:

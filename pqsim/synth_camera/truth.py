@@ -90,6 +90,10 @@ class CameraTruth:
         How ``u`` was made: ``{"seed", "sigma_pixel", "sigma_lowfreq", "lowfreq_scale"}``.
     glare : GlareSpread or None
         The veiling glare of the optics (:mod:`pqsim.synth_camera.glare`), if any.
+    vignetting_model : dict or tuple of dict, optional
+        The vignetting's ``{"kind", "params"}`` record(s)
+        (:data:`~pqsim.synth_camera.optics.VIGNETTING_KINDS`) when the camera
+        was given them; ``None`` for ``vignetting_params`` or none.
     """
 
     responses: tuple[ResponseCurve, ...]
@@ -103,6 +107,7 @@ class CameraTruth:
     channels: tuple[str, ...] = ("R", "G", "B")
     prnu: dict[str, Any] = field(default_factory=dict)
     glare: GlareSpread | None = None
+    vignetting_model: Any = None
 
     def __post_init__(self) -> None:
         c = len(self.responses)
@@ -254,7 +259,7 @@ class CameraTruth:
             "prnu": dict(self.prnu),
             # written only when there is glare: truths without it stay as they were
             **({} if self.glare is None else {"glare": self.glare.to_dict()}),
-        }
+        } | ({} if self.vignetting_model is None else {"vignetting_model": self.vignetting_model})
 
     def save(self, folder: str | Path) -> Path:
         """Write this truth alone to ``folder`` (see :func:`save_truth`)."""
@@ -443,6 +448,15 @@ def _read_map(folder: Path, name: Any, shape: tuple[int, ...] | None) -> np.ndar
     return arr
 
 
+def _vignetting_model(doc: Any) -> Any:
+    """A vignetting record (or one per channel) as read from ``truth.json``."""
+    if doc is None or isinstance(doc, dict):
+        return doc
+    if isinstance(doc, list) and all(isinstance(r, dict) for r in doc):
+        return tuple(doc)
+    raise InputError(f"truth.json: `vignetting_model` must be a record or a list, got {doc!r}")
+
+
 def load_truth(folder: str | Path) -> TruthSet:
     """Read a ground truth written by :func:`save_truth`.
 
@@ -488,6 +502,7 @@ def load_truth(folder: str | Path) -> TruthSet:
             channels=tuple(cam["channels"]),
             prnu=dict(cam.get("prnu", {})),
             glare=cam.get("glare"),
+            vignetting_model=_vignetting_model(cam.get("vignetting_model")),
         )
         captures = {}
         for name, cap in doc.get("captures", {}).items():

@@ -43,3 +43,34 @@ def test_table1_says_what_to_install_without_hugin(monkeypatch):
     assert rows and all(r.ours == "not installed" for r in rows)
     assert table1_module.NO_HUGIN in res.notes
     assert not any(k.split(".")[3] == "hugin" for k in run.metrics if k.startswith("table1."))
+
+
+def test_table1_and_fig7_have_a_row_per_pipeline_and_fig7_a_hugin_row():
+    """Issue 11: "Table 1 and Fig. 7 get the Hugin row from the real Hugin, and a row per pipeline"."""
+    from photoquant.profiles import DEFAULT_PROFILE, PROFILES
+
+    run = run_validation(TINY, 0, experiments=["table1", "fig7"], progress=_quiet)
+    m = run.metrics
+    others = [p for p in PROFILES if p != DEFAULT_PROFILE]
+    assert others  # the paper's own profile at least
+    keys = [f"profile_{p}" for p in others] + (["hugin"] if hugin.available() else [])
+    for col in ("ccd.outdoor", "ccd.indoor", "cmos.outdoor", "cmos.indoor"):
+        for key in keys:
+            # every pipeline linearises the camera: its chart correlates with the truth
+            # better than the clipped, non-linear LDR frame does
+            assert m[f"table1.{col}.{key}.r_camera"] > m[f"table1.{col}.uncorrected.r_camera"]
+            assert 0 < m[f"table1.{col}.{key}.e_mean"] < 0.1
+            for gt in ("cie", "camera"):
+                # Fig. 7's regression of the same pipeline's chart: a line through the
+                # points with a smaller residual than the LDR frame's
+                fit = f"fig7.{col}.{key}.{gt}"
+                assert m[f"{fit}.residual_norm"] < m[f"fig7.{col}.uncorrected.{gt}.residual_norm"]
+                assert m[f"{fit}.slope"] > 0
+    for p in others:
+        rows = [r for r in run.experiments["table1"].rows if f"({p} profile)" in r.quantity]
+        assert len(rows) == 2
+        rows = [r for r in run.experiments["fig7"].rows if f"({p} profile)" in r.quantity]
+        assert len(rows) == 2 * 4  # both ground truths, four columns
+    if hugin.available():
+        rows = [r for r in run.experiments["fig7"].rows if ", Hugin vs" in r.quantity]
+        assert len(rows) == 2 * 4

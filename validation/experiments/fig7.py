@@ -29,7 +29,12 @@ import numpy as np
 from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, FigureSpec
 from validation.experiments.shared import Shared
-from validation.experiments.table1 import chart_experiment, chart_measurements
+from validation.experiments.table1 import (
+    chart_experiment,
+    chart_measurements,
+    pipeline_measurements,
+    pipeline_rows,
+)
 
 __all__ = ["run", "linear_fit", "PAPER", "TITLE"]
 
@@ -65,8 +70,22 @@ def run(
     if res.skipped:
         return res
     panels = []
+    extra = pipeline_rows(config)
+    row_names = {key: name for key, name, _ in extra}
     for preset, label in columns:
         m = chart_measurements(config, shared, preset, label, lighting[label])
+        others = [
+            (
+                key,
+                _display(
+                    pipeline_measurements(
+                        config, shared, preset, label, lighting[label], key, steps
+                    )["hdr"]
+                ),
+                f"{name} HDR (tone-mapped)",
+            )
+            for key, name, steps in extra
+        ]
         n_ch = m["ldr"].shape[1]
         channel = np.tile(np.arange(n_ch), (m["ldr"].shape[0], 1))
         paper_case = (preset, label) == columns[0]
@@ -75,6 +94,7 @@ def run(
             for row, y, name in (
                 ("uncorrected", m["ldr"], "uncorrected LDR (DN)"),
                 ("corrected", _display(m["hdr"]), "corrected HDR (tone-mapped)"),
+                *others,
             ):
                 a, b, r = linear_fit(x, y)
                 key = f"{preset}.{label}.{row}.{gt}"
@@ -86,13 +106,13 @@ def run(
                     description=f"intercept (display units), {row} vs {gt}",
                 )
                 res.metric(f"{key}.residual_norm", r, description=f"‖residual‖₂, {row} vs {gt}")
-                p = PAPER[row]
+                p = PAPER.get(row)
                 res.row(
-                    f"{preset} {label}, {row} vs {gt_name}",
+                    f"{preset} {label}, {row_names.get(row, row)} vs {gt_name}",
                     f"y = {a:.2f}x {'+' if b >= 0 else '−'} {abs(b):.2f}, residual norm {r:.2f}",
                     (
                         f"y = {p['slope']}x − {abs(p['intercept'])}, {p['residual_norm']}"
-                        if gt == "cie" and paper_case
+                        if gt == "cie" and paper_case and isinstance(p, dict)
                         else "–"
                     ),
                     "",
@@ -127,8 +147,11 @@ def run(
                 "Each point is one channel of one ColorChecker patch (colour = channel); the "
                 "line is the least-squares fit; crosses are LDR patches with clipped pixels. "
                 "Top: against the chart maker's CIE RGB (the paper's Fig. 7); bottom: against "
-                "the true camera photoquantity.",
-                {"panels": panels, "ncols": 2},
+                "the true camera photoquantity. Columns: uncorrected, corrected, then the "
+                "other pipelines (Table 1's rows: "
+                + (", ".join(name for _, name, _ in extra) or "none")
+                + ").",
+                {"panels": panels, "ncols": 2 + len(extra)},
             )
         )
     res.notes.append(

@@ -163,38 +163,70 @@ def _corrected_chart(
     return stack, hdr_raw, balance, correct_s
 
 
-def hugin_measurements(
-    config: ValidationConfig, shared: Shared, preset: str, label: str, illuminant: str
+def pipeline_rows(config: ValidationConfig) -> list[tuple[str, str, dict[str, Any]]]:
+    """The rows beside "corrected": ``(key, label, calibrate keywords)``, one per pipeline.
+
+    Each profile of :data:`photoquant.profiles.PROFILES` other than the run's
+    own (the "corrected" row's, ``config.calibrate_kwargs["profile"]`` or the
+    default) gets a row calibrated with that profile alone; the Hugin row
+    (:data:`HUGIN_STEPS`) follows when Hugin's ``vig_optimize`` is installed.
+    """
+    from photoquant.peers import hugin
+    from photoquant.profiles import DEFAULT_PROFILE, PROFILES
+
+    run_profile = str(config.calibrate_kwargs.get("profile", DEFAULT_PROFILE)).lower()
+    rows: list[tuple[str, str, dict[str, Any]]] = [
+        (f"profile_{name}", f"corrected ({name} profile)", {"profile": name})
+        for name in PROFILES
+        if name.lower() != run_profile
+    ]
+    if hugin.available():
+        rows.append(("hugin", "Hugin", dict(HUGIN_STEPS)))
+    return rows
+
+
+def pipeline_measurements(
+    config: ValidationConfig,
+    shared: Shared,
+    preset: str,
+    label: str,
+    illuminant: str,
+    row: str,
+    steps: dict[str, Any],
 ) -> dict[str, Any]:
-    """The chart of :func:`chart_measurements` corrected with a Hugin-calibrated camera (memoised).
+    """The chart of :func:`chart_measurements` corrected with another pipeline's camera (memoised).
 
     The preset's capture set (the one the corrected row's camera comes from)
-    is calibrated with :data:`HUGIN_STEPS`; the chart's HDR frames are the
-    corrected row's (the same seed stream). Returns ``"hdr"`` (24, 3)
-    balanced on the white patch, ``"model"``, ``"calibrate_s"``,
-    ``"correct_s"`` and the Hugin fits' reports.
+    is calibrated with ``calibrate(**steps)`` (once per preset and ``row``);
+    the chart's HDR frames are the corrected row's (the same seed stream), so
+    the rows differ only by the calibration. Returns ``"hdr"`` (24, 3)
+    balanced on the white patch, ``"model"``, ``"calibrate_s"`` and
+    ``"correct_s"``.
     """
     import time
 
     from photoquant.calibration import calibrate
     from photoquant.io import load_manifest, load_stack
 
-    key = ("chart-hugin", preset, label)
+    key = ("chart-pipeline", row, preset, label)
     if key in shared.cache:
         return shared.cache[key]
     cal = shared.calibration(preset)
-    model_key = ("hugin-model", preset)
+    model_key = ("pipeline-model", row, preset)
     if model_key not in shared.cache:
         manifest = load_manifest(cal.manifest)
         views = [load_stack(v, manifest) for v in manifest.views]
         tracks = list(manifest.correspondences) if manifest.correspondences else None
         t0 = time.perf_counter()
+        # a pipeline without a sensor LUT (Hugin) does not read the irradiance scene
+        use_irradiance = manifest.irradiance and str(steps.get("sensor_lut", "")) != "None"
         result = calibrate(
             views,
+            irradiance=load_stack(manifest.irradiance, manifest) if use_irradiance else None,
             white_roi=manifest.white_roi,
             correspondences=tracks,
             seed=cal.calibrate_seed,
-            **HUGIN_STEPS,
+            **steps,
         )
         shared.cache[model_key] = (result, time.perf_counter() - t0)
     model, calibrate_s = shared.cache[model_key]
@@ -210,6 +242,15 @@ def hugin_measurements(
     }
     shared.cache[key] = out
     return out
+
+
+def hugin_measurements(
+    config: ValidationConfig, shared: Shared, preset: str, label: str, illuminant: str
+) -> dict[str, Any]:
+    """The chart corrected with a Hugin-calibrated camera (:data:`HUGIN_STEPS`, memoised)."""
+    return pipeline_measurements(
+        config, shared, preset, label, illuminant, "hugin", dict(HUGIN_STEPS)
+    )
 
 
 def _chart_note(config: ValidationConfig, shared: Shared) -> str:
@@ -272,31 +313,38 @@ def run(
     from photoquant.peers import hugin
 
     have_hugin = hugin.available()
-    rows = ("uncorrected", "corrected", "hugin") if have_hugin else ("uncorrected", "corrected")
+    extra = pipeline_rows(config)
+    rows = ("uncorrected", "corrected", *(key for key, _, _ in extra))
+    names = {"uncorrected": "uncorrected", "corrected": "corrected"} | {
+        key: name for key, name, _ in extra
+    }
     table: dict[tuple[str, str], dict[str, float]] = {}
-    hugin_times: list[str] = []
+    times: dict[str, list[str]] = {}
     for preset, label in columns:
         m = chart_measurements(config, shared, preset, label, lighting[label])
         cell: dict[str, float] = {}
         measured = [("uncorrected", m["ldr"]), ("corrected", m["hdr"])]
-        if have_hugin:
-            hm = hugin_measurements(config, shared, preset, label, lighting[label])
-            measured.append(("hugin", hm["hdr"]))
-            hugin_times.append(f"{preset.upper()} calibration {hm['calibrate_s']:.1f} s")
+        for key, _, steps in extra:
+            pm = pipeline_measurements(config, shared, preset, label, lighting[label], key, steps)
+            measured.append((key, pm["hdr"]))
+            times.setdefault(key, []).append(
+                f"{preset.upper()} calibration {pm['calibrate_s']:.1f} s"
+            )
         for row, values in measured:
             for gt in ("camera", "cie"):
                 cell[f"{row}.r_{gt}"] = res.metric(
                     f"{preset}.{label}.{row}.r_{gt}",
                     correlation(m[f"truth_{gt}"], values),
                     better="higher",
-                    description=f"correlation of {row} patch values with the "
+                    description=f"correlation of {names[row]} patch values with the "
                     + ("true camera photoquantity" if gt == "camera" else "CIE RGB (D65)"),
                 )
             cell[f"{row}.e_mean"] = res.metric(
                 f"{preset}.{label}.{row}.e_mean",
                 _eq8_patches(m["truth_camera"], values),
                 unit="fraction",
-                description=f"eq. 8 mean over the patches of {row} vs the camera photoquantity",
+                description=f"eq. 8 mean over the patches of {names[row]} vs the camera "
+                "photoquantity",
             )
         table[(preset, label)] = cell
     heads = "  ".join(f"{p.upper()}-{lab}" for p, lab in columns)
@@ -305,9 +353,11 @@ def run(
     for gt, gt_name in (("cie", "CIE RGB (D65)"), ("camera", "camera photoquantity")):
         for row in rows:
             res.row(
-                f"r, {'Hugin' if row == 'hugin' else row} vs {gt_name}",
+                f"r, {names[row]} vs {gt_name}",
                 "  ".join(f"{table[c][f'{row}.r_{gt}']:.4f}" for c in columns),
-                "  ".join(f"{PAPER[row][i]:.2f}" for i in paper_idx) if gt == "cie" else "–",
+                "  ".join(f"{PAPER[row][i]:.2f}" for i in paper_idx)
+                if gt == "cie" and row in PAPER
+                else "–",
                 (
                     "eq. 8 e_mean: "
                     + " ".join(fmt_pct(table[c][f"{row}.e_mean"], 1) for c in columns)
@@ -328,12 +378,21 @@ def run(
         "vig_optimize from point pairs the adapter writes (photoquant.peers.hugin), no sensor "
         "LUT; the chart's frames merged through that response by photoquant's merge and "
         "balanced on the white patch like the corrected row"
-        + (f" ({'; '.join(sorted(set(hugin_times)))})." if hugin_times else ".")
+        + (f" ({'; '.join(sorted(set(times['hugin'])))})." if times.get("hugin") else ".")
         if have_hugin
         else NO_HUGIN
     )
+    profile_notes = [
+        f"The '{name}' row: the same capture set calibrated with photoquant's "
+        f"'{key.removeprefix('profile_')}' profile (photoquant.profiles; "
+        f"{'; '.join(sorted(set(times.get(key, []))))}), its chart corrected and balanced "
+        "like the corrected row."
+        for key, name, _ in extra
+        if key.startswith("profile_")
+    ]
     res.notes += [
         hugin_note,
+        *profile_notes,
         _chart_note(config, shared),
         "The corrected values are balanced on the chart's white patch (the paper's white chart "
         "lit by the scene's light, §5.3); the camera-photoquantity truth is balanced the same "
