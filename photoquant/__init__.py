@@ -38,6 +38,7 @@ _EXPORTS: dict[str, str] = {
     "find_correspondences": "photoquant.calibration",
     "fit_vignetting_step": "photoquant.calibration",
     "fit_balance": "photoquant.calibration",
+    "fit_glare_step": "photoquant.calibration",
     "correct": "photoquant.correction",
     "correct_manifest": "photoquant.correction",
     "Correction": "photoquant.correction",
@@ -55,6 +56,8 @@ _EXPORTS: dict[str, str] = {
     "VignettingModel": "photoquant.vignetting",
     "VignettingData": "photoquant.vignetting",
     "ExtendedGoldmanChenVignetting": "photoquant.vignetting",
+    "GlareModel": "photoquant.glare",
+    "GlareData": "photoquant.glare",
     "load_manifest": "photoquant.io",
     "load_stack": "photoquant.io",
     "read_exr": "photoquant.io",
@@ -72,6 +75,7 @@ _EXPORTS: dict[str, str] = {
     "SENSOR_LUT_METHODS": "photoquant.flatfield",
     "VIGNETTING_METHODS": "photoquant.vignetting",
     "CORRESPONDENCE_METHODS": "photoquant.correspondences",
+    "GLARE_METHODS": "photoquant.glare",
     "WEIGHTING_FUNCTIONS": "photoquant.weighting",
     "PROFILES": "photoquant.profiles",
     "DEVIATIONS": "photoquant.profiles",
@@ -99,6 +103,7 @@ if TYPE_CHECKING:
         find_correspondences as find_correspondences,
         fit_vignetting_step as fit_vignetting_step,
         fit_balance as fit_balance,
+        fit_glare_step as fit_glare_step,
     )
     from photoquant.correction import (
         correct as correct,
@@ -114,6 +119,11 @@ if TYPE_CHECKING:
     from photoquant.flatfield import (
         SensorLUTModel as SensorLUTModel,
         SENSOR_LUT_METHODS as SENSOR_LUT_METHODS,
+    )
+    from photoquant.glare import (
+        GlareModel as GlareModel,
+        GlareData as GlareData,
+        GLARE_METHODS as GLARE_METHODS,
     )
     from photoquant.io import (
         load_manifest as load_manifest,

@@ -15,6 +15,11 @@
    (:mod:`photoquant.vignetting`),
 5. colour balance ``a_λ`` from the white chart (:mod:`photoquant.balance`).
 
+With a glare capture (a small bright source on a dark background), the
+camera's veiling glare is fitted after the sensor LUT (:mod:`photoquant.glare`)
+and removed from the views before the vignetting and the balance are
+estimated; without one the glare step is the identity and nothing changes.
+
 Each step is also a public function (:func:`photoquant.response.fit_response`,
 :meth:`photoquant.merge.MergeModel.merge`, :func:`fit_sensor_lut`,
 :func:`find_correspondences`, :func:`fit_vignetting_step`,
@@ -52,6 +57,7 @@ from photoquant.exposure import (
     refine_jointly,
 )
 from photoquant.flatfield import SensorLUTModel
+from photoquant.glare import GlareData, GlareModel
 from photoquant.merge import MergeModel, MergeResult
 from photoquant.methods import STEPS, Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
@@ -71,6 +77,7 @@ __all__ = [
     "find_correspondences",
     "fit_vignetting_step",
     "fit_balance",
+    "fit_glare_step",
 ]
 
 Progress = Callable[[str], None]
@@ -165,6 +172,19 @@ def fit_balance(
     return _checked_fit(method.function(data, options), method, BalanceModel)
 
 
+def fit_glare_step(
+    glare_capture: MergeResult,
+    sensor_lut: np.ndarray,
+    spec: Any = None,
+    *,
+    profile: str = DEFAULT_PROFILE,
+) -> StepFit[GlareModel]:
+    """The glare step from the merged glare capture and the sensor LUT ``u`` (:mod:`photoquant.glare`)."""
+    method, options = _step("glare", spec, profile)
+    data = GlareData(glare_capture.photoquantity() / sensor_lut, glare_capture.all_saturated)
+    return _checked_fit(method.function(data, options), method, GlareModel)
+
+
 @dataclass(frozen=True, eq=False)
 class CalibrationIntermediates:
     """What the steps of one calibration passed each other.
@@ -234,6 +254,7 @@ def calibrate(
     white_roi: Sequence[int] | None = None,
     correspondences: Sequence[np.ndarray] | None = None,
     flat_field: ExposureStack | None = None,
+    glare_capture: ExposureStack | None = None,
     profile: str = DEFAULT_PROFILE,
     response: Any = None,
     merge: Any = None,
@@ -241,6 +262,7 @@ def calibrate(
     sensor_lut: Any = None,
     vignetting: Any = None,
     correspondence_finder: Any = None,
+    glare: Any = None,
     seed: int = 0,
     refine_exposures: bool | None = None,
     progress: Progress | None = None,
@@ -266,10 +288,15 @@ def calibrate(
         A uniformly lit target seen through the optics (diffuser, integrating
         sphere), for vignetting methods that need one (``"Flat Field"``);
         merged and divided by ``u`` like the views.
+    glare_capture : ExposureStack, optional
+        A small bright source on a dark background through the optics
+        (manifest key ``"glare"``): the glare step fits the camera's veiling
+        glare from it, and it is removed from the views before the vignetting
+        and the balance. Without it the glare step is the identity.
     profile : {"photoquant", "paper"}
         The methods and options of every step not given below
         (:mod:`photoquant.profiles`).
-    response, merge, balance, sensor_lut, vignetting, correspondence_finder
+    response, merge, balance, sensor_lut, vignetting, correspondence_finder, glare
         Per-step specs overriding the profile: a method name, ``(name,
         {option: value})``, a mapping of options for the profile's method, or
         an options dataclass instance.
@@ -329,6 +356,8 @@ def calibrate(
         )
     if flat_field is not None:
         _check_views([views[0], flat_field], None)
+    if glare_capture is not None:
+        _check_views([views[0], glare_capture], None)
     steps = resolve_steps(
         profile,
         response=response,
@@ -337,6 +366,7 @@ def calibrate(
         sensor_lut=sensor_lut,
         vignetting=vignetting,
         correspondences=correspondence_finder,
+        glare=glare,
     )
     say = progress or (lambda _msg: None)
     ref = views[0]
@@ -416,6 +446,14 @@ def calibrate(
         flat_ref = _refine_against(flat_field, resp, seed)
         flat_field = flat_ref.apply(flat_field)
         exposures["flat_field"] = flat_ref.as_dict()
+    if refine_exposures and glare_capture is not None and steps["glare"][0].name != "None":
+        try:
+            glare_ref = _refine_against(glare_capture, resp, seed)
+        except CalibrationError as exc:
+            notes.append(f"glare capture's exposures not refined, nominal times kept: {exc}")
+        else:
+            glare_capture = glare_ref.apply(glare_capture)
+            exposures["glare"] = glare_ref.as_dict()
     timings["response"] = time.perf_counter() - t0
     report["response"] = {"method": response_spec[0].name, **resp_fit.report}
     report["exposures"] = exposures
@@ -452,9 +490,29 @@ def calibrate(
     report["sensor_lut"] = {"method": lut.method, **lut_fit.report}
     timings["sensor_lut"] = time.perf_counter() - t0
 
+    # 3b. veiling glare (on the sensor: after ÷ u, before ÷ v) ----------------
+    t0 = time.perf_counter()
+    glare_spec = steps["glare"]
+    glare_model = GlareModel.identity(ref.n_channels)
+    if glare_capture is None or glare_spec[0].name == "None":
+        if glare is not None and glare_spec[0].name != "None":
+            raise CalibrationError(
+                f"the {glare_spec[0].name!r} glare method needs a glare capture "
+                "(manifest key `glare`, calibrate(glare_capture=...))"
+            )
+        glare_spec = resolve_method("glare", "None", ("None", {}))
+    else:
+        say("glare")
+        glare_fit = fit_glare_step(merge_model.merge(glare_capture, resp), lut.lut, glare_spec)
+        glare_model = glare_fit.model
+        report["glare"] = {"method": glare_model.method, **glare_fit.report}
+        timings["glare"] = time.perf_counter() - t0
+
     # 4. correspondences and vignetting --------------------------------------
     t0 = time.perf_counter()
     uniform = [m.photoquantity() / lut.lut for m in merged]
+    if not glare_model.is_identity:  # the views without their veiling glare
+        uniform = [glare_model.remove(u) for u in uniform]
     tracks: list[np.ndarray] | None = None
     source = "none"
     vig_spec = steps["vignetting"]
@@ -518,7 +576,10 @@ def calibrate(
         notes.append("no white chart: colour balance left at 1 (identity)")
     else:
         say("colour balance")
-        uniformised = linear / (lut.lut * vig.map((height, width)))
+        if glare_model.is_identity:
+            uniformised = linear / (lut.lut * vig.map((height, width)))
+        else:  # view 0 without its glare, ÷ v
+            uniformised = uniform[0] / vig.map((height, width))
         bal_fit = fit_balance(
             linear,
             uniformised,
@@ -531,7 +592,9 @@ def calibrate(
     timings["balance"] = time.perf_counter() - t0
 
     used = dict(steps)
-    used.update({"sensor_lut": lut_spec, "vignetting": vig_spec, "balance": bal_spec})
+    used.update(
+        {"sensor_lut": lut_spec, "vignetting": vig_spec, "balance": bal_spec, "glare": glare_spec}
+    )
     if source in ("none", "given"):
         used.pop("correspondences")
     parameters = {
@@ -554,6 +617,7 @@ def calibrate(
         vignetting=vig,
         parameters=parameters,
         report=report,
+        glare=glare_model,
     )
     if not return_intermediates:
         return model
@@ -596,8 +660,8 @@ def calibrate_manifest(
 ) -> Any:
     """Calibrate from a capture manifest (a path or a loaded ``CaptureManifest``).
 
-    Uses ``views``, ``irradiance``, ``white_roi``, ``correspondences`` and
-    ``flatfield`` of the manifest; ``kwargs`` go to :func:`calibrate`.
+    Uses ``views``, ``irradiance``, ``white_roi``, ``correspondences``,
+    ``flatfield`` and ``glare`` of the manifest; ``kwargs`` go to :func:`calibrate`.
     """
     from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
 
@@ -612,6 +676,8 @@ def calibrate_manifest(
     corr = list(manifest.correspondences) if manifest.correspondences else None
     if manifest.flatfield is not None and "flat_field" not in kwargs:
         kwargs["flat_field"] = load_stack(manifest.flatfield, manifest, progress=progress_bars)
+    if manifest.glare is not None and "glare_capture" not in kwargs:
+        kwargs["glare_capture"] = load_stack(manifest.glare, manifest, progress=progress_bars)
     return calibrate(
         views,
         irradiance=irradiance,

@@ -187,6 +187,12 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     ):
         for name, row in zip(model.channels, params, strict=True):
             lines.append(f"  {name}: {model.vignetting.method} {_fmt(row)}")
+    if not model.glare.is_identity:  # the glare step (photoquant.glare)
+        fit = _section(rep, "glare")
+        lines.append(
+            f"glare: fraction {_fmt(model.glare.fraction)}, width {_fmt(model.glare.width_px)} px"
+            f" (Moffat beta {model.glare.beta:g}), fit rms (ln) {_fmt(fit.get('rms_log_residual'))}"
+        )
     exposures = _section(rep, "exposures")
     stacks = [("view " + str(i), e) for i, e in enumerate(exposures.get("views") or [])]
     if isinstance(exposures.get("irradiance"), dict):

@@ -192,7 +192,7 @@ def correct(
         else:
             stack = refinement.apply(stack)
     gain = gain_map_f32(model)
-    plan = merger.tile_plan(stack, model.balanced_response())
+    plan = merger.tile_plan(stack, model.balanced_response()) if model.glare.is_identity else None
     if plan is not None:  # one pass: frames -> ln c -> l, tile by tile
         shape = (*stack.image_shape, stack.n_channels)
         photoquantity = np.empty(shape, dtype=np.float32)
@@ -213,10 +213,16 @@ def correct(
             workers=workers,
             on_tile=uniformise,
         )
-    else:  # a method that merges the whole image at once
+    else:  # a method that merges the whole image at once, or glare to remove
         merged = merger.merge(stack, model.balanced_response())
         with np.errstate(invalid="ignore"):
-            photoquantity = np.exp(merged.log_photoquantity).astype(np.float32) * gain
+            if model.glare.is_identity:
+                photoquantity = np.exp(merged.log_photoquantity).astype(np.float32) * gain
+            else:  # veiling glare: deconvolve on the sensor (÷ u first), then ÷ v (photoquant.glare)
+                sensor = np.exp(merged.log_photoquantity) / model.sensor_lut.lut
+                photoquantity = (model.glare.remove(sensor) / model.vignetting_map()).astype(
+                    np.float32
+                )
         mask, all_saturated, all_dark = merged.mask, merged.all_saturated, merged.all_dark
     defects = detect_defects(stack)  # hot/stuck pixels: not merged (NaN, flagged)
     if defects is not None and defects.mask.any():

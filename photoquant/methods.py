@@ -17,6 +17,7 @@ step                      function signature (see each step's module)
 ``"sensor_lut"``          ``fit(linear, mask, options) -> StepFit[SensorLUTModel]``
 ``"vignetting"``          ``fit(data: VignettingData, options) -> StepFit[VignettingModel]``
 ``"correspondences"``     ``find(uniform_views, options) -> list of tracks``
+``"glare"``               ``fit(data: GlareData, options) -> StepFit[GlareModel]``
 ========================  ===================================================
 
 Methods from other distributions are registered through the entry-point
@@ -64,12 +65,24 @@ STEPS: tuple[str, ...] = (
     "sensor_lut",
     "vignetting",
     "correspondences",
+    "glare",
 )
 """The calibration steps, in the order :func:`photoquant.calibration` runs them
 (the balance is estimated last but listed where the paper puts it)."""
 
-MODEL_STEPS: tuple[str, ...] = ("response", "merge", "balance", "sensor_lut", "vignetting")
+MODEL_STEPS: tuple[str, ...] = (
+    "response",
+    "merge",
+    "balance",
+    "sensor_lut",
+    "vignetting",
+    "glare",
+)
 """The steps whose result a :class:`~photoquant.model.CameraModel` stores."""
+
+OPTIONAL_MODEL_STEPS: tuple[str, ...] = ("glare",)
+"""Model steps a camera file may lack (written before the step existed): they load
+as their identity."""
 
 ENTRY_POINT_GROUP = "photoquant.methods"
 """Entry-point group through which other distributions register methods."""
@@ -305,6 +318,7 @@ _BUILTIN_MODULES = (
     "photoquant.flatfield",
     "photoquant.vignetting",
     "photoquant.correspondences",
+    "photoquant.glare",
     "photoquant.peers",
 )
 """Modules whose import registers the built-in methods (loaded before any plug-in)."""

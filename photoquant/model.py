@@ -11,9 +11,13 @@ merge          :class:`~photoquant.merge.MergeModel`                 eq. 6 (meth
 balance        :class:`~photoquant.balance.BalanceModel`             ``× a_λ``
 sensor_lut     :class:`~photoquant.flatfield.SensorLUTModel`         ``÷ u``
 vignetting     a :class:`~photoquant.vignetting.VignettingModel`     ``÷ v`` (``.map(shape)``)
+glare          :class:`~photoquant.glare.GlareModel`                 ``G⁻¹`` between ``÷ u`` and ``÷ v``
 =============  ====================================================  =======================
 
-so that the correction (§4 of the paper) is ``l = exp(merge) · a / (u·v)``.
+so that the correction (§4 of the paper) is ``l = exp(merge) · a / (u·v)``,
+or ``l = G⁻¹(exp(merge) · a / u) / v`` with a measured veiling glare ``G``.
+The glare step is optional in camera files: one without it (written before
+the step existed) loads with the identity (``"None"``).
 
 On disk a camera is a folder::
 
@@ -53,10 +57,11 @@ from photoquant._json import load_json, to_json_value
 from photoquant.balance import BalanceModel
 from photoquant.errors import CameraModelError, InputError
 from photoquant.flatfield import SensorLUTModel
+from photoquant.glare import GlareModel
 from photoquant.io.atomic import atomic_directory, write_text_atomic
 from photoquant.io.images import read_exr, write_exr
 from photoquant.merge import MergeModel, MergeResult
-from photoquant.methods import MODEL_STEPS, registry
+from photoquant.methods import MODEL_STEPS, OPTIONAL_MODEL_STEPS, registry
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 from photoquant.vignetting import ExtendedGoldmanChenVignetting, VignettingModel
@@ -74,6 +79,7 @@ _STEP_TYPES: dict[str, type] = {
     "balance": BalanceModel,
     "sensor_lut": SensorLUTModel,
     "vignetting": VignettingModel,
+    "glare": GlareModel,
 }
 _DEFAULT_MODEL_CLASS: dict[str, Any] = {**_STEP_TYPES, "vignetting": ExtendedGoldmanChenVignetting}
 """The class that rebuilds a step whose method names no model class of its own."""
@@ -105,6 +111,9 @@ class CameraModel:
         The profile, methods and options that produced the model.
     report : dict
         Diagnostics of the calibration (counts, residuals, timings, notes).
+    glare : GlareModel, optional
+        Veiling glare of the optics (:mod:`photoquant.glare`); ``None``
+        (default): the identity, nothing removed.
     """
 
     image_shape: tuple[int, int]
@@ -117,6 +126,7 @@ class CameraModel:
     vignetting: VignettingModel
     parameters: dict[str, Any] = field(default_factory=dict)
     report: dict[str, Any] = field(default_factory=dict)
+    glare: GlareModel = None  # type: ignore[assignment]  # None: the identity, set below
     _cache: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -133,6 +143,8 @@ class CameraModel:
         if n_ch < 1 or len(set(channels)) != n_ch or not all(channels):
             raise InputError(f"`channels` must be unique non-empty names, got {channels}")
         bit_depth = check_bit_depth(self.bit_depth)
+        if self.glare is None:
+            object.__setattr__(self, "glare", GlareModel.identity(n_ch))
         for step, kind in _STEP_TYPES.items():
             value = getattr(self, step)
             if not isinstance(value, kind):
@@ -149,6 +161,10 @@ class CameraModel:
         if self.balance.factors.shape != (n_ch,):
             raise InputError(
                 f"the balance has {self.balance.factors.size} factors, the camera {n_ch} channels"
+            )
+        if self.glare.n_channels != n_ch:
+            raise InputError(
+                f"the glare model has {self.glare.n_channels} channels, the camera {n_ch}"
             )
         if self.sensor_lut.lut.shape != (height, width, n_ch):
             raise InputError(
@@ -237,8 +253,16 @@ class CameraModel:
         return self.merge.merge(stack, self.balanced_response() if balanced else self.response)
 
     def steps(self) -> dict[str, Any]:
-        """The model of every step, by step name."""
-        return {step: getattr(self, step) for step in MODEL_STEPS}
+        """The model of every step, by step name.
+
+        An optional step at its identity (no glare measured) is left out, so a
+        camera without it is written exactly as before the step existed.
+        """
+        return {
+            step: getattr(self, step)
+            for step in MODEL_STEPS
+            if not (step in OPTIONAL_MODEL_STEPS and getattr(self, step).is_identity)
+        }
 
     # -- persistence -------------------------------------------------------
     def _serialise(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -442,10 +466,14 @@ def load_camera(path: str | os.PathLike[str]) -> CameraModel:
         models = _models_v1(data, folder, channels, json_path)
     else:
         steps = _field(data, "steps", dict, where)
-        missing = [s for s in MODEL_STEPS if s not in steps]
+        missing = [s for s in MODEL_STEPS if s not in steps and s not in OPTIONAL_MODEL_STEPS]
         if missing:
             raise CameraModelError(f"{json_path}: `steps` lacks {', '.join(missing)}")
-        models = {s: _step_model(s, steps[s], folder, channels, json_path) for s in MODEL_STEPS}
+        models = {
+            s: _step_model(s, steps[s], folder, channels, json_path)
+            for s in MODEL_STEPS
+            if s in steps
+        }
     parameters = data.get("parameters", {})
     report = data.get("report", {})
     if not isinstance(parameters, dict) or not isinstance(report, dict):

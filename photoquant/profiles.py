@@ -52,6 +52,8 @@ _PHOTOQUANT: dict[str, tuple[str, Mapping[str, Any]]] = {
     "sensor_lut": ("Irradiance Scene", {}),
     "vignetting": ("Extended Goldman-Chen", {}),
     "correspondences": ("SIFT Homography", {}),
+    # used only when the capture has a glare capture (otherwise "None")
+    "glare": ("Parametric PSF", {}),
 }
 
 _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
@@ -70,6 +72,8 @@ _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
     # ExtendedGoldmanChenOptions.view_gains)
     "vignetting": ("Extended Goldman-Chen", {"normalise": "none", "view_gains": False}),
     "correspondences": ("SIFT Homography", {}),
+    # used only when the capture has a glare capture (otherwise "None")
+    "glare": ("Parametric PSF", {}),
 }
 
 PROFILES: Mapping[str, Mapping[str, tuple[str, Mapping[str, Any]]]] = MappingProxyType(

@@ -19,6 +19,8 @@ Public objects
 - :func:`scene_test_hdr`: a test scene of dynamic range above 10⁴ (a lamp and
   a deep shadow).
 - :func:`scene_ramp`: a logarithmic ramp.
+- :func:`scene_glare_source`: a small bright disc on a black background, the
+  capture from which the camera's glare spread function is measured.
 
 References
 ----------
@@ -49,6 +51,7 @@ __all__ = [
     "scene_irradiance",
     "scene_test_hdr",
     "scene_ramp",
+    "scene_glare_source",
 ]
 
 
@@ -523,3 +526,58 @@ def scene_ramp(
     s = xn if axis == "x" else yn
     field = lo * (hi / lo) ** s
     return np.repeat(field[..., None], c, axis=2)
+
+
+def scene_glare_source(
+    shape: Sequence[int],
+    *,
+    level: float = 300.0,
+    radius_px: float = 4.0,
+    centre: Sequence[float] | None = None,
+    channels: int = 3,
+) -> np.ndarray:
+    """A small bright source on a black background, to measure veiling glare from.
+
+    The target of a glare spread function measurement [TAHL07]_: a lamp or
+    LED behind a pinhole in a dark room. Everything the camera records away
+    from the disc is light its optics spread.
+
+    Parameters
+    ----------
+    shape : (H, W)
+        Image shape.
+    level : float
+        Photoquantity of the disc, equal in all channels (300: the disc fills
+        half the presets' well in 17 µs).
+    radius_px : float
+        Radius of the disc in pixels (pixel centres within it are lit).
+    centre : (x, y), optional
+        Centre in pixel-index coordinates; the image centre by default.
+    channels : int
+        Number of channels ``C``.
+
+    Returns
+    -------
+    ndarray, shape (H, W, C), float64
+        ``level`` on the disc, 0 elsewhere.
+
+    References
+    ----------
+    .. [TAHL07] E.-V. Talvala, A. Adams, M. Horowitz, M. Levoy, "Veiling glare
+       in high dynamic range imaging", ACM Trans. Graph. 26(3), 37, 2007.
+    """
+    h, w = check_shape(shape)
+    c = _channels(channels)
+    lv = check_positive(level, "level")
+    radius = check_positive(radius_px, "radius_px")
+    if centre is None:
+        cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+    else:
+        cx, cy = (float(v) for v in check_array(centre, "centre", shape=(2,), finite=True))
+    y, x = np.mgrid[0:h, 0:w]
+    disc = np.hypot(x - cx, y - cy) <= radius
+    if not disc.any():
+        raise InputError(f"the glare source (radius {radius} px at {(cx, cy)}) lights no pixel")
+    out = np.zeros((h, w, c))
+    out[disc] = lv
+    return out

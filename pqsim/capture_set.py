@@ -11,6 +11,7 @@ and the irradiance scene on the bare sensor — plus a test scene, with a
       views/v1/..., views/v2/...
       irradiance/t0.001000_n0.png  the irradiance scene (no optics), ...
       scene/t0.000250_n0.png       the test scene, ...
+      glare/t0.000015_n0.png       a small bright source on black (``glare=True`` only), ...
       truth/truth.json, u.exr, v.exr, l_view0.exr, ..., l_irradiance.exr, l_scene.exr
 
 Frames are PNG (uint8 for 8 bits, uint16 above) or TIFF. The whole set is
@@ -47,6 +48,7 @@ from photoquant.utils import check_exposure_times, check_int, check_positive, th
 from pqsim.analytic import (
     pan_shifts,
     scene_calibration_world,
+    scene_glare_source,
     scene_irradiance,
     scene_ramp,
     scene_test_hdr,
@@ -58,6 +60,7 @@ from pqsim.synth_camera.truth import CaptureTruth, save_truth
 
 __all__ = [
     "DEFAULT_EXPOSURES_S",
+    "DEFAULT_GLARE_EXPOSURES_S",
     "DEFAULT_SCENE_EXPOSURES_S",
     "MANIFEST_NAME",
     "capture_set_problem",
@@ -78,9 +81,15 @@ DEFAULT_SCENE_EXPOSURES_S = np.geomspace(2.5e-4, 0.64, 10)
 :func:`~pqsim.analytic.scene_test_hdr` (lamp ~20 % of the well at 0.25 ms,
 shadow ~2 % at 0.64 s)."""
 
+DEFAULT_GLARE_EXPOSURES_S = np.geomspace(1.5e-5, 1.0, 14)
+"""Glare-capture exposures, a ratio of 6.7·10⁴: the default source
+(:func:`~pqsim.analytic.scene_glare_source`, ``l = 300``) fills ~45 % of the
+presets' well at 15 µs, and a 1.5 % glare of 40 px stays above the dark
+current 150 px from it at 1 s."""
+
 MANIFEST_NAME = "capture.json"
 #: Top-level paths of a capture folder written by pqsim.
-_OWNED = ("views", "irradiance", "scene", "colorchecker", "truth", MANIFEST_NAME)
+_OWNED = ("views", "irradiance", "scene", "colorchecker", "glare", "truth", MANIFEST_NAME)
 
 #: A capture, or a function simulating it when its frames are about to be written
 #: (so that only one capture's frames are in memory at a time).
@@ -458,6 +467,7 @@ def write_capture_set(
     write_saturation_level: bool = False,
     overwrite: bool = False,
     workers: int | None = None,
+    glare: bool | Mapping[str, Any] = False,
 ) -> Path:
     """Simulate and write a calibration capture set with its ground truth.
 
@@ -484,8 +494,9 @@ def write_capture_set(
         Master seed. A :class:`numpy.random.SeedSequence` of it is split into
         independent streams: the world, each view, the irradiance scene and
         the test scene (``V + 3`` children, in that order).
-    scene : {"hdr", "ramp"} or ndarray (H, W, C)
-        The test scene: :func:`~pqsim.analytic.scene_test_hdr`,
+    scene : {"hdr", "lamp", "ramp"} or ndarray (H, W, C)
+        The test scene: :func:`~pqsim.analytic.scene_test_hdr` (``"lamp"``:
+        with the lamp 30× the white chart, the brightest patch),
         :func:`~pqsim.analytic.scene_ramp`, or a given photoquantity field.
     scene_exposure_s : array_like (K',), optional
         Exposures of the test scene; :data:`DEFAULT_SCENE_EXPOSURES_S` by default.
@@ -510,6 +521,15 @@ def write_capture_set(
     workers : int, optional
         Threads simulating and writing frames (every CPU by default); the
         files do not depend on it.
+    glare : bool or mapping
+        Also write a glare capture (``glare/``, manifest key ``"glare"``): a
+        small bright source on black (:func:`~pqsim.analytic.scene_glare_source`)
+        through the optics, from which the calibrator measures the glare
+        spread function. A mapping sets ``level``, ``radius_px``, ``centre``
+        (of the source) and ``exposure_s`` (:data:`DEFAULT_GLARE_EXPOSURES_S`
+        by default). Its noise is stream ``V + 3`` of the master seed; the
+        other captures do not change.
+
     Returns
     -------
     Path
@@ -545,13 +565,15 @@ def write_capture_set(
     ext = frame_extension(frame_format)
     check_positive(irradiance_level, "irradiance_level")
     if isinstance(scene, str):
-        if scene not in ("hdr", "ramp"):
-            raise InputError(f"`scene` must be 'hdr', 'ramp' or an (H, W, C) array, got {scene!r}")
-        l_scene = (
-            scene_test_hdr((h, w), channels=camera.n_channels)
-            if scene == "hdr"
-            else scene_ramp((h, w), channels=camera.n_channels)
-        )
+        if scene not in ("hdr", "lamp", "ramp"):
+            raise InputError(
+                f"`scene` must be 'hdr', 'lamp', 'ramp' or an (H, W, C) array, got {scene!r}"
+            )
+        if scene == "ramp":
+            l_scene = scene_ramp((h, w), channels=camera.n_channels)
+        else:  # "lamp": a lamp 30x the white chart, the brightest patch
+            lamp = {"hdr": {}, "lamp": {"lamp_level": 30.0}}[scene]
+            l_scene = scene_test_hdr((h, w), channels=camera.n_channels, **lamp)
         scene_name = scene
     else:
         l_scene = np.asarray(scene, dtype=np.float64)
@@ -561,6 +583,7 @@ def write_capture_set(
             )
         scene_name = "array"
 
+    glare_source = _glare_source(glare, (h, w), camera.n_channels)
     folder, non_empty = check_output_folder(folder, overwrite)
 
     # -- simulate everything in memory first -----------------------------------------
@@ -582,6 +605,15 @@ def write_capture_set(
     )
     irr = camera.capture(l_irr, t, n_repeats, gens[n_views + 1], optics=False, workers=workers)
     test = camera.capture(l_scene, t_scene, n_repeats, gens[n_views + 2], workers=workers)
+    extra: dict[str, tuple[CaptureSource, Mapping[str, Any]]] = {}
+    if glare_source is not None:
+        # stream V + 3: spawn(V + 4)'s first V + 3 children are spawn(V + 3)'s
+        glare_rng = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(n_views + 4)[-1])
+        l_glare, t_glare = glare_source
+        extra["glare"] = (
+            camera.capture(l_glare, t_glare, n_repeats, glare_rng, workers=workers),
+            {},
+        )
 
     meta = {
         "seed": int(seed),
@@ -597,12 +629,15 @@ def write_capture_set(
         "irradiance_nonuniformity": float(irradiance_nonuniformity),
         "irradiance_falloff": float(irradiance_falloff),
     }
+    if glare_source is not None:
+        meta["glare_capture"] = {"exposure_s": glare_source[1].tolist()}
     return write_capture_folder(
         folder,
         camera,
         views=views,
         irradiance=irr,
         scene=test,
+        extra_sets=extra,
         white_roi=pv.white_rois[0],
         correspondences=pv.correspondences() if pv.tracks.shape[0] and n_views > 1 else None,
         ext=ext,
@@ -617,3 +652,26 @@ def write_capture_set(
         remove_previous=non_empty,
         workers=workers,
     )
+
+
+def _glare_source(
+    glare: Any, shape: tuple[int, int], channels: int
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The glare capture's photoquantity and exposures, or None (``glare=False``)."""
+    if glare is False or glare is None:
+        return None
+    if glare is True:
+        params: dict[str, Any] = {}
+    elif isinstance(glare, Mapping):
+        params = dict(glare)
+    else:
+        raise InputError(f"`glare` must be true, false or a mapping of settings, got {glare!r}")
+    unknown = sorted(set(params) - {"level", "radius_px", "centre", "exposure_s"})
+    if unknown:
+        raise InputError(
+            f"`glare` has unknown setting(s) {unknown}; valid: centre, exposure_s, level, radius_px"
+        )
+    t = check_exposure_times(
+        params.pop("exposure_s", DEFAULT_GLARE_EXPOSURES_S), "glare.exposure_s"
+    )
+    return scene_glare_source(shape, channels=channels, **params), t

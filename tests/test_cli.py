@@ -213,6 +213,7 @@ def test_methods_lists_every_step_and_the_profiles(capsys):
         "sensor_lut",
         "vignetting",
         "correspondences",
+        "glare",
     }
     debevec = listing["response"]["Debevec 1997"]
     assert debevec["options"]["smoothness"] == 1000.0

@@ -11,6 +11,7 @@ import numpy as np
 
 from photoquant.balance import BalanceModel
 from photoquant.flatfield import SensorLUTModel
+from photoquant.glare import GlareModel
 from photoquant.merge import MergeModel
 from photoquant.model import CameraModel
 from photoquant.response import ResponseModel, response_levels
@@ -29,7 +30,8 @@ def camera_model_from_truth(camera, *, weighting: str = "hat-quantisation") -> C
     ``g_λ`` is the true ``ln f_λ⁻¹(c/a_λ)`` (exposure units), held constant
     above the saturation value and at level 0 extended from level 1 (never
     used with a non-zero weight); balance 1 (the truth is already in exposure
-    units); the true sensor LUT and vignetting parameters.
+    units); the true sensor LUT and vignetting parameters, and the true
+    veiling glare when the camera has one.
     """
     levels = response_levels(camera.bit_depth)
     g = np.empty((camera.n_channels, levels.size))
@@ -40,6 +42,10 @@ def camera_model_from_truth(camera, *, weighting: str = "hat-quantisation") -> C
     g = np.maximum.accumulate(g, axis=1)
     vig = camera.vignetting_params
     vig = np.tile(IDENTITY_VIGNETTING, (camera.n_channels, 1)) if vig is None else np.asarray(vig)
+    glare = None
+    if getattr(camera, "glare", None) is not None:
+        f, w = zip(*(camera.glare.channel(ch) for ch in range(camera.n_channels)), strict=True)
+        glare = GlareModel("ground truth", np.array(f), np.array(w), camera.glare.beta)
     vignetting: ExtendedGoldmanChenVignetting | FlatFieldVignetting
     if getattr(camera, "vignetting_model", None) is not None:  # a truth outside the family: its map
         vignetting = FlatFieldVignetting("ground truth", np.asarray(camera.vignetting))
@@ -63,6 +69,7 @@ def camera_model_from_truth(camera, *, weighting: str = "hat-quantisation") -> C
         sensor_lut=SensorLUTModel("ground truth", np.asarray(camera.sensor_lut, np.float32)),
         vignetting=vignetting,
         parameters={"source": "ground truth"},
+        glare=glare,
     )
 
 

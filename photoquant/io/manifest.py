@@ -25,6 +25,9 @@ Key                           Required  Meaning
 ``irradiance``, ``scene``     no        frame sets
 ``flatfield``                 no        frame set: a uniformly lit target through the
                                         optics, for flat-field vignetting methods
+``glare``                     no        frame set: a small bright source on a dark
+                                        background through the optics, from which the
+                                        camera's veiling glare is fitted
 ``correspondences``           no        tracks of ``[view_index, x, y]`` (pixels), at
                                         least 2 entries each, one per view at most
 ``saturation_level``          no        per-channel clipping level, 1 to 2**bit_depth - 1
@@ -116,6 +119,7 @@ _KNOWN_KEYS = frozenset(
         "irradiance",
         "scene",
         "flatfield",
+        "glare",
         "correspondences",
         "saturation_level",
         "black_level",
@@ -201,6 +205,8 @@ class CaptureManifest:
         How exposures are measured (see the module docstring).
     flatfield : FrameSetRef or None
         A flat-field capture (a uniformly lit target through the optics), if given.
+    glare : FrameSetRef or None
+        A glare capture (a small bright source on a dark background), if given.
     """
 
     path: Path
@@ -218,6 +224,7 @@ class CaptureManifest:
     dark: FrameSetRef | None = None
     exposure_basis: str = "auto"
     flatfield: FrameSetRef | None = None
+    glare: FrameSetRef | None = None
 
 
 # --------------------------------------------------------------------------- parsing
@@ -266,6 +273,7 @@ class _Parser:
         irradiance = self.parse_optional_frameset(data, "irradiance")
         scene = self.parse_optional_frameset(data, "scene")
         flatfield = self.parse_optional_frameset(data, "flatfield")
+        glare = self.parse_optional_frameset(data, "glare")
         tracks = self.parse_tracks(data.get("correspondences"), len(views))
         saturation = self.parse_saturation(data.get("saturation_level"), bit_depth, channels)
         black = self.parse_black_level(data.get("black_level"), bit_depth, channels, saturation)
@@ -297,6 +305,7 @@ class _Parser:
             dark=dark,
             exposure_basis=basis,
             flatfield=flatfield,
+            glare=glare,
         )
 
     def check_format(self, data: dict[str, Any]) -> None:

@@ -115,7 +115,7 @@ def manifest_inputs(manifest: PathLike, *, allow_outside: bool = False) -> list[
         m = load_manifest(path, allow_outside=allow_outside)
     except (PhotoquantError, OSError, RecursionError):
         return found
-    for frame_set in (*m.views, m.irradiance, m.scene, m.dark, m.flatfield):
+    for frame_set in (*m.views, m.irradiance, m.scene, m.dark, m.flatfield, m.glare):
         if frame_set is not None:
             found.extend(frame.file for frame in frame_set.frames)
     for key, value in m.extra.items():

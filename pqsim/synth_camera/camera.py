@@ -50,6 +50,7 @@ from pqsim.synth_camera.disturbances import (
     actual_exposure_times,
     fixed_pattern,
 )
+from pqsim.synth_camera.glare import GlareSpread
 from pqsim.synth_camera.optics import (
     check_shape,
     prnu_field,
@@ -186,6 +187,13 @@ class SyntheticCamera:
         Channel names, ``("R", "G", "B")``.
     prnu_lowfreq_scale : float
         Correlation length of the smooth PRNU component, fraction of ``min(H, W)``.
+    glare : GlareSpread, mapping or None
+        Veiling glare of the optics (:mod:`pqsim.synth_camera.glare`): a
+        fraction of the vignetted light spread by a long-tailed kernel before
+        the sensor, ``u·((1−f)·v·l + f·K⊛(v·l))``; a mapping of its fields
+        (a preset's ``"glare": {"fraction": 0.015, "width_px": 40}``) is
+        accepted. ``None`` (default): no glare. Only captures through the
+        optics (``optics=True``) have it.
     vignetting : mapping or sequence of mappings, optional
         The vignetting as ``{"kind", "params"}`` record(s) of
         :data:`~pqsim.synth_camera.optics.VIGNETTING_KINDS`
@@ -218,6 +226,7 @@ class SyntheticCamera:
     prnu_seed: int = 0
     channels: tuple[str, ...] = ("R", "G", "B")
     prnu_lowfreq_scale: float = 0.15
+    glare: GlareSpread | None = None
     vignetting: Any = None
     disturbances: SensorDisturbances | None = None
 
@@ -253,6 +262,10 @@ class SyntheticCamera:
         channels = tuple(str(s) for s in self.channels)
         if len(channels) != c:
             raise InputError(f"`channels` names {len(channels)} channels but `responses` has {c}")
+        glare = GlareSpread.from_value(self.glare)
+        if glare is not None:
+            glare.check_channels(c)
+        object.__setattr__(self, "glare", glare)
         object.__setattr__(self, "responses", responses)
         object.__setattr__(self, "balance", tuple(float(a) for a in bal))
         object.__setattr__(self, "vignetting_params", vp)
@@ -363,6 +376,7 @@ class SyntheticCamera:
             },
             disturbances=self.disturbances if self._disturbed else None,
             fixed_pattern=fixed_pattern(self, (h, w)) if self._disturbed else None,
+            glare=self.glare,
         )
 
     @property
@@ -442,8 +456,13 @@ class SyntheticCamera:
             raise InputError(f"`optics` must be a bool, got {optics!r}")
         shape = arr.shape[:2]
         cam_truth = self.truth(shape)
-        gain = cam_truth.sensor_lut * cam_truth.vignetting if optics else cam_truth.sensor_lut
-        photo_rate = gain * arr * self.exposure_scale  # photo-electrons per second
+        if optics and self.glare is not None and not self.glare.is_identity:
+            # veiling glare: the lens spreads part of the vignetted light, then the sensor's u
+            lens = self.glare.apply(cam_truth.vignetting * arr)
+            photo_rate = cam_truth.sensor_lut * lens * self.exposure_scale
+        else:
+            gain = cam_truth.sensor_lut * cam_truth.vignetting if optics else cam_truth.sensor_lut
+            photo_rate = gain * arr * self.exposure_scale  # photo-electrons per second
         if not np.isfinite(float(photo_rate.max(initial=0.0)) * float(t.max())):
             raise InputError("`l` is too large: its photo-electron counts overflow float64")
         n = int(n_repeats)

@@ -37,6 +37,7 @@ import numpy as np
 from photoquant.errors import InputError
 from photoquant.utils import check_array, check_bit_depth
 from pqsim.synth_camera.disturbances import FixedPattern, SensorDisturbances
+from pqsim.synth_camera.glare import GlareSpread
 from pqsim.synth_camera.responses import ResponseCurve
 from pqsim.synth_camera.sensor import SensorNoise
 
@@ -88,6 +89,8 @@ class CameraTruth:
         Channel names.
     prnu : dict
         How ``u`` was made: ``{"seed", "sigma_pixel", "sigma_lowfreq", "lowfreq_scale"}``.
+    glare : GlareSpread or None
+        The veiling glare of the optics (:mod:`pqsim.synth_camera.glare`), if any.
     vignetting_model : dict or tuple of dict, optional
         The vignetting's ``{"kind", "params"}`` record(s)
         (:data:`~pqsim.synth_camera.optics.VIGNETTING_KINDS`) when the camera
@@ -111,12 +114,14 @@ class CameraTruth:
     exposure_scale: float
     channels: tuple[str, ...] = ("R", "G", "B")
     prnu: dict[str, Any] = field(default_factory=dict)
+    glare: GlareSpread | None = None
     vignetting_model: Any = None
     disturbances: SensorDisturbances | None = None
     fixed_pattern: FixedPattern | None = None
 
     def __post_init__(self) -> None:
         c = len(self.responses)
+        object.__setattr__(self, "glare", GlareSpread.from_value(self.glare))
         v = check_array(self.vignetting, "vignetting", ndim=3, kind="f", finite=True)
         u = check_array(self.sensor_lut, "sensor_lut", shape=v.shape, kind="f", finite=True)
         if v.shape[2] != c or len(self.balance) != c or len(self.channels) != c:
@@ -282,6 +287,8 @@ class CameraTruth:
             if self.vignetting_params is None
             else [list(p) for p in self.vignetting_params],
             "prnu": dict(self.prnu),
+            # written only when there is glare: truths without it stay as they were
+            **({} if self.glare is None else {"glare": self.glare.to_dict()}),
         } | (
             ({} if self.vignetting_model is None else {"vignetting_model": self.vignetting_model})
             | ({} if self.disturbances is None else {"disturbances": self.disturbances.to_dict()})
@@ -351,9 +358,16 @@ class CaptureTruth:
             return self.camera.sensor_lut * self.camera.vignetting
         return np.asarray(self.camera.sensor_lut)
 
+    def sensor_photoquantity(self) -> np.ndarray:
+        """What reaches the sensor's pixels, ``u·v·l``, or ``u·G(v·l)`` with veiling glare ``G``."""
+        glare = self.camera.glare
+        if self.optics and glare is not None and not glare.is_identity:
+            return self.camera.sensor_lut * glare.apply(self.camera.vignetting * self.l)
+        return self.gain * self.l
+
     def exposure(self) -> np.ndarray:
-        """``X_k = u·v·t_k·l``, shape (K, H, W, C), photoquantity·s."""
-        return self.exposure_s[:, None, None, None] * (self.gain * self.l)[None]
+        """``X_k = u·v·t_k·l`` (glare included, if any), shape (K, H, W, C), photoquantity·s."""
+        return self.exposure_s[:, None, None, None] * self.sensor_photoquantity()[None]
 
     def noise_free_dn(self) -> np.ndarray:
         """Expected-signal pixel values ``(K, H, W, C)``, unrounded, dark current mean included."""
@@ -568,6 +582,7 @@ def load_truth(folder: str | Path) -> TruthSet:
             exposure_scale=float(cam["exposure_scale"]),
             channels=tuple(cam["channels"]),
             prnu=dict(cam.get("prnu", {})),
+            glare=cam.get("glare"),
             vignetting_model=_vignetting_model(cam.get("vignetting_model")),
             disturbances=SensorDisturbances.from_value(cam.get("disturbances")),
             fixed_pattern=_read_fixed_pattern(folder, cam, (h, w)),

@@ -1,0 +1,39 @@
+"""Veiling glare: the camera's glare spread function, measured and removed.
+
+- :mod:`photoquant.glare.base`: :class:`GlareModel` (the step's result,
+  stored in the camera), :func:`remove_glare` (the correction's
+  deconvolution), :data:`GLARE_METHODS` and the ``"None"`` method.
+- :mod:`photoquant.glare.parametric_psf`: ``"Parametric PSF"``, a Moffat
+  kernel's fraction and width per channel fitted to a point-source capture
+  (Talvala et al. 2007; Bitlis, Jansson & Allebach 2007).
+"""
+
+from photoquant.glare.base import (
+    GLARE_METHODS,
+    MAX_GLARE_FRACTION,
+    GlareData,
+    GlareModel,
+    characterise_glare_None,
+    glare_kernel_Moffat,
+    remove_glare,
+)
+from photoquant.glare.parametric_psf import (
+    GlareFit,
+    ParametricPSFOptions,
+    characterise_glare_ParametricPSF,
+    fit_glare_ParametricPSF,
+)
+
+__all__ = [
+    "GLARE_METHODS",
+    "MAX_GLARE_FRACTION",
+    "GlareData",
+    "GlareFit",
+    "GlareModel",
+    "ParametricPSFOptions",
+    "characterise_glare_None",
+    "characterise_glare_ParametricPSF",
+    "fit_glare_ParametricPSF",
+    "glare_kernel_Moffat",
+    "remove_glare",
+]
