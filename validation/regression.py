@@ -387,7 +387,14 @@ def check_configuration(
         if (theirs.get("source"), theirs.get("sha256")) != (p["source"], p.get("sha256")):
             diff = _first_difference(p.get("content"), theirs.get("content"))
             raise ValidationError(f"{head}: preset {p['name']!r} differs ({diff})")
-    extra = [e for e in description["experiments"] if e not in (ref.get("experiments") or [])]
+    from validation.experiments import OPT_IN
+
+    # opt-in experiments (robustness) are reported, never checked: a baseline need not have them
+    extra = [
+        e
+        for e in description["experiments"]
+        if e not in (ref.get("experiments") or []) and e not in OPT_IN
+    ]
     if extra:
         raise ValidationError(f"{head}: experiment(s) {', '.join(extra)} are not in the baseline")
     ref_steps = ref.get("steps") or {}

@@ -567,3 +567,16 @@ def test_a_crafted_baseline_is_refused_in_one_line_or_checked(doc):
         check_configuration(base, description, name="baseline b.json")
     except ValidationError as exc:
         assert "\n" not in str(exc) and str(exc).startswith("baseline b.json")
+
+
+def test_an_opt_in_experiment_needs_no_baseline_but_another_does(sealed):
+    """The robustness experiment is reported, never checked: a baseline without it applies.
+
+    (``--full`` runs it; the stored full baseline is recorded without it.)
+    """
+    _, doc = sealed
+    cfg = dict(TEST_CONFIG, experiments=["response", "robustness"])
+    prepare_check(RunConfiguration(methods={"response": PLUGIN}, **cfg), doc)
+    cfg = dict(TEST_CONFIG, experiments=["response", "noise"])
+    with pytest.raises(ValidationError, match="noise are not in the baseline"):
+        prepare_check(RunConfiguration(methods={"response": PLUGIN}, **cfg), doc)
