@@ -377,7 +377,7 @@ def test_ablation_compares_every_deviation_and_reuses_the_pipeline(tmp_path):
     from photoquant.profiles import DEVIATIONS
     from validation.compare import compare_with_truth
     from validation.experiments import ablation
-    from validation.experiments.shared import Shared
+    from validation.experiments.shared import Shared, pipeline_scores
 
     config = TINY.replace(presets=("ccd",))
     shared = Shared(config, 0, tmp_path, _quiet)
@@ -388,7 +388,7 @@ def test_ablation_compares_every_deviation_and_reuses_the_pipeline(tmp_path):
         for q, _, _ in ablation.QUANTITIES:
             assert res.metrics[f"ablation.ccd.{key}.{q}"] is not None, (key, q)
     cal = shared.calibration("ccd")
-    own = ablation._scores(compare_with_truth(cal.manifest, cal.model, cal.truth))
+    own = pipeline_scores(compare_with_truth(cal.manifest, cal.model, cal.truth))
     for q, value in own.items():
         assert res.metrics[f"ablation.ccd.photoquant.{q}"] == value, q
     assert not all(

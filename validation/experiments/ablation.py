@@ -29,23 +29,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, fmt_pct
-from validation.experiments.shared import Shared
+from validation.experiments.shared import PIPELINE_QUANTITIES, Shared, pipeline_scores
 
 __all__ = ["run", "TITLE", "QUANTITIES", "variants"]
 
 TITLE = "Paper profile, photoquant profile and ablation (issue 8)"
 
-QUANTITIES: tuple[tuple[str, str, str], ...] = (
-    ("g_rms", "g rms (ln)", "ln"),
-    ("balance", "balance", "fraction"),
-    ("lut", "LUT e_mean", "fraction"),
-    ("vignetting", "vignetting e_mean", "fraction"),
-    ("scene", "test scene e_mean", "fraction"),
-)
+QUANTITIES = PIPELINE_QUANTITIES
 """Metric key, column label and unit of each quantity compared with the truth."""
 
 
@@ -60,16 +52,6 @@ def variants() -> list[tuple[str, str, dict[str, Any]]]:
         )
     out.append(("photoquant", "photoquant profile", {"profile": "photoquant"}))
     return out
-
-
-def _scores(rep: dict[str, Any]) -> dict[str, float]:
-    return {
-        "g_rms": max(r["rms"] for r in rep["response"]),
-        "balance": float(np.max(np.abs(rep["balance"]["channel_error"]))),
-        "lut": rep["lut"]["error"].e_mean,
-        "vignetting": rep["vignetting"]["error"].e_mean,
-        "scene": rep["scene"]["error"].e_mean,
-    }
 
 
 def run(
@@ -97,7 +79,7 @@ def run(
                 for q, _, unit in QUANTITIES:
                     res.metric(f"{preset}.{key}.{q}", None, unit=unit, check=False)
                 continue
-            scores = _scores(rep)
+            scores = pipeline_scores(rep)
             floor = rep["scene"]["noise_floor_mean"]
             for q, name, unit in QUANTITIES:
                 res.metric(

@@ -42,7 +42,12 @@ import numpy as np
 
 from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, fmt_pct
-from validation.experiments.shared import Shared, calibrate_arguments
+from validation.experiments.shared import (
+    PIPELINE_QUANTITIES,
+    Shared,
+    calibrate_arguments,
+    pipeline_scores,
+)
 
 __all__ = ["DISTURBANCES", "Disturbance", "TITLE", "QUANTITIES", "run"]
 
@@ -126,24 +131,8 @@ DISTURBANCES: tuple[Disturbance, ...] = (
 the set the issue measured (its glare, the other part's, to add), that set with
 the exposure times refined, and ``"all"``: every disturbance above."""
 
-QUANTITIES: tuple[tuple[str, str, str], ...] = (
-    ("g_rms", "g rms (ln)", "ln"),
-    ("balance", "balance", "fraction"),
-    ("lut", "LUT e_mean", "fraction"),
-    ("vignetting", "vignetting e_mean", "fraction"),
-    ("scene", "test scene e_mean", "fraction"),
-)
+QUANTITIES = PIPELINE_QUANTITIES
 """Metric key, column label and unit of each quantity compared with the truth."""
-
-
-def _scores(rep: dict[str, Any]) -> dict[str, float]:
-    return {
-        "g_rms": max(r["rms"] for r in rep["response"]),
-        "balance": float(np.max(np.abs(rep["balance"]["channel_error"]))),
-        "lut": rep["lut"]["error"].e_mean,
-        "vignetting": rep["vignetting"]["error"].e_mean,
-        "scene": rep["scene"]["error"].e_mean,
-    }
 
 
 def _one(
@@ -212,7 +201,7 @@ def run(
                 for q, _, unit in QUANTITIES:
                     res.metric(f"{preset}.{dist.key}.{q}", None, unit=unit, check=False)
                 continue
-            scores = _scores(rep)
+            scores = pipeline_scores(rep)
             for q, name, unit in QUANTITIES:
                 res.metric(
                     f"{preset}.{dist.key}.{q}",

@@ -26,9 +26,38 @@ import numpy as np
 
 from validation.config import ValidationConfig, stream_seed
 
-__all__ = ["Calibration", "Shared", "calibrate_arguments", "merge_with_model"]
+__all__ = [
+    "Calibration",
+    "PIPELINE_QUANTITIES",
+    "Shared",
+    "calibrate_arguments",
+    "merge_with_model",
+    "pipeline_scores",
+]
 
 Progress = Callable[[str], None]
+
+
+PIPELINE_QUANTITIES: tuple[tuple[str, str, str], ...] = (
+    ("g_rms", "g rms (ln)", "ln"),
+    ("balance", "balance", "fraction"),
+    ("lut", "LUT e_mean", "fraction"),
+    ("vignetting", "vignetting e_mean", "fraction"),
+    ("scene", "test scene e_mean", "fraction"),
+)
+"""Metric key, column label and unit of each quantity of a whole calibration compared
+with the truth (:func:`pipeline_scores`; the ablation and robustness tables)."""
+
+
+def pipeline_scores(rep: dict[str, Any]) -> dict[str, float]:
+    """The :data:`PIPELINE_QUANTITIES` of a :func:`validation.compare.compare_with_truth` report."""
+    return {
+        "g_rms": max(r["rms"] for r in rep["response"]),
+        "balance": float(np.max(np.abs(rep["balance"]["channel_error"]))),
+        "lut": rep["lut"]["error"].e_mean,
+        "vignetting": rep["vignetting"]["error"].e_mean,
+        "scene": rep["scene"]["error"].e_mean,
+    }
 
 
 def _stderr(message: str) -> None:
