@@ -60,7 +60,13 @@ _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
     # §5.2: a random subset P⁻ of 500 image points, the hat of eq. 6
     "response": (
         "Debevec 1997",
-        {"weighting": "hat", "sampling": "random", "n_samples": 500, "toe": "solved"},
+        {
+            "weighting": "hat",
+            "sampling": "random",
+            "n_samples": 500,
+            "toe": "solved",
+            "censoring": "ignored",
+        },
     ),
     # eq. 6: the hat over every value the camera gives
     "merge": ("Debevec 1997", {"weighting": "hat", "exclude_below_valid_min": False}),
@@ -133,6 +139,14 @@ DEVIATIONS: tuple[Deviation, ...] = (
         {"toe": "continued"},
         "below the toe's steepest level, where noise dilutes eq. 7's regression, g is continued "
         "linearly instead of flattening, and valid_min is raised there",
+    ),
+    Deviation(
+        "censored pairs trimmed",
+        "response",
+        {"censoring": "trimmed"},
+        "at a level whose partner exposure clips for part of the pixels, as many partners are "
+        "dropped from the other tail (Powell 1986), so the pairs left are not the clipped "
+        "distribution's biased tail",
     ),
     Deviation(
         "quantisation-aware weights",

@@ -45,6 +45,14 @@ Implementation notes
 * **Saturation**: values at a channel's saturation level (in any repeat) are
   excluded; ``g`` above the saturation level is held constant (never used
   with a non-zero weight).
+* **Censored pairs** (``censoring="trimmed"``, the default): at a level of
+  one exposure whose partner in another exposure is clipped for part of the
+  pixels, the pairs left are the unclipped tail, which ties ``g`` to too dark
+  (or too bright) a partner; that many partners are also dropped from the
+  other tail, per level, so that the rest is symmetric about the median
+  (symmetrically trimmed least squares, [Powell1986]_;
+  :mod:`photoquant.response.censoring`). A level with half its partners or
+  more clipped keeps none.
 * **Toe** (``toe="continued"``, the default): eq. 7 regresses ``ln X`` on the
   observed value, so where the noise (in code values) is comparable with the
   response's rise the estimate becomes ``E[ln X | c]``, which tends to the
@@ -75,6 +83,9 @@ References
    range radiance maps from photographs. SIGGRAPH '97, 369-378.
    doi:10.1145/258734.258884
 .. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.2, eq. 7.
+.. [Powell1986] Powell, J. L. (1986). Symmetrically trimmed least squares
+   estimation for Tobit models. *Econometrica* 54(6), 1435-1460.
+   doi:10.2307/1914308
 .. [Fuller1987] Fuller, W. A. (1987). *Measurement Error Models*. Wiley,
    ch. 1 (attenuation of a regression by noise in the regressor).
    doi:10.1002/9780470316665
@@ -100,6 +111,7 @@ from photoquant._checks import (
 )
 from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import StepFit
+from photoquant.response.censoring import CENSORING_MODES, trim_censored_partners
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
@@ -446,6 +458,7 @@ def camera_response_Debevec1997(
     sampling: str = "histogram",
     toe: str = "continued",
     max_pixels: int | None = DEFAULT_MAX_PIXELS,
+    censoring: str = "trimmed",
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -496,6 +509,13 @@ def camera_response_Debevec1997(
         every exposure, not every pixel: 2¹⁷ pixels leave a bin of one part
         in 10⁴ of the image about 13 candidates for its few samples, and
         the selection's cost stops growing with the image.
+    censoring : {"trimmed", "ignored"}
+        ``"trimmed"`` (default): the partners of pairs whose other value is
+        clipped are trimmed symmetrically, per level, before the samples are
+        chosen (:func:`photoquant.response.censoring.trim_censored_partners`,
+        [Powell1986]_), so that a level whose partners mostly saturate is not
+        tied to the few that did not; ``"ignored"``: every usable value is
+        used (the paper's).
 
     Returns
     -------
@@ -512,6 +532,8 @@ def camera_response_Debevec1997(
     smoothness = check_positive(smoothness, "smoothness", allow_zero=True)
     if toe not in TOE_MODES:
         raise InputError(f"`toe` must be one of {list(TOE_MODES)}, got {toe!r}")
+    if censoring not in CENSORING_MODES:
+        raise InputError(f"`censoring` must be one of {list(CENSORING_MODES)}, got {censoring!r}")
     if int(n_samples) < 2:
         raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
     c_full = 2**bit_depth - 1
@@ -559,6 +581,8 @@ def camera_response_Debevec1997(
         vals = values[..., ch]
         c_lo = float(floor[ch])
         valid = (vals > c_lo) & (vals < sat[ch]) & ~saturated[..., ch]
+        if censoring == "trimmed":
+            valid = trim_censored_partners(vals, valid, t, spacing)
         idx = sampler(vals, valid, sat[ch], int(n_samples), rng)
         weights = wfun(vals[:, idx], c_lo, sat[ch])
         valid_idx = valid[:, idx] & (weights > 0)
@@ -646,6 +670,9 @@ class DebevecResponseOptions:
     max_pixels : int, optional
         Larger images are thinned at random to about this many candidate
         pixels before the samples are chosen (``None``: every pixel).
+    censoring : {"trimmed", "ignored"}
+        Symmetric trimming of censored pairs' partners (default) or none (the
+        paper's); see :mod:`photoquant.response.censoring`.
     """
 
     smoothness: float = DEFAULT_SMOOTHNESS
@@ -656,10 +683,15 @@ class DebevecResponseOptions:
     min_support: float = 10.0
     toe: str = "continued"
     max_pixels: int | None = DEFAULT_MAX_PIXELS
+    censoring: str = "trimmed"
 
     def __post_init__(self) -> None:
         if self.toe not in TOE_MODES:
             raise InputError(f"`toe` must be one of {list(TOE_MODES)}, got {self.toe!r}")
+        if self.censoring not in CENSORING_MODES:
+            raise InputError(
+                f"`censoring` must be one of {list(CENSORING_MODES)}, got {self.censoring!r}"
+            )
         check_positive(self.smoothness, "smoothness", allow_zero=True)
         check_int(self.n_samples, "n_samples", 2)
         check_int(self.max_levels, "max_levels", 16)
@@ -728,6 +760,7 @@ def characterise_response_Debevec1997(
         max_levels=opts.max_levels,
         min_support=opts.min_support,
         toe=opts.toe,
+        censoring=opts.censoring,
         rng=rng,
         c_min=c_min,
     )

@@ -1,0 +1,163 @@
+"""Censored exposure pairs: symmetric trimming of the partners of a level (Powell 1986).
+
+A response fit pairs the values of one pixel in two exposures ``k`` and ``j``.
+When ``j`` is the longer one, its value is *censored* (clipped at the
+saturation level, or otherwise excluded) for the brighter pixels: among the
+pixels at one level ``c`` of ``k``, only those whose ``j`` value stayed below
+the clip remain as pairs, the lower part of the distribution of ``j`` values
+given ``c``. Fitting ``g`` to those pairs (eq. 7 of [PQ]_, any per-pixel
+least-squares or median statistic) is biased: ``g(c)`` is tied to too dark a
+partner. It is the same selection as a regression on a censored response
+variable (the Tobit model, [Tobin1958]_), and it is worst exactly where a
+level's partners are mostly clipped: there the few pairs left are the far
+tail of the distribution, often outliers (a moving or misregistered pixel).
+The mirror case is a shorter partner ``j`` whose values are dark-clipped.
+
+Symmetric trimming [Powell1986]_ removes the bias without a model of the
+distribution: if ``n_c`` of a level's ``n`` partners are censored in one
+tail, the ``n_c`` most extreme partners of the *other* tail are dropped too,
+so that what is left is the distribution's central part, symmetric about its
+median as the untruncated distribution is (Powell's estimator is consistent
+for any symmetric error distribution). A level with half its partners or
+more censored keeps none: its median is itself censored, and the pairs
+carry no unbiased information. Where nothing is censored nothing changes:
+the step acts only on the censored pairs, at the levels where a partner
+exposure clips.
+
+The statistic is taken per (exposure ``k``, level of ``k``, partner ``j``),
+levels being the response's levels (one per code value at 8 bits; at most
+256 over the data), for the *nearest* shorter and longer partners ``j`` of
+each exposure: censoring is monotone in the exposure time (a pixel clipped
+at ``j`` is clipped at every longer one), so a pixel's usable exposures are
+contiguous in time and the selection of the pixels that pair with level
+``c`` happens at the nearest partner; a farther partner is reached through
+the chain of nearer ones (trimming it too would drop most of a long
+bracket's data: measured on pqsim's EMoR camera, ``g`` rms 0.0057 → 0.0137).
+A partner value dropped from a pair is excluded from the fit (its pixel
+keeps its other values).
+
+References
+----------
+.. [Powell1986] Powell, J. L. (1986). Symmetrically trimmed least squares
+   estimation for Tobit models. *Econometrica* 54(6), 1435-1460.
+   doi:10.2307/1914308
+.. [Tobin1958] Tobin, J. (1958). Estimation of relationships for limited
+   dependent variables. *Econometrica* 26(1), 24-36. doi:10.2307/1907382
+.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.2, eq. 7.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from photoquant.errors import InputError
+
+__all__ = ["CENSORING_MODES", "trim_censored_partners"]
+
+_MAX_BINS = 256
+"""Most levels the statistic is taken over (coarser levels above 8 bits)."""
+
+CENSORING_MODES = ("trimmed", "ignored")
+"""Treatments of censored partners in the response fit: symmetric trimming
+(:func:`trim_censored_partners`) or none (the paper's)."""
+
+
+def trim_censored_partners(
+    values: np.ndarray,
+    valid: np.ndarray,
+    exposure_s: np.ndarray,
+    spacing: float = 1.0,
+) -> np.ndarray:
+    """Drop the partners of censored exposure pairs symmetrically [Powell1986]_.
+
+    Parameters
+    ----------
+    values : ndarray, shape (K, P)
+        Denoised values of one channel at ``K`` exposures.
+    valid : ndarray, shape (K, P) of bool
+        Whether each value is usable; an unusable value is censored (clipped
+        at the saturation level, dark-clipped, or otherwise excluded).
+    exposure_s : ndarray, shape (K,)
+        Exposure times (distinct).
+    spacing : float
+        Width of a level: the statistic is taken per level ``⌊value / spacing⌋``
+        (at most 256 levels over the data: coarser above 8 bits).
+
+    Returns
+    -------
+    ndarray, shape (K, P) of bool
+        ``valid`` with, for every exposure ``k``, level ``c`` of ``k`` and
+        nearest partner ``j`` (the next shorter and the next longer), the ``n_c`` lowest ``j`` values dropped where ``n_c``
+        of the level's pixels have ``j`` censored and ``j`` is longer (the
+        ``n_c`` highest where ``j`` is shorter); all of them where
+        ``n_c ≥ n/2``. Partners are ranked by their level, and within a level by
+        pixel index (deterministic).
+    """
+    values = np.asarray(values)
+    valid = np.asarray(valid, dtype=bool)
+    t = np.asarray(exposure_s, dtype=np.float64)
+    if values.ndim != 2 or valid.shape != values.shape or t.shape != (values.shape[0],):
+        raise InputError(
+            "`values` and `valid` must have shape (K, P) and `exposure_s` shape (K,), got "
+            f"{values.shape}, {valid.shape} and {t.shape}"
+        )
+    if not spacing > 0:
+        raise InputError(f"`spacing` must be positive, got {spacing}")
+    k_count = values.shape[0]
+    out = valid.copy()
+    if k_count < 2:
+        return out
+    top = float(np.max(values, where=valid, initial=0.0))
+    spacing = max(float(spacing), top / (_MAX_BINS - 1))  # at most _MAX_BINS levels
+    level = np.minimum(np.floor(np.where(valid, values, 0.0) / spacing), _MAX_BINS - 1)
+    level = level.astype(np.int64)
+    n_lev = int(level.max()) + 1
+    by_time = np.argsort(t, kind="stable")
+    for rank_k, k in enumerate(by_time):
+        # the nearest shorter and nearest longer exposures (module notes)
+        partners = by_time[[r for r in (rank_k - 1, rank_k + 1) if 0 <= r < k_count]]
+        in_k = np.flatnonzero(valid[k])
+        if in_k.size == 0:
+            continue
+        lev_k = level[k, in_k]
+        n_p = partners.size
+        partner_ok = valid[partners][:, in_k]  # (n_p, n_k)
+        n = np.bincount(lev_k, minlength=n_lev)
+        # censored partners per (partner, level of k), one bincount for both
+        cell = np.arange(n_p)[:, None] * n_lev + lev_k[None, :]
+        n_cens = np.bincount(cell[~partner_ok], minlength=n_p * n_lev).reshape(n_p, n_lev)
+        if not n_cens.any():
+            continue
+        # levels with half or more censored: every remaining partner goes
+        drop_all = (n_cens > 0) & (n_cens >= n[None, :] - n_cens)
+        partial = (n_cens > 0) & ~drop_all
+        rows, pos = np.nonzero(partner_ok & drop_all[:, lev_k])
+        out[partners[rows], in_k[pos]] = False
+        rows, pos = np.nonzero(partner_ok & partial[:, lev_k])
+        if rows.size == 0:
+            continue
+        jj, pix = partners[rows], in_k[pos]
+        cell_c = rows * n_lev + lev_k[pos]
+        # the partner's level, counted from the tail opposite the censored one:
+        # the lowest values of a longer partner (it clips at the top), the
+        # highest of a shorter one
+        lev_j = level[jj, pix]
+        lev_j = np.where(t[jj] > t[k], lev_j, n_lev - 1 - lev_j)
+        # per cell, the partner level holding its n_cens-th partner (a counting
+        # sort: the histogram of partner levels, cumulated)
+        hist = np.bincount(cell_c * n_lev + lev_j, minlength=n_p * n_lev * n_lev)
+        cum = np.cumsum(hist.reshape(n_p * n_lev, n_lev), axis=1)
+        need = n_cens.ravel()
+        thr = np.argmax(cum >= need[:, None], axis=1)  # cells without candidates: unused
+        below = np.where(thr > 0, cum[np.arange(cum.shape[0]), thr - 1], 0)
+        t_c = thr[cell_c]
+        out[jj[lev_j < t_c], pix[lev_j < t_c]] = False
+        # at the threshold level, the first (need − below) partners in pixel order
+        at = np.flatnonzero(lev_j == t_c)
+        if at.size:
+            order = at[np.argsort(cell_c[at], kind="stable")]  # candidates: pixel order
+            c_sorted = cell_c[order]
+            rank = np.arange(order.size) - np.searchsorted(c_sorted, c_sorted, side="left")
+            drop = order[rank < (need - below)[c_sorted]]
+            out[jj[drop], pix[drop]] = False
+    return out
