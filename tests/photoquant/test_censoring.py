@@ -104,3 +104,13 @@ def test_bad_input_is_one_clear_error():
         DebevecResponseOptions(censoring="tobit")
     with pytest.raises(InputError, match="censoring"):
         camera_response_Debevec1997(np.ones((2, 4, 4, 1)), [1.0, 2.0], censoring="x")
+
+
+def test_pixels_with_three_usable_values_are_not_trimmed(rng):
+    # the same clipped pair, with a third, shorter exposure usable everywhere: ln E_p
+    # rests on two more values, so the pair no longer decides the pixel's entry
+    values, valid, _ = _pair(rng, 100.0, 240.0, 10.0, 0.0, 250.0)
+    values = np.concatenate([np.full((1, P), 12.5), values])
+    valid = np.concatenate([np.ones((1, P), dtype=bool), valid])
+    out = trim_censored_partners(values, valid, np.array([0.125, 1.0, 8.0]))
+    np.testing.assert_array_equal(out, valid)
