@@ -27,7 +27,10 @@ exposure clips.
 The statistic is taken per (exposure ``k``, level of ``k``, partner ``j``),
 levels being the response's levels (one per code value at 8 bits; at most
 256 over the data), for the *nearest* shorter and longer partners ``j`` of
-each exposure: censoring is monotone in the exposure time (a pixel clipped
+each exposure (the nearest that shares usable pixels with it: in a
+combination of stacks, :func:`photoquant.exposure.combine_stacks`, another
+stack's exposures are none of its partners): censoring is monotone in the
+exposure time (a pixel clipped
 at ``j`` is clipped at every longer one), so a pixel's usable exposures are
 contiguous in time and the selection of the pixels that pair with level
 ``c`` happens at the nearest partner; a farther partner is reached through
@@ -93,7 +96,8 @@ def trim_censored_partners(
     -------
     ndarray, shape (K, P) of bool
         ``valid`` with, for every exposure ``k``, level ``c`` of ``k`` and
-        nearest partner ``j`` (the next shorter and the next longer), among
+        nearest partner ``j`` (the next shorter and the next longer sharing
+        usable pixels with ``k``), among
         the pixels with at most two usable values, the ``n_c`` lowest ``j`` values dropped where ``n_c``
         of the level's pixels have ``j`` censored and ``j`` is longer (the
         ``n_c`` highest where ``j`` is shorter); all of them where
@@ -120,11 +124,19 @@ def trim_censored_partners(
     level = level.astype(np.int64)
     n_lev = int(level.max()) + 1
     by_time = np.argsort(t, kind="stable")
+    # pixels usable in both exposures of each pair: an exposure that shares none
+    # with k (another stack's, in a combination of stacks) is no partner of k
+    as_float = valid.astype(np.float64)
+    shared = as_float @ as_float.T
     # the pixels whose entry into the fit the pair decides: two usable values at most
     few = valid.sum(axis=0) <= 2
     for rank_k, k in enumerate(by_time):
         # the nearest shorter and nearest longer exposures (module notes)
-        partners = by_time[[r for r in (rank_k - 1, rank_k + 1) if 0 <= r < k_count]]
+        shorter = [j for j in by_time[:rank_k][::-1] if shared[k, j] > 0][:1]
+        longer = [j for j in by_time[rank_k + 1 :] if shared[k, j] > 0][:1]
+        partners = np.array(shorter + longer, dtype=np.int64)
+        if partners.size == 0:
+            continue
         in_k = np.flatnonzero(valid[k] & few)
         if in_k.size == 0:
             continue
