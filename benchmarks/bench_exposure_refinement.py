@@ -10,13 +10,18 @@ scene's eq. 8 error is measured after ``calibrate`` + ``correct``:
 * ``refined``: the nominal labels, ``refine_exposures=True``;
 * a suffix ``-gains`` / ``-nogains`` sets the vignetting's ``view_gains``.
 
-Run: ``python benchmarks/bench_exposure_refinement.py [--shape H W] [--seeds 0 1]``.
+Run: ``python benchmarks/bench_exposure_refinement.py [--shape H W] [--seeds 0 1] [--oracle]``
+(``--oracle``: the refinement handed the true exponent, and the views' true
+scales, to measure what the frames leave undetermined).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import dataclasses
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -127,14 +132,69 @@ def scene_error(data: JitteredSet, **calibrate_options: Any) -> tuple[float, Any
     return relative_error_eq8(data.scene_l, res.photoquantity, res.mask)[1].e_mean, model, res
 
 
+@contextlib.contextmanager
+def oracle(data: JitteredSet, *, scales: bool) -> Iterator[None]:
+    """Hand the views' refinement the true exponent (and, with ``scales``, each view's true scale).
+
+    ``photoquant.exposure.fit_affine_shutter`` is wrapped for the duration: its
+    result for the views is given the pooled slope 1 on the actual ``ln t``
+    (the exponent γ of Grossberg & Nayar 2003) and, with ``scales``, each view
+    the actual times' geometric mean (its gauge). A measurement of what the
+    frames leave undetermined, not a method.
+    """
+    import photoquant.exposure as exposure
+
+    original = exposure.fit_affine_shutter
+    actual = [data.actual[f"view{i}"] for i in range(len(data.views))]
+
+    def wrapped(refs: Any) -> Any:
+        out, info = original(refs)
+        if len(out) != len(actual):  # not the views' joint refinement
+            return out, info
+        xs, xa = [], []
+        for r, t in zip(out, actual, strict=True):
+            s = r.refined
+            xs.append(np.log(r.exposure_s[s]) - np.log(r.exposure_s[s]).mean())
+            xa.append(np.log(t[s]) - np.log(t[s]).mean())
+        a, b = np.concatenate(xs), np.concatenate(xa)
+        slope = float(a @ b / (b @ b))
+        new = []
+        for r, t in zip(out, actual, strict=True):
+            x, s = np.log(r.exposure_s), r.refined
+            x = np.where(s, x[s].mean() + (x - x[s].mean()) / slope, x)
+            if scales:
+                x = np.where(s, x - x[s].mean() + np.log(t[s]).mean(), x)
+            new.append(dataclasses.replace(r, exposure_s=np.exp(x)))
+        return new, info
+
+    exposure.fit_affine_shutter = wrapped
+    try:
+        yield
+    finally:
+        exposure.fit_affine_shutter = original
+
+
 def main() -> None:
     from validation.metrics import map_relative_error
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--shape", type=int, nargs=2, default=(120, 160))
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
-    parser.add_argument("--variants", nargs="+", default=["exact", "nominal", "refined"])
+    parser.add_argument(
+        "--variants",
+        nargs="+",
+        default=["exact", "nominal", "refined"],
+        help="exact, nominal, refined[-gains|-nogains]; refined-oracle-gamma and "
+        "refined-oracle-scales (true exponent; and true view scales, no view gains)",
+    )
+    parser.add_argument(
+        "--oracle",
+        action="store_true",
+        help="add the oracle variants (what the frames leave undetermined)",
+    )
     args = parser.parse_args()
+    if args.oracle:
+        args.variants += ["refined-oracle-gamma", "refined-oracle-scales"]
     for seed in args.seeds:
         data = jittered_set(seed, tuple(args.shape))
         row = []
@@ -144,9 +204,13 @@ def main() -> None:
             options: dict[str, Any] = {"refine_exposures": name.startswith("refined")}
             if name.endswith("-gains"):
                 options["vignetting"] = {"view_gains": True}
-            elif name.endswith("-nogains"):
+            elif name.endswith("-nogains") or name == "refined-oracle-scales":
                 options["vignetting"] = {"view_gains": False}
-            e, model, _ = scene_error(data_in, **options)
+            if "-oracle-" in name:
+                with oracle(data, scales=name.endswith("scales")):
+                    e, model, _ = scene_error(data_in, **options)
+            else:
+                e, model, _ = scene_error(data_in, **options)
             vig = map_relative_error(
                 data.camera.truth(tuple(args.shape)).vignetting, model.vignetting_map()
             )
