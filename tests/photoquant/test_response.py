@@ -300,34 +300,29 @@ def test_thinned_candidates_keep_the_accuracy(rng):
     """600 samples from ~2000 of 6400 candidates recover g as well as from all of them.
 
     With 1 DN noise the recovered g is limited by its samples' noise: its RMS
-    error over the well-exposed levels is 0.003–0.005 ln (measured over seeds,
-    with either candidate pool). The thinned pool must stay below 0.01 and
-    within 2× the full pool's error (the spread between draws is ≤ 1.6×).
+    error over the well-exposed levels is 0.003–0.005 ln on average, single
+    draws of the samples 0.0018–0.0063 (measured over seeds, with either
+    candidate pool, 2026-12-01). So the pools are compared over four draws:
+    every thinned draw below 0.01, and the thinned pool's mean error within
+    1.5× the full pool's (the mean of 12 draws varies by ~±15 %).
     """
     l = log_uniform_scene(rng, (80, 80, 3))
     frames = capture(l, EXPOSURES, noise_dn=1.0, rng=rng)
     sat = np.round(np.array(BALANCE) * 255)
     levels = np.arange(1.0, 256.0)
-    recs = [
-        camera_response_Debevec1997(
-            frames[0], EXPOSURES, saturation_level=sat, n_samples=600, rng=1, max_pixels=mp
-        )
-        for mp in (None, 2000)
-    ]
-    assert np.all(recs[1].n_samples == 600)
-    for ch in range(3):
-        sel = (levels > 0.1 * sat[ch]) & (levels < 0.9 * sat[ch])
-        full, thin = (
-            float(
-                np.sqrt(
-                    np.mean(
-                        _gauge_free_error(
-                            r.log_inverse_response[ch, 1:], true_g(levels, ch), levels, 0, sat[ch]
-                        )[sel]
-                        ** 2
-                    )
-                )
+    errors: dict[int | None, list[float]] = {None: [], 2000: []}
+    for draw in range(4):
+        for mp in (None, 2000):
+            rec = camera_response_Debevec1997(
+                frames[0], EXPOSURES, saturation_level=sat, n_samples=600, rng=draw, max_pixels=mp
             )
-            for r in recs
-        )
-        assert thin < 0.01 and thin < 2 * full, (ch, full, thin)
+            assert np.all(rec.n_samples == 600)
+            for ch in range(3):
+                sel = (levels > 0.1 * sat[ch]) & (levels < 0.9 * sat[ch])
+                err = _gauge_free_error(
+                    rec.log_inverse_response[ch, 1:], true_g(levels, ch), levels, 0, sat[ch]
+                )[sel]
+                errors[mp].append(float(np.sqrt(np.mean(err**2))))
+    full, thin = np.mean(errors[None]), np.mean(errors[2000])
+    assert max(errors[2000]) < 0.01, errors[2000]
+    assert thin < 1.5 * full, (full, thin)
