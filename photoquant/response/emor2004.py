@@ -475,8 +475,10 @@ def fit_emor_values(
 
     def monotone_step(hess: np.ndarray, grad: np.ndarray, base: np.ndarray) -> np.ndarray:
         """The step ``δ`` minimising ``½ δᵀHδ − gᵀδ`` with ``f0 + (base + δ)·h`` non-decreasing."""
+        scale = max(float(np.trace(hess)) / base.size, 1e-300)  # SLSQP wants O(1) numbers
+        hs, gs = hess / scale, grad / scale
         res = scipy.optimize.minimize(
-            lambda z: (0.5 * z @ hess @ z - grad @ z, hess @ z - grad),
+            lambda z: (0.5 * z @ hs @ z - gs @ z, hs @ z - gs),
             np.zeros_like(base),
             jac=True,
             method="SLSQP",
