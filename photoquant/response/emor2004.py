@@ -23,8 +23,9 @@ Gaussian noise [Robertson2003]_ [Granados2010]_; ``Var`` is measured from the
 ``N`` repeats (the variance of each value level's repeats, binned over the
 image, plus the quantiser's ``1/12`` DN², divided by ``N``; with ``N = 1``
 every value weighs the same). ``f`` is linear in ``c`` at fixed ``x``, so the
-fit alternates a (monotonicity-constrained) linear least-squares step in ``c``
-with a Gauss–Newton step per pixel in ``x`` (``rounds``), started from the
+fit starts with two rounds alternating Gauss–Newton steps per pixel in ``x``
+with the (monotonicity-constrained) linear least squares in ``c``, then takes
+joint Gauss–Newton steps in ``(c, x)`` (``rounds`` in all), started from the
 projection on the basis of a Debevec 1997 estimate of the same stack
 [Debevec1997]_.
 
@@ -39,25 +40,29 @@ where ``f⁻¹`` is the tabulated ``f`` inverted by linear interpolation and
 ``ln f⁻¹``: at dark values, where a few DN of noise span a large part of
 ``ln E``, the mean of ``ln f⁻¹(M̄)`` is biased (errors in variables) and the
 pairs' residuals are far from equal in variance; on cameras whose responses
-are drawn from the EMoR space itself (pqsim ``emor``, ``emor-1``; 160×120,
-N = 2) it recovered ``g`` 2–3× worse than Debevec 1997 (worst channel 0.019
-/ 0.027 rms against 0.0036 / 0.0085), where the values fit gets 0.0019 /
-0.0028 (measured 2026-12-01). The log-ratio fit's objective at the true
+are drawn from the EMoR space itself (pqsim ``emor``, ``emor-1``, an
+optics-free log-uniform scene, 160×120, N = 2) it recovered ``g`` 2–3× worse
+than Debevec 1997 (worst channel 0.019 / 0.027 rms against 0.0036 /
+0.0085), where the values fit gets 0.0020 / 0.0028 (measured 2026-12-01). The log-ratio fit's objective at the true
 coefficients was *above* its minimum by 6 % (blue, ``emor``): the objective,
 not the solver, was wrong.
 
 Notes
 -----
-* **Values fit**: each round solves the weighted linear least squares in
-  ``c`` (:func:`numpy.linalg.lstsq`; when its curve decreases somewhere, the
-  same quadratic under the 1023 monotonicity constraints by SLSQP), then
-  three Gauss–Newton steps of every pixel's ``x_p`` (steps clipped to ±0.5
-  in ``ln``); it stops when no ``x_p`` moves by more than ``1e-4`` or after
-  ``rounds`` rounds (measured: 2–5 rounds change ``g`` by < 1e-4). A local
-  method: the Debevec start puts it in the right basin, where the
-  log-ratio fit's two starts (below) missed a camera with a near-flat
-  stretch (``emor-1`` red: 0.027 rms from both, 0.0021 from the Debevec
-  start).
+* **Values fit**: the first two rounds take three Gauss–Newton steps of
+  every pixel's ``x_p`` (clipped to ±0.5 in ``ln``), then solve the weighted
+  linear least squares in ``c`` (robust far from the minimum, but slow near
+  it: the scale of ``x`` and the shape of ``f`` trade off along a valley);
+  later rounds take joint Gauss–Newton steps, the ``x`` block eliminated
+  (a Schur complement: a ``K × K`` system), halved while they do not lower
+  the objective. A step whose curve would decrease somewhere is replaced by
+  the same quadratic under the 1023 monotonicity constraints (SLSQP, scaled
+  to O(1)). It stops when no ``x_p`` and no ``c_k`` moves by more than
+  ``1e-7`` (12-bit data need it: ``1e-4`` in ``x`` is a third of a DN at the
+  top) or after ``rounds`` rounds (measured: 5–6 rounds). A local method:
+  the Debevec start puts it in the right basin, where the log-ratio fit's
+  two starts (below) missed a camera with a near-flat stretch (``emor-1``
+  red: 0.027 rms from both, 0.0021 from the Debevec start).
 * **Log-ratio solver**: sequential quadratic programming in the ``K`` coefficients
   (:func:`scipy.optimize.minimize`, SLSQP) with the analytic gradient (the derivative of the interpolated
   inverse, :func:`_log_inverse_and_jacobian`) and monotonicity as the 1023
@@ -223,7 +228,7 @@ class EMoRResponseOptions:
         The maximum-likelihood fit in the values (default) or the earlier
         fit of the pairs' log ratios (see the module notes).
     rounds : int
-        Most alternations of the values fit.
+        Most rounds of the values fit (two alternating, then joint Gauss–Newton).
     """
 
     n_components: int = 8
@@ -424,7 +429,7 @@ def fit_emor_values(
     start : ndarray, shape (K_c,)
         Starting coefficients (``K_c`` components are fitted).
     rounds : int
-        Most alternations.
+        Most rounds (two alternating, then joint Gauss–Newton).
     max_iterations : int
         Most iterations of the constrained step's solver.
 
