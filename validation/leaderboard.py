@@ -44,11 +44,17 @@ Ranking: by the mean over the presets of the step's own error, lower is
 better; failed methods follow, "n/a" methods are listed unranked. The
 numbers are deterministic for a seed (timings aside).
 
+Besides the step's own error and the test scene's, every entry carries the
+sensor LUT's error and the ColorChecker correlation of Table 1 (the preset's
+outdoor chart, the same frames and scoring as Table 1's "corrected" row,
+corrected with the entry's camera; :data:`SCORES`).
+
 Outputs: a text table per step (:func:`format_leaderboard`), JSON
 (:meth:`Leaderboard.to_json`) and a report folder (:func:`write_report`:
 ``leaderboard.md``, ``leaderboard.json``, a bar chart per step, the
-response methods' recovered curves over the truth per camera and every
-method's error against its time (:mod:`validation.plots`), written
+response methods' recovered curves over the truth per camera, every
+method's error against its time (:mod:`validation.plots`) and the
+ColorChecker's ``1 − r`` per method (``colorchecker.png``), written
 atomically).
 """
 
@@ -114,10 +120,18 @@ _SHORT = {"g_rms": "g rms", "scene": "scene", "vignetting": "v e_mean"}
 
 SCORES: tuple[tuple[str, str, str], ...] = (
     ("g_rms", "g rms", "ln"),
+    ("lut", "sensor LUT e_mean", "fraction"),
     ("vignetting", "vignetting e_mean", "fraction"),
     ("scene", "test scene e_mean", "fraction"),
+    ("cc_r", "ColorChecker r (camera truth)", "r"),
+    ("cc_r_cie", "ColorChecker r (CIE RGB)", "r"),
 )
-"""Every score kept per preset (key, label, unit); the noise floor is per preset."""
+"""Every score kept per preset (key, label, unit); the noise floor is per preset.
+``cc_r`` / ``cc_r_cie``: Pearson's correlation of the corrected ColorChecker's 24
+patch means (balanced on the white patch) with the camera's true photoquantity and
+with the chart maker's CIE RGB under D65, as Table 1 computes them
+(:mod:`validation.experiments.table1`, the outdoor chart); ``None`` where the
+capture has no chart (colour-science missing, or a user's set without one)."""
 
 _STEP_TIMING = {"response": "response", "merge": "merge_per_view", "vignetting": "vignetting"}
 """The key of the step's own time in ``CameraModel.report["timings_s"]``."""
@@ -155,7 +169,8 @@ class Entry:
     reason : str
         Why it failed or is n/a (one line); empty when ``ok``.
     scores : dict
-        Per preset: ``g_rms``, ``vignetting``, ``scene`` (see :data:`SCORES`).
+        Per preset: ``g_rms``, ``lut``, ``vignetting``, ``scene``, ``cc_r``,
+        ``cc_r_cie`` (see :data:`SCORES`; ``None`` where not measured).
     time_s, step_time_s : dict
         Per preset: calibration wall time (median of the runs) and the
         step's own time, seconds.
@@ -171,7 +186,7 @@ class Entry:
     reference: str
     status: str = "ok"
     reason: str = ""
-    scores: dict[str, dict[str, float]] = field(default_factory=dict)
+    scores: dict[str, dict[str, float | None]] = field(default_factory=dict)
     time_s: dict[str, float] = field(default_factory=dict)
     step_time_s: dict[str, float] = field(default_factory=dict)
     crossval: dict[str, float | None] = field(default_factory=dict)
@@ -421,6 +436,8 @@ class _Capture:
     calibrate_seed: int
     inputs: frozenset[str]
     allow_outside: bool = False
+    chart: Callable[[Any], dict[str, float]] | None = None
+    """The ColorChecker corrected with a model → ``cc_r``, ``cc_r_cie`` (None: no chart)."""
 
     def describe(self) -> str:
         ref = self.views[0]
@@ -489,7 +506,36 @@ def _load_capture(shared: Any, preset: str) -> _Capture:
         tracks=None if len(views) < 2 else tracks,
         calibrate_seed=cal.calibrate_seed,
         inputs=frozenset(inputs),
+        chart=_table1_chart(shared, preset),
     )
+
+
+def _table1_chart(shared: Any, preset: str) -> Callable[[Any], dict[str, float]] | None:
+    """Table 1's outdoor ColorChecker of ``preset`` corrected with a model (None without
+    colour-science): the same chart, frames (seed stream ``chart_hdr``) and scoring as
+    Table 1's "corrected" row, so the default entry's ``cc_r`` is that row's outdoor value."""
+    from validation.experiments.shared import have_colour_science
+
+    if not have_colour_science():
+        return None
+
+    def score(model: Any) -> dict[str, float]:
+        from validation.experiments.table1 import _corrected_chart
+        from validation.metrics import correlation
+
+        cal = shared.calibration(preset)
+        chart = shared.chart("D65", preset)
+        _, hdr_raw, balance, _ = _corrected_chart(
+            shared.config, shared, preset, "outdoor", cal.camera, model, chart
+        )
+        hdr = hdr_raw * balance
+        truth = chart.patch_l / chart.patch_l[chart.white_index]
+        return {
+            "cc_r": correlation(truth, hdr),
+            "cc_r_cie": correlation(np.asarray(chart.cie_rgb), hdr),
+        }
+
+    return score
 
 
 _NEED_TEXT = {"tracks": "correspondences across two or more views", "flat_field": "a flat field"}
@@ -506,12 +552,24 @@ def _missing_needs(method: Any, inputs: frozenset[str]) -> str | None:
     )
 
 
-def _scores(rep: dict[str, Any]) -> dict[str, float]:
-    return {
+def _scores(rep: dict[str, Any], cap: _Capture, model: Any) -> dict[str, float | None]:
+    """The :data:`SCORES` of one calibration (``rep``: its comparison with the truth)."""
+    out: dict[str, float | None] = {
         "g_rms": float(max(r["rms"] for r in rep["response"])),
+        "lut": float(rep["lut"]["error"].e_mean),
         "vignetting": float(rep["vignetting"]["error"].e_mean),
         "scene": float(rep["scene"]["error"].e_mean),
+        "cc_r": None,
+        "cc_r_cie": None,
     }
+    if "colorchecker" in rep:  # a user's set with its own chart
+        out["cc_r"] = float(rep["colorchecker"]["r_camera"])
+        out["cc_r_cie"] = _finite(rep["colorchecker"].get("r_cie_rgb"))
+    elif cap.chart is not None:
+        if "leaderboard_chart" not in rep:  # once per calibration (the memo keeps rep)
+            rep["leaderboard_chart"] = cap.chart(model)
+        out.update(rep["leaderboard_chart"])
+    return out
 
 
 def _calibrate_kwargs(cfg: ValidationConfig, step: str, method: Any, seed: int) -> dict[str, Any]:
@@ -604,7 +662,7 @@ def _score_into(
     rep: dict[str, Any],
     floors: dict[str, float],
 ) -> None:
-    entry.scores[cap.preset] = _scores(rep)
+    entry.scores[cap.preset] = _scores(rep, cap, model)
     entry.time_s[cap.preset] = float(statistics.median(times))
     step_t = model.report.get("timings_s", {}).get(_STEP_TIMING[step])
     if step_t is not None:
@@ -808,6 +866,11 @@ def run_leaderboard(
                 shared = Shared(config, seed, root, say)
             captures = [_load_capture(shared, p) for p in presets]
         lb = Leaderboard(config, int(seed), presets, [])
+        if not given and any(c.chart is None for c in captures):
+            lb.notes.append(
+                "the ColorChecker column (CC r) is empty: the chart's spectral data need "
+                "colour-science (pip install colour-science)"
+            )
         memo: dict[tuple[int, str], Any] = {}
         lb.describe = "; ".join(dict.fromkeys(c.describe() for c in captures))
         if given:
@@ -886,6 +949,8 @@ def _fmt(value: float | None, unit: str) -> str:
         return f"{100 * value:.3f} %"
     if unit == "ln":
         return f"{value:.4f}"
+    if unit == "r":  # correlations of a good calibration differ in the 5th decimal
+        return f"{value:.5f}"
     if unit == "s":
         return f"{value:.2f}"
     return f"{value:.2f}"
@@ -901,7 +966,7 @@ def _columns(board: Board, lb: Leaderboard) -> tuple[list[str], list[tuple[list[
     crossval = board.step == "response" and bool(lb.real_sets)
     if crossval:
         head += [f"crossval {s} (DN)" for s in lb.real_sets]
-    head += ["step s", "calib. s", "reference"]
+    head += ["LUT (mean)", "CC r (mean)", "step s", "calib. s", "reference"]
     rows: list[tuple[list[str], str]] = []
     for e in board.entries:
         cells = ["n/a" if e.rank is None else str(e.rank), e.method]
@@ -914,6 +979,7 @@ def _columns(board: Board, lb: Leaderboard) -> tuple[list[str], list[tuple[list[
             cells += [_fmt(e.scores[p]["scene"], "fraction") for p in lb.presets]
         if crossval:
             cells += [_fmt(e.crossval.get(s), "") for s in lb.real_sets]
+        cells += [_fmt(e.mean("lut"), "fraction"), _fmt(e.mean("cc_r"), "r")]
         cells += [_fmt(e.step_time_median_s, "s"), _fmt(e.time_median_s, "s"), e.reference]
         rows.append((cells, ""))
     if board.noise_floor:
@@ -952,8 +1018,10 @@ def format_leaderboard(lb: Leaderboard) -> str:
     if lb.notes:
         out += [""] + [f"note: {n}" for n in lb.notes]
     out.append(
-        "scene: the corrected test scene's eq. 8 e_mean against the truth; step s / calib. s: "
-        "the step's own time and the whole calibration's (median), seconds"
+        "scene: the corrected test scene's eq. 8 e_mean against the truth; LUT: the sensor "
+        "LUT's e_mean; CC r: the corrected ColorChecker's correlation with the true camera "
+        "photoquantity (Table 1's); step s / calib. s: the step's own time and the whole "
+        "calibration's (median), seconds"
     )
     return "\n".join(out)
 
@@ -986,6 +1054,54 @@ def format_markdown(lb: Leaderboard, figures: dict[str, str]) -> str:
     return "\n".join(out)
 
 
+def _num(value: float | None) -> float:
+    """A score for a plot (NaN where it was not measured)."""
+    return math.nan if value is None else float(value)
+
+
+def _colorchecker_chart(lb: Leaderboard, path: Path) -> bool:
+    """``1 − r`` of the corrected ColorChecker per method and camera, one panel per board.
+
+    ``r``: Table 1's correlation with the camera's true photoquantity (``cc_r``);
+    False when no entry has one (no chart).
+    """
+    panels = [
+        (b, [e for e in b.entries if e.status == "ok" and e.mean("cc_r") is not None])
+        for b in lb.boards
+    ]
+    panels = [(b, ok) for b, ok in panels if ok]
+    if not panels:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    rows = max(len(ok) for _, ok in panels)
+    fig, axes = plt.subplots(
+        1,
+        len(panels),
+        figsize=(4.2 * len(panels) + 1.5, 1.2 + 0.3 * rows * len(lb.presets) / 2),
+        squeeze=False,
+    )
+    height = 0.8 / len(lb.presets)
+    for ax, (board, ok) in zip(axes[0], panels, strict=True):
+        y = np.arange(len(ok))
+        for j, p in enumerate(lb.presets):
+            values = [max(1.0 - _num(e.scores[p].get("cc_r")), 1e-6) for e in ok]
+            ax.barh(y + (j - (len(lb.presets) - 1) / 2) * height, values, height, label=p)
+        ax.set_xscale("log")
+        ax.set_yticks(y, [e.method for e in ok])
+        ax.invert_yaxis()
+        ax.set_xlabel("1 − r (ColorChecker vs camera truth)")
+        ax.set_title(f"{board.step}: lower is better")
+    axes[0][0].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
+
 def _bar_chart(board: Board, lb: Leaderboard, path: Path) -> bool:
     """A horizontal bar chart of the step's error per method and preset; False if none."""
     scored = [e for e in board.entries if e.status == "ok"]
@@ -1002,13 +1118,13 @@ def _bar_chart(board: Board, lb: Leaderboard, path: Path) -> bool:
     y = np.arange(len(scored))
     height = 0.8 / len(lb.presets)
     for j, p in enumerate(lb.presets):
-        values = [scale * e.scores[p][key] for e in scored]
+        values = [scale * _num(e.scores[p][key]) for e in scored]
         ax.barh(y + (j - (len(lb.presets) - 1) / 2) * height, values, height, label=p)
     if key == "scene":
         for j, p in enumerate(lb.presets):
             if p in board.noise_floor:
                 ax.axvline(scale * board.noise_floor[p], ls="--", lw=1, color=f"C{j}")
-    shown = [scale * e.scores[p][key] for e in scored for p in lb.presets]
+    shown = [scale * _num(e.scores[p][key]) for e in scored for p in lb.presets]
     positive = [v for v in shown if v > 0]
     if positive and max(positive) > 30 * min(positive):
         ax.set_xscale("log")  # a bad method must not flatten the good ones' bars
@@ -1024,6 +1140,7 @@ def _bar_chart(board: Board, lb: Leaderboard, path: Path) -> bool:
 
 
 _EXTRA_FIGURES = {
+    "colorchecker": "ColorChecker: 1 − r against the camera truth (Table 1's correlation)",
     "response_curves": "Recovered responses over the truth (G channel; residual below)",
     "error_vs_time": "Error against calibration time (median over the cameras)",
 }
@@ -1069,12 +1186,14 @@ def _extra_figures(lb: Leaderboard, folder: Path) -> dict[str, str]:
         )
     if plot_error_vs_time(panels, folder / "error_vs_time.png"):
         out["error_vs_time"] = "error_vs_time.png"
+    if _colorchecker_chart(lb, folder / "colorchecker.png"):
+        out["colorchecker"] = "colorchecker.png"
     return out
 
 
 def write_report(lb: Leaderboard, folder: str | Path, *, overwrite: bool = False) -> Path:
-    """Write ``leaderboard.md``, ``leaderboard.json``, ``<step>.png``, ``response_curves.png``
-    and ``error_vs_time.png`` into ``folder``.
+    """Write ``leaderboard.md``, ``leaderboard.json``, ``<step>.png``, ``response_curves.png``,
+    ``error_vs_time.png`` and ``colorchecker.png`` into ``folder``.
 
     Written atomically (:func:`photoquant.io.atomic.atomic_directory`): an
     existing folder is refused without ``overwrite`` (before anything runs,

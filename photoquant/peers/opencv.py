@@ -113,6 +113,24 @@ def _opencv_images(stack: ExposureStack, peer: str) -> tuple[list[np.ndarray], n
     return images, np.asarray(stack.exposure_s, dtype=np.float32)
 
 
+def _blocked(image: np.ndarray) -> np.ndarray:
+    """A one-row (or one-column) image as a near-square block of its pixels, in order.
+
+    OpenCV's regular-grid sampler places ``√(samples·W/H)`` by ``√(samples·H/W)``
+    points and asserts that both are at least 1, which a ``1 × n`` image (a
+    sample of pixels from several views, :func:`photoquant.exposure.combine_stacks`)
+    fails. Where a pixel lies does not matter to a response calibration; the
+    last ``n mod h`` pixels (fewer than ``√n``) are left out.
+    """
+    h, w = image.shape[:2]
+    if min(h, w) > 1:
+        return image
+    n = h * w
+    rows = max(1, int(np.sqrt(n)))
+    flat = image.reshape(n, *image.shape[2:])[: rows * (n // rows)]
+    return np.ascontiguousarray(flat.reshape(rows, n // rows, *image.shape[2:]))
+
+
 def _table(response: np.ndarray) -> np.ndarray:
     """OpenCV's ``(256, 1, 3)`` BGR ``f⁻¹`` table as ``(C, 256)`` in the stack's order."""
     return response.reshape(256, 3)[:, ::-1].astype(np.float64).T
@@ -257,7 +275,7 @@ def _response_fit(
 ) -> StepFit[ResponseModel]:
     require(available, name, REQUIREMENT)
     images, times = _opencv_images(stack, name)
-    response = calibrator.process(images, times)
+    response = calibrator.process([_blocked(im) for im in images], times)
     model, report = response_from_inverse(
         name, np.arange(256.0), _table(response), stack.saturation_level, params=params
     )

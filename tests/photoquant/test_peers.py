@@ -99,6 +99,22 @@ def test_peer_response_recovers_a_known_gamma(bracket, name):
         assert _g_rms(model) < bound, fit.report
 
 
+def test_opencv_debevec_calibrates_a_one_row_stack():
+    """A ``1 × n`` stack (what exposure refinement's joint fit hands the response step,
+    :func:`photoquant.exposure.combine_stacks`) is calibrated as the 2-D bracket is.
+
+    OpenCV's grid sampler asserts on an image one row high; the adapter gives
+    it the pixels as a near-square block. The bound is the 2-D bracket's.
+    """
+    _skip_unless(opencv)
+    rng = np.random.default_rng(7)
+    l = log_uniform_scene(rng, (60, 80, 3), decades=3.5)  # noqa: E741
+    frames = capture(l, EXPOSURES, balance=(1.0, 1.0, 1.0), n_repeats=4)
+    row = frames.reshape(*frames.shape[:2], 1, -1, 3)
+    fit = pq.fit_response(pq.ExposureStack(row, EXPOSURES), "OpenCV Debevec")
+    assert _g_rms(fit.model) < PEERS["OpenCV Debevec"][1], fit.report
+
+
 @pytest.mark.parametrize("name", list(PEERS))
 def test_peer_calibrates_saves_loads_and_corrects(bracket, tmp_path, name):
     module, _ = PEERS[name]

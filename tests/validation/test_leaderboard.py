@@ -168,6 +168,44 @@ def test_the_default_entry_is_the_validation_pipelines_calibration(board):
         assert vig == scores  # the default pipeline, on either board
 
 
+def test_colorchecker_and_lut_columns_are_table1s_and_the_comparisons(board):
+    """Every scored entry carries the sensor LUT's error and Table 1's ColorChecker r.
+
+    The default entry's ``cc_r`` / ``cc_r_cie`` are Table 1's "corrected" row
+    (outdoor chart, :func:`validation.experiments.table1.chart_measurements`,
+    computed here through Table 1's own code); a wrong response correlates
+    worse than Debevec's. Without colour-science (the chart's spectra) the
+    column is empty and a note says why.
+    """
+    from validation.compare import compare_with_truth
+    from validation.experiments.shared import have_colour_science
+    from validation.experiments.table1 import chart_measurements
+    from validation.metrics import correlation
+
+    lb, shared = board
+    b = lb.board("response")
+    debevec, bad = b.entry("Debevec 1997"), b.entry(BAD)
+    for preset in ("ccd", "cmos"):
+        cal = shared.calibration(preset)
+        rep = compare_with_truth(cal.manifest, cal.model, cal.truth)
+        assert debevec.scores[preset]["lut"] == rep["lut"]["error"].e_mean
+        if not have_colour_science():
+            assert debevec.scores[preset]["cc_r"] is None
+            continue
+        m = chart_measurements(shared.config, shared, preset, "outdoor", "D65")
+        assert debevec.scores[preset]["cc_r"] == pytest.approx(
+            correlation(m["truth_camera"], m["hdr"]), abs=1e-12
+        )
+        assert debevec.scores[preset]["cc_r_cie"] == pytest.approx(
+            correlation(m["truth_cie"], m["hdr"]), abs=1e-12
+        )
+        assert bad.scores[preset]["cc_r"] < debevec.scores[preset]["cc_r"]
+    text = format_leaderboard(lb)
+    assert "CC r (mean)" in text and "LUT (mean)" in text
+    if not have_colour_science():
+        assert any("colour-science" in n for n in lb.notes)
+
+
 def test_json_output(board):
     lb, _ = board
     data = json.loads(json.dumps(lb.to_json()))
@@ -178,7 +216,14 @@ def test_json_output(board):
     by_name = {e["method"]: e for e in resp["entries"]}
     assert by_name[FAILING]["status"] == "failed" and by_name[FAILING]["primary"] is None
     assert by_name["Debevec 1997"]["rank"] == 1 or by_name[BAD]["rank"] > 1
-    assert set(by_name["Debevec 1997"]["scores"]["ccd"]) == {"g_rms", "vignetting", "scene"}
+    assert set(by_name["Debevec 1997"]["scores"]["ccd"]) == {
+        "g_rms",
+        "lut",
+        "vignetting",
+        "scene",
+        "cc_r",
+        "cc_r_cie",
+    }
     assert by_name["Debevec 1997"]["time_s"]["ccd"] > 0
 
 
@@ -225,7 +270,15 @@ def test_report_folder(board, tmp_path):
     for step in ("response", "vignetting"):
         assert (folder / f"{step}.png").read_bytes()[:8] == PNG_SIGNATURE
         assert f"]({step}.png)" in md
-    assert json.loads((folder / "leaderboard.json").read_text())["boards"]
+    assert "CC r (mean)" in md
+    data = json.loads((folder / "leaderboard.json").read_text())
+    scored = [e for e in data["boards"][0]["entries"] if e["status"] == "ok"]
+    assert all({"lut", "cc_r", "cc_r_cie"} <= set(e["scores"]["ccd"]) for e in scored)
+    from validation.experiments.shared import have_colour_science
+
+    if have_colour_science():  # the chart exists: its plot too
+        assert (folder / "colorchecker.png").read_bytes()[:8] == PNG_SIGNATURE
+        assert "](colorchecker.png)" in md
     with pytest.raises(PhotoquantError, match="already exists"):
         write_report(lb, folder)
     write_report(lb, folder, overwrite=True)

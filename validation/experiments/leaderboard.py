@@ -5,7 +5,8 @@ configuration, reusing the run's capture sets (:class:`Shared`): each
 registered method of a step (plug-ins included, ``"None"`` left out)
 calibrates each preset's set with the other steps at their defaults, and is
 scored against the truth (the step's own error, the test scene's eq. 8
-error beside its noise floor) and timed.
+error beside its noise floor, the sensor LUT's error and Table 1's
+ColorChecker correlation) and timed.
 
 The quick job ranks the response and vignetting steps only, with one timed
 calibration per method (a few seconds per method on two cores); ``--full``
@@ -196,6 +197,9 @@ def _report(res: ExperimentResult, lb, PRIMARY) -> None:  # noqa: N803 - the mod
                 for p in lb.presets
             )
             scene = " / ".join(fmt_pct(e.scores[p]["scene"], 3) for p in lb.presets)
+            cc = [e.scores[p].get("cc_r") for p in lb.presets]
+            if all(v is not None for v in cc):  # Table 1's ColorChecker correlation
+                scene += "; CC r " + " / ".join(f"{v:.5f}" for v in cc)
             t = e.time_median_s
             res.row(
                 where,
