@@ -123,37 +123,59 @@ def _repeats_py(
     all_sat: Any,
     all_dark: Any,
 ) -> None:  # pragma: no cover - compiled by numba
-    """numba body: the codes of ``N`` repeats ``frames (N, K, n)`` (sum, or an exclusion code)."""
+    """numba body: the codes of ``N`` repeats ``frames (N, K, n)`` (sum, or an exclusion code).
+
+    Blocked: for a block of values, each frame ``(r, k)`` is read as one
+    contiguous run into per-value sums and extremes (one memory stream at a
+    time; reading the ``N·K`` frames of one value after another is ``N·K``
+    interleaved streams, which the prefetchers do not follow: 3.8 ns per
+    frame value against 0.9 measured, 2026-12-01, 1024×768×3, N = 10, K = 8).
+    Per value the K terms are still added in the order ``k = 0 … K−1``, so
+    the bits are those of the numpy kernel.
+    """
     n_rep, n_k, n = frames.shape
     n_ch = w.shape[0]
-    for p in range(n // n_ch):
-        for ch in range(n_ch):
-            q = p * n_ch + ch
-            s = np.float32(0.0)
-            d = np.float32(0.0)
-            unsat = False
-            for k in range(n_k):
-                tot = np.int64(0)
-                hi = np.int64(0)
-                lo = np.int64(1 << 62)
-                for r in range(n_rep):
-                    f = np.int64(frames[r, k, q])
-                    tot += f
-                    if f > hi:
-                        hi = f
-                    if f < lo:
-                        lo = f
-                if hi >= sat_thr[ch]:
-                    c = np.int64(sat_code)
-                elif lo <= dark_thr[ch]:
-                    c = np.int64(dark_code)
-                else:
-                    c = tot
-                s += wt[k, ch, c]
-                d += w[ch, c]
-                if not clip[ch, c]:
-                    unsat = True
-            _store(num, den, mask, all_sat, all_dark, q, s, d, unsat)
+    block = 2048 * n_ch
+    tot = np.empty(block, dtype=np.int64)
+    hi = np.empty(block, dtype=np.int64)
+    lo = np.empty(block, dtype=np.int64)
+    s = np.empty(block, dtype=np.float32)
+    d = np.empty(block, dtype=np.float32)
+    unsat = np.empty(block, dtype=np.bool_)
+    for q0 in range(0, n, block):
+        m = min(block, n - q0)
+        s[:m] = 0.0
+        d[:m] = 0.0
+        unsat[:m] = False
+        for k in range(n_k):
+            for i in range(m):
+                f = np.int64(frames[0, k, q0 + i])
+                tot[i] = f
+                hi[i] = f
+                lo[i] = f
+            for r in range(1, n_rep):
+                for i in range(m):
+                    f = np.int64(frames[r, k, q0 + i])
+                    tot[i] += f
+                    if f > hi[i]:
+                        hi[i] = f
+                    if f < lo[i]:
+                        lo[i] = f
+            for p in range(m // n_ch):
+                for ch in range(n_ch):
+                    i = p * n_ch + ch
+                    if hi[i] >= sat_thr[ch]:
+                        c = np.int64(sat_code)
+                    elif lo[i] <= dark_thr[ch]:
+                        c = np.int64(dark_code)
+                    else:
+                        c = tot[i]
+                    s[i] += wt[k, ch, c]
+                    d[i] += w[ch, c]
+                    if not clip[ch, c]:
+                        unsat[i] = True
+        for i in range(m):
+            _store(num, den, mask, all_sat, all_dark, q0 + i, s[i], d[i], unsat[i])
 
 
 def _compile(fn: Callable[..., Any], **options: Any) -> Any:  # pragma: no cover
