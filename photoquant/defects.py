@@ -52,8 +52,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant.errors import InputError
-from photoquant.merge._kernels import HAVE_NUMBA, _compile
 from photoquant.stack import ExposureStack
 from photoquant.utils import check_positive
 
@@ -157,7 +157,7 @@ def _ring_rank_py(image: Any, rank: Any, out: Any) -> None:  # pragma: no cover 
                     out[i, j, ch] = v0
 
 
-_ring_rank_nb = _compile(_ring_rank_py) if HAVE_NUMBA else None
+_ring_rank_nb = compile_kernel(_ring_rank_py) if HAVE_NUMBA else None
 
 
 def _ring_rank_fast(image: np.ndarray, rank: int) -> np.ndarray:

