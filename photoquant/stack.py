@@ -524,6 +524,16 @@ class ExposureStack:
         self._extremes.append((lo.reshape(shape), hi.reshape(shape)))
         return True
 
+    def cached_repeat_statistics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """``(repeat_sum, lowest, highest)`` repeat (K, H, W, C) if already computed, else None.
+
+        Lets a consumer (the merge) read these instead of the ``N`` frames
+        without forcing their computation.
+        """
+        if self.n_repeats > 1 and self._sum and self._extremes:
+            return self._sum[0], self._extremes[0][0], self._extremes[0][1]
+        return None
+
     def _repeat_extremes(self) -> tuple[np.ndarray, np.ndarray]:
         """Per value, the lowest and highest of its ``N`` repeats (computed once)."""
         if not self._extremes and not self._fused_repeat_stats():  # sums too, when compiled

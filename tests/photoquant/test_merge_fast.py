@@ -168,3 +168,32 @@ def test_blocked_repeat_kernel_across_blocks_gives_the_numpy_bits():
     assert np.isfinite(numba_out[0]).mean() > 0.5  # mostly merged values, not all flags
     for a, b in zip(numba_out, numpy_out, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=40, deadline=None)
+@given(case=stacks(), backend=st.sampled_from(["numpy", "numba"] if HAVE_NUMBA else ["numpy"]))
+def test_merge_from_the_cached_repeat_statistics_gives_the_same_bits(case, backend):
+    # a stack that holds its repeat sums and extremes is merged from them (SummaryCodes),
+    # a fresh one from its frames (RepeatCodes): the same codes, the same bits
+    stack, response, opts = case
+
+    def fresh() -> ExposureStack:
+        return ExposureStack(
+            stack.frames,
+            stack.exposure_s,
+            bit_depth=stack.bit_depth,
+            saturation_level=stack.saturation_level,
+            black_level=stack.black_level,
+            channels=stack.channels,
+        )
+
+    plain, summarised = fresh(), fresh()
+    summarised.repeat_sum()
+    summarised.saturated()  # the extremes
+    expected = "SummaryCodes" if stack.n_repeats > 1 else "DirectCodes"
+    assert type(plan_stack_Debevec1997(summarised, response, opts)[0]).__name__ == expected
+    assert plain.cached_repeat_statistics() is None
+    for a, b in zip(
+        _run(plain, response, opts, backend), _run(summarised, response, opts, backend), strict=True
+    ):
+        np.testing.assert_array_equal(a, b)
