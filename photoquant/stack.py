@@ -543,6 +543,33 @@ class ExposureStack:
                 self._extremes.append((self.frames.min(axis=0), self.frames.max(axis=0)))
         return self._extremes[0]
 
+    def at_pixels(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(repeat_sum, saturated, dark_clipped)`` at some pixels, ``(K, P, C)`` each.
+
+        ``index`` holds flat pixel indices (row-major over ``(H, W)``). The
+        same values as :meth:`repeat_sum`, :meth:`saturated` and
+        :meth:`dark_clipped` (the stack's own levels) at those pixels, from
+        the cached full-size arrays when there are any, else from the frames
+        at those pixels only (nothing full-size is made).
+        """
+        index = np.asarray(index, dtype=np.intp)
+        n, k, h, w, c = self.shape
+        sat_thr, dark_thr = _sat_threshold(self.saturation_level), _dark_threshold(self.black_level)
+        if self._sum and self._extremes:
+            sums = self._sum[0].reshape(k, h * w, c)[:, index]
+            lo = self._extremes[0][0].reshape(k, h * w, c)[:, index]
+            hi = self._extremes[0][1].reshape(k, h * w, c)[:, index]
+        else:
+            sub = self.frames.reshape(n, k, h * w, c)[:, :, index]
+            if n == 1:
+                sums, lo, hi = sub[0].astype(self._sum_dtype()), sub[0], sub[0]
+            else:
+                sums = sub.sum(axis=0, dtype=self._sum_dtype())
+                lo, hi = sub.min(axis=0), sub.max(axis=0)
+        saturated = _compare_per_channel(np.greater_equal, hi, sat_thr)
+        dark = _compare_per_channel(np.less_equal, lo, dark_thr)
+        return sums, saturated, dark
+
     def saturated(self, saturation_level: np.ndarray | None = None) -> np.ndarray:
         """``(K, H, W, C)`` bool: any repeat reached the channel's saturation level.
 
@@ -551,9 +578,7 @@ class ExposureStack:
         """
         level = self.saturation_level if saturation_level is None else saturation_level
         level = check_array(level, "saturation_level", shape=(self.n_channels,), kind="iuf")
-        # frames are integers: c >= level  <=>  c >= ceil(level)
-        thr = np.ceil(level.astype(np.float64)).astype(np.int64)
-        return self._mask("saturated", thr, np.greater_equal, 1)
+        return self._mask("saturated", _sat_threshold(level), np.greater_equal, 1)
 
     def dark_clipped(self, floor: float | np.ndarray | None = None) -> np.ndarray:
         """``(K, H, W, C)`` bool: any repeat at or below the floor (no measurable light).
@@ -567,9 +592,7 @@ class ExposureStack:
         """
         level = self.black_level if floor is None else floor
         level = np.broadcast_to(np.asarray(level, dtype=np.float64), (self.n_channels,))
-        # frames are integers: c <= level  <=>  c <= floor(level)
-        thr = np.floor(level).astype(np.int64)
-        return self._mask("dark", thr, np.less_equal, 0)
+        return self._mask("dark", _dark_threshold(level), np.less_equal, 0)
 
     def _mask(self, kind: str, thr: np.ndarray, ufunc: np.ufunc, extreme: int) -> np.ndarray:
         key = (kind, tuple(int(x) for x in thr))
@@ -588,6 +611,16 @@ class ExposureStack:
         """
         assert self.black_level is not None  # set in __post_init__
         return self.mean() - self.black_level
+
+
+def _sat_threshold(level: Any) -> np.ndarray:
+    """Integer threshold of "at or above ``level``": frames are integers, ``c ≥ ⌈level⌉``."""
+    return np.ceil(np.asarray(level).astype(np.float64)).astype(np.int64)
+
+
+def _dark_threshold(level: Any) -> np.ndarray:
+    """Integer threshold of "at or below ``level``": ``c ≤ ⌊level⌋``."""
+    return np.floor(np.asarray(level, dtype=np.float64)).astype(np.int64)
 
 
 def _check_black_level(
