@@ -268,28 +268,29 @@ def select_samples_histogram(
     ndarray of int
         Indices into ``P``, sorted.
     """
-    usable = np.flatnonzero(valid.sum(axis=0) >= 2)
+    k_count = values.shape[0]
+    # count of valid exposures per pixel, in one byte (K < 256) rather than int64
+    n_valid = valid.view(np.uint8).sum(axis=0, dtype=np.uint8) if k_count < 256 else valid.sum(0)
+    usable = np.flatnonzero(n_valid >= 2)
     if usable.size <= n_samples:
         return usable
-    k_count = values.shape[0]
     key = rng.random(usable.size)  # the random ranking
-    if usable.size == values.shape[1]:
-        vals, ok = values, valid
-    else:
-        vals, ok = values[:, usable], valid[:, usable]
     # bin = min(floor(v / c_max · n_bins), n_bins − 1) for valid values, n_bins
-    # otherwise; computed in place (valid values are positive: floor = truncation).
+    # otherwise; computed in place (valid values are positive: floor = truncation),
+    # over every pixel, then only the int16 bins of the usable ones are gathered.
     # With a power-of-two n_bins, v / (c_max / n_bins) is that product to the last
     # bit (scaling by 2^j commutes with rounding) in one pass instead of two.
     if n_bins & (n_bins - 1) == 0:
-        scaled = np.divide(vals, float(c_max) / n_bins, dtype=np.float64)
+        scaled = np.divide(values, float(c_max) / n_bins, dtype=np.float64)
     else:
-        scaled = np.divide(vals, c_max, dtype=np.float64)
+        scaled = np.divide(values, c_max, dtype=np.float64)
         scaled *= n_bins
     np.minimum(scaled, n_bins - 1, out=scaled)
+    np.copyto(scaled, n_bins, where=~valid)  # the invalid bin (exact in float64)
     bins = scaled.astype(np.int16)
     del scaled
-    np.putmask(bins, ~ok, n_bins)
+    if usable.size != values.shape[1]:
+        bins = bins[:, usable]
     counts = np.stack([np.bincount(b, minlength=n_bins + 1)[:n_bins] for b in bins])
     n_cells = max(int(np.count_nonzero(counts)), 1)
     per_cell = max(1, -(-4 * n_samples // n_cells))
