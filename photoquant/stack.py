@@ -562,12 +562,14 @@ class ExposureStack:
         index = np.asarray(index, dtype=np.intp)
         n, k, h, w, c = self.shape
         sat_thr, dark_thr = _sat_threshold(self.saturation_level), _dark_threshold(self.black_level)
+        # np.take, not a[:, index]: a fancy index behind a slice returns a transposed
+        # (non-contiguous) layout, and every per-channel pass after it would copy
         if self._sum and self._extremes:
-            sums = self._sum[0].reshape(k, h * w, c)[:, index]
-            lo = self._extremes[0][0].reshape(k, h * w, c)[:, index]
-            hi = self._extremes[0][1].reshape(k, h * w, c)[:, index]
+            sums = np.take(self._sum[0].reshape(k, h * w, c), index, axis=1)
+            lo = np.take(self._extremes[0][0].reshape(k, h * w, c), index, axis=1)
+            hi = np.take(self._extremes[0][1].reshape(k, h * w, c), index, axis=1)
         else:
-            sub = self.frames.reshape(n, k, h * w, c)[:, :, index]
+            sub = np.take(self.frames.reshape(n, k, h * w, c), index, axis=2)
             if n == 1:
                 sums, lo, hi = sub[0].astype(self._sum_dtype()), sub[0], sub[0]
             else:
