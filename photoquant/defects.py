@@ -201,6 +201,29 @@ def _ring_median_at(image: np.ndarray, where: np.ndarray) -> np.ndarray:
     return np.sort(vals, axis=-1)[..., 4]
 
 
+_KEEP_EXCESS_BYTES = 256 * 2**20
+"""Excess planes kept between the two passes of the hot test (beyond: recomputed)."""
+
+
+def _plane_means(stack: ExposureStack) -> Any:
+    """``mean(k)``: ``stack.mean()[k]`` to the last bit, one plane at a time.
+
+    The stack's cached means when it has them; else the plane of its repeat
+    sums over ``N`` (what :meth:`ExposureStack.mean` computes for the whole
+    stack) or, for one repeat, the frame as float64: no ``(K, H, W, C)``
+    float64 array for a scene stack that is only corrected.
+    """
+    if stack._mean:
+        full = stack._mean[0]
+        return lambda k: full[k]
+    if stack.n_repeats == 1:
+        frames = stack.frames[0]
+        return lambda k: frames[k].astype(np.float64)
+    sums = stack.repeat_sum()
+    n = stack.n_repeats
+    return lambda k: sums[k] / n
+
+
 def _one_stack(
     stack: ExposureStack,
     hot_sigmas: float,
@@ -217,7 +240,7 @@ def _one_stack(
     rep_lo, rep_hi = stack._repeat_extremes()
     lo, hi = rep_lo.min(axis=0), rep_hi.max(axis=0)
     order = np.argsort(stack.exposure_s)
-    mean = stack.mean()  # (K, H, W, C), read in exposure order through `order`
+    mean = _plane_means(stack)  # mean(k): the repeat mean of exposure k, stack.mean()[k]
     not_stuck = lo != hi
     stuck = (lo == hi) & (lo > black) & (lo < sat)
     if stack.n_exposures >= 2:
@@ -225,33 +248,54 @@ def _one_stack(
         # values as the filtered images (_ring_median) there
         if stuck.any():
             change = np.abs(
-                _ring_median_at(mean[order[-1]], stuck) - _ring_median_at(mean[order[0]], stuck)
+                _ring_median_at(mean(order[-1]), stuck) - _ring_median_at(mean(order[0]), stuck)
             )
             stuck[stuck] = change > stuck_min_change_dn
     else:
         stuck[:] = False
     # a hot pixel's extra charge is fixed: it stands out most in its shortest unsaturated
     # exposures, where the scene is darkest; the long ones may bury it under the texture
-    n_short = max(hot_min_exposures, mean.shape[0] // 3)
-    above = np.ones(stuck.shape, dtype=bool)
+    n_k = stack.n_exposures
+    n_short = max(hot_min_exposures, n_k // 3)
     # running count of unsaturated exposures (shortest first): `use` of exposure k is
     # "unsaturated and among the n_short shortest unsaturated" (a cumulative sum, by plane)
-    n_unsat = np.zeros(stuck.shape, dtype=np.int16 if mean.shape[0] < 2**15 else np.int64)
+    n_unsat = np.zeros(stuck.shape, dtype=np.int16 if n_k < 2**15 else np.int64)
     n_use = np.zeros(stuck.shape, dtype=n_unsat.dtype)
+    # Two passes, the same result: the threshold is at least hot_min_dn, so a pixel can
+    # be "above" only where its excess beats hot_min_dn in every used exposure
+    # (`maybe`); the robust spreads (two image medians per channel and exposure, most of
+    # the cost) are computed only when some pixel is still a candidate after all of them.
+    maybe = np.ones(stuck.shape, dtype=bool)
+    used: list[tuple[int, np.ndarray, np.ndarray | None]] = []
+    keep_bytes = 0
     for k in order:
-        unsat_k = mean[k] < sat - 0.5  # repeat mean below the clip
+        mean_k = mean(k)
+        unsat_k = mean_k < sat - 0.5  # repeat mean below the clip
         n_unsat += unsat_k
         use_k = unsat_k & (n_unsat <= n_short)
         n_use += use_k
         if not use_k.any():
             continue
-        excess = mean[k] - _ring_rank_fast(mean[k], hot_rank)
-        spread = np.empty(excess.shape[-1])
-        for ch in range(excess.shape[-1]):
-            e = excess[..., ch]
-            spread[ch] = 1.4826 * np.median(np.abs(e - np.median(e)))
-        thr = np.maximum(hot_min_dn, hot_sigmas * spread)
-        above &= (excess > thr) | ~use_k
+        excess = mean_k - _ring_rank_fast(mean_k, hot_rank)
+        maybe &= (excess > hot_min_dn) | ~use_k
+        keep = keep_bytes + excess.nbytes <= _KEEP_EXCESS_BYTES
+        keep_bytes += excess.nbytes if keep else 0
+        used.append((int(k), use_k, excess if keep else None))
+    above = np.zeros(stuck.shape, dtype=bool)
+    if maybe.any() and used:
+        above[:] = True
+        for k, use_k, kept in used:
+            if kept is None:
+                kept = mean(k) - _ring_rank_fast(mean(k), hot_rank)
+            excess = kept
+            spread = np.empty(excess.shape[-1])
+            for ch in range(excess.shape[-1]):
+                e = excess[..., ch]
+                spread[ch] = 1.4826 * np.median(np.abs(e - np.median(e)))
+            thr = np.maximum(hot_min_dn, hot_sigmas * spread)
+            above &= (excess > thr) | ~use_k
+    elif not used:
+        above[:] = True  # no exposure used: "above" in none is vacuous (never told)
     told = n_use >= hot_min_exposures
     hot = above & told & ~stuck
     return hot, told & ~above, stuck, not_stuck
