@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant.errors import InputError
 from photoquant.stack import ExposureStack
 from photoquant.utils import check_positive
@@ -86,14 +87,141 @@ class DefectMap:
 
 
 def _ring_rank(image: np.ndarray, rank: int) -> np.ndarray:
-    """``rank``-th largest of the 8 neighbours of every pixel, per channel (edges mirrored)."""
+    """``rank``-th largest of the 8 neighbours of every pixel, per channel (edges mirrored).
+
+    The readable reference (:mod:`scipy.ndimage`); :func:`_ring_rank_fast`
+    gives the same values.
+    """
     if rank == 1:
         return ndimage.maximum_filter(image, footprint=_RING[..., None], mode="mirror")
     return ndimage.rank_filter(image, -rank, footprint=_RING[..., None], mode="mirror")
 
 
+def _ring_rank_py(image: Any, rank: Any, out: Any) -> None:  # pragma: no cover - numba body
+    """numba body of :func:`_ring_rank_fast`: per value, its 8 neighbours through a sorting network.
+
+    Batcher's odd-even merge sort of 8 values (19 branch-free compare-exchanges;
+    Knuth, *The Art of Computer Programming* 3, §5.3.4), then the ``rank``-th largest.
+    """
+    h, w, n_ch = image.shape
+    for i in range(h):
+        # "mirror" edges: index -1 reads 1, index h reads h - 2 (one row: itself)
+        im = i - 1 if i > 0 else min(1, h - 1)
+        ip = i + 1 if i < h - 1 else max(h - 2, 0)
+        for j in range(w):
+            jm = j - 1 if j > 0 else min(1, w - 1)
+            jp = j + 1 if j < w - 1 else max(w - 2, 0)
+            for ch in range(n_ch):
+                v0 = image[im, jm, ch]
+                v1 = image[im, j, ch]
+                v2 = image[im, jp, ch]
+                v3 = image[i, jm, ch]
+                v4 = image[i, jp, ch]
+                v5 = image[ip, jm, ch]
+                v6 = image[ip, j, ch]
+                v7 = image[ip, jp, ch]
+                v0, v1 = min(v0, v1), max(v0, v1)
+                v2, v3 = min(v2, v3), max(v2, v3)
+                v4, v5 = min(v4, v5), max(v4, v5)
+                v6, v7 = min(v6, v7), max(v6, v7)
+                v0, v2 = min(v0, v2), max(v0, v2)
+                v1, v3 = min(v1, v3), max(v1, v3)
+                v4, v6 = min(v4, v6), max(v4, v6)
+                v5, v7 = min(v5, v7), max(v5, v7)
+                v1, v2 = min(v1, v2), max(v1, v2)
+                v5, v6 = min(v5, v6), max(v5, v6)
+                v0, v4 = min(v0, v4), max(v0, v4)
+                v1, v5 = min(v1, v5), max(v1, v5)
+                v2, v6 = min(v2, v6), max(v2, v6)
+                v3, v7 = min(v3, v7), max(v3, v7)
+                v2, v4 = min(v2, v4), max(v2, v4)
+                v3, v5 = min(v3, v5), max(v3, v5)
+                v1, v2 = min(v1, v2), max(v1, v2)
+                v3, v4 = min(v3, v4), max(v3, v4)
+                v5, v6 = min(v5, v6), max(v5, v6)
+                if rank == 1:
+                    out[i, j, ch] = v7
+                elif rank == 2:
+                    out[i, j, ch] = v6
+                elif rank == 3:
+                    out[i, j, ch] = v5
+                elif rank == 4:
+                    out[i, j, ch] = v4
+                elif rank == 5:
+                    out[i, j, ch] = v3
+                elif rank == 6:
+                    out[i, j, ch] = v2
+                elif rank == 7:
+                    out[i, j, ch] = v1
+                else:
+                    out[i, j, ch] = v0
+
+
+_ring_rank_nb = compile_kernel(_ring_rank_py) if HAVE_NUMBA else None
+
+
+def _ring_rank_fast(image: np.ndarray, rank: int) -> np.ndarray:
+    """:func:`_ring_rank`, with a compiled kernel when numba is there (the same values).
+
+    An order statistic is one of its inputs, so both give the same bits
+    (:mod:`tests.photoquant.test_defects` checks it). Measured 2026-12-01 on
+    a 768×1024×3 float64 image (the shared 2-core machine, loaded): scipy's
+    ``rank_filter`` with the 8-pixel ring 270 ms, this kernel about 30 ms;
+    the hot-pixel test runs it once per short exposure of every view.
+    """
+    if _ring_rank_nb is None or image.ndim != 3:
+        return _ring_rank(image, rank)
+    src = np.ascontiguousarray(image)
+    out = np.empty_like(src)
+    _ring_rank_nb(src, int(rank), out)
+    return out
+
+
 def _ring_median(image: np.ndarray) -> np.ndarray:
     return ndimage.median_filter(image, footprint=_RING[..., None], mode="mirror")
+
+
+def _ring_median_at(image: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """:func:`_ring_median` of ``image (H, W, C)`` at the ``where`` pixels only (1-d, in order).
+
+    scipy's median of the 8 neighbours is their 5th smallest (rank
+    ``8 // 2``); the same value, gathered with the same mirrored edges, for
+    the few pixels that need it (the stuck candidates) instead of the image.
+    """
+    ii, jj, cc = np.nonzero(where)
+    h, w = image.shape[:2]
+
+    def mirror(idx: np.ndarray, n: int) -> np.ndarray:
+        if n == 1:
+            return np.zeros_like(idx)
+        return np.where(idx < 0, -idx, np.where(idx >= n, 2 * (n - 1) - idx, idx))
+
+    ring = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
+    vals = np.stack([image[mirror(ii + di, h), mirror(jj + dj, w), cc] for di, dj in ring], axis=-1)
+    return np.sort(vals, axis=-1)[..., 4]
+
+
+_KEEP_EXCESS_BYTES = 256 * 2**20
+"""Excess planes kept between the two passes of the hot test (beyond: recomputed)."""
+
+
+def _plane_means(stack: ExposureStack) -> Any:
+    """``mean(k)``: ``stack.mean()[k]`` to the last bit, one plane at a time.
+
+    The stack's cached means when it has them; else the plane of its repeat
+    sums over ``N`` (what :meth:`ExposureStack.mean` computes for the whole
+    stack) or, for one repeat, the frame as float64: no ``(K, H, W, C)``
+    float64 array for a scene stack that is only corrected.
+    """
+    if stack._mean:
+        full = stack._mean[0]
+        return lambda k: full[k]
+    if stack.n_repeats == 1:
+        frames = stack.frames[0]
+        return lambda k: frames[k].astype(np.float64)
+    sums = stack.repeat_sum()
+    n = stack.n_repeats
+    return lambda k: sums[k] / n
 
 
 def _one_stack(
@@ -105,36 +233,70 @@ def _one_stack(
     hot_rank: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(hot, not_hot, stuck, not_stuck)`` of one stack; neither: the stack cannot tell."""
-    frames = stack.frames  # (N, K, H, W, C)
     black = np.asarray(stack.black_level, dtype=np.float64)
     sat = np.asarray(stack.saturation_level, dtype=np.float64)
-    lo, hi = frames.min(axis=(0, 1)), frames.max(axis=(0, 1))
+    # every frame's extremes: of the per-repeat extremes the stack keeps (cached, shared
+    # with its saturation and dark masks), not a second pass over the (N, K) frames
+    rep_lo, rep_hi = stack._repeat_extremes()
+    lo, hi = rep_lo.min(axis=0), rep_hi.max(axis=0)
     order = np.argsort(stack.exposure_s)
-    mean = stack.mean()[order]  # (K, H, W, C), shortest first
+    mean = _plane_means(stack)  # mean(k): the repeat mean of exposure k, stack.mean()[k]
     not_stuck = lo != hi
     stuck = (lo == hi) & (lo > black) & (lo < sat)
     if stack.n_exposures >= 2:
-        change = np.abs(_ring_median(mean[-1]) - _ring_median(mean[0]))
-        stuck &= change > stuck_min_change_dn
+        # the neighbours' medians only where a pixel is a candidate (few): the same
+        # values as the filtered images (_ring_median) there
+        if stuck.any():
+            change = np.abs(
+                _ring_median_at(mean(order[-1]), stuck) - _ring_median_at(mean(order[0]), stuck)
+            )
+            stuck[stuck] = change > stuck_min_change_dn
     else:
         stuck[:] = False
     # a hot pixel's extra charge is fixed: it stands out most in its shortest unsaturated
     # exposures, where the scene is darkest; the long ones may bury it under the texture
-    n_short = max(hot_min_exposures, mean.shape[0] // 3)
-    unsat = mean < sat - 0.5  # repeat mean below the clip
-    use = unsat & (np.cumsum(unsat, axis=0) <= n_short)
-    above = np.ones(stuck.shape, dtype=bool)
-    for k in range(mean.shape[0]):
-        if not use[k].any():
+    n_k = stack.n_exposures
+    n_short = max(hot_min_exposures, n_k // 3)
+    # running count of unsaturated exposures (shortest first): `use` of exposure k is
+    # "unsaturated and among the n_short shortest unsaturated" (a cumulative sum, by plane)
+    n_unsat = np.zeros(stuck.shape, dtype=np.int16 if n_k < 2**15 else np.int64)
+    n_use = np.zeros(stuck.shape, dtype=n_unsat.dtype)
+    # Two passes, the same result: the threshold is at least hot_min_dn, so a pixel can
+    # be "above" only where its excess beats hot_min_dn in every used exposure
+    # (`maybe`); the robust spreads (two image medians per channel and exposure, most of
+    # the cost) are computed only when some pixel is still a candidate after all of them.
+    maybe = np.ones(stuck.shape, dtype=bool)
+    used: list[tuple[int, np.ndarray, np.ndarray | None]] = []
+    keep_bytes = 0
+    for k in order:
+        mean_k = mean(k)
+        unsat_k = mean_k < sat - 0.5  # repeat mean below the clip
+        n_unsat += unsat_k
+        use_k = unsat_k & (n_unsat <= n_short)
+        n_use += use_k
+        if not use_k.any():
             continue
-        excess = mean[k] - _ring_rank(mean[k], hot_rank)
-        spread = np.empty(excess.shape[-1])
-        for ch in range(excess.shape[-1]):
-            e = excess[..., ch]
-            spread[ch] = 1.4826 * np.median(np.abs(e - np.median(e)))
-        thr = np.maximum(hot_min_dn, hot_sigmas * spread)
-        above &= (excess > thr) | ~use[k]
-    told = use.sum(axis=0) >= hot_min_exposures
+        excess = mean_k - _ring_rank_fast(mean_k, hot_rank)
+        maybe &= (excess > hot_min_dn) | ~use_k
+        keep = keep_bytes + excess.nbytes <= _KEEP_EXCESS_BYTES
+        keep_bytes += excess.nbytes if keep else 0
+        used.append((int(k), use_k, excess if keep else None))
+    above = np.zeros(stuck.shape, dtype=bool)
+    if maybe.any() and used:
+        above[:] = True
+        for k, use_k, kept in used:
+            if kept is None:
+                kept = mean(k) - _ring_rank_fast(mean(k), hot_rank)
+            excess = kept
+            spread = np.empty(excess.shape[-1])
+            for ch in range(excess.shape[-1]):
+                e = excess[..., ch]
+                spread[ch] = 1.4826 * np.median(np.abs(e - np.median(e)))
+            thr = np.maximum(hot_min_dn, hot_sigmas * spread)
+            above &= (excess > thr) | ~use_k
+    elif not used:
+        above[:] = True  # no exposure used: "above" in none is vacuous (never told)
+    told = n_use >= hot_min_exposures
     hot = above & told & ~stuck
     return hot, told & ~above, stuck, not_stuck
 

@@ -27,25 +27,22 @@ or at the dark floor (``dark_code``).
 
 from __future__ import annotations
 
-import importlib
-import os
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-__all__ = ["HAVE_NUMBA", "accumulate_codes", "accumulate_repeats", "repeat_codes"]
+from photoquant._numba import HAVE_NUMBA, compile_kernel
 
-_njit: Callable[..., Any] | None
-try:  # pragma: no cover - depends on the environment
-    if os.environ.get("PHOTOQUANT_NO_NUMBA"):
-        raise ImportError("disabled by PHOTOQUANT_NO_NUMBA")
-    _njit = importlib.import_module("numba").njit
-except ImportError:  # pragma: no cover - depends on the environment
-    _njit = None
+__all__ = [
+    "HAVE_NUMBA",
+    "accumulate_codes",
+    "accumulate_repeats",
+    "accumulate_summaries",
+    "repeat_codes",
+    "summary_codes",
+]
 
-HAVE_NUMBA = _njit is not None
-"""Whether the numba kernels are available (``PHOTOQUANT_NO_NUMBA=1`` turns them off)."""
+_compile = compile_kernel
 
 
 def _direct_py(
@@ -123,8 +120,87 @@ def _repeats_py(
     all_sat: Any,
     all_dark: Any,
 ) -> None:  # pragma: no cover - compiled by numba
-    """numba body: the codes of ``N`` repeats ``frames (N, K, n)`` (sum, or an exclusion code)."""
+    """numba body: the codes of ``N`` repeats ``frames (N, K, n)`` (sum, or an exclusion code).
+
+    Blocked: for a block of values, each frame ``(r, k)`` is read as one
+    contiguous run into per-value sums and extremes (one memory stream at a
+    time; reading the ``N·K`` frames of one value after another is ``N·K``
+    interleaved streams, which the prefetchers do not follow), with narrow
+    accumulators and branch-free extremes that vectorise: 1.2 ns per frame
+    value against 3.7 before (one thread, 1024×768×3, N = 10, K = 8, uint8;
+    2026-12-01 on the shared 2-core machine, loaded).
+    Per value the K terms are still added in the order ``k = 0 … K−1``, so
+    the bits are those of the numpy kernel.
+    """
     n_rep, n_k, n = frames.shape
+    n_ch = w.shape[0]
+    block = 2048 * n_ch
+    # narrow accumulators (int32 sums: the tables, hence N · c_max, stay below 2²², see
+    # merge.debevec1997; extremes in the frames' dtype), branch-free max/min: they vectorise
+    tot = np.empty(block, dtype=np.int32)
+    hi = np.empty(block, dtype=frames.dtype)
+    lo = np.empty(block, dtype=frames.dtype)
+    s = np.empty(block, dtype=np.float32)
+    d = np.empty(block, dtype=np.float32)
+    unsat = np.empty(block, dtype=np.bool_)
+    for q0 in range(0, n, block):
+        m = min(block, n - q0)
+        s[:m] = 0.0
+        d[:m] = 0.0
+        unsat[:m] = False
+        for k in range(n_k):
+            for i in range(m):
+                f = frames[0, k, q0 + i]
+                tot[i] = f
+                hi[i] = f
+                lo[i] = f
+            for r in range(1, n_rep):
+                for i in range(m):
+                    f = frames[r, k, q0 + i]
+                    tot[i] += np.int32(f)
+                    hi[i] = max(hi[i], f)
+                    lo[i] = min(lo[i], f)
+            for p in range(m // n_ch):
+                for ch in range(n_ch):
+                    i = p * n_ch + ch
+                    if hi[i] >= sat_thr[ch]:
+                        c = np.int64(sat_code)
+                    elif lo[i] <= dark_thr[ch]:
+                        c = np.int64(dark_code)
+                    else:
+                        c = np.int64(tot[i])
+                    s[i] += wt[k, ch, c]
+                    d[i] += w[ch, c]
+                    if not clip[ch, c]:
+                        unsat[i] = True
+        for i in range(m):
+            _store(num, den, mask, all_sat, all_dark, q0 + i, s[i], d[i], unsat[i])
+
+
+def _summary_py(
+    total: Any,
+    lo: Any,
+    hi: Any,
+    w: Any,
+    wt: Any,
+    clip: Any,
+    sat_thr: Any,
+    dark_thr: Any,
+    sat_code: int,
+    dark_code: int,
+    num: Any,
+    den: Any,
+    mask: Any,
+    all_sat: Any,
+    all_dark: Any,
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: the codes of :func:`_repeats_py` from the stack's repeat sums and extremes.
+
+    ``total, lo, hi (K, n)``: what :meth:`ExposureStack.repeat_sum` and its
+    extremes already hold (a quarter of the frames' bytes at N = 10, 8 bits);
+    the same codes, the same order of the K terms, the same bits.
+    """
+    n_k, n = total.shape
     n_ch = w.shape[0]
     for p in range(n // n_ch):
         for ch in range(n_ch):
@@ -133,22 +209,12 @@ def _repeats_py(
             d = np.float32(0.0)
             unsat = False
             for k in range(n_k):
-                tot = np.int64(0)
-                hi = np.int64(0)
-                lo = np.int64(1 << 62)
-                for r in range(n_rep):
-                    f = np.int64(frames[r, k, q])
-                    tot += f
-                    if f > hi:
-                        hi = f
-                    if f < lo:
-                        lo = f
-                if hi >= sat_thr[ch]:
+                if hi[k, q] >= sat_thr[ch]:
                     c = np.int64(sat_code)
-                elif lo <= dark_thr[ch]:
+                elif lo[k, q] <= dark_thr[ch]:
                     c = np.int64(dark_code)
                 else:
-                    c = tot
+                    c = np.int64(total[k, q])
                 s += wt[k, ch, c]
                 d += w[ch, c]
                 if not clip[ch, c]:
@@ -156,19 +222,11 @@ def _repeats_py(
             _store(num, den, mask, all_sat, all_dark, q, s, d, unsat)
 
 
-def _compile(fn: Callable[..., Any], **options: Any) -> Any:  # pragma: no cover
-    """``njit`` with an on-disk cache where numba finds a writable place for one, else without."""
-    assert _njit is not None
-    try:
-        return _njit(nogil=True, cache=True, **options)(fn)
-    except RuntimeError:  # "cannot cache ... as it uses dynamic globals" / no cache locator
-        return _njit(nogil=True, **options)(fn)
-
-
-if _njit is not None:  # pragma: no cover - depends on the environment
+if HAVE_NUMBA:  # pragma: no cover - depends on the environment
     _store = _compile(_store_py, inline="always")
     _direct_nb = _compile(_direct_py)
     _repeats_nb = _compile(_repeats_py)
+    _summary_nb = _compile(_summary_py)
 
 
 def _direct_np(
@@ -226,9 +284,22 @@ def repeat_codes(
     else ``dark_code`` where any repeat is at or below ``dark_thr``.
     """
     total = frames.sum(axis=0, dtype=np.int64)
-    hi = frames.max(axis=0)
-    lo = frames.min(axis=0)
-    codes = np.where(lo <= dark_thr, np.int64(dark_code), total)
+    return summary_codes(
+        total, frames.min(axis=0), frames.max(axis=0), sat_thr, dark_thr, sat_code, dark_code
+    )
+
+
+def summary_codes(
+    total: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    sat_thr: np.ndarray,
+    dark_thr: np.ndarray,
+    sat_code: int,
+    dark_code: int,
+) -> np.ndarray:
+    """:func:`repeat_codes` from the repeat sums ``total`` and extremes ``lo``, ``hi`` (K, …, C)."""
+    codes = np.where(lo <= dark_thr, np.int64(dark_code), total.astype(np.int64))
     return np.where(hi >= sat_thr, np.int64(sat_code), codes)
 
 
@@ -312,3 +383,32 @@ def _use_numba(backend: str) -> bool:
             raise ImportError("the numba merge kernels need numba (pip install numba)")
         return True
     return HAVE_NUMBA
+
+
+def accumulate_summaries(
+    total: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    w: np.ndarray,
+    wt: np.ndarray,
+    clip: np.ndarray,
+    sat_thr: np.ndarray,
+    dark_thr: np.ndarray,
+    sat_code: int,
+    dark_code: int,
+    num: np.ndarray,
+    den: np.ndarray,
+    mask: np.ndarray,
+    all_sat: np.ndarray,
+    all_dark: np.ndarray,
+    *,
+    backend: str = "auto",
+) -> None:
+    """As :func:`accumulate_repeats`, from the repeat sums and extremes ``(K, h, W, C)``."""
+    if _use_numba(backend):
+        outs = _flat_outputs(num, den, mask, all_sat, all_dark)
+        flat = [a.reshape(a.shape[0], -1) for a in (total, lo, hi)]
+        _summary_nb(*flat, w, wt, clip, sat_thr, dark_thr, sat_code, dark_code, *outs)
+    else:
+        codes = summary_codes(total, lo, hi, sat_thr, dark_thr, sat_code, dark_code)
+        _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)

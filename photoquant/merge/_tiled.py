@@ -37,9 +37,17 @@ from typing import Protocol
 import numpy as np
 
 from photoquant._threads import thread_map
-from photoquant.merge._kernels import accumulate_codes, accumulate_repeats
+from photoquant.merge._kernels import accumulate_codes, accumulate_repeats, accumulate_summaries
 
-__all__ = ["MergeTables", "CodeSource", "DirectCodes", "RepeatCodes", "row_tiles", "merge_tiles"]
+__all__ = [
+    "MergeTables",
+    "CodeSource",
+    "DirectCodes",
+    "RepeatCodes",
+    "SummaryCodes",
+    "row_tiles",
+    "merge_tiles",
+]
 
 TILE_BYTES = 2 << 20
 """Input bytes per row tile when the caller gives no ``tile_rows`` (2 MiB: the tile's
@@ -190,6 +198,57 @@ class RepeatCodes:
     ) -> None:
         accumulate_repeats(
             self.frames[:, :, rows],
+            tables.w,
+            tables.wt,
+            tables.clip,
+            self.sat_thr,
+            self.dark_thr,
+            tables.sat_code,
+            tables.dark_code,
+            num,
+            den,
+            *flags,
+            backend=backend,
+        )
+
+
+class SummaryCodes:
+    """A stack's repeat sums and extremes ``(K, H, W, C)``: the codes of :class:`RepeatCodes`.
+
+    Used where the stack holds them already (computed for its masks, the
+    defect detection or the response): the merge then reads
+    ``sizeof(sum) + 2 · sizeof(frame)`` bytes per value instead of the ``N``
+    frames, with the same codes and bits.
+    """
+
+    def __init__(
+        self,
+        total: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        sat_thr: np.ndarray,
+        dark_thr: np.ndarray,
+    ) -> None:
+        self.total, self.lo, self.hi = total, lo, hi
+        self.sat_thr = np.ascontiguousarray(sat_thr, dtype=np.int64)
+        self.dark_thr = np.ascontiguousarray(dark_thr, dtype=np.int64)
+        k, _, width, n_ch = total.shape
+        self.shape = (int(total.shape[1]), int(width), int(n_ch))
+        self.bytes_per_row = int(k * width * n_ch * (total.itemsize + lo.itemsize + hi.itemsize))
+
+    def accumulate(
+        self,
+        rows: slice,
+        tables: MergeTables,
+        num: np.ndarray,
+        den: np.ndarray,
+        flags: tuple[np.ndarray, np.ndarray, np.ndarray],
+        backend: str,
+    ) -> None:
+        accumulate_summaries(
+            self.total[:, rows],
+            self.lo[:, rows],
+            self.hi[:, rows],
             tables.w,
             tables.wt,
             tables.clip,

@@ -25,7 +25,14 @@ import numpy as np
 from photoquant._checks import check_array, check_exposure_times, check_int
 from photoquant.errors import InputError
 from photoquant.merge._base import MergeResult, apply_log_inverse_response
-from photoquant.merge._tiled import CodeSource, DirectCodes, MergeTables, RepeatCodes, merge_tiles
+from photoquant.merge._tiled import (
+    CodeSource,
+    DirectCodes,
+    MergeTables,
+    RepeatCodes,
+    SummaryCodes,
+    merge_tiles,
+)
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
@@ -395,7 +402,11 @@ def plan_stack_Debevec1997(
         source = DirectCodes(stack.frames[0])
     else:
         # integer repeats: c >= level  <=>  c >= ceil(level);  c <= b  <=>  c <= floor(b)
-        source = RepeatCodes(stack.frames, np.ceil(sat_level), np.floor(black), tables)
+        cached = stack.cached_repeat_statistics()
+        if cached is not None:  # the stack holds its repeat sums and extremes: read those
+            source = SummaryCodes(*cached, np.ceil(sat_level), np.floor(black))
+        else:
+            source = RepeatCodes(stack.frames, np.ceil(sat_level), np.floor(black), tables)
     return source, tables
 
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import ndimage
 
 from photoquant.defects import DefectMap, detect_defects, exclude_defects
@@ -198,3 +200,84 @@ def test_a_stuck_pixel_is_no_clip_for_the_saturation_detection() -> None:
     assert detect_saturation_levels(frames, 8).tolist() == [217]
     one = np.full((1, 3, 1, 1, 1), 255, dtype=np.uint8)  # a lone clipped pixel stays clipped
     assert detect_saturation_levels(one, 8).tolist() == [255]
+
+
+# ---------------------------------------------------------------------------
+# the fast paths against the readable ones (issue 14): the same bits
+# ---------------------------------------------------------------------------
+
+_images = st.tuples(st.integers(1, 7), st.integers(1, 7), st.integers(1, 3), st.integers(0, 2**31))
+
+
+def _image(shape_seed: tuple[int, int, int, int], dtype: type) -> np.ndarray:
+    h, w, c, seed = shape_seed
+    rng = np.random.default_rng(seed)
+    # few distinct values: ties, the case where an order statistic could go wrong
+    return rng.integers(0, 6, size=(h, w, c)).astype(dtype) / (3 if dtype is np.float64 else 1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(_images, st.integers(1, 8), st.sampled_from([np.float64, np.uint16]))
+def test_ring_rank_fast_equals_scipy(shape_seed, rank, dtype) -> None:  # noqa: ANN001
+    from photoquant.defects import _ring_rank, _ring_rank_fast
+
+    img = _image(shape_seed, dtype)
+    np.testing.assert_array_equal(_ring_rank_fast(img, rank), _ring_rank(img, rank))
+
+
+@settings(max_examples=60, deadline=None)
+@given(_images, st.integers(0, 2**31))
+def test_ring_median_at_candidates_equals_the_filtered_image(shape_seed, seed) -> None:  # noqa: ANN001
+    from photoquant.defects import _ring_median, _ring_median_at
+
+    img = _image(shape_seed, np.float64)
+    where = np.random.default_rng(seed).random(img.shape) < 0.5
+    np.testing.assert_array_equal(_ring_median_at(img, where), _ring_median(img)[where])
+
+
+def _reference_one_stack(
+    stack, hot_sigmas, hot_min_dn, hot_min_exposures, stuck_min_change_dn, hot_rank
+):  # noqa: ANN001, ANN202, E501
+    """The readable detector (full-image filters, a cumulative sum), as it was before issue 14."""
+    frames = stack.frames
+    black = np.asarray(stack.black_level, dtype=np.float64)
+    sat = np.asarray(stack.saturation_level, dtype=np.float64)
+    lo, hi = frames.min(axis=(0, 1)), frames.max(axis=(0, 1))
+    mean = stack.mean()[np.argsort(stack.exposure_s)]
+    ring = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], dtype=bool)[..., None]
+    stuck = (lo == hi) & (lo > black) & (lo < sat)
+    med = [ndimage.median_filter(mean[k], footprint=ring, mode="mirror") for k in (0, -1)]
+    stuck &= np.abs(med[1] - med[0]) > stuck_min_change_dn
+    n_short = max(hot_min_exposures, mean.shape[0] // 3)
+    unsat = mean < sat - 0.5
+    use = unsat & (np.cumsum(unsat, axis=0) <= n_short)
+    above = np.ones(stuck.shape, dtype=bool)
+    for k in range(mean.shape[0]):
+        if not use[k].any():
+            continue
+        excess = mean[k] - ndimage.rank_filter(mean[k], -hot_rank, footprint=ring, mode="mirror")
+        spread = np.array(
+            [1.4826 * np.median(np.abs(e - np.median(e))) for e in np.moveaxis(excess, -1, 0)]
+        )
+        above &= (excess > np.maximum(hot_min_dn, hot_sigmas * spread)) | ~use[k]
+    told = use.sum(axis=0) >= hot_min_exposures
+    return above & told & ~stuck, told & ~above, stuck, lo != hi
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.004])
+@pytest.mark.parametrize("n_views", [1, 3])
+def test_detector_equals_the_readable_reference(n_views: int, fraction: float) -> None:
+    # with no defects the fast path skips the robust spreads (no candidate is left)
+    cam = camera_from_preset(
+        "cmos", disturbances={"hot_pixel_fraction": fraction, "stuck_pixel_fraction": fraction}
+    )
+    views = [stack_of(cam.capture(scene_test_hdr(SHAPE), T, 3, rng=20 + v)) for v in range(n_views)]
+    rank = 4 if n_views > 1 else 1
+    parts = [_reference_one_stack(v, 8.0, 4.0, 2, 2.0, rank) for v in views]
+    hot, not_hot, stuck, not_stuck = (np.logical_or.reduce([p[i] for p in parts]) for i in range(4))
+    stuck &= ~not_stuck
+    found = detect_defects(views)
+    if fraction > 0:
+        assert found.hot.any() and found.stuck.any()  # the comparison is not vacuous
+    np.testing.assert_array_equal(found.stuck, stuck)
+    np.testing.assert_array_equal(found.hot, hot & ~not_hot & ~stuck)

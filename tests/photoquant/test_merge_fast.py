@@ -116,14 +116,14 @@ def test_tiles_and_threads_change_no_bit(case, tile_rows, workers):
         np.testing.assert_array_equal(getattr(tiled, field), getattr(whole, field), err_msg=field)
 
 
-def _run(stack, response, opts, backend):
+def _run(stack, response, opts, backend, tile_rows=2):
     plan = plan_stack_Debevec1997(stack, response, opts)
     assert plan is not None
     shape = stack.image_shape + (stack.n_channels,)
     out = [np.empty(shape, np.float32), np.empty(shape, bool), np.empty(shape, bool)]
     out.append(np.empty(shape, bool))
     weight = np.empty(shape, np.float32)
-    merge_tiles(*plan, *out, weight_out=weight, tile_rows=2, workers=1, backend=backend)
+    merge_tiles(*plan, *out, weight_out=weight, tile_rows=tile_rows, workers=1, backend=backend)
     return [*out, weight]
 
 
@@ -149,3 +149,51 @@ def test_numpy_kernel_is_used_without_numba():
     resp = ResponseModel("given", levels, np.tile(np.log(levels + 1), (3, 1)), np.full(3, 255.0))
     log_c, mask, *_ = _run(stack, resp, DebevecMergeOptions("hat", False), "numpy")
     assert not mask.any() and np.isfinite(log_c).all()
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed (the numpy kernels are used)")
+def test_blocked_repeat_kernel_across_blocks_gives_the_numpy_bits():
+    # more values than one block of the repeat kernel (2048 pixels × C), a partial last one
+    rng = np.random.default_rng(7)
+    frames = rng.integers(0, 256, size=(3, 4, 37, 71, 3))
+    frames[rng.random(frames.shape) < 0.05] = 255
+    frames[rng.random(frames.shape) < 0.05] = 0
+    stack = ExposureStack(frames.astype(np.uint8), [1e-3, 4e-3, 1.6e-2, 6.4e-2], bit_depth=8)
+    levels = np.arange(256.0)
+    g = np.log(np.linspace(1e-3, 1.0, 256))[None].repeat(3, axis=0)
+    response = ResponseModel("given", levels, g, np.full(3, 255.0))
+    opts = DebevecMergeOptions("hat", True)
+    numba_out = _run(stack, response, opts, "numba", tile_rows=37)  # one tile: 7881 values
+    numpy_out = _run(stack, response, opts, "numpy", tile_rows=37)
+    assert np.isfinite(numba_out[0]).mean() > 0.5  # mostly merged values, not all flags
+    for a, b in zip(numba_out, numpy_out, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=40, deadline=None)
+@given(case=stacks(), backend=st.sampled_from(["numpy", "numba"] if HAVE_NUMBA else ["numpy"]))
+def test_merge_from_the_cached_repeat_statistics_gives_the_same_bits(case, backend):
+    # a stack that holds its repeat sums and extremes is merged from them (SummaryCodes),
+    # a fresh one from its frames (RepeatCodes): the same codes, the same bits
+    stack, response, opts = case
+
+    def fresh() -> ExposureStack:
+        return ExposureStack(
+            stack.frames,
+            stack.exposure_s,
+            bit_depth=stack.bit_depth,
+            saturation_level=stack.saturation_level,
+            black_level=stack.black_level,
+            channels=stack.channels,
+        )
+
+    plain, summarised = fresh(), fresh()
+    summarised.repeat_sum()
+    summarised.saturated()  # the extremes
+    expected = "SummaryCodes" if stack.n_repeats > 1 else "DirectCodes"
+    assert type(plan_stack_Debevec1997(summarised, response, opts)[0]).__name__ == expected
+    assert plain.cached_repeat_statistics() is None
+    for a, b in zip(
+        _run(plain, response, opts, backend), _run(summarised, response, opts, backend), strict=True
+    ):
+        np.testing.assert_array_equal(a, b)

@@ -326,3 +326,76 @@ def test_thinned_candidates_keep_the_accuracy(rng):
     full, thin = np.mean(errors[None]), np.mean(errors[2000])
     assert max(errors[2000]) < 0.01, errors[2000]
     assert thin < 1.5 * full, (full, thin)
+
+
+def _sparse_reduced_system(valid, weights, log_t, knot_pos, top, smooth_w, smoothness, gauge):  # noqa: ANN001, ANN202
+    """The readable assembly: eq. 7's rows as a sparse matrix A, then AᵀA, Aᵀb and the Schur step."""
+    import scipy.sparse as sp
+
+    n_g, p_count = top + 1, valid.shape[1]
+    kk, pp = np.nonzero(valid)
+    w = weights[kk, pp]
+    u = np.minimum(knot_pos[kk, pp], top)
+    i0 = np.minimum(np.floor(u).astype(np.int64), max(top - 1, 0))
+    alpha = u - i0
+    rows = np.arange(w.size)
+    shape = (w.size, n_g + p_count)
+    data = sp.coo_matrix(
+        (
+            np.concatenate([w * (1 - alpha), w * alpha, -w]),
+            (np.concatenate([rows] * 3), np.concatenate([i0, i0 + 1, n_g + pp])),
+        ),
+        shape=shape,
+    )
+    j = np.arange(1, top)
+    sw = np.sqrt(smoothness) * smooth_w[j]
+    srows = np.arange(j.size)
+    smooth = sp.coo_matrix(
+        (
+            np.concatenate([sw, -2 * sw, sw]),
+            (np.concatenate([srows] * 3), np.concatenate([j - 1, j, j + 1])),
+        ),
+        shape=(j.size, n_g + p_count),
+    )
+    gauge_row = sp.coo_matrix(([1.0], ([0], [gauge])), shape=(1, n_g + p_count))
+    a = sp.vstack([data, smooth, gauge_row]).tocsr()
+    b = np.concatenate([w * log_t[kk], np.zeros(j.size + 1)])
+    normal = (a.T @ a).tocsr()
+    rhs = a.T @ b
+    n_ge = normal[:n_g, n_g:]
+    d = normal[n_g:, n_g:].diagonal()
+    schur = normal[:n_g, :n_g].toarray() - (n_ge @ sp.diags(1.0 / d) @ n_ge.T).toarray()
+    return schur, rhs[:n_g] - n_ge @ (rhs[n_g:] / d), d
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    k=st.integers(2, 12),
+    p=st.integers(2, 60),
+    top=st.integers(4, 40),
+    fill=st.floats(0.2, 1.0),
+)
+def test_normal_equations_by_bincount_equal_the_sparse_assembly(seed, k, p, top, fill):
+    from photoquant.response.debevec1997 import _normal_equations
+
+    rng = np.random.default_rng(seed)
+    valid = rng.random((k, p)) < fill
+    valid[:2, :] = True  # two equations per pixel, as the sampling guarantees
+    valid = valid[rng.permuted(np.tile(np.arange(k)[:, None], (1, p)), axis=0), np.arange(p)]
+    weights = rng.uniform(0.05, 1.0, (k, p))
+    knot_pos = rng.uniform(0, top, (k, p))
+    log_t = np.sort(rng.uniform(-8, 0, k))
+    smooth_w = rng.uniform(0.1, 1.0, top + 1)
+    gauge = int(rng.integers(0, top + 1))
+    eq = _normal_equations(valid, weights, log_t, knot_pos, top, smooth_w, 30.0, gauge)
+    schur, r_red, d = _sparse_reduced_system(
+        valid, weights, log_t, knot_pos, top, smooth_w, 30.0, gauge
+    )
+    # the same sums in another order: float64 rounding, ~1e-16 relative per term
+    scale = np.abs(schur).max()
+    np.testing.assert_allclose(eq["schur"], schur, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(
+        eq["r_red"], r_red, rtol=0, atol=1e-12 * np.abs(r_red).max() + 1e-300
+    )
+    np.testing.assert_allclose(eq["d"], d, rtol=1e-13)

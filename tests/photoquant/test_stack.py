@@ -142,3 +142,43 @@ def test_vectorised_saturation_detection_and_masks_equal_the_per_channel_referen
     np.testing.assert_array_equal(stack.saturated(level), frames.max(axis=0) >= level)
     np.testing.assert_array_equal(stack.dark_clipped(level), frames.min(axis=0) <= level)
     assert stack.saturated(level) is stack.saturated(level)  # computed once
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    shape=st.tuples(st.integers(1, 3), st.integers(1, 3), st.integers(1, 6), st.integers(1, 4)),
+    bits=st.sampled_from([8, 12]),
+)
+def test_both_paths_detect_and_summarise_as_the_reference(compiled, seed, shape, bits):
+    # the compiled histogram and repeat statistics (numba) and the numpy paths give the
+    # reference's integers; without numba the compiled path is simply not taken
+    import photoquant.stack as stack_module
+
+    rng = np.random.default_rng(seed)
+    c_max = 2**bits - 1
+    white = rng.integers(c_max // 2, c_max + 1, shape[-1])
+    frames = np.minimum(rng.integers(0, c_max + 1, (shape[0], 2, *shape[1:])), white)
+    frames = frames.astype(np.uint8 if bits == 8 else np.uint16)
+    old = stack_module.HAVE_NUMBA
+    stack_module.HAVE_NUMBA = compiled and old
+    try:
+        np.testing.assert_array_equal(
+            detect_saturation_levels(frames, bits), _detect_reference(frames, bits)
+        )
+        stack = ExposureStack(
+            frames, [0.01, 0.1], bit_depth=bits, channels=tuple("RGBA"[: shape[-1]])
+        )
+        lo, hi = stack._repeat_extremes()
+        np.testing.assert_array_equal(lo, frames.min(axis=0))
+        np.testing.assert_array_equal(hi, frames.max(axis=0))
+        np.testing.assert_array_equal(stack.repeat_sum(), frames.sum(axis=0))
+        assert stack.repeat_sum().dtype == np.uint16  # N · c_max ≤ 3 · 4095 < 2¹⁶
+        # new exposure times in the same order share the statistics; a new order does not
+        same = stack.with_exposure_times([0.02, 0.2])
+        assert same.repeat_sum() is stack.repeat_sum()
+        swapped = stack.with_exposure_times([0.3, 0.2])
+        np.testing.assert_array_equal(swapped.repeat_sum(), frames[:, ::-1].sum(axis=0))
+    finally:
+        stack_module.HAVE_NUMBA = old

@@ -1,0 +1,38 @@
+"""The optional numba compiler shared by photoquant's compiled kernels.
+
+numba is optional (``pip install 'photoquant[fast]'``); every kernel compiled
+here has a numpy (or scipy) path that gives the same bits, used when numba
+is not installed or ``PHOTOQUANT_NO_NUMBA=1`` is set. Users: the merge
+(:mod:`photoquant.merge._kernels`), the stack's saturation detection and
+repeat statistics (:mod:`photoquant.stack`), the defect detection
+(:mod:`photoquant.defects`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["HAVE_NUMBA", "compile_kernel"]
+
+_njit: Callable[..., Any] | None
+try:  # pragma: no cover - depends on the environment
+    if os.environ.get("PHOTOQUANT_NO_NUMBA"):
+        raise ImportError("disabled by PHOTOQUANT_NO_NUMBA")
+    _njit = importlib.import_module("numba").njit
+except ImportError:  # pragma: no cover - depends on the environment
+    _njit = None
+
+HAVE_NUMBA = _njit is not None
+"""Whether the numba kernels are available (``PHOTOQUANT_NO_NUMBA=1`` turns them off)."""
+
+
+def compile_kernel(fn: Callable[..., Any], **options: Any) -> Any:  # pragma: no cover
+    """``njit(nogil=True)`` with an on-disk cache where numba finds a writable place for one."""
+    assert _njit is not None
+    try:
+        return _njit(nogil=True, cache=True, **options)(fn)
+    except RuntimeError:  # "cannot cache ... as it uses dynamic globals" / no cache locator
+        return _njit(nogil=True, **options)(fn)
