@@ -618,6 +618,7 @@ def calibrate(
         parameters=parameters,
         report=report,
         glare=glare_model,
+        defects=defects,
     )
     if not return_intermediates:
         return model

@@ -224,7 +224,9 @@ def correct(
                     np.float32
                 )
         mask, all_saturated, all_dark = merged.mask, merged.all_saturated, merged.all_dark
-    defects = detect_defects(stack)  # hot/stuck pixels: not merged (NaN, flagged)
+    # hot/stuck pixels: not merged (NaN, flagged); the calibration's map of the sensor when
+    # the camera has one (no search per scene: 75 ms of a 1024x768 K = 4 stack's ~100 ms)
+    defects = model.defects if model.defects is not None else detect_defects(stack)
     if defects is not None and defects.mask.any():
         photoquantity[defects.mask] = np.nan
         mask |= defects.mask

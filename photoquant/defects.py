@@ -85,6 +85,50 @@ class DefectMap:
         """Counts for a calibration report (JSON-ready)."""
         return {"hot": int(self.hot.sum()), "stuck": int(self.stuck.sum())}
 
+    def to_params(self) -> dict[str, list[int]]:
+        """The flagged pixels as flat indices into ``(H, W, C)``, ascending (JSON-ready).
+
+        A sensor's defects are few (EMVA 1288 counts them in parts per
+        million), so a list of indices is far smaller than a map.
+        """
+        return {
+            "hot": np.flatnonzero(self.hot).tolist(),
+            "stuck": np.flatnonzero(self.stuck).tolist(),
+        }
+
+    @classmethod
+    def from_params(cls, params: Any, shape: tuple[int, int, int]) -> DefectMap:
+        """The inverse of :meth:`to_params`, validated (camera files are untrusted).
+
+        Raises :class:`InputError` naming the problem: not an object of two
+        lists, an index that is not an integer or lies outside ``shape``, an
+        index listed twice, or a pixel both hot and stuck.
+        """
+        if not isinstance(params, dict) or set(params) != {"hot", "stuck"}:
+            raise InputError("`defects` must be an object with the lists `hot` and `stuck`")
+        size = int(np.prod(shape))
+        maps = {}
+        for kind in ("hot", "stuck"):
+            idx = params[kind]
+            if not isinstance(idx, list) or not all(
+                isinstance(i, int) and not isinstance(i, bool) for i in idx
+            ):
+                raise InputError(f"`defects.{kind}` must be a list of integer pixel indices")
+            flat = np.asarray(idx, dtype=np.int64)
+            if flat.size and (flat.min() < 0 or flat.max() >= size):
+                raise InputError(
+                    f"`defects.{kind}` has an index outside the {shape[0]}x{shape[1]}x{shape[2]} "
+                    f"image (indices run from 0 to {size - 1})"
+                )
+            if np.unique(flat).size != flat.size:
+                raise InputError(f"`defects.{kind}` lists a pixel twice")
+            m = np.zeros(size, dtype=bool)
+            m[flat] = True
+            maps[kind] = m.reshape(shape)
+        if np.any(maps["hot"] & maps["stuck"]):
+            raise InputError("`defects` lists a pixel as both hot and stuck")
+        return cls(hot=maps["hot"], stuck=maps["stuck"])
+
 
 def _ring_rank(image: np.ndarray, rank: int) -> np.ndarray:
     """``rank``-th largest of the 8 neighbours of every pixel, per channel (edges mirrored).

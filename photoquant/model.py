@@ -22,7 +22,8 @@ the step existed) loads with the identity (``"None"``).
 On disk a camera is a folder::
 
     CAMERA/
-      camera.json        # "format": "photoquant.camera/2"; per step {"method", "params", "images"}
+      camera.json        # "format": "photoquant.camera/2"; per step {"method", "params", "images"};
+                         # optional "defects": {"hot": [...], "stuck": [...]} (flat (H, W, C) indices)
       sensor_lut.exr     # u, float32 channels named like the camera's channels
       vignetting.exr     # v evaluated on the pixel grid (for inspection only)
 
@@ -55,6 +56,7 @@ import numpy as np
 from photoquant._checks import check_bit_depth
 from photoquant._json import load_json, to_json_value
 from photoquant.balance import BalanceModel
+from photoquant.defects import DefectMap
 from photoquant.errors import CameraModelError, InputError
 from photoquant.flatfield import SensorLUTModel
 from photoquant.glare import GlareModel
@@ -114,6 +116,11 @@ class CameraModel:
     glare : GlareModel, optional
         Veiling glare of the optics (:mod:`photoquant.glare`); ``None``
         (default): the identity, nothing removed.
+    defects : DefectMap, optional
+        The sensor's hot and stuck pixels found at calibration
+        (:mod:`photoquant.defects`), flagged in every correction without
+        searching each scene again; ``None`` (a camera written before the
+        map was stored, or built by hand): the correction searches the scene.
     """
 
     image_shape: tuple[int, int]
@@ -127,6 +134,7 @@ class CameraModel:
     parameters: dict[str, Any] = field(default_factory=dict)
     report: dict[str, Any] = field(default_factory=dict)
     glare: GlareModel = None  # type: ignore[assignment]  # None: the identity, set below
+    defects: DefectMap | None = None
     _cache: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -165,6 +173,15 @@ class CameraModel:
         if self.glare.n_channels != n_ch:
             raise InputError(
                 f"the glare model has {self.glare.n_channels} channels, the camera {n_ch}"
+            )
+        if self.defects is not None and (
+            not isinstance(self.defects, DefectMap)
+            or self.defects.hot.shape != (height, width, n_ch)
+            or self.defects.stuck.shape != (height, width, n_ch)
+        ):
+            raise InputError(
+                f"`defects` must be a DefectMap of shape {(height, width, n_ch)}, got "
+                f"{getattr(getattr(self.defects, 'hot', None), 'shape', type(self.defects).__name__)}"
             )
         if self.sensor_lut.lut.shape != (height, width, n_ch):
             raise InputError(
@@ -287,6 +304,8 @@ class CameraModel:
             "parameters": self.parameters,
             "report": self.report,
         }
+        if self.defects is not None:
+            data["defects"] = self.defects.to_params()
         return to_json_value(data), images
 
     def to_json_dict(self) -> dict[str, Any]:
@@ -478,6 +497,12 @@ def load_camera(path: str | os.PathLike[str]) -> CameraModel:
     report = data.get("report", {})
     if not isinstance(parameters, dict) or not isinstance(report, dict):
         raise CameraModelError(f"{json_path}: `parameters` and `report` must be objects")
+    defects = None
+    if "defects" in data:
+        try:
+            defects = DefectMap.from_params(data["defects"], (shape[0], shape[1], len(channels)))
+        except InputError as exc:
+            raise CameraModelError(f"{json_path}: {exc}") from None
     try:
         return CameraModel(
             image_shape=(shape[0], shape[1]),
@@ -485,6 +510,7 @@ def load_camera(path: str | os.PathLike[str]) -> CameraModel:
             bit_depth=bit_depth,
             parameters=parameters,
             report=report,
+            defects=defects,
             **models,
         )
     except InputError as exc:

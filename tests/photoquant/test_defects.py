@@ -281,3 +281,69 @@ def test_detector_equals_the_readable_reference(n_views: int, fraction: float) -
         assert found.hot.any() and found.stuck.any()  # the comparison is not vacuous
     np.testing.assert_array_equal(found.stuck, stuck)
     np.testing.assert_array_equal(found.hot, hot & ~not_hot & ~stuck)
+
+
+def test_the_camera_carries_its_defect_map_into_every_correction(tmp_path) -> None:
+    """Calibration stores the sensor's map; save/load keeps it; correct applies it, no search.
+
+    A clean scene from the same optics (no hot pixels of its own) is corrected
+    with the map: exactly the map's pixels are flagged. Without a map (a
+    camera written before it was stored) the scene is searched and, being
+    clean, nothing is flagged.
+    """
+    import dataclasses
+
+    import photoquant as pq
+
+    cam = camera_from_preset("ccd", disturbances={"hot_pixel_fraction": 0.005})
+    views = [stack_of(cam.capture(smooth_scene(), T, 2, rng=s)) for s in (2, 3)]
+    model = pq.calibrate(views[:1], refine_exposures=False)
+    # the truth marks a pixel hot in every channel
+    hot = np.repeat((cam.truth(SHAPE).fixed_pattern.defects == DEFECT_HOT)[..., None], 3, axis=2)
+    assert hot.any() and model.defects is not None and np.array_equal(model.defects.hot, hot)
+    loaded = pq.load_camera(model.save(tmp_path / "cam"))
+    assert np.array_equal(loaded.defects.hot, model.defects.hot)
+    assert np.array_equal(loaded.defects.stuck, model.defects.stuck)
+    clean = stack_of(camera_from_preset("ccd").capture(smooth_scene(), T, 2, rng=4))
+    res = pq.correct(clean, loaded)
+    assert np.array_equal(np.isnan(res.photoquantity), hot) and np.all(res.mask[hot])
+    searched = pq.correct(clean, dataclasses.replace(loaded, defects=None))
+    assert not np.isnan(searched.photoquantity).any()
+
+
+@pytest.mark.parametrize(
+    ("params", "match"),
+    [
+        ([1, 2], "an object with the lists"),
+        ({"hot": [1]}, "an object with the lists"),
+        ({"hot": [1.5], "stuck": []}, "integer pixel indices"),
+        ({"hot": [True], "stuck": []}, "integer pixel indices"),
+        ({"hot": [-1], "stuck": []}, "outside the 2x3x1 image"),
+        ({"hot": [6], "stuck": []}, "outside the 2x3x1 image"),
+        ({"hot": [2, 2], "stuck": []}, "twice"),
+        ({"hot": [2], "stuck": [2]}, "both hot and stuck"),
+    ],
+)
+def test_a_tampered_defect_map_is_refused(params, match) -> None:  # noqa: ANN001
+    with pytest.raises(InputError, match=match):
+        DefectMap.from_params(params, (2, 3, 1))
+    good = DefectMap.from_params({"hot": [5], "stuck": [0]}, (2, 3, 1))
+    assert good.hot[1, 2, 0] and good.stuck[0, 0, 0] and good.mask.sum() == 2
+    assert good.to_params() == {"hot": [5], "stuck": [0]}
+
+
+def test_a_camera_file_with_a_tampered_defect_map_is_refused(tmp_path) -> None:
+    import json
+
+    import photoquant as pq
+    from photoquant.errors import CameraModelError
+
+    cam = camera_from_preset("ccd")
+    model = pq.calibrate([stack_of(cam.capture(smooth_scene(), T, 2, rng=1))])
+    folder = model.save(tmp_path / "cam")
+    doc = json.loads((folder / "camera.json").read_text())
+    assert doc["defects"] == {"hot": [], "stuck": []}
+    doc["defects"]["hot"] = [SHAPE[0] * SHAPE[1] * 3]
+    (folder / "camera.json").write_text(json.dumps(doc))
+    with pytest.raises(CameraModelError, match=r"camera\.json: `defects.hot` has an index outside"):
+        pq.load_camera(folder)
