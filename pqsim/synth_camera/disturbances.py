@@ -282,6 +282,25 @@ class SensorDisturbances:
             top = np.minimum(top, np.floor(white))
         return top.astype(np.int64)
 
+    @property
+    def clip_spread_px(self) -> int:
+        """How far (pixels) the processing after the converter's clip spreads a clipped value.
+
+        Demosaicing interpolates from the neighbouring photosites (OpenCV's
+        bilinear: 3×3, 1 px; edge-aware and VNG: 5×5, 2 px), JPEG codes 8×8
+        blocks of 4:2:0 macro-blocks (8 px reach a clipped value's block);
+        0 without either. The capture-set writer writes it as the manifest's
+        ``saturation_spread`` (:mod:`photoquant.saturation`): what a
+        consumer camera's user knows of its pipeline, as a raw file's
+        metadata gives its black level.
+        """
+        reach = 0
+        if self.cfa is not None:
+            reach = 1 if self.demosaic == "bilinear" else 2
+        if self.jpeg_quality is not None:
+            reach = max(reach, 8)
+        return reach
+
     # -- simulation -----------------------------------------------------------------
 
     def check_camera(self, camera: SyntheticCamera) -> None:
