@@ -94,6 +94,8 @@ _BANDING = {"row_noise_dn": 0.5, "column_noise_dn": 0.25}
 _DSNU = {"dsnu_e": 40.0}
 _DEFECTS = {"hot_pixel_fraction": 1e-3, "stuck_pixel_fraction": 1e-3}
 _BAYER = {"cfa": "RGGB", "demosaic": "bilinear"}
+# a raw converter's order: the linear photosites demosaiced, the tone curve after
+_BAYER_RAW = {**_BAYER, "demosaic_stage": "linear"}
 _JPEG = {"jpeg_quality": 90}
 
 # The optics: cos⁴ natural fall-off outside the fitted family (focal length in
@@ -137,6 +139,11 @@ DISTURBANCES: tuple[Disturbance, ...] = (
     Disturbance("dsnu", "DSNU 40 e⁻", _sensor(**_DSNU)),
     Disturbance("defects", "hot + stuck pixels 0.1 % + 0.1 %", _sensor(**_DEFECTS)),
     Disturbance("bayer", "Bayer RGGB + bilinear demosaicing", _sensor(**_BAYER)),
+    Disturbance(
+        "bayer_raw",
+        "Bayer RGGB + bilinear demosaicing of the linear photosites, response after",
+        _sensor(**_BAYER_RAW),
+    ),
     Disturbance("jpeg", "JPEG quality 90", _sensor(**_JPEG)),
     Disturbance(
         "cos4", "cos⁴ vignetting (corners −26 %) with a mechanical cut-off", {"vignetting": _COS4}
@@ -173,7 +180,7 @@ DISTURBANCES: tuple[Disturbance, ...] = (
     ),
     Disturbance(
         "all",
-        "all sensor and output disturbances together",
+        "all sensor and output disturbances together (demosaicing of the linear photosites)",
         _sensor(
             **_EXPOSURE,
             **_BLACK,
@@ -182,7 +189,7 @@ DISTURBANCES: tuple[Disturbance, ...] = (
             **_BANDING,
             **_DSNU,
             **_DEFECTS,
-            **_BAYER,
+            **_BAYER_RAW,
             **_JPEG,
         ),
     ),
