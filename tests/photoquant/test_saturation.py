@@ -18,11 +18,13 @@ from photoquant.stack import detect_saturation_levels
 
 def test_spread_marks_the_square_around_a_clip_in_every_channel():
     frames = np.full((2, 3, 9, 11, 3), 40, np.uint8)
-    frames[1, 2, 4, 6, 1] = 200  # one repeat of one exposure clips in one channel
+    frames[1, 2, 4, 6, 1] = 200  # one repeat of one exposure clips in one channel ...
+    frames[0, 2, 5, 6, 2] = 195  # ... and, beside it, another channel of another repeat
+    frames[0, 1, 1, 1, 0] = 250  # a lone clipped pixel: no region, no spread
     level = np.array([180, 200, 190])
     out = spread_saturation(frames, level, 2)
     expect = frames.copy()
-    expect[:, 2, 2:7, 4:9, :] = level.astype(np.uint8)  # the 5×5 square, all repeats/channels
+    expect[:, 2, 2:8, 4:9, :] = level.astype(np.uint8)  # 5×5 squares, all repeats/channels
     np.testing.assert_array_equal(out, expect)
     assert spread_saturation(frames, level, 0) is frames
     assert frames[1, 2, 4, 6, 1] == 200  # the input is not modified
