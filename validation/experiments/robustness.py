@@ -2,8 +2,13 @@
 
 The synthetic camera of the other experiments follows eq. 1 of [PQ]
 exactly; real cameras do not (issue 12). Here each preset's camera is
-simulated with one disturbance of :mod:`pqsim.synth_camera.disturbances` at
-a realistic level, then with all of them together, and calibrated and
+simulated with one disturbance at a realistic level — of the sensor and
+the camera's output (:mod:`pqsim.synth_camera.disturbances`), of the optics
+(cos⁴ vignetting with a cut-off, per-channel fall-off, veiling glare with
+and without a glare capture), of the response (EMoR-drawn, film-like, a
+knee) or of the capture (a flat field's fall-off) — then with the issue's
+set, with its glare, and with all sensor and output disturbances together,
+and calibrated and
 corrected by the default pipeline (the configuration's calibrate arguments,
 exactly as the clean camera); every recovered quantity is compared with the
 truth (:func:`validation.compare.compare_with_truth`): ``g`` rms (ln, worst
@@ -16,9 +21,14 @@ Every variant uses the clean camera's capture seed: the disturbances draw
 from their own streams, so the clean noise is the same draw in every row and
 a row's difference from the clean one is the disturbance's alone.
 
-A disturbance is one entry of :data:`DISTURBANCES`: a key, a label and the
+A disturbance is one entry of :data:`DISTURBANCES`: a key, a label, the
 preset overrides (:func:`pqsim.synth_camera.presets.camera_from_preset`
-keyword arguments, the dotted preset paths of a sweep) that switch it on.
+keyword arguments, the dotted preset paths of a sweep) that switch it on,
+and capture arguments (:func:`pqsim.capture_set.write_capture_set`). A row
+on another test scene (the glare rows: the lamp scene) is compared with the
+clean camera on that scene, a row of its own. Each row also reports the
+scene's error more than 2 px from a sharp edge, where demosaicing and JPEG
+do not blur the analytic scene's pixel-sharp edges.
 Not in the quick job (its baseline is unchanged): ``--full`` runs it, and
 ``--experiments robustness`` on any configuration.
 
