@@ -39,6 +39,7 @@ fewer than two views ``v = 1``; without a white chart ``a = 1``.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -452,6 +453,10 @@ def calibrate(
         except CalibrationError as exc:
             notes.append(f"glare capture's exposures not refined, nominal times kept: {exc}")
         else:
+            if refs is not None and shutter.lag_s > 3.0 * shutter.lag_std_s:
+                # a lag the views determine (3 σ; a clean shutter's noise would move
+                # a 15 µs exposure by its own few µs)
+                glare_ref = _fill_by_shutter(glare_ref, shutter.lag_s)
             glare_capture = glare_ref.apply(glare_capture)
             exposures["glare"] = glare_ref.as_dict()
     timings["response"] = time.perf_counter() - t0
@@ -562,6 +567,7 @@ def calibrate(
             "correspondence_source": source,
             **vig_fit.report,
         }
+        notes.extend(vig_fit.report.get("warnings", []))  # photoquant.vignetting.trust
     vig = vig_fit.model
     timings["vignetting"] = time.perf_counter() - t0
 
@@ -632,6 +638,28 @@ def calibrate(
             correspondence_source=source,
         ),
     )
+
+
+def _fill_by_shutter(ref: ExposureRefinement, lag_s: float) -> ExposureRefinement:
+    """The exposures the data left undetermined, from the views' shutter: ``c·(t + λ)``.
+
+    A glare capture's short exposures see only the small source, too few
+    values to refine them (:func:`~photoquant.exposure.refine_exposure_times`
+    keeps their nominal times), yet they are the ones that measure the
+    source's core, and a shutter lag lengthens them most (0.1 ms on a 15 µs
+    exposure: 7.7×). The views' affine shutter
+    (:func:`~photoquant.exposure.fit_affine_shutter`, its lag ``λ``) is the
+    same camera's: an undetermined exposure becomes ``c·(t_nominal + λ)``,
+    ``c`` the geometric mean of ``t_refined / (t_nominal + λ)`` over the
+    refined ones (their gauge). Unchanged when every exposure was refined,
+    none was, or the lag is not positive.
+    """
+    if ref.refined.all() or not ref.refined.any() or not lag_s > 0:
+        return ref
+    lagged = ref.nominal_s + lag_s
+    gauge = float(np.exp(np.mean(np.log(ref.exposure_s[ref.refined] / lagged[ref.refined]))))
+    filled = np.where(ref.refined, ref.exposure_s, gauge * lagged)
+    return dataclasses.replace(ref, exposure_s=filled)
 
 
 def _refine_against(stack: ExposureStack, response: ResponseModel, seed: int) -> ExposureRefinement:

@@ -439,6 +439,9 @@ def _write_capture_contents(
         manifest["black_level"] = dist.per_channel(
             dist.black_level_dn, "black_level_dn", camera.n_channels
         ).tolist()
+    if dist is not None and dist.clip_spread_px:
+        # demosaicing / JPEG after the clip: the camera's pipeline, as its user knows it
+        manifest["saturation_spread"] = dist.clip_spread_px
     manifest["truth"] = "truth/truth.json"
     manifest["generator"] = dict(generator)
     bar.close()

@@ -33,7 +33,7 @@ __all__ = ["main", "build_parser"]
 #: Default resolutions (H, W) per renderer.
 _DEFAULT_RESOLUTION = {"mitsuba": (768, 1024), "analytic": (240, 320)}
 #: Options that only the analytic renderer has (dest → flag).
-_ANALYTIC_ONLY = {"pan_px": "--pan-px", "scene": "--scene"}
+_ANALYTIC_ONLY = {"pan_px": "--pan-px", "scene": "--scene", "glare": "--glare"}
 #: Options that only the Mitsuba renderer has (dest → flag).
 _MITSUBA_ONLY = {
     "sensitivities": "--sensitivities",
@@ -145,6 +145,7 @@ def _cmd_capture(args: argparse.Namespace) -> int:
             frame_format=args.format,
             overwrite=args.overwrite,
             workers=args.workers,
+            glare=args.glare,
         )
     else:
         manifest = _capture_rendered(args, camera, resolution, exposures)
@@ -266,7 +267,10 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument("--views", type=int, default=3, help="V calibration views (3)")
     cap.add_argument("--pan-px", type=int, default=None, help="analytic: view shift in pixels")
     cap.add_argument(
-        "--scene", default=None, choices=["hdr", "ramp"], help="analytic: test scene (hdr)"
+        "--scene",
+        default=None,
+        choices=["hdr", "lamp", "ramp"],
+        help="analytic: test scene (hdr; lamp: with a lamp 30x the white chart)",
     )
     cap.add_argument(
         "--sensitivities",
@@ -326,6 +330,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=0.0,
         help="analytic: radial fall-off of the irradiance scene's illumination, corners 1 - F (0)",
+    )
+    cap.add_argument(
+        "--glare",
+        action="store_true",
+        help="analytic: also write a glare capture (a small bright source on black, manifest "
+        "key 'glare') from which photoquant calibrate fits the veiling glare",
     )
     cap.add_argument("--bit-depth", type=int, default=None, help="override the preset's bit depth")
     cap.add_argument("--format", default="png", choices=["png", "tiff"], help="frame file format")

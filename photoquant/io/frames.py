@@ -414,6 +414,16 @@ def load_stack(
     if black_level is None and raw is not None:
         black_level = raw[0]
     try:
+        if manifest.saturation_spread:
+            # processed after the clip: its level from a spread pile, its spread read as clipped
+            from photoquant.saturation import (
+                detect_saturation_levels_processed,
+                spread_saturation,
+            )
+
+            if saturation is None:
+                saturation = detect_saturation_levels_processed(stack, manifest.bit_depth)
+            stack = spread_saturation(stack, saturation, manifest.saturation_spread)
         return ExposureStack(
             frames=stack,
             exposure_s=np.asarray(times, dtype=np.float64),

@@ -38,6 +38,10 @@ Key                           Required  Meaning
                                         black level is their mean per channel
 ``exposure_basis``            no        ``"auto"`` (default), ``"time"`` or
                                         ``"exposure value"`` (see below)
+``saturation_spread``         no        pixels over which the camera's processing
+                                        after the clip (demosaicing, JPEG) spreads a
+                                        clipped value, 0 to 64; 0 (default): none
+                                        (:mod:`photoquant.saturation`)
 ============================  ========  =================================================
 
 A frame set is ``{"frames": [frame, ...]}`` with at least one frame; a frame is
@@ -112,6 +116,7 @@ _DEFAULT_CHANNELS = ("R", "G", "B")
 _KNOWN_KEYS = frozenset(
     {
         "format",
+        "saturation_spread",
         "bit_depth",
         "channels",
         "views",
@@ -207,6 +212,9 @@ class CaptureManifest:
         A flat-field capture (a uniformly lit target through the optics), if given.
     glare : FrameSetRef or None
         A glare capture (a small bright source on a dark background), if given.
+    saturation_spread : int
+        Reach (pixels) of the camera's processing after the clip; every value
+        that near a clipped one is read as clipped (:mod:`photoquant.saturation`).
     """
 
     path: Path
@@ -225,6 +233,7 @@ class CaptureManifest:
     exposure_basis: str = "auto"
     flatfield: FrameSetRef | None = None
     glare: FrameSetRef | None = None
+    saturation_spread: int = 0
 
 
 # --------------------------------------------------------------------------- parsing
@@ -288,6 +297,11 @@ class _Parser:
             raise self.error(
                 f"`exposure_basis` must be one of {list(EXPOSURE_BASIS_CHOICES)}, got {basis!r}"
             )
+        spread = data.get("saturation_spread", 0)
+        if not _is_int(spread) or not 0 <= spread <= 64:
+            raise self.error(
+                f"`saturation_spread` must be an integer from 0 to 64 (pixels), got {spread!r}"
+            )
         extra = {k: v for k, v in data.items() if k not in _KNOWN_KEYS}
         return CaptureManifest(
             path=self.manifest_path,
@@ -306,6 +320,7 @@ class _Parser:
             exposure_basis=basis,
             flatfield=flatfield,
             glare=glare,
+            saturation_spread=spread,
         )
 
     def check_format(self, data: dict[str, Any]) -> None:

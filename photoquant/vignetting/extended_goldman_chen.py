@@ -63,6 +63,7 @@ from photoquant.vignetting.base import (
     check_view_gains_option,
     wants_view_gains,
 )
+from photoquant.vignetting.trust import residual_warnings
 
 __all__ = [
     "VIGNETTING_PARAMETER_NAMES",
@@ -1326,6 +1327,9 @@ def characterise_vignetting_ExtendedGoldmanChen(
         "message": fit.message,
         **view_gain_report(fit.view_gains, fit.view_gain_std),
     }
+    warnings = residual_warnings(fit.residual_rms, fit.map_uncertainty)  # trust beyond the solver's
+    if warnings:
+        report["warnings"] = warnings
     return StepFit(ExtendedGoldmanChenVignetting("Extended Goldman-Chen", fit.params), report)
 
 

@@ -43,6 +43,7 @@ __all__ = [
     "DEMOSAIC_METHODS",
     "cfa_channels",
     "demosaic",
+    "demosaic_linear",
     "jpeg_roundtrip",
     "mosaic",
 ]
@@ -120,6 +121,35 @@ def demosaic(raw: np.ndarray, pattern: str, method: str = "bilinear") -> np.ndar
         raise InputError(f"a Bayer mosaic must be at least 4×4 pixels, got {raw.shape}")
     code = getattr(cv2, f"COLOR_Bayer{p}2RGB{DEMOSAIC_METHODS[m]}")
     return np.asarray(cv2.cvtColor(np.ascontiguousarray(raw), code))
+
+
+def demosaic_linear(
+    signal: np.ndarray, pattern: str, method: str = "bilinear", top: float = 1.0
+) -> np.ndarray:
+    """Mosaic and demosaic a linear photosite signal ``(H, W, 3)``, as a camera does its raw data.
+
+    A camera demosaics its linear raw values and applies its tone curve
+    after (the order of a raw converter, e.g. dcraw/LibRaw): each photosite
+    clips at ``top`` (its full well), is coded on 16 bits (steps of
+    ``top / 65535``, far below any output quantisation), keeps its own
+    channel, and OpenCV interpolates the others (``"bilinear"`` or ``"ea"``;
+    ``"vng"`` takes 8-bit data only).
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float32
+        The demosaiced signal in the unit of ``signal``, in ``[0, top]``.
+    """
+    m = check_demosaic(method)
+    if m == "vng":
+        raise InputError(
+            "the 'vng' demosaicer takes 8-bit data only; demosaic linear data "
+            "with 'bilinear' or 'ea'"
+        )
+    scale = 65535.0 / float(top)
+    code = np.rint(np.clip(signal, 0.0, top) * scale).astype(np.uint16)
+    out = demosaic(mosaic(code, pattern), pattern, m)
+    return (out.astype(np.float32) / np.float32(scale)).astype(np.float32)
 
 
 def jpeg_roundtrip(frame: np.ndarray, quality: int) -> np.ndarray:

@@ -154,6 +154,17 @@ class SensorDisturbances:
         its own channel, then :attr:`demosaic` interpolates the others.
     demosaic : {"bilinear", "ea", "vng"}
         OpenCV demosaicer (:func:`pqsim.synth_camera.cfa.demosaic`).
+    demosaic_stage : {"output", "linear"}
+        Where the mosaic and the demosaicing act. ``"output"`` (default): on
+        the output values, after the response and the balance (a sensor whose
+        non-linearity is in its photosites). ``"linear"``: on the linear
+        photosite signal, each photosite clipped at its full well, before
+        the response (a camera that demosaics its raw data and applies its
+        tone curve after, as raw converters do;
+        :func:`pqsim.synth_camera.cfa.demosaic_linear`; not with ``"vng"``).
+        With a linear response the two agree but for rounding; with a
+        non-linear one, ``"output"`` averages values of the curve at an
+        edge, which no photoquantity explains.
     jpeg_quality : int, optional
         JPEG-compress every frame at this quality (1–100, 8-bit cameras) and
         decode it back (:func:`pqsim.synth_camera.cfa.jpeg_roundtrip`).
@@ -175,6 +186,7 @@ class SensorDisturbances:
     cfa: str | None = None
     demosaic: str = "bilinear"
     jpeg_quality: int | None = None
+    demosaic_stage: str = "output"
 
     def __post_init__(self) -> None:
         set_ = functools.partial(object.__setattr__, self)
@@ -208,6 +220,12 @@ class SensorDisturbances:
             raise InputError("`hot_pixel_fraction` + `stuck_pixel_fraction` must be at most 0.5")
         set_("cfa", None if self.cfa is None else _cfa.check_pattern(self.cfa))
         set_("demosaic", _cfa.check_demosaic(self.demosaic))
+        if self.demosaic_stage not in ("output", "linear"):
+            raise InputError(
+                f"`demosaic_stage` must be 'output' or 'linear', got {self.demosaic_stage!r}"
+            )
+        if self.demosaic_stage == "linear" and self.demosaic == "vng":
+            raise InputError("`demosaic_stage` 'linear' needs the 'bilinear' or 'ea' demosaicer")
         if self.jpeg_quality is not None:
             q = self.jpeg_quality
             if isinstance(q, bool) or not isinstance(q, int | np.integer) or not 1 <= q <= 100:
@@ -282,6 +300,25 @@ class SensorDisturbances:
             top = np.minimum(top, np.floor(white))
         return top.astype(np.int64)
 
+    @property
+    def clip_spread_px(self) -> int:
+        """How far (pixels) the processing after the converter's clip spreads a clipped value.
+
+        Demosaicing interpolates from the neighbouring photosites (OpenCV's
+        bilinear: 3×3, 1 px; edge-aware and VNG: 5×5, 2 px), JPEG codes 8×8
+        blocks of 4:2:0 macro-blocks (8 px reach a clipped value's block);
+        0 without either. The capture-set writer writes it as the manifest's
+        ``saturation_spread`` (:mod:`photoquant.saturation`): what a
+        consumer camera's user knows of its pipeline, as a raw file's
+        metadata gives its black level.
+        """
+        reach = 0
+        if self.cfa is not None:
+            reach = 1 if self.demosaic == "bilinear" else 2
+        if self.jpeg_quality is not None:
+            reach = max(reach, 8)
+        return reach
+
     # -- simulation -----------------------------------------------------------------
 
     def check_camera(self, camera: SyntheticCamera) -> None:
@@ -325,6 +362,9 @@ class SensorDisturbances:
             e += pattern.offset_e[..., None].astype(e.dtype, copy=False)
         np.maximum(e, 0, out=e)
         e /= f32(noise.full_well_e)
+        linear_cfa = self.cfa is not None and self.demosaic_stage == "linear"
+        if linear_cfa:  # the raw converter's order: demosaic, then the tone curve
+            e = _cfa.demosaic_linear(e, str(self.cfa), self.demosaic)
         h, w, c = e.shape
         black = self.per_channel(self.black_level_dn, "black_level_dn", c)
         # the raw value, as the ADC codes it: pedestal, its noise and banding are analog
@@ -355,7 +395,7 @@ class SensorDisturbances:
         np.rint(dn, out=dn)
         np.clip(dn, 0, top, out=dn)
         frame = dn.astype(camera.dtype)
-        if self.cfa is not None:  # each photosite keeps its own channel, then demosaicing
+        if self.cfa is not None and not linear_cfa:  # each photosite keeps its channel, then
             frame = _cfa.demosaic(_cfa.mosaic(frame, self.cfa), self.cfa, self.demosaic)
         if self.jpeg_quality is not None:
             frame = _cfa.jpeg_roundtrip(frame, self.jpeg_quality)

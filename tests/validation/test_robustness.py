@@ -14,17 +14,23 @@ def test_every_row_switches_something_on_for_both_presets() -> None:
 
     keys = [d.key for d in DISTURBANCES]
     assert len(set(keys)) == len(keys) and keys[-1] == "all"
-    assert {"issue", "issue_refined"} <= set(keys)
+    assert {"issue", "issue_glare", "glare", "glare_capture", "cos4", "emor"} <= set(keys)
     for preset in ("ccd", "cmos"):
         clean = camera_from_preset(preset)
+        assert clean.disturbances is None and clean.glare is None
         for dist in DISTURBANCES:
+            assert dist.overrides or dist.capture  # a disturbance of the camera or the capture
             cam = camera_from_preset(preset, **dist.overrides)
-            assert clean.disturbances is None
-            assert cam.disturbances is not None and cam.disturbances.active
-    # "all" holds every other row's fields
+            if "disturbances" in dist.overrides:
+                assert cam.disturbances is not None and cam.disturbances.active
+            if "glare" in dist.overrides:
+                assert cam.glare is not None
+            if dist.capture.get("glare"):
+                assert dist.scene == "lamp"  # the glare target: the lamp scene
+    # "all" holds every other row's sensor and output fields
     every = DISTURBANCES[-1].overrides["disturbances"]
     for dist in DISTURBANCES[:-1]:
-        for key, value in dist.overrides["disturbances"].items():
+        for key, value in dist.overrides.get("disturbances", {}).items():
             assert every[key] == value
 
 
