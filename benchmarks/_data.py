@@ -92,6 +92,7 @@ def camera_model(data: HDRStack, saturation: np.ndarray, *, valid_min: float = 2
     the preset), identity balance; the pipeline's merge (hat-quantisation).
     """
     from photoquant.balance import BalanceModel
+    from photoquant.defects import DefectMap
     from photoquant.flatfield import SensorLUTModel
     from photoquant.merge import MergeModel
     from photoquant.model import CameraModel
@@ -101,6 +102,7 @@ def camera_model(data: HDRStack, saturation: np.ndarray, *, valid_min: float = 2
     levels, g = true_log_inverse_response(data)
     n_ch = g.shape[0]
     truth = data.camera.truth(data.frames.shape[2:4])
+    shape = (*data.frames.shape[2:4], n_ch)
     response = ResponseModel(
         "Debevec 1997", levels, g, saturation, valid_min=np.full(n_ch, valid_min)
     )
@@ -115,6 +117,8 @@ def camera_model(data: HDRStack, saturation: np.ndarray, *, valid_min: float = 2
         vignetting=ExtendedGoldmanChenVignetting(
             "Extended Goldman-Chen", np.asarray(data.camera.vignetting_params, dtype=float)
         ),
+        # the preset's sensor has no hot or stuck pixel: the map a calibration stores
+        defects=DefectMap(hot=np.zeros(shape, dtype=bool), stuck=np.zeros(shape, dtype=bool)),
     )
 
 
