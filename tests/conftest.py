@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,21 @@ from hypothesis import settings
 # deadline) still apply on top of the profile.
 settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """SIGINT delivered as from a terminal, however the suite was started.
+
+    A run started in the background of a non-interactive shell (``cmd &``, as
+    a CI script may do) has SIGINT ignored; Python leaves it ignored and every
+    child process inherits that, so the Ctrl-C tests of the write path
+    (``tests/test_no_data_loss.py``, ``test_atomic.py``) would fail for a
+    reason that is not theirs (seen in a dry run of ``.ci/run`` under nohup).
+    """
+    del config
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
 
 REPO = Path(__file__).resolve().parents[1]
 # ``../shared`` beside the checkout; PHOTOQUANT_SHARED points elsewhere (e.g. from a worktree)

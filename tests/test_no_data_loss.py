@@ -295,8 +295,13 @@ def _start(tmp_path: Path, mode: str, stage: str, match: str, seconds: float, *a
 
 
 def _finish(proc: subprocess.Popen) -> tuple[int, str]:
-    """Wait for the process; its exit status and standard error."""
-    _, err = proc.communicate(timeout=30)
+    """Wait for the process; its exit status and standard error (killed if it hangs)."""
+    try:
+        _, err = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        raise
     return proc.returncode, err
 
 
@@ -445,8 +450,13 @@ def test_validate_report_refuses_to_replace_its_workdir(tmp_path, capsys):
 
 
 _LOOPING_WRITER = r"""
+import signal
 import sys
 from pathlib import Path
+
+# a user's terminal delivers SIGINT; a suite started in the background (`cmd &`) has it
+# ignored, which a child inherits and Python then leaves ignored: restore the default
+signal.signal(signal.SIGINT, signal.default_int_handler)
 from photoquant.io import atomic
 from photoquant._signals import Terminated, handle_signals
 
