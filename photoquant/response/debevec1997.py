@@ -468,7 +468,6 @@ def _normal_equations(
 
 
 def _solve_channel(
-    values: np.ndarray,
     valid: np.ndarray,
     weights: np.ndarray,
     log_t: np.ndarray,
@@ -478,8 +477,7 @@ def _solve_channel(
     smoothness: float,
     gauge: int,
 ) -> tuple[np.ndarray, float, bool, int, np.ndarray]:
-    """Solve eq. 7 for one channel on sampled pixels ``values (K, P)``."""
-    del values
+    """Solve eq. 7 for one channel on ``P`` sampled pixels (arrays ``(K, P)``)."""
     n_g = top + 1
     eq = _normal_equations(valid, weights, log_t, knot_pos, top, smooth_w, smoothness, gauge)
     schur, r_red, d = eq["schur"], eq["r_red"], eq["d"]
@@ -690,7 +688,6 @@ def camera_response_Debevec1997(
         # a multi-threaded BLAS on a loaded machine can be 100× slower
         with _blas_controller().limit(limits=1, user_api="blas"):
             g, rms[ch], constrained[ch], n_eq[ch], support = _solve_channel(
-                vals[:, idx],
                 valid_idx,
                 np.where(valid_idx, weights, 0.0),
                 log_t,
