@@ -151,20 +151,13 @@ def oracle(data: JitteredSet, *, scales: bool) -> Iterator[None]:
         out, info = original(refs)
         if len(out) != len(actual):  # not the views' joint refinement
             return out, info
-        xs, xa = [], []
-        for r, t in zip(out, actual, strict=True):
-            s = r.refined
-            xs.append(np.log(r.exposure_s[s]) - np.log(r.exposure_s[s]).mean())
-            xa.append(np.log(t[s]) - np.log(t[s]).mean())
-        a, b = np.concatenate(xs), np.concatenate(xa)
-        slope = float(a @ b / (b @ b))
-        new = []
-        for r, t in zip(out, actual, strict=True):
-            x, s = np.log(r.exposure_s), r.refined
-            x = np.where(s, x[s].mean() + (x - x[s].mean()) / slope, x)
-            if scales:
+        # the pooled slope of the refined ln t set on the true times (not the nominal ones)
+        new = exposure._reset_common_slope(out, actual)
+        if scales:
+            for i, (r, t) in enumerate(zip(new, actual, strict=True)):
+                x, s = np.log(r.exposure_s), r.refined
                 x = np.where(s, x - x[s].mean() + np.log(t[s]).mean(), x)
-            new.append(dataclasses.replace(r, exposure_s=np.exp(x)))
+                new[i] = dataclasses.replace(r, exposure_s=np.exp(x))
         return new, info
 
     exposure.fit_affine_shutter = wrapped
