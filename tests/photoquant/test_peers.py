@@ -99,6 +99,17 @@ def test_peer_response_recovers_a_known_gamma(bracket, name):
         assert _g_rms(model) < bound, fit.report
 
 
+@pytest.mark.parametrize("name", list(PEERS))
+def test_peer_response_is_bit_identical_for_a_seed(bracket, name):
+    """The same stack and seed give the same curve: the leaderboard's determinism rests on it."""
+    module, _ = PEERS[name]
+    _skip_unless(module)
+    stack, _ = bracket
+    a, b = (pq.fit_response(stack, _spec(name), rng=np.random.default_rng(5)).model for _ in "ab")
+    np.testing.assert_array_equal(a.log_inverse_response, b.log_inverse_response)
+    np.testing.assert_array_equal(a.valid_min, b.valid_min)
+
+
 def test_opencv_debevec_calibrates_a_one_row_stack():
     """A ``1 × n`` stack (what exposure refinement's joint fit hands the response step,
     :func:`photoquant.exposure.combine_stacks`) is calibrated as the 2-D bracket is.

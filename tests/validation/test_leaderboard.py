@@ -240,9 +240,16 @@ def _without_timings(value):
 
 
 def test_deterministic_for_a_seed(registered, tmp_path):
+    """The board's own seeding: capture, reference and each method's sampling stream.
+
+    Three methods stand for the rest (the paper's, a user's registered one and a
+    peer that samples with the stream it is given); each method's determinism on
+    its own is tested with the method (``test_response_methods``, ``test_peers``).
+    """
     runs = [
         run_leaderboard(
             "response",
+            methods=["Debevec 1997", BAD, "Hugin EMoR"],
             presets=["ccd"],
             config=TINY,
             seed=5,
@@ -318,8 +325,8 @@ def test_real_brackets_add_a_crossval_column(registered, tmp_path):
     assert [s.name for s in find_real_sets(tmp_path / "real", tmp_path / "m")] == ["bracket"]
 
     lb = run_leaderboard(
-        "response", presets=["ccd"], config=TINY, repeats=1, real=True,
-        real_dir=tmp_path / "real", progress=_quiet,
+        "response", methods=["Debevec 1997", BAD, FAILING], presets=["ccd"], config=TINY,
+        repeats=1, real=True, real_dir=tmp_path / "real", progress=_quiet,
     )  # fmt: skip
     assert lb.real_sets == ["bracket"]
     b = lb.board("response")
@@ -362,13 +369,14 @@ def test_command_json_and_report(command, tmp_path):
     report = tmp_path / "report"
     status, out, err = command(
         "leaderboard", "--quick", "--step", "response", "--presets", "ccd", "--json", "-q",
-        "-o", str(report),
+        "-o", str(report), "--methods", "Debevec 1997", "Robertson 2003",
     )  # fmt: skip
     assert status == 0, err
     data = json.loads(out)
     assert data["config"]["shape"] == [120, 160] and data["presets"] == ["ccd"]
     entries = data["boards"][0]["entries"]
-    assert {e["method"] for e in entries} == _registered("response")
+    # (every registered method on its board: test_every_registered_method_is_on_its_board)
+    assert {e["method"] for e in entries} == {"Debevec 1997", "Robertson 2003"}
     assert (report / "leaderboard.md").is_file() and (report / "response.png").is_file()
 
     line = _one_error_line(*command("leaderboard", "--quick", "-q", "-o", str(report))[::2])
