@@ -341,6 +341,17 @@ def _cmd_methods(args: argparse.Namespace) -> int:
     return 0
 
 
+def _crossval_options(items: list[str] | None) -> dict[str, Any]:
+    """``--option NAME=VALUE`` of ``crossval``: options of the response method."""
+    options: dict[str, Any] = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise InputError(f"--option takes NAME=VALUE, got {item!r}")
+        options[name] = _parse_value(value)
+    return options
+
+
 def _cmd_crossval(args: argparse.Namespace) -> int:
     from photoquant.crossval import crossval_manifest
 
@@ -351,6 +362,7 @@ def _cmd_crossval(args: argparse.Namespace) -> int:
         allow_outside=args.allow_outside,
         seed=args.seed,
         profile=args.profile,
+        options=_crossval_options(args.option),
     )
     print(json.dumps(result.to_json(), indent=1) if args.json else result.format_table())
     return 0
@@ -492,6 +504,13 @@ def build_parser() -> argparse.ArgumentParser:
         choices=sorted(PROFILES),
         default=DEFAULT_PROFILE,
         help="the calibration profile the response method runs in (default photoquant)",
+    )
+    xval.add_argument(
+        "--option",
+        action="append",
+        metavar="NAME=VALUE",
+        help="an option of the response method (repeatable; VALUE is JSON or text), "
+        "e.g. --option wide_steps=none",
     )
     xval.add_argument(
         "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"

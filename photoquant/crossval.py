@@ -56,7 +56,7 @@ References
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -315,14 +315,19 @@ def _is_peer(method: str) -> bool:
 
 
 def _fit_photoquant(
-    stack: ExposureStack, method: str, seed: int, profile: str = "photoquant"
+    stack: ExposureStack,
+    method: str,
+    seed: int,
+    profile: str = "photoquant",
+    options: Mapping[str, Any] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any]:
     """``photoquant calibrate``'s pipeline on one view (the profile's, with ``method`` as the
-    response): response, then the camera's own merge."""
+    response, with ``options`` over its defaults): response, then the camera's own merge."""
     from photoquant.calibration import calibrate
     from photoquant.merge import MergeModel
 
-    model = calibrate([stack], profile=profile, response=method, seed=seed)
+    spec: Any = method if not options else (method, dict(options))
+    model = calibrate([stack], profile=profile, response=spec, seed=seed)
     merged = model.merge_stack(stack)
     log_e = merged.log_photoquantity
     if np.any(merged.mask):
@@ -341,6 +346,7 @@ def crossval_stack(
     roi: Sequence[int] | None = None,
     seed: int = 0,
     profile: str = "photoquant",
+    options: Mapping[str, Any] | None = None,
 ) -> CrossvalResult:
     """Leave-one-exposure-out cross-validation of ``method`` on a single-view bracket.
 
@@ -359,6 +365,9 @@ def crossval_stack(
         Seed of photoquant's sample selection (results are deterministic).
     profile : {"photoquant", "paper"}
         The calibration profile the response method runs in (not for peers).
+    options : mapping, optional
+        Options of the response method over its defaults (e.g.
+        ``{"wide_steps": "none"}``), checked by the method; not for peers.
 
     Returns
     -------
@@ -378,6 +387,8 @@ def crossval_stack(
             f"cross-validation needs at least 3 exposures (an inner one to hold out), got {k_count}"
         )
     peer = None
+    if options and _is_peer(method):
+        raise InputError(f"options are for photoquant's response methods, not the peer {method!r}")
     if _is_peer(method):
         from photoquant.peers import get_peer
 
@@ -417,7 +428,7 @@ def crossval_stack(
             channels=stack.channels,
         )
         if peer is None:
-            levels, g, sat, log_e, flagged = _fit_photoquant(sub, name, seed, profile)
+            levels, g, sat, log_e, flagged = _fit_photoquant(sub, name, seed, profile, options)
         else:
             fit = peer.fit(sub)
             levels, g, sat, log_e = (
@@ -476,6 +487,7 @@ def crossval_manifest(
     allow_outside: bool = False,
     seed: int = 0,
     profile: str = "photoquant",
+    options: Mapping[str, Any] | None = None,
 ) -> CrossvalResult:
     """Cross-validate on ``views[0]`` of a capture manifest (a path or a ``CaptureManifest``).
 
@@ -494,4 +506,4 @@ def crossval_manifest(
             stack.image_shape,
             where=f"manifest {manifest.path}: crossval_roi",
         )
-    return crossval_stack(stack, method, roi=roi, seed=seed, profile=profile)
+    return crossval_stack(stack, method, roi=roi, seed=seed, profile=profile, options=options)

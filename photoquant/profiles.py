@@ -66,6 +66,7 @@ _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
             "n_samples": 500,
             "toe": "solved",
             "censoring": "ignored",
+            "wide_steps": "none",
         },
     ),
     # eq. 6: the hat over every value the camera gives
@@ -147,6 +148,14 @@ DEVIATIONS: tuple[Deviation, ...] = (
         "at a level whose partner exposure clips for part of the pixels, as many partners are "
         "dropped from the other tail (Powell 1986), so the pairs left are not the clipped "
         "distribution's biased tail",
+    ),
+    Deviation(
+        "wide steps about the EMoR mean",
+        "response",
+        {"wide_steps": "template"},
+        "on brackets wider than 2.2x a step, the smoothness grows as the step's 4th power about "
+        "the EMoR mean response, so the shape the data leave open follows a camera's, not a "
+        "straight g (Grossberg & Nayar 2004)",
     ),
     Deviation(
         "quantisation-aware weights",

@@ -112,6 +112,13 @@ from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import StepFit
 from photoquant.response.censoring import CENSORING_MODES, trim_censored_partners
 from photoquant.response.model import ResponseModel
+from photoquant.response.wide_steps import (
+    WIDE_STEP_MODES,
+    emor_mean_log_inverse,
+    step_factor,
+    template_penalty,
+    typical_step,
+)
 from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
 
@@ -218,6 +225,10 @@ class ResponseRecovery:
         values no weight.
     smoothness : float
         The β used.
+    smoothness_factor : ndarray, shape (C,)
+        ``F`` of each channel: the smoothness across the EMoR mean response
+        is ``F β`` (``wide_steps="template"``, :mod:`photoquant.response.wide_steps`;
+        1 on brackets of steps up to ``ρ₀`` or with ``wide_steps="none"``).
     """
 
     levels: np.ndarray
@@ -229,6 +240,7 @@ class ResponseRecovery:
     monotone_constrained: np.ndarray
     smoothness: float
     valid_min: np.ndarray
+    smoothness_factor: np.ndarray | None = None
 
 
 def response_levels(bit_depth: int, max_levels: int = 1024) -> np.ndarray:
@@ -476,11 +488,15 @@ def _solve_channel(
     smooth_w: np.ndarray,
     smoothness: float,
     gauge: int,
+    prior: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, bool, int, np.ndarray]:
-    """Solve eq. 7 for one channel on ``P`` sampled pixels (arrays ``(K, P)``)."""
+    """Solve eq. 7 for one channel on ``P`` sampled pixels (arrays ``(K, P)``); ``prior``
+    (``(top + 1, top + 1)``), when given, is a further quadratic penalty on ``g``."""
     n_g = top + 1
     eq = _normal_equations(valid, weights, log_t, knot_pos, top, smooth_w, smoothness, gauge)
     schur, r_red, d = eq["schur"], eq["r_red"], eq["d"]
+    if prior is not None:
+        schur = schur + prior
     valid = eq["valid"]
     n_data = int(np.count_nonzero(valid))
     schur = 0.5 * (schur + schur.T)
@@ -540,6 +556,7 @@ def camera_response_Debevec1997(
     toe: str = "continued",
     max_pixels: int | None = DEFAULT_MAX_PIXELS,
     censoring: str = "trimmed",
+    wide_steps: str = "template",
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -597,6 +614,12 @@ def camera_response_Debevec1997(
         [Powell1986]_), so that a level whose partners mostly saturate is not
         tied to the few that did not; ``"ignored"``: every usable value is
         used (the paper's).
+    wide_steps : {"template", "none"}
+        ``"template"`` (default): on brackets whose typical step is wider
+        than ``ρ₀`` (ratio 2.2), the smoothness across the EMoR mean response
+        grows as ``(ρ/ρ₀)⁴`` (:mod:`photoquant.response.wide_steps`), so that
+        the shape the data leave open follows a camera's, not a straight
+        ``g``; ``"none"``: β as given (the paper's).
 
     Returns
     -------
@@ -615,6 +638,8 @@ def camera_response_Debevec1997(
         raise InputError(f"`toe` must be one of {list(TOE_MODES)}, got {toe!r}")
     if censoring not in CENSORING_MODES:
         raise InputError(f"`censoring` must be one of {list(CENSORING_MODES)}, got {censoring!r}")
+    if wide_steps not in WIDE_STEP_MODES:
+        raise InputError(f"`wide_steps` must be one of {list(WIDE_STEP_MODES)}, got {wide_steps!r}")
     if int(n_samples) < 2:
         raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
     c_full = 2**bit_depth - 1
@@ -658,6 +683,7 @@ def camera_response_Debevec1997(
     rms = np.zeros(n_ch)
     constrained = np.zeros(n_ch, dtype=bool)
     valid_min = np.zeros(n_ch)
+    factors = np.ones(n_ch)
     for ch in range(n_ch):
         vals = values[..., ch]
         c_lo = float(floor[ch])
@@ -684,6 +710,13 @@ def camera_response_Debevec1997(
             # (never used: valid_min lies above), so the system stays regular
             first = wfun(np.array([c_lo + spacing]), c_lo, sat[ch])[0]
             smooth_w = np.where(levels <= c_lo, first, smooth_w)
+        prior = None
+        if wide_steps == "template":
+            factors[ch] = step_factor(typical_step(valid_idx, log_t))
+            if factors[ch] > 1.0:
+                g0 = emor_mean_log_inverse(levels[: top + 1], c_lo, sat[ch])
+                rows = smooth_w[1:top] ** 2
+                prior = smoothness * template_penalty(rows, g0, factors[ch])
         # the dense systems are small (≤ 1024²): one BLAS thread is fastest, and
         # a multi-threaded BLAS on a loaded machine can be 100× slower
         with _blas_controller().limit(limits=1, user_api="blas"):
@@ -696,6 +729,7 @@ def camera_response_Debevec1997(
                 smooth_w,
                 smoothness,
                 gauge,
+                prior,
             )
         # lowest measured level: below it g is extrapolated by the prior alone
         # (gaps between measured levels are interpolated, which is fine)
@@ -718,6 +752,7 @@ def camera_response_Debevec1997(
         monotone_constrained=constrained,
         smoothness=smoothness,
         valid_min=valid_min,
+        smoothness_factor=factors,
     )
 
 
@@ -753,6 +788,10 @@ class DebevecResponseOptions:
     censoring : {"trimmed", "ignored"}
         Symmetric trimming of censored pairs' partners (default) or none (the
         paper's); see :mod:`photoquant.response.censoring`.
+    wide_steps : {"template", "none"}
+        Smoothness scaled with the bracket's step about the EMoR mean response
+        (default) or β as given (the paper's); see
+        :mod:`photoquant.response.wide_steps`.
     """
 
     smoothness: float = DEFAULT_SMOOTHNESS
@@ -764,6 +803,7 @@ class DebevecResponseOptions:
     toe: str = "continued"
     max_pixels: int | None = DEFAULT_MAX_PIXELS
     censoring: str = "trimmed"
+    wide_steps: str = "template"
 
     def __post_init__(self) -> None:
         if self.toe not in TOE_MODES:
@@ -771,6 +811,10 @@ class DebevecResponseOptions:
         if self.censoring not in CENSORING_MODES:
             raise InputError(
                 f"`censoring` must be one of {list(CENSORING_MODES)}, got {self.censoring!r}"
+            )
+        if self.wide_steps not in WIDE_STEP_MODES:
+            raise InputError(
+                f"`wide_steps` must be one of {list(WIDE_STEP_MODES)}, got {self.wide_steps!r}"
             )
         check_positive(self.smoothness, "smoothness", allow_zero=True)
         check_int(self.n_samples, "n_samples", 2)
@@ -838,6 +882,7 @@ def characterise_response_Debevec1997(
         min_support=opts.min_support,
         toe=opts.toe,
         censoring=opts.censoring,
+        wide_steps=opts.wide_steps,
         rng=rng,
         c_min=c_min,
     )
@@ -857,5 +902,6 @@ def characterise_response_Debevec1997(
         "monotone_constrained": rec.monotone_constrained,
         "saturation_level": rec.saturation_level,
         "valid_min": rec.valid_min,
+        "smoothness_factor": rec.smoothness_factor,
     }
     return StepFit(model, report)

@@ -212,3 +212,23 @@ def test_twelve_bit_repeats_are_scored_in_their_own_code_values(rng):
     assert res.overall_mae_dn < 0.5
     with pytest.raises(InputError, match="8-bit"):
         crossval_stack(ExposureStack(frames, EXPOSURES, bit_depth=12), "opencv")
+
+
+def test_options_of_the_response_method(tmp_path, gamma_stack, capsys):
+    """``options`` (``--option NAME=VALUE``) reach the method: a smoothness of 0 and one of 10⁹
+    score differently, and the default options are the method's own."""
+    default = crossval_stack(gamma_stack)
+    same = crossval_stack(gamma_stack, options={"smoothness": 1000.0})
+    assert same.overall_mae_dn == default.overall_mae_dn
+    stiff = crossval_stack(gamma_stack, options={"smoothness": 1e9})
+    assert stiff.overall_mae_dn > 2 * default.overall_mae_dn  # a straight g misses the gamma
+    path = _write_set(tmp_path, gamma_stack)
+    assert main(["crossval", str(path), "--json", "--option", "smoothness=1e9"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["overall_mae_dn"] == pytest.approx(stiff.overall_mae_dn)
+    with pytest.raises(InputError, match="not the peer"):
+        crossval_stack(gamma_stack, "opencv", options={"smoothness": 1.0})
+    for bad, phrase in (("smoothness", "NAME=VALUE"), ("wide_steps=emor", "wide_steps")):
+        assert main(["crossval", str(path), "--option", bad]) == 2
+        err = capsys.readouterr().err.strip()
+        assert phrase in err and len(err.splitlines()) == 1

@@ -58,16 +58,12 @@ def test_memorial_crossval_is_25_percent_below_opencv(tmp_path):
     assert ours <= 0.75 * opencv, f"photoquant {ours:.3f} DN, OpenCV {opencv:.3f} DN"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 9 target not reached: photoquant 19.9 DN, OpenCV 14.6 DN (26.9 before the "
-    "censored pairs were trimmed). The two calibration frames, six stops apart, pair only the "
-    "short frame's levels 0-25 with the long frame's 45-255: the data fix g only up to the "
-    "one-ratio ambiguity (any shape on 0-25 carries over to 45-255), so g is the smoothness "
-    "prior's (measured 2026-12-01: Huber-reweighted eq. 7 with a global scale reaches 13.7 DN "
-    "but raises g rms on pqsim's EMoR and CMOS cameras by 17-24 %, with a per-level scale "
-    "17.4 DN; Hugin's EMoR prior scores 3.6 DN here)",
-)
-def test_frobisher_crossval_is_no_worse_than_opencv(tmp_path, frobisher_dir):
+def test_frobisher_crossval_is_25_percent_below_opencv(tmp_path, frobisher_dir):
+    """Two calibration frames six stops apart: the shape of g is the prior's.
+
+    Eq. 7's straight-line prior gave 19.9 DN against OpenCV's 14.6; the
+    smoothness scaled with the step about the EMoR mean
+    (:mod:`photoquant.response.wide_steps`) gives 6.3 (measured 2026-12-01).
+    """
     ours, opencv = _scores(_manifest(frobisher_dir, tmp_path))
-    assert ours <= opencv, f"photoquant {ours:.3f} DN, OpenCV {opencv:.3f} DN"
+    assert ours <= 0.75 * opencv, f"photoquant {ours:.3f} DN, OpenCV {opencv:.3f} DN"
