@@ -191,6 +191,9 @@ class Entry:
     step_time_s: dict[str, float] = field(default_factory=dict)
     crossval: dict[str, float | None] = field(default_factory=dict)
     crossval_notes: dict[str, str] = field(default_factory=dict)
+    notes: dict[str, str] = field(default_factory=dict)
+    """Per preset: why some scores are missing from an ``ok`` row (a response whose
+    pipeline fails after the response: its own scores kept, the rest ``None``)."""
     rank: int | None = None
     curves: dict[str, dict[str, np.ndarray]] = field(default_factory=dict, repr=False)
     """Per preset (response step): ``levels``, ``g_est``, ``g_true``, ``weights`` (C, L),
@@ -232,6 +235,7 @@ class Entry:
             "step_time_s": dict(self.step_time_s),
             "crossval_mae_dn": {k: _finite(v) for k, v in self.crossval.items()},
             "crossval_notes": dict(self.crossval_notes),
+            "notes": dict(self.notes),
         }
 
 
@@ -644,13 +648,55 @@ def _run_entry(
                 cap.manifest, model, cap.truth, allow_outside=cap.allow_outside
             )
         except Exception as exc:  # noqa: BLE001 - a method must not crash the board
-            entry.status = "failed"
-            entry.reason = f"{cap.preset}: {_one_line(exc)}"
-            entry.scores.clear()
-            return entry
+            partial = _response_alone(step, cap, kwargs, exc) if model is None else None
+            if partial is None:
+                entry.status = "failed"
+                entry.reason = f"{cap.preset}: {_one_line(exc)}"
+                entry.scores.clear()
+                return entry
+            model, rep = partial
+            _score_into(entry, step, cap, model, [], rep, floors, kept=_BEFORE_VIGNETTING)
+            why = _one_line(exc)
+            why = why if len(why) <= 120 else why[:119].rstrip() + "…"
+            entry.notes[cap.preset] = (
+                f"the pipeline fails after this response ({why}): only the response's and "
+                "the sensor LUT's scores are kept"
+            )
+            continue
         memo[key] = (model, times, rep)
         _score_into(entry, step, cap, model, times, rep, floors)
     return entry
+
+
+_BEFORE_VIGNETTING = frozenset({"g_rms", "lut"})
+"""The scores of the steps calibrate runs before the vignetting (response, sensor LUT)."""
+
+
+def _response_alone(
+    step: str, cap: _Capture, kwargs: dict[str, Any], error: BaseException
+) -> tuple[Any, dict[str, Any]] | None:
+    """A response method whose curve breaks a later step (a peer's poor ``g`` makes the
+    vignetting fit untrustworthy) still has a score of its own: the same calibration
+    without the vignetting step gives the same response and LUT (both come first).
+    ``None`` when that fails too, or for another step's method."""
+    from photoquant.calibration import calibrate
+    from photoquant.errors import PhotoquantError
+    from validation.compare import compare_with_truth
+
+    if step != "response" or not isinstance(error, PhotoquantError):
+        return None
+    try:
+        model = calibrate(
+            cap.views,
+            irradiance=cap.irradiance,
+            white_roi=cap.white_roi,
+            correspondences=cap.tracks,
+            **{**kwargs, "vignetting": "None"},
+        )
+        rep = compare_with_truth(cap.manifest, model, cap.truth, allow_outside=cap.allow_outside)
+    except Exception:  # noqa: BLE001 - then the entry fails with the first error
+        return None
+    return model, rep
 
 
 def _score_into(
@@ -661,13 +707,21 @@ def _score_into(
     times: list[float],
     rep: dict[str, Any],
     floors: dict[str, float],
+    kept: frozenset[str] | None = None,
 ) -> None:
-    entry.scores[cap.preset] = _scores(rep, cap, model)
-    entry.time_s[cap.preset] = float(statistics.median(times))
+    """Score one calibration into ``entry``; with ``kept``, only those scores (the rest
+    ``None``, no calibration time: the pipeline was not the entry's whole one)."""
+    scores = _scores(rep, cap, model)
+    if kept is not None:
+        scores = {k: (v if k in kept else None) for k, v in scores.items()}
+    entry.scores[cap.preset] = scores
+    if times:
+        entry.time_s[cap.preset] = float(statistics.median(times))
     step_t = model.report.get("timings_s", {}).get(_STEP_TIMING[step])
     if step_t is not None:
         entry.step_time_s[cap.preset] = float(step_t)
-    floors.setdefault(cap.preset, float(rep["scene"]["noise_floor_mean"]))
+    if kept is None:
+        floors.setdefault(cap.preset, float(rep["scene"]["noise_floor_mean"]))
     if step == "response":
         entry.curves[cap.preset] = _curves(model, cap.truth.camera)
 
@@ -1015,6 +1069,7 @@ def format_leaderboard(lb: Leaderboard) -> str:
                 out.append(
                     "  ".join(c.ljust(w) for c, w in zip(cells, widths, strict=True)).rstrip()
                 )
+        out += [f"  {e.method} / {p}: {n}" for e in board.entries for p, n in e.notes.items()]
     if lb.notes:
         out += [""] + [f"note: {n}" for n in lb.notes]
     out.append(
@@ -1043,6 +1098,9 @@ def format_markdown(lb: Leaderboard, figures: dict[str, str]) -> str:
             if note:
                 cells = [*cells[:2], note, *cells[3:]]
             out.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        notes = [f"- {e.method} / {p}: {n}" for e in board.entries for p, n in e.notes.items()]
+        if notes:
+            out += ["", *notes]
         if board.step in figures:
             out += ["", f"![{board.step}]({figures[board.step]})"]
     for key, caption in _EXTRA_FIGURES.items():

@@ -108,7 +108,9 @@ def response_from_inverse(
     (ResponseModel, dict)
         The model and a report: ``unmeasured_levels`` (per channel, the levels
         without a finite value: set to the lowest measured value, below
-        ``valid_min``) and ``monotone_fixes`` (levels where the peer's table
+        ``valid_min``; levels above the saturation level take the value at the
+        highest measured level at or below it, whatever the peer gave there) and
+        ``monotone_fixes`` (levels where the peer's table
         decreased and was raised to the running maximum, its monotone
         envelope; photoquant's models must be non-decreasing).
     """
@@ -134,6 +136,14 @@ def response_from_inverse(
             raise CalibrationError(
                 f"{method}: the peer's response of channel {c} has fewer than two measured levels"
             )
+        # above the channel's clipping level the stack has no data: whatever the peer
+        # extrapolated there (colour-hdri normalises its curve to its maximum, which can
+        # lie there) is replaced by the value at the clip, as photoquant's own fits do
+        above = levels > sat[c]
+        if np.any(above) and np.any(finite & ~above):
+            top = int(np.flatnonzero(finite & ~above)[-1])
+            g[c, top + 1 :] = g[c, top]
+            finite = np.isfinite(g[c])
         first = int(np.argmax(finite))
         g[c, :first] = g[c, first]
         # interior gaps: carry the last measured value forward (flat, then rising again)

@@ -326,3 +326,15 @@ def test_response_from_inverse_fills_unmeasured_levels_and_makes_it_monotone():
     assert report == {"unmeasured_levels": [2], "monotone_fixes": [1]}
     with pytest.raises(CalibrationError, match="fewer than two measured levels"):
         response_from_inverse("x", np.arange(3.0), np.array([[0.0, 0.0, 1.0]]), np.array([2.0]))
+
+
+def test_response_from_inverse_ignores_what_a_peer_puts_above_the_clip():
+    """Above the saturation level the stack has no data: colour-hdri normalises its curve to
+    a maximum that can lie there (an extrapolation e^60 above the measured range)."""
+    levels = np.arange(8.0)
+    table = np.exp([[np.nan, -3.0, -2.0, -1.0, -0.5, 40.0, -60.0, 50.0]])
+    model, _ = response_from_inverse("x", levels, table, np.array([4.0]))
+    g = model.log_inverse_response[0]
+    np.testing.assert_allclose(g[1:5], [-3.0, -2.0, -1.0, -0.5])
+    np.testing.assert_allclose(g[5:], -0.5)  # held at the clip, as photoquant's own fits
+    assert g[0] == g[1] and model.valid_min[0] == 1

@@ -141,6 +141,46 @@ def test_a_bad_response_ranks_below_debevec_and_a_failing_one_last(board):
     assert "failed: ccd: deliberately fails" in text and "second line" not in text
 
 
+BREAKS_LATER = "Breaks the vignetting (test)"
+
+
+def test_a_response_that_breaks_a_later_step_keeps_its_own_scores(monkeypatch):
+    """A peer's poor curve can make the vignetting fit untrustworthy: the response is still
+    ranked by its own error (the pipeline without vignetting gives the same response and
+    LUT, which come first), its scene is not scored, and the row says why."""
+    import photoquant.calibration as calibration
+
+    debevec = pq.registry("response")["Debevec 1997"]
+    pq.register_method("response", BREAKS_LATER, debevec.function, reference="test: breaks v")
+    real = calibration.calibrate
+
+    def calibrate(*args, **kwargs):
+        if kwargs.get("response") == BREAKS_LATER and kwargs.get("vignetting") != "None":
+            raise CalibrationError("the vignetting fit cannot be trusted: test")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(calibration, "calibrate", calibrate)
+    try:
+        lb = run_leaderboard(
+            "response", methods=["Debevec 1997", BREAKS_LATER], presets=["ccd"], config=TINY,
+            repeats=1, progress=_quiet,
+        )  # fmt: skip
+    finally:
+        pq.registry("response").remove(BREAKS_LATER)
+    board = lb.board("response")
+    ours, later = board.entry("Debevec 1997"), board.entry(BREAKS_LATER)
+    assert later.status == "ok" and later.rank is not None
+    # the same response (same function, options and seed) and LUT; nothing after them
+    assert later.scores["ccd"]["g_rms"] == ours.scores["ccd"]["g_rms"]
+    assert later.scores["ccd"]["lut"] == ours.scores["ccd"]["lut"]
+    assert later.scores["ccd"]["scene"] is None and later.scores["ccd"]["vignetting"] is None
+    assert later.mean("scene") is None and later.time_s == {} and later.step_time_s["ccd"] > 0
+    assert "vignetting fit cannot be trusted: test" in later.notes["ccd"]
+    text = format_leaderboard(lb)
+    assert f"{BREAKS_LATER} / ccd: the pipeline fails after this response" in text
+    assert later.to_json()["notes"] == later.notes
+
+
 def test_methods_whose_needs_the_capture_lacks_are_na_with_the_reason(board):
     lb, _ = board
     absent = lb.board("response").entry(ABSENT)
