@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from photoquant.errors import CalibrationError, InputError
+from photoquant.merge._base import MergeResult
 from photoquant.methods import REGISTRIES, Method
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
@@ -220,3 +221,42 @@ def write_ppm(path: Path, image: np.ndarray, maxval: int) -> None:
     with open(path, "wb") as f:
         f.write(f"P6\n{w} {h}\n{maxval}\n".encode("ascii"))
         f.write(np.ascontiguousarray(data).tobytes())
+
+
+def response_table(response: ResponseModel, n_levels: int) -> np.ndarray:
+    """``f⁻¹ = exp(g)`` of ``response`` at the levels ``0 … n_levels − 1``, ``(C, n_levels)``:
+    the linear table an 8-bit peer's merge takes (photoquant's gauge, ``g = 0`` mid-range)."""
+    z = np.arange(float(n_levels))
+    levels = np.asarray(response.levels, dtype=np.float64)
+    g = np.asarray(response.log_inverse_response, dtype=np.float64)
+    return np.exp(np.stack([np.interp(z, levels, g[c]) for c in range(g.shape[0])]))
+
+
+def merge_result_from_log(
+    stack: ExposureStack,
+    response: ResponseModel,
+    log_e: np.ndarray,
+    peer: str,
+    report: dict[str, Any] | None = None,
+) -> MergeResult:
+    """A :class:`~photoquant.merge.MergeResult` from a peer's merged ``ln E`` ``(H, W, C)``.
+
+    Pixels every exposure of which is clipped (at the response's saturation
+    level, or at or below the dark floor) are flagged as photoquant's own
+    merges flag them, whatever value the peer gave them; so are values the
+    peer left non-finite or non-positive. Peers do not expose their weights:
+    ``weight_sum`` is 1 where a value is given, 0 where flagged.
+    """
+    log_e = np.asarray(log_e, dtype=np.float64)
+    all_sat = np.all(stack.saturated(np.asarray(response.saturation_level)), axis=0)
+    all_dark = np.all(stack.dark_clipped(), axis=0)
+    bad = ~np.isfinite(log_e)
+    mask = bad | all_sat | all_dark
+    return MergeResult(
+        log_photoquantity=np.where(mask, np.nan, log_e),
+        mask=mask,
+        all_saturated=all_sat,
+        all_dark=all_dark & ~all_sat,
+        weight_sum=np.where(mask, 0.0, 1.0),
+        report={"peer": peer, "non_finite_values": int(np.count_nonzero(bad)), **(report or {})},
+    )

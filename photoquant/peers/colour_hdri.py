@@ -1,4 +1,4 @@
-"""colour-hdri's Debevec 1997 response as a peer (the ``"colour-hdri Debevec 1997"`` method).
+"""colour-hdri as a peer: its Debevec 1997 response and its ``image_stack_to_HDRI`` merge.
 
 The adapter builds a :class:`colour_hdri.ImageStack` from the stack's
 frames (one image per exposure: the mean of the ``N`` repeats, scaled to
@@ -16,6 +16,16 @@ constant factor of the exposure time; it drops out with photoquant's gauge.
 
 It estimates the response only; the saturation levels are the stack's and
 the merge, LUT, vignetting and balance are photoquant's.
+
+The merge method ``"colour-hdri image_stack_to_HDRI"`` gives the same image
+stack (exposures in increasing order, as colour-hdri expects: its shortest
+frame's bright values and its longest frame's dark ones get weight 1) and
+the camera's response as colour-hdri's ``camera_response_functions`` (``f⁻¹``
+at the 256 levels) to :func:`colour_hdri.image_stack_to_HDRI` with its
+default Debevec hat, clipped at colour-hdri's ``EPSILON`` so that every value
+is used. colour-hdri warns about values at 0 (its images are meant to be
+encoded in a wide gamut); the adapter counts them in the merge's report
+instead.
 
 References
 ----------
@@ -35,12 +45,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from photoquant.errors import InputError
+from photoquant.merge._base import MergeResult
 from photoquant.methods import StepFit
 from photoquant.peers._common import (
     check_channels,
+    merge_result_from_log,
     register_peer,
     require,
     response_from_inverse,
+    response_table,
 )
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
@@ -50,6 +63,7 @@ __all__ = [
     "available",
     "ColourHDRIDebevecOptions",
     "characterise_response_ColourHDRIDebevec1997",
+    "merge_stack_ColourHDRI",
 ]
 
 METHOD_NAME = "colour-hdri Debevec 1997"
@@ -147,6 +161,56 @@ register_peer(
     options=ColourHDRIDebevecOptions,
     model=ResponseModel,
     reference="colour_hdri.camera_response_functions_Debevec1997 (doi:10.1145/258734.258884)",
+    available=available,
+    requirement=REQUIREMENT,
+)
+
+
+MERGE_NAME = "colour-hdri image_stack_to_HDRI"
+
+
+def merge_stack_ColourHDRI(
+    stack: ExposureStack, response: ResponseModel, options: None = None
+) -> MergeResult:
+    """The merge step by colour-hdri's ``image_stack_to_HDRI`` [ColourHDRI]_ with ``response``.
+
+    8-bit, 3-channel stacks (the mean of the repeats, in ``[0, 1]``); see the
+    module notes.
+    """
+    del options
+    require(available, MERGE_NAME, REQUIREMENT)
+    import warnings
+
+    import colour_hdri
+
+    check_channels(stack, MERGE_NAME)
+    if stack.bit_depth != 8:
+        raise InputError(
+            f"{MERGE_NAME} takes the 256-level response of 8-bit images only, "
+            f"the stack is {stack.bit_depth}-bit"
+        )
+    means = stack.mean() / stack.c_max
+    images = colour_hdri.ImageStack()
+    for k in np.argsort(stack.exposure_s, kind="stable"):
+        meta = colour_hdri.Metadata(f_number=1.0, exposure_time=float(stack.exposure_s[k]), iso=100)
+        images.append(colour_hdri.Image(f"exposure_{k}", np.asarray(means[k]), meta))
+    crfs = response_table(response, 256).T  # (256, C), colour-hdri's layout
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        hdr = colour_hdri.image_stack_to_HDRI(images, camera_response_functions=crfs)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_e = np.log(np.asarray(hdr, dtype=np.float64))
+    report = {"colour_hdri_version": colour_hdri.__version__, "warnings": len(caught)}
+    return merge_result_from_log(stack, response, log_e, MERGE_NAME, report)
+
+
+register_peer(
+    "merge",
+    MERGE_NAME,
+    merge_stack_ColourHDRI,
+    options=None,
+    model=None,
+    reference="colour_hdri.image_stack_to_HDRI (Debevec & Malik 1997, eq. 6)",
     available=available,
     requirement=REQUIREMENT,
 )

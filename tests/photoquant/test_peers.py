@@ -338,3 +338,70 @@ def test_response_from_inverse_ignores_what_a_peer_puts_above_the_clip():
     np.testing.assert_allclose(g[1:5], [-3.0, -2.0, -1.0, -0.5])
     np.testing.assert_allclose(g[5:], -0.5)  # held at the clip, as photoquant's own fits
     assert g[0] == g[1] and model.valid_min[0] == 1
+
+
+# --------------------------------------------------------------------------- merge peers
+
+MERGE_PEERS = {
+    # median |error| of ln E with the true response on the noise-free bracket, as a
+    # multiple of photoquant's Debevec merge's on the same data (measured 2026-12-01:
+    # Robertson 0.0028, colour-hdri 0.0030 against 0.0028; OpenCV's Debevec 0.040, its
+    # triangle weight is not 0 at level 0, where g is an extrapolation)
+    "OpenCV MergeDebevec": (opencv, 20.0),
+    "OpenCV MergeRobertson": (opencv, 1.5),
+    "colour-hdri image_stack_to_HDRI": (colour_hdri, 1.5),
+}
+
+
+def _true_response() -> pq.ResponseModel:
+    g = np.stack([true_g(np.maximum(LEVELS, 0.5), c, balance=(1, 1, 1)) for c in range(3)])
+    return pq.ResponseModel(
+        method="truth", levels=LEVELS, log_inverse_response=g,
+        saturation_level=np.full(3, 255.0), valid_min=np.ones(3),
+    )  # fmt: skip
+
+
+def _median_log_error(result, l) -> float:  # noqa: E741
+    d = result.log_photoquantity - np.log(l)
+    ok = ~result.mask
+    return float(np.median(np.abs(d[ok] - np.median(d[ok]))))
+
+
+@pytest.mark.parametrize("name", list(MERGE_PEERS))
+def test_peer_merge_with_the_true_response(bracket, name):
+    module, factor = MERGE_PEERS[name]
+    _skip_unless(module)
+    stack, l = bracket
+    truth = _true_response()
+    ours = pq.MergeModel("Debevec 1997").merge(stack, truth)
+    result = pq.MergeModel(name).merge(stack, truth)
+    assert result.report["peer"] == name
+    # flagged: what photoquant's merge flags (clipped in every exposure), and little else
+    assert np.all(result.mask[ours.all_saturated | ours.all_dark]) and result.mask.mean() < 0.01
+    assert _median_log_error(result, l) < factor * _median_log_error(ours, l)
+    # pixels clipped in every exposure are flagged as photoquant's merges flag them
+    frames = stack.frames.copy()
+    frames[:, :, 0, 0] = 255
+    frames[:, :, 0, 1] = 0
+    clipped = pq.ExposureStack(frames, stack.exposure_s)
+    res = pq.MergeModel(name).merge(clipped, truth)
+    assert res.all_saturated[0, 0].all() and res.all_dark[0, 1].all()
+    assert res.mask[0, :2].all() and np.isnan(res.log_photoquantity[0, :2]).all()
+    assert res.weight_sum[0, 0, 0] == 0 and res.weight_sum[5, 5, 0] == 1
+
+
+@pytest.mark.parametrize("name", list(MERGE_PEERS))
+def test_peer_merge_calibrates_saves_loads_and_corrects(bracket, tmp_path, name):
+    module, _ = MERGE_PEERS[name]
+    _skip_unless(module)
+    stack, l = bracket
+    model = pq.calibrate([stack], merge=name, vignetting="None", sensor_lut="None")
+    assert model.merge.method == name
+    model.save(tmp_path / "cam")
+    loaded = pq.load_camera(tmp_path / "cam")
+    assert loaded.merge.method == name
+    a, b = model.merge_stack(stack), loaded.merge_stack(stack)
+    np.testing.assert_array_equal(a.log_photoquantity, b.log_photoquantity)
+    deep = pq.ExposureStack(stack.frames.astype(np.uint16) * 16, stack.exposure_s, bit_depth=12)
+    with pytest.raises(InputError, match="8-bit"):
+        pq.MergeModel(name).merge(deep, _true_response())
