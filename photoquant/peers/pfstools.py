@@ -1,4 +1,5 @@
-"""pfstools' ``pfshdrcalibrate`` as a peer: ``"pfstools Robertson"`` and ``"pfstools Mitsunaga"``.
+"""pfstools' ``pfshdrcalibrate`` as a peer: ``"pfstools Robertson"`` and ``"pfstools Mitsunaga"``
+responses, and its Robertson merge (``"pfstools Robertson merge"``).
 
 The adapter writes one binary PPM per exposure (the mean of the ``N``
 repeats, rounded; 8-bit only, see below) and
@@ -16,6 +17,15 @@ vignetting and balance are photoquant's). Levels pfstools leaves at 0 (not
 observed, or outside its weighting) get no estimate: they are set to the
 lowest measured value and lie below ``valid_min``; a table that decreases
 (pfstools' Robertson does near saturation) is raised to its running maximum.
+
+The merge method runs ``pfshdrcalibrate -c robertson -f response.m`` with the
+camera's response written in pfstools' format (per channel ``log10(f⁻¹) |
+level | f⁻¹``, photoquant's gauge) and reads the merged image it writes
+(``pfsout merged.pfm``, float RGB). ``-f`` also reads the weighting function
+from the file; pfstools derives it from the frames (a Gaussian over the
+levels the data span), so a first ``pfshdrcalibrate -c robertson -s`` run
+on the same frames provides it and only its curves are replaced: the merge
+is pfstools' with photoquant's response.
 
 8-bit only: ``pfshdrcalibrate --bpp 12`` on 12-bit PPM frames (read by
 ``pfsinppm`` as values in ``[0, 1]``), with or without ``--multiplier
@@ -47,14 +57,17 @@ from pathlib import Path
 import numpy as np
 
 from photoquant.errors import CalibrationError, InputError
+from photoquant.merge._base import MergeResult
 from photoquant.methods import StepFit
 from photoquant.peers._common import (
     check_channels,
     have_executables,
     integer_frames,
+    merge_result_from_log,
     register_peer,
     require,
     response_from_inverse,
+    response_table,
     write_ppm,
 )
 from photoquant.response.model import ResponseModel
@@ -68,6 +81,8 @@ __all__ = [
     "read_response_file",
     "characterise_response_PfstoolsRobertson",
     "characterise_response_PfstoolsMitsunaga",
+    "merge_stack_PfstoolsRobertson",
+    "write_response_file",
 ]
 
 REQUIREMENT = "pfstools (`apt-get install pfstools`: pfsinhdrgen, pfshdrcalibrate)"
@@ -253,6 +268,112 @@ register_peer(
     options=PfstoolsMitsunagaOptions,
     model=ResponseModel,
     reference="pfshdrcalibrate -c mitsunaga (Mitsunaga & Nayar 1999, doi:10.1109/CVPR.1999.786966)",
+    available=available,
+    requirement=REQUIREMENT,
+)
+
+
+# ---------------------------------------------------------------------------
+# The merge
+# ---------------------------------------------------------------------------
+
+MERGE_NAME = "pfstools Robertson merge"
+_CHANNEL_NAMES = ("IR", "IG", "IB")
+
+
+def write_response_file(path: Path | str, table: np.ndarray, weighting: str) -> None:
+    """Write ``f⁻¹`` ``(3, 256)`` in ``pfshdrcalibrate``'s response format, with ``weighting``
+    (the ``W`` block of one of its own files) appended."""
+    lines: list[str] = []
+    for name, curve in zip(_CHANNEL_NAMES, np.asarray(table, dtype=np.float64), strict=True):
+        lines += [
+            f"# Camera response curve, channel {name}",
+            "# data layout: log10(response) | camera output | response",
+            f"# name: {name}",
+            "# type: matrix",
+            f"# rows: {curve.size}",
+            "# columns: 3",
+        ]
+        lines += [f" {np.log10(v):.9e} {i:4d} {v:.9e}" for i, v in enumerate(curve)]
+        lines.append("")
+    Path(path).write_text("\n".join(lines) + "\n" + weighting, encoding="ascii")
+
+
+def _read_pfm(path: Path) -> np.ndarray:
+    """A colour PFM (``PF``) as ``(H, W, 3)`` float64, top row first."""
+    data = path.read_bytes()
+    head = data.split(b"\n", 3)
+    if len(head) < 4 or head[0].strip() != b"PF":
+        raise CalibrationError(f"{MERGE_NAME}: pfsout did not write a colour PFM")
+    w, h = (int(v) for v in head[1].split())
+    scale = float(head[2])
+    dtype = "<f4" if scale < 0 else ">f4"
+    pixels = np.frombuffer(head[3], dtype=dtype, count=w * h * 3)
+    return pixels.reshape(h, w, 3)[::-1].astype(np.float64)
+
+
+def merge_stack_PfstoolsRobertson(
+    stack: ExposureStack, response: ResponseModel, options: None = None
+) -> MergeResult:
+    """The merge step by ``pfshdrcalibrate -c robertson -f`` [pfstools]_ with ``response``.
+
+    8-bit, 3-channel stacks (the mean of the repeats, rounded); see the module notes.
+    """
+    del options
+    require(available, MERGE_NAME, REQUIREMENT)
+    require(lambda: have_executables("pfsout"), MERGE_NAME, REQUIREMENT)
+    check_channels(stack, MERGE_NAME)
+    frames = integer_frames(stack, MERGE_NAME, bit_depths=BIT_DEPTHS)
+    import subprocess
+
+    with tempfile.TemporaryDirectory(prefix="photoquant-pfstools-") as tmp:
+        folder = Path(tmp)
+        lines = []
+        for k in range(stack.n_exposures):
+            file = f"exposure_{k}.ppm"
+            write_ppm(folder / file, frames[k], stack.c_max)
+            lines.append(f"{file} {1.0 / float(stack.exposure_s[k]):.10g} 1 100 0")
+        (folder / "frames.hdrgen").write_text("\n".join(lines) + "\n")
+        steps = (
+            "pfsinhdrgen frames.hdrgen | pfshdrcalibrate -c robertson -s own.m > /dev/null",
+            "pfsinhdrgen frames.hdrgen | pfshdrcalibrate -c robertson -f response.m "
+            "| pfsout merged.pfm",
+        )
+        for i, cmd in enumerate(steps):
+            if i == 1:
+                own = (folder / "own.m").read_text(encoding="ascii")
+                if "# Weighting function" not in own:
+                    raise CalibrationError(f"{MERGE_NAME}: pfshdrcalibrate saved no weighting")
+                weighting = own[own.index("# Weighting function") :]
+                write_response_file(folder / "response.m", response_table(response, 256), weighting)
+            proc = subprocess.run(
+                ["bash", "-o", "pipefail", "-c", cmd],
+                cwd=folder,
+                capture_output=True,
+                text=True,
+                timeout=600,
+                check=False,
+            )
+            if proc.returncode != 0:
+                tail = " ".join((proc.stderr or "").split())[-300:]
+                raise CalibrationError(
+                    f"{MERGE_NAME}: pfshdrcalibrate failed (exit {proc.returncode}): {tail}"
+                )
+        hdr = _read_pfm(folder / "merged.pfm")
+    if hdr.shape != (*stack.image_shape, 3):
+        raise CalibrationError(f"{MERGE_NAME}: pfsout wrote {hdr.shape[:2]}, not the frames' size")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_e = np.log(hdr)
+    return merge_result_from_log(stack, response, log_e, MERGE_NAME)
+
+
+register_peer(
+    "merge",
+    MERGE_NAME,
+    merge_stack_PfstoolsRobertson,
+    options=None,
+    model=None,
+    reference="pfshdrcalibrate -c robertson -f (Robertson et al. 2003, doi:10.1117/1.1557695)",
     available=available,
     requirement=REQUIREMENT,
 )

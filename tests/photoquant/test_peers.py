@@ -345,9 +345,10 @@ def test_response_from_inverse_ignores_what_a_peer_puts_above_the_clip():
 MERGE_PEERS = {
     # median |error| of ln E with the true response on the noise-free bracket, as a
     # multiple of photoquant's Debevec merge's on the same data (measured 2026-12-01:
-    # Robertson 0.0028, colour-hdri 0.0030 against 0.0028; OpenCV's Debevec 0.040, its
-    # triangle weight is not 0 at level 0, where g is an extrapolation)
+    # Robertson 0.0028, colour-hdri 0.0030 against 0.0028; pfstools 0.012; OpenCV's Debevec
+    # 0.040, its triangle weight is not 0 at level 0, where g is an extrapolation)
     "OpenCV MergeDebevec": (opencv, 20.0),
+    "pfstools Robertson merge": (pfstools, 7.0),
     "OpenCV MergeRobertson": (opencv, 1.5),
     "colour-hdri image_stack_to_HDRI": (colour_hdri, 1.5),
 }
