@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import importlib.util
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -99,6 +100,30 @@ class ColourHDRIDebevecOptions:
             raise InputError(f"`smoothness` must be a positive number, got {self.smoothness!r}")
 
 
+def _check_stack(stack: ExposureStack, name: str) -> None:
+    """colour-hdri installed, 3 channels, 8 bits (its tables have one entry per level)."""
+    require(available, name, REQUIREMENT)
+    check_channels(stack, name)
+    if stack.bit_depth != 8:
+        raise InputError(
+            f"{name} accepts 8-bit images only (one table entry per level), "
+            f"the stack is {stack.bit_depth}-bit"
+        )
+
+
+def _image_stack(stack: ExposureStack, order: Any) -> Any:
+    """A :class:`colour_hdri.ImageStack` of the repeat means in ``[0, 1]``, exposures in
+    ``order`` (f/1, ISO 100: colour-hdri's luminance gauge is the exposure time alone)."""
+    import colour_hdri
+
+    means = stack.mean() / stack.c_max  # (K, H, W, C)
+    images = colour_hdri.ImageStack()
+    for k in order:
+        meta = colour_hdri.Metadata(f_number=1.0, exposure_time=float(stack.exposure_s[k]), iso=100)
+        images.append(colour_hdri.Image(f"exposure_{k}", np.asarray(means[k]), meta))
+    return images
+
+
 def characterise_response_ColourHDRIDebevec1997(
     stack: ExposureStack,
     options: ColourHDRIDebevecOptions | None = None,
@@ -122,21 +147,11 @@ def characterise_response_ColourHDRIDebevec1997(
         where it is not) and a report.
     """
     del rng
-    require(available, METHOD_NAME, REQUIREMENT)
+    _check_stack(stack, METHOD_NAME)
     import colour_hdri
 
-    check_channels(stack, METHOD_NAME)
-    if stack.bit_depth != 8:
-        raise InputError(
-            f"{METHOD_NAME} accepts 8-bit images only (one unknown per level), "
-            f"the stack is {stack.bit_depth}-bit"
-        )
     opts = options or ColourHDRIDebevecOptions()
-    means = stack.mean() / stack.c_max  # (K, H, W, C) in [0, 1]
-    images = colour_hdri.ImageStack()
-    for k in range(stack.n_exposures):
-        meta = colour_hdri.Metadata(f_number=1.0, exposure_time=float(stack.exposure_s[k]), iso=100)
-        images.append(colour_hdri.Image(f"exposure_{k}", np.asarray(means[k]), meta))
+    images = _image_stack(stack, range(stack.n_exposures))
     crfs = colour_hdri.camera_response_functions_Debevec1997(
         images,
         sampling_function_kwargs={"samples": opts.samples},
@@ -178,22 +193,12 @@ def merge_stack_ColourHDRI(
     module notes.
     """
     del options
-    require(available, MERGE_NAME, REQUIREMENT)
+    _check_stack(stack, MERGE_NAME)
     import warnings
 
     import colour_hdri
 
-    check_channels(stack, MERGE_NAME)
-    if stack.bit_depth != 8:
-        raise InputError(
-            f"{MERGE_NAME} takes the 256-level response of 8-bit images only, "
-            f"the stack is {stack.bit_depth}-bit"
-        )
-    means = stack.mean() / stack.c_max
-    images = colour_hdri.ImageStack()
-    for k in np.argsort(stack.exposure_s, kind="stable"):
-        meta = colour_hdri.Metadata(f_number=1.0, exposure_time=float(stack.exposure_s[k]), iso=100)
-        images.append(colour_hdri.Image(f"exposure_{k}", np.asarray(means[k]), meta))
+    images = _image_stack(stack, np.argsort(stack.exposure_s, kind="stable"))
     crfs = response_table(response, 256).T  # (256, C), colour-hdri's layout
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -176,40 +176,49 @@ def read_response_file(path: Path | str, n_channels: int = 3) -> tuple[np.ndarra
     return levels, np.stack(curves)
 
 
+def _write_bracket(folder: Path, stack: ExposureStack, name: str) -> None:
+    """One PPM per exposure and the hdrgen script that lists them (module notes)."""
+    frames = integer_frames(stack, name, bit_depths=BIT_DEPTHS)
+    lines = []
+    for k in range(stack.n_exposures):
+        file = f"exposure_{k}.ppm"
+        write_ppm(folder / file, frames[k], stack.c_max)
+        lines.append(f"{file} {1.0 / float(stack.exposure_s[k]):.10g} 1 100 0")
+    (folder / "frames.hdrgen").write_text("\n".join(lines) + "\n")
+
+
+def _pipeline(folder: Path, cmd: str, name: str, expected: str) -> None:
+    """Run a pfstools pipeline in ``folder``; one line naming the tool when it fails or does
+    not write ``expected``."""
+    import subprocess
+
+    proc = subprocess.run(
+        ["bash", "-o", "pipefail", "-c", cmd],
+        cwd=folder,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    if proc.returncode != 0 or not (folder / expected).exists():
+        tail = " ".join((proc.stderr or "").split())[-300:]
+        raise CalibrationError(f"{name}: pfshdrcalibrate failed (exit {proc.returncode}): {tail}")
+
+
 def _run(
     name: str, stack: ExposureStack, algorithm: str, extra: list[str]
 ) -> StepFit[ResponseModel]:
     require(available, name, REQUIREMENT)
     check_channels(stack, name)
-    frames = integer_frames(stack, name, bit_depths=BIT_DEPTHS)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="photoquant-pfstools-") as tmp:
         folder = Path(tmp)
-        lines = []
-        for k in range(stack.n_exposures):
-            file = f"exposure_{k}.ppm"
-            write_ppm(folder / file, frames[k], stack.c_max)
-            lines.append(f"{file} {1.0 / float(stack.exposure_s[k]):.10g} 1 100 0")
-        (folder / "frames.hdrgen").write_text("\n".join(lines) + "\n")
-        import subprocess
-
+        _write_bracket(folder, stack, name)
         cmd = (
             "pfsinhdrgen frames.hdrgen | pfshdrcalibrate "
             f"-c {algorithm} -b {stack.bit_depth} -s response.m {' '.join(extra)} > /dev/null"
         )
-        proc = subprocess.run(
-            ["bash", "-o", "pipefail", "-c", cmd],
-            cwd=folder,
-            capture_output=True,
-            text=True,
-            timeout=600,
-            check=False,
-        )
-        if proc.returncode != 0 or not (folder / "response.m").exists():
-            tail = " ".join((proc.stderr or "").split())[-300:]
-            raise CalibrationError(
-                f"{name}: pfshdrcalibrate failed (exit {proc.returncode}): {tail}"
-            )
+        _pipeline(folder, cmd, name, "response.m")
         levels, table = read_response_file(folder / "response.m", stack.n_channels)
     elapsed = time.perf_counter() - t0
     params = {"calibration": algorithm, "bpp": stack.bit_depth, "arguments": extra}
@@ -323,42 +332,22 @@ def merge_stack_PfstoolsRobertson(
     require(available, MERGE_NAME, REQUIREMENT)
     require(lambda: have_executables("pfsout"), MERGE_NAME, REQUIREMENT)
     check_channels(stack, MERGE_NAME)
-    frames = integer_frames(stack, MERGE_NAME, bit_depths=BIT_DEPTHS)
-    import subprocess
-
     with tempfile.TemporaryDirectory(prefix="photoquant-pfstools-") as tmp:
         folder = Path(tmp)
-        lines = []
-        for k in range(stack.n_exposures):
-            file = f"exposure_{k}.ppm"
-            write_ppm(folder / file, frames[k], stack.c_max)
-            lines.append(f"{file} {1.0 / float(stack.exposure_s[k]):.10g} 1 100 0")
-        (folder / "frames.hdrgen").write_text("\n".join(lines) + "\n")
-        steps = (
-            "pfsinhdrgen frames.hdrgen | pfshdrcalibrate -c robertson -s own.m > /dev/null",
+        _write_bracket(folder, stack, MERGE_NAME)
+        # pfstools' own weighting for these frames, from a calibration run (module notes)
+        cmd = "pfsinhdrgen frames.hdrgen | pfshdrcalibrate -c robertson -s own.m > /dev/null"
+        _pipeline(folder, cmd, MERGE_NAME, "own.m")
+        own = (folder / "own.m").read_text(encoding="ascii")
+        if "# Weighting function" not in own:
+            raise CalibrationError(f"{MERGE_NAME}: pfshdrcalibrate saved no weighting")
+        weighting = own[own.index("# Weighting function") :]
+        write_response_file(folder / "response.m", response_table(response, 256), weighting)
+        cmd = (
             "pfsinhdrgen frames.hdrgen | pfshdrcalibrate -c robertson -f response.m "
-            "| pfsout merged.pfm",
+            "| pfsout merged.pfm"
         )
-        for i, cmd in enumerate(steps):
-            if i == 1:
-                own = (folder / "own.m").read_text(encoding="ascii")
-                if "# Weighting function" not in own:
-                    raise CalibrationError(f"{MERGE_NAME}: pfshdrcalibrate saved no weighting")
-                weighting = own[own.index("# Weighting function") :]
-                write_response_file(folder / "response.m", response_table(response, 256), weighting)
-            proc = subprocess.run(
-                ["bash", "-o", "pipefail", "-c", cmd],
-                cwd=folder,
-                capture_output=True,
-                text=True,
-                timeout=600,
-                check=False,
-            )
-            if proc.returncode != 0:
-                tail = " ".join((proc.stderr or "").split())[-300:]
-                raise CalibrationError(
-                    f"{MERGE_NAME}: pfshdrcalibrate failed (exit {proc.returncode}): {tail}"
-                )
+        _pipeline(folder, cmd, MERGE_NAME, "merged.pfm")
         hdr = _read_pfm(folder / "merged.pfm")
     if hdr.shape != (*stack.image_shape, 3):
         raise CalibrationError(f"{MERGE_NAME}: pfsout wrote {hdr.shape[:2]}, not the frames' size")
