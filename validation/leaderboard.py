@@ -605,7 +605,6 @@ def _run_entry(
     ``memo`` keeps each calibration by capture and keywords: the default
     pipeline, on every board, is calibrated and scored once per capture.
     """
-    from photoquant.calibration import calibrate
     from validation.compare import compare_with_truth
 
     entry = Entry(step, method.name, method.reference)
@@ -632,13 +631,7 @@ def _run_entry(
             model = None
             while True:
                 t0 = time.perf_counter()
-                fitted = calibrate(
-                    cap.views,
-                    irradiance=cap.irradiance,
-                    white_roi=cap.white_roi,
-                    correspondences=cap.tracks,
-                    **kwargs,
-                )
+                fitted = _calibrate_capture(cap, kwargs)
                 times.append(time.perf_counter() - t0)
                 if model is None:
                     model = fitted  # deterministic: the first one is scored
@@ -668,6 +661,19 @@ def _run_entry(
     return entry
 
 
+def _calibrate_capture(cap: _Capture, kwargs: dict[str, Any]) -> Any:
+    """:func:`photoquant.calibrate` on a capture's views, irradiance, chart and tracks."""
+    from photoquant.calibration import calibrate
+
+    return calibrate(
+        cap.views,
+        irradiance=cap.irradiance,
+        white_roi=cap.white_roi,
+        correspondences=cap.tracks,
+        **kwargs,
+    )
+
+
 _BEFORE_VIGNETTING = frozenset({"g_rms", "lut"})
 """The scores of the steps calibrate runs before the vignetting (response, sensor LUT)."""
 
@@ -679,20 +685,13 @@ def _response_alone(
     vignetting fit untrustworthy) still has a score of its own: the same calibration
     without the vignetting step gives the same response and LUT (both come first).
     ``None`` when that fails too, or for another step's method."""
-    from photoquant.calibration import calibrate
     from photoquant.errors import PhotoquantError
     from validation.compare import compare_with_truth
 
     if step != "response" or not isinstance(error, PhotoquantError):
         return None
     try:
-        model = calibrate(
-            cap.views,
-            irradiance=cap.irradiance,
-            white_roi=cap.white_roi,
-            correspondences=cap.tracks,
-            **{**kwargs, "vignetting": "None"},
-        )
+        model = _calibrate_capture(cap, {**kwargs, "vignetting": "None"})
         rep = compare_with_truth(cap.manifest, model, cap.truth, allow_outside=cap.allow_outside)
     except Exception:  # noqa: BLE001 - then the entry fails with the first error
         return None
