@@ -331,10 +331,26 @@ def _pixel_sample(stack: ExposureStack, max_pixels: int, rng: np.random.Generato
     if n_pix <= max_pixels:
         return stack
     pick = np.sort(rng.choice(n_pix, max_pixels, replace=False))
+    return _stack_of_pixels(stack, pick)
+
+
+def _take_pixels(stack: ExposureStack, pick: np.ndarray) -> np.ndarray:
+    """The frames of ``stack`` at the flat pixel indices ``pick``, shape ``(N, K, P, C)``.
+
+    ``np.take`` on the ``(N·K, H·W, C)`` view: fancy indexing of the middle
+    axis walks the trailing channels three at a time and is ~4× slower
+    (1024×768, N = 10, K = 8, 40 000 pixels: 43 → 12 ms).
+    """
     n, k, c = stack.n_repeats, stack.n_exposures, stack.n_channels
-    frames = stack.frames.reshape(n, k, n_pix, c)[:, :, pick][:, :, None]
+    n_pix = stack.image_shape[0] * stack.image_shape[1]
+    flat = stack.frames.reshape(n * k, n_pix, c)
+    return np.take(flat, pick, axis=1).reshape(n, k, pick.size, c)
+
+
+def _stack_of_pixels(stack: ExposureStack, pick: np.ndarray) -> ExposureStack:
+    """The pixels ``pick`` of ``stack`` in one row, with its levels (not detected again)."""
     return ExposureStack(
-        frames,
+        _take_pixels(stack, pick)[:, :, None],
         stack.exposure_s,
         bit_depth=stack.bit_depth,
         saturation_level=stack.saturation_level,
@@ -717,18 +733,15 @@ def combine_stacks(
                 "black level; only stacks of one camera setting can be combined"
             )
     times = np.unique(np.concatenate([st.exposure_s for st in stacks]))
-    rng = np.random.default_rng(seed)
     parts = []
-    for st in stacks:
+    for st in _thin_stacks(stacks, max_pixels, seed):
         n_pix = st.image_shape[0] * st.image_shape[1]
-        pick = np.arange(n_pix)
-        if n_pix > max_pixels:
-            pick = np.sort(rng.choice(n_pix, max_pixels, replace=False))
-        frames = st.frames.reshape(st.n_repeats, st.n_exposures, n_pix, st.n_channels)[:, :, pick]
+        frames = st.frames.reshape(st.n_repeats, st.n_exposures, n_pix, st.n_channels)
         full = np.full(
-            (st.n_repeats, times.size, pick.size, st.n_channels), first.c_max, dtype=frames.dtype
+            (st.n_repeats, times.size, n_pix, st.n_channels), first.c_max, dtype=frames.dtype
         )
-        full[:, np.searchsorted(times, st.exposure_s)] = frames
+        for k, slot in enumerate(np.searchsorted(times, st.exposure_s)):
+            full[:, slot] = frames[:, k]  # one exposure at a time: a plain copy
         parts.append(full)
     combined = np.concatenate(parts, axis=2)[:, :, None]
     sat = np.min(np.stack([np.asarray(st.saturation_level) for st in stacks]), axis=0)
@@ -741,6 +754,19 @@ def combine_stacks(
         black_level=first.black_level,
         exposure_basis=first.exposure_basis,
     )
+
+
+def _thin_stacks(
+    stacks: Sequence[ExposureStack], max_pixels: int, seed: int
+) -> list[ExposureStack]:
+    """Each stack, or ``max_pixels`` of its pixels drawn at random (one generator from ``seed``, in turn).
+
+    The draw of :func:`combine_stacks`: combining the thinned stacks again
+    draws nothing (each has at most ``max_pixels``), so a caller that combines
+    the same stacks under several labellings thins them once.
+    """
+    rng = np.random.default_rng(seed)
+    return [_pixel_sample(st, max_pixels, rng) for st in stacks]
 
 
 def refine_jointly(
@@ -809,8 +835,10 @@ def refine_jointly(
     current = [st.exposure_s.copy() for st in stacks]
     refs: list[ExposureRefinement] = []
     response: tuple[np.ndarray, ...] = ()
+    # the pixels the response sees, drawn once (the draw combine_stacks makes)
+    thinned = _thin_stacks(stacks, combine_pixels, 0)
     for _ in range(rounds):
-        labelled = [st.with_exposure_times(t) for st, t in zip(stacks, current, strict=True)]
+        labelled = [st.with_exposure_times(t) for st, t in zip(thinned, current, strict=True)]
         response = recover(combine_stacks(labelled, max_pixels=combine_pixels))
         levels, g, sat = response[:3]
         vmin = response[3] if len(response) > 3 else options.get("valid_min")
@@ -829,7 +857,7 @@ def refine_jointly(
         current = [r.exposure_s for r in refs]
         if change < tolerance:
             break
-    labelled = [st.with_exposure_times(t) for st, t in zip(stacks, current, strict=True)]
+    labelled = [st.with_exposure_times(t) for st, t in zip(thinned, current, strict=True)]
     response = recover(combine_stacks(labelled, max_pixels=combine_pixels))
     return refs, response
 
