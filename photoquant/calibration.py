@@ -58,7 +58,7 @@ from photoquant.exposure import (
     refine_jointly,
 )
 from photoquant.flatfield import SensorLUTModel
-from photoquant.glare import GlareData, GlareModel
+from photoquant.glare import GlareData, GlareModel, best_exposed_level
 from photoquant.merge import MergeModel, MergeResult
 from photoquant.methods import STEPS, Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
@@ -179,10 +179,17 @@ def fit_glare_step(
     spec: Any = None,
     *,
     profile: str = DEFAULT_PROFILE,
+    best_level: np.ndarray | None = None,
 ) -> StepFit[GlareModel]:
-    """The glare step from the merged glare capture and the sensor LUT ``u`` (:mod:`photoquant.glare`)."""
+    """The glare step from the merged glare capture and the sensor LUT ``u`` (:mod:`photoquant.glare`).
+
+    ``best_level``: :func:`photoquant.glare.best_exposed_level` of the capture
+    (:attr:`photoquant.glare.GlareData.best_level`), if known.
+    """
     method, options = _step("glare", spec, profile)
-    data = GlareData(glare_capture.photoquantity() / sensor_lut, glare_capture.all_saturated)
+    data = GlareData(
+        glare_capture.photoquantity() / sensor_lut, glare_capture.all_saturated, best_level
+    )
     return _checked_fit(method.function(data, options), method, GlareModel)
 
 
@@ -508,7 +515,12 @@ def calibrate(
         glare_spec = resolve_method("glare", "None", ("None", {}))
     else:
         say("glare")
-        glare_fit = fit_glare_step(merge_model.merge(glare_capture, resp), lut.lut, glare_spec)
+        glare_fit = fit_glare_step(
+            merge_model.merge(glare_capture, resp),
+            lut.lut,
+            glare_spec,
+            best_level=best_exposed_level(glare_capture, resp.saturation_level),
+        )
         glare_model = glare_fit.model
         report["glare"] = {"method": glare_model.method, **glare_fit.report}
         timings["glare"] = time.perf_counter() - t0

@@ -63,6 +63,7 @@ __all__ = [
     "GlareData",
     "GlareModel",
     "MAX_GLARE_FRACTION",
+    "best_exposed_level",
     "characterise_glare_None",
     "glare_kernel_Moffat",
     "remove_glare",
@@ -312,10 +313,40 @@ class GlareData:
     all_saturated : ndarray, shape (H, W, C) of bool
         Pixels saturated in every exposure (a source brighter than the
         shortest exposure can hold).
+    best_level : ndarray, shape (H, W, C), optional
+        Each pixel's best-exposed value: its highest unsaturated mean over
+        the repeats, above the black level, as a fraction of the range from
+        the black to the saturation level (0 where every exposure is dark or
+        saturated). A method may leave out pixels whose best value is too
+        close to the dark floor to be merged without bias. ``None``: unknown.
     """
 
     image: np.ndarray
     all_saturated: np.ndarray
+    best_level: np.ndarray | None = None
+
+
+def best_exposed_level(stack: Any, saturation_level: Any = None) -> np.ndarray:
+    """Each pixel's best-exposed value as a fraction of its channel's range (:attr:`GlareData.best_level`).
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        The glare capture.
+    saturation_level : array_like, shape (C,), optional
+        The levels the merge used (e.g. the response's); the stack's own by default.
+
+    Returns
+    -------
+    ndarray, shape (H, W, C)
+        ``(max_k z̄_k − black) / (saturation − black)`` over the exposures ``k``
+        where no repeat saturated; 0 where every exposure saturated.
+    """
+    sat = np.asarray(stack.saturation_level if saturation_level is None else saturation_level)
+    sat = sat.astype(np.float64)
+    black = np.asarray(stack.black_level, dtype=np.float64)
+    z = np.where(stack.saturated(sat), -np.inf, stack.mean()).max(axis=0)
+    return np.clip((z - black) / np.maximum(sat - black, 1e-12), 0.0, 1.0)
 
 
 def characterise_glare_None(data: GlareData, options: None = None) -> StepFit[GlareModel]:
