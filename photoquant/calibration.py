@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.optimize
 
 from photoquant import __version__
 from photoquant.balance import BalanceData, BalanceModel, check_roi
@@ -53,6 +54,7 @@ from photoquant.defects import detect_defects, exclude_defects, hide_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import (
     ExposureRefinement,
+    _take_pixels,
     fit_affine_shutter,
     refine_exposure_times,
     refine_jointly,
@@ -460,12 +462,17 @@ def calibrate(
         except CalibrationError as exc:
             notes.append(f"glare capture's exposures not refined, nominal times kept: {exc}")
         else:
-            if refs is not None and shutter.lag_s > 3.0 * shutter.lag_std_s:
-                # a lag the views determine (3 σ; a clean shutter's noise would move
-                # a 15 µs exposure by its own few µs)
-                glare_ref = _fill_by_shutter(glare_ref, shutter.lag_s)
+            glare_ref, lag_info = _refine_source_exposures(
+                glare_capture,
+                glare_ref,
+                resp,
+                seed,
+                lag_s=None if refs is None else shutter.lag_s,
+                lag_std_s=None if refs is None else shutter.lag_std_s,
+                defects=None if defects is None else defects.mask,
+            )
             glare_capture = glare_ref.apply(glare_capture)
-            exposures["glare"] = glare_ref.as_dict()
+            exposures["glare"] = {**glare_ref.as_dict(), **lag_info}
     timings["response"] = time.perf_counter() - t0
     report["response"] = {"method": response_spec[0].name, **resp_fit.report}
     report["exposures"] = exposures
@@ -668,10 +675,164 @@ def _fill_by_shutter(ref: ExposureRefinement, lag_s: float) -> ExposureRefinemen
     """
     if ref.refined.all() or not ref.refined.any() or not lag_s > 0:
         return ref
-    lagged = ref.nominal_s + lag_s
-    gauge = float(np.exp(np.mean(np.log(ref.exposure_s[ref.refined] / lagged[ref.refined]))))
-    filled = np.where(ref.refined, ref.exposure_s, gauge * lagged)
+    filled = np.where(
+        ref.refined, ref.exposure_s, _shutter_scale(ref, lag_s) * (ref.nominal_s + lag_s)
+    )
     return dataclasses.replace(ref, exposure_s=filled)
+
+
+def _shutter_scale(ref: ExposureRefinement, lag_s: float) -> float:
+    """``c``: the geometric mean of ``t_refined / (t_nominal + λ)`` over the refined exposures."""
+    lagged = ref.nominal_s[ref.refined] + lag_s
+    return float(np.exp(np.mean(np.log(ref.exposure_s[ref.refined] / lagged))))
+
+
+def _lag_from_group(ref: ExposureRefinement) -> tuple[float, float, float] | None:
+    """The lag ``L`` that the refined times of one group of exposures bend to, with its error.
+
+    Fits ``ln t_k = s + ln(t_nominal,k + L)`` (``s`` free: the group's scale,
+    which its own data do not fix) by weighted least squares (weights
+    ``1 / log_std²``) over the refined exposures; ``L ≥ 0``. Returns
+    ``(L, σ_L, s)``, or ``None`` with fewer than three refined exposures
+    (two fix ``s`` and ``L`` with nothing left to judge them by).
+    """
+    k = np.flatnonzero(ref.refined)
+    if k.size < 3:
+        return None
+    t_nom = ref.nominal_s[k]
+    y = np.log(ref.exposure_s[k])
+    # the gauge exposure has log_std 0: give it the group's smallest nonzero error
+    sd = ref.log_std[k]
+    floor = float(np.min(sd[sd > 0])) if np.any(sd > 0) else 1e-3
+    w = 1.0 / np.maximum(sd, floor) ** 2
+
+    def cost(lag: float) -> float:
+        r = y - np.log(t_nom + lag)
+        return float(np.sum(w * (r - np.sum(w * r) / np.sum(w)) ** 2))
+
+    top = 10.0 * float(np.max(t_nom))
+    grid = np.concatenate([[0.0], np.geomspace(1e-6 * float(np.min(t_nom)), top, 400)])
+    costs = np.array([cost(v) for v in grid])
+    i = int(np.argmin(costs))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    lag = float(scipy.optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded").x)
+    if costs[0] <= cost(lag):
+        lag = 0.0
+    r = y - np.log(t_nom + lag)
+    s_fit = float(np.sum(w * r) / np.sum(w))
+    j = 1.0 / (t_nom + lag)
+    jc = j - np.sum(w * j) / np.sum(w)
+    chi2 = cost(lag) / max(k.size - 2, 1)
+    lag_std = float(np.sqrt(max(chi2, 1.0) / np.sum(w * jc**2)))
+    return lag, lag_std, s_fit
+
+
+def _refine_source_exposures(
+    stack: ExposureStack,
+    ref: ExposureRefinement,
+    response: ResponseModel,
+    seed: int,
+    lag_s: float | None,
+    lag_std_s: float | None,
+    defects: np.ndarray | None = None,
+) -> tuple[ExposureRefinement, dict[str, Any]]:
+    """A glare capture's short exposures, from the source they see and the shutter's lag.
+
+    The refinement of the whole capture leaves the short exposures
+    undetermined: only the small source is exposed in them, too few pixels
+    for its sample, and nothing links them to the long exposures that see the
+    glare tail (the source is ~10 stops above its tail, more than the 8-bit
+    range). Among themselves they are linked: the source's pixels are usable
+    in several of them. So:
+
+    1. the undetermined exposures are refined from the pixels usable in two
+       of them or more (every such pixel, ``min_overlap`` 20: each value is a
+       mean of ``N`` repeats of a bright source), up to a common scale;
+    2. the lag ``L`` these times bend to (a lag of 0.1 ms on a 15 µs
+       exposure is 7.7×) is fitted with the group's free scale
+       (:func:`_lag_from_group`), and averaged, by inverse variance, with
+       the views' lag where the views determine it (``lag_s ± lag_std_s``);
+    3. the group is scaled to the refined long exposures through the shutter
+       ``c·(t_nominal + L)``: ``c`` is the geometric mean of
+       ``t_refined / (t_nominal + L)`` over the long ones, and the group's
+       scale is the one that puts its own fit on ``c·(t_nominal + L)``; each
+       exposure of the group keeps its own measured ratio to the others (its
+       jitter); exposures in neither group become ``c·(t_nominal + L)``.
+
+    ``defects`` (``(H, W, C)``, the calibration's hot and stuck pixels) are
+    left out of the group: a stuck pixel is "usable" at every exposure, and
+    a sensor has about as many as a small source has pixels.
+
+    Unchanged when every exposure was refined or none was; without a group
+    (fewer than three exposures of it refined) step 3 uses the views' lag
+    alone (nothing where that is not positive).
+    """
+    info: dict[str, Any] = {}
+    undetermined = ~ref.refined
+    if not undetermined.any() or not ref.refined.any():
+        return ref, info
+    sat = np.asarray(response.saturation_level, dtype=np.float64)
+    usable = ~(stack.saturated(sat) | stack.dark_clipped())[undetermined].any(axis=-1)
+    ok = usable.sum(axis=0) >= 2
+    if defects is not None:
+        ok &= ~np.asarray(defects, dtype=bool).any(axis=-1)
+    pix = np.flatnonzero(ok)
+    group = None
+    if pix.size and undetermined.sum() >= 3:
+        values = _take_pixels(stack, pix)[:, undetermined][:, :, None]
+        sub = ExposureStack(
+            values,
+            stack.exposure_s[undetermined],
+            bit_depth=stack.bit_depth,
+            saturation_level=stack.saturation_level,
+            channels=stack.channels,
+            black_level=stack.black_level,
+            exposure_basis=stack.exposure_basis,
+        )
+        try:
+            group = refine_exposure_times(
+                sub,
+                response.levels,
+                response.log_inverse_response,
+                response.saturation_level,
+                valid_min=response.valid_min,
+                max_pixels=None,
+                min_overlap=20,
+                seed=seed,
+            )
+        except CalibrationError:
+            group = None
+    fitted = None if group is None else _lag_from_group(group)
+    lags, weights = [], []
+    if fitted is not None:
+        lags.append(fitted[0])
+        weights.append(1.0 / max(fitted[1], 1e-12) ** 2)
+        info.update(group_lag_s=fitted[0], group_lag_std_s=fitted[1])
+    if lag_s is not None and lag_std_s is not None and lag_s > 3.0 * lag_std_s:
+        # a lag the views determine (3 σ; a clean shutter's noise would move a
+        # 15 µs exposure by its own few µs)
+        lags.append(float(lag_s))
+        weights.append(1.0 / max(float(lag_std_s), 1e-12) ** 2)
+    if not lags:
+        return ref, info
+    lag = float(np.average(lags, weights=weights))
+    info["lag_s"] = lag
+    if not lag > 0:
+        return ref, info
+    c = _shutter_scale(ref, lag)
+    out = _fill_by_shutter(ref, lag).exposure_s.copy()
+    refined = ref.refined.copy()
+    log_std = ref.log_std.copy()
+    if group is not None and fitted is not None:
+        # the group's own fit at the combined lag, on c·(t + L)
+        k = np.flatnonzero(group.refined)
+        s_group = float(np.mean(np.log(group.exposure_s[k] / (group.nominal_s[k] + lag))))
+        idx = np.flatnonzero(undetermined)[k]
+        out[idx] = c * np.exp(-s_group) * group.exposure_s[k]
+        refined[idx] = True
+        log_std[idx] = group.log_std[k]
+        info["group_exposures"] = idx.tolist()
+    return dataclasses.replace(ref, exposure_s=out, refined=refined, log_std=log_std), info
 
 
 def _refine_against(stack: ExposureStack, response: ResponseModel, seed: int) -> ExposureRefinement:
