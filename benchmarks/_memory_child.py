@@ -105,14 +105,21 @@ def main(argv: list[str]) -> int:
 
 
 def _full_model(model, shape):
-    """The model at the full size: ``u`` tiled like the frames, the same vignetting params."""
+    """The model at the full size: ``u`` and the defect map tiled like the frames, the same vignetting."""
     import dataclasses
 
+    from photoquant.defects import DefectMap
     from photoquant.flatfield import SensorLUTModel
 
     u = np.tile(model.sensor_lut.lut, (10, 10, 1))
+    defects = DefectMap(
+        hot=np.tile(model.defects.hot, (10, 10, 1)), stuck=np.tile(model.defects.stuck, (10, 10, 1))
+    )
     return dataclasses.replace(
-        model, image_shape=tuple(shape), sensor_lut=SensorLUTModel("Irradiance Scene", u)
+        model,
+        image_shape=tuple(shape),
+        sensor_lut=SensorLUTModel("Irradiance Scene", u),
+        defects=defects,
     )
 
 

@@ -152,6 +152,7 @@ class ImplResult:
     times_s: list[float] = field(default_factory=list)
     accuracy: dict[str, float] = field(default_factory=dict)
     metrics: dict[str, float] = field(default_factory=dict)
+    error: str | None = None
 
     @property
     def min_s(self) -> float:
@@ -169,6 +170,7 @@ class ImplResult:
             "times_s": self.times_s,
             "accuracy": self.accuracy,
             "metrics": self.metrics,
+            "error": self.error,
         }
 
 
@@ -230,8 +232,17 @@ def run_case(case: Case, config: Config, log: Callable[[str], None] | None = Non
     repeats = max(1, config.repeats) if case.timed else 1
     for rep in range(repeats):
         for name, fn in case.implementations.items():
-            sec, out = _call(fn, ctx)
             res = results[name]
+            if res.error is not None:
+                continue
+            try:
+                sec, out = _call(fn, ctx)
+            except Exception as exc:  # one implementation's failure is its row, not the run's
+                lines = str(exc).strip().splitlines() or [""]
+                res.error = f"{type(exc).__name__}: {lines[-1]}"
+                if log is not None:
+                    log(f"  {case.name}: {name} failed: {res.error}")
+                continue
             if isinstance(out, Measured):
                 if rep == 0:
                     res.metrics.update({k: float(v) for k, v in out.metrics.items()})

@@ -67,6 +67,8 @@ def markdown(results: list[CaseResult], header: dict[str, Any]) -> str:
             ratio_text = "" if ratio is None else f"{ratio['min']:.2f}, {ratio['median']:.2f}"
             acc = ", ".join(f"{k} {_fmt_value(v)}" for k, v in r.accuracy.items())
             other = ", ".join(f"{k} {_fmt_value(v)}" for k, v in r.metrics.items())
+            if r.error is not None:
+                other = f"failed: {r.error}"
             timed = case.timed
             lines.append(
                 f"| {case.title if name == case.ours_name else ''} | {name} "

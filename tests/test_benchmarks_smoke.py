@@ -38,6 +38,33 @@ def test_run_case_interleaves_and_scores() -> None:
     assert set(res.ratios()) == {"peer"}
 
 
+def test_a_failing_implementation_is_its_row_not_the_run() -> None:
+    """One peer's failure is recorded (its type and last line) and tried no more; the rest run."""
+    calls: list[str] = []
+
+    def ours(ctx: dict) -> float:
+        calls.append("ours")
+        return 1.0
+
+    def broken(ctx: dict) -> float:
+        calls.append("broken")
+        raise RuntimeError("peer: crashed\nlast line: out of memory")
+
+    case = Case(
+        name="toy",
+        title="toy",
+        setup=lambda cfg: {},
+        implementations={"ours": ours, "broken": broken},
+    )
+    res = run_case(case, Config(repeats=3))
+    assert calls == ["ours", "broken", "ours", "ours"]
+    assert res.results["broken"].error == "RuntimeError: last line: out of memory"
+    assert res.results["broken"].times_s == []
+    assert res.results["ours"].error is None and len(res.results["ours"].times_s) == 3
+    assert res.ratios() == {}  # no ratio to a failed peer
+    assert res.to_dict()["implementations"][1]["error"].startswith("RuntimeError")
+
+
 def test_runner_writes_json_and_markdown(tmp_path) -> None:
     out = tmp_path / "results"
     rc = main(
