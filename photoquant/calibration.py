@@ -54,9 +54,9 @@ from photoquant.defects import detect_defects, exclude_defects, hide_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import (
     ExposureRefinement,
-    _take_pixels,
+    _stack_of_pixels,
     fit_affine_shutter,
-    refine_exposure_times,
+    refine_against_response,
     refine_jointly,
 )
 from photoquant.flatfield import SensorLUTModel
@@ -779,26 +779,10 @@ def _refine_source_exposures(
     pix = np.flatnonzero(ok)
     group = None
     if pix.size and undetermined.sum() >= 3:
-        values = _take_pixels(stack, pix)[:, undetermined][:, :, None]
-        sub = ExposureStack(
-            values,
-            stack.exposure_s[undetermined],
-            bit_depth=stack.bit_depth,
-            saturation_level=stack.saturation_level,
-            channels=stack.channels,
-            black_level=stack.black_level,
-            exposure_basis=stack.exposure_basis,
-        )
+        sub = _stack_of_pixels(stack, pix, undetermined)
         try:
-            group = refine_exposure_times(
-                sub,
-                response.levels,
-                response.log_inverse_response,
-                response.saturation_level,
-                valid_min=response.valid_min,
-                max_pixels=None,
-                min_overlap=20,
-                seed=seed,
+            group = refine_against_response(
+                sub, response, max_pixels=None, min_overlap=20, seed=seed
             )
         except CalibrationError:
             group = None
@@ -838,14 +822,7 @@ def _refine_source_exposures(
 def _refine_against(stack: ExposureStack, response: ResponseModel, seed: int) -> ExposureRefinement:
     """``stack``'s exposure times re-estimated against a known response (one-line errors)."""
     try:
-        return refine_exposure_times(
-            stack,
-            response.levels,
-            response.log_inverse_response,
-            response.saturation_level,
-            valid_min=response.valid_min,
-            seed=seed,
-        )
+        return refine_against_response(stack, response, seed=seed)
     except CalibrationError as exc:
         raise CalibrationError(
             f"exposure refinement failed ({exc}); use refine_exposures=False "

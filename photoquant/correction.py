@@ -22,7 +22,7 @@ import numpy as np
 
 from photoquant.defects import detect_defects
 from photoquant.errors import CalibrationError, InputError
-from photoquant.exposure import ExposureRefinement, refine_exposure_times
+from photoquant.exposure import ExposureRefinement, refine_against_response
 from photoquant.merge import MergeModel
 from photoquant.merge._tiled import merge_tiles
 from photoquant.methods import resolve_method
@@ -173,15 +173,8 @@ def correct(
     refinement: ExposureRefinement | None = None
     notes: list[str] = []
     if refine_exposures or (refine_exposures is None and _camera_refines(model)):
-        resp = model.response
         try:
-            refinement = refine_exposure_times(
-                stack,
-                resp.levels,
-                resp.log_inverse_response,
-                resp.saturation_level,
-                valid_min=resp.valid_min,
-            )
+            refinement = refine_against_response(stack, model.response)
         except CalibrationError as exc:
             if refine_exposures:
                 raise CalibrationError(

@@ -94,6 +94,7 @@ __all__ = [
     "ShutterFit",
     "combine_stacks",
     "fit_affine_shutter",
+    "refine_against_response",
     "refine_jointly",
     "rounding_variance",
     "refine_exposure_times",
@@ -347,16 +348,44 @@ def _take_pixels(stack: ExposureStack, pick: np.ndarray) -> np.ndarray:
     return np.take(flat, pick, axis=1).reshape(n, k, pick.size, c)
 
 
-def _stack_of_pixels(stack: ExposureStack, pick: np.ndarray) -> ExposureStack:
-    """The pixels ``pick`` of ``stack`` in one row, with its levels (not detected again)."""
+def _stack_of_pixels(
+    stack: ExposureStack, pick: np.ndarray, exposures: np.ndarray | None = None
+) -> ExposureStack:
+    """The pixels ``pick`` of ``stack`` in one row, with its levels (not detected again).
+
+    ``exposures`` (a boolean mask over ``K``) keeps only those exposures.
+    """
+    values = _take_pixels(stack, pick)
+    t = stack.exposure_s
+    if exposures is not None:
+        values, t = values[:, exposures], t[exposures]
     return ExposureStack(
-        _take_pixels(stack, pick)[:, :, None],
-        stack.exposure_s,
+        values[:, :, None],
+        t,
         bit_depth=stack.bit_depth,
         saturation_level=stack.saturation_level,
         channels=stack.channels,
         black_level=stack.black_level,
         exposure_basis=stack.exposure_basis,
+    )
+
+
+def refine_against_response(
+    stack: ExposureStack, response: Any, **options: Any
+) -> ExposureRefinement:
+    """:func:`refine_exposure_times` of ``stack`` against a calibrated response model.
+
+    ``response`` is a :class:`~photoquant.response.model.ResponseModel` (its
+    levels, ``g``, saturation levels and ``valid_min``); ``options`` go to
+    :func:`refine_exposure_times`.
+    """
+    return refine_exposure_times(
+        stack,
+        response.levels,
+        response.log_inverse_response,
+        response.saturation_level,
+        valid_min=response.valid_min,
+        **options,
     )
 
 
