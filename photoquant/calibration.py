@@ -803,12 +803,12 @@ def _refine_source_exposures(
     info["lag_s"] = lag
     if not lag > 0:
         return ref, info
-    c = _shutter_scale(ref, lag)
     out = _fill_by_shutter(ref, lag).exposure_s.copy()
     refined = ref.refined.copy()
     log_std = ref.log_std.copy()
     if group is not None and fitted is not None:
         # the group's own fit at the combined lag, on c·(t + L)
+        c = _shutter_scale(ref, lag)
         k = np.flatnonzero(group.refined)
         s_group = float(np.mean(np.log(group.exposure_s[k] / (group.nominal_s[k] + lag))))
         idx = np.flatnonzero(undetermined)[k]

@@ -19,7 +19,12 @@ from hypothesis import strategies as st
 
 import photoquant as pq
 from photoquant.errors import CalibrationError, CameraModelError, InputError, ManifestError
-from photoquant.glare import GlareModel, fit_glare_ParametricPSF, remove_glare
+from photoquant.glare import (
+    GlareModel,
+    ParametricPSFOptions,
+    fit_glare_ParametricPSF,
+    remove_glare,
+)
 from pqsim.analytic import normalised_coordinates, scene_glare_source
 from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera import camera_from_preset
@@ -333,3 +338,21 @@ def test_fit_leaves_out_annuli_near_the_dark_floor():
     # a tail nowhere above the floor is refused, naming the floor
     with pytest.raises(CalibrationError, match="3 % of the range"):
         fit_glare_ParametricPSF(y, best_level=0.02 * np.ones_like(y))
+
+
+@pytest.mark.parametrize(
+    ("bad", "match"),
+    [
+        ({"beta": 1.0}, "beta"),
+        ({"core_threshold": 0.9}, "core_threshold"),
+        ({"n_annuli": 2}, "n_annuli"),
+        ({"min_valid_fraction": 0.0}, "min_valid_fraction"),
+        ({"min_level": -0.01}, "min_level"),
+        ({"min_level": 0.6}, "min_level"),
+        ({"fit_background": "yes"}, "fit_background"),
+    ],
+)
+def test_parametric_psf_bad_options(bad, match):
+    with pytest.raises(InputError, match=match) as info:
+        ParametricPSFOptions(**bad)
+    assert "\n" not in str(info.value)
