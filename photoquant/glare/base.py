@@ -24,6 +24,20 @@ fit use; a Fourier-space division ``Y / ((1 − f) + f K̂)`` would instead
 invert a *circular* convolution and wrap the glare of one edge onto the
 other. Light scattered in from outside the frame cannot be removed.
 
+A source saturated in every exposure has no measured value, yet its glare
+must be removed from everything around it. Where only some channels of a
+pixel saturated (a bright source of a strong colour, or a channel whose
+white balance puts its clip lowest), the clipped channel is estimated from
+a valid one scaled by their ratio on the clipped region's rim, the
+cross-channel reconstruction of raw converters' highlight recovery
+[dcraw]_ (:func:`fill_clipped_channels`); pixels with no valid channel take
+their nearest valid neighbour's value, a lower bound. Measured 2026-12-01
+on pqsim's ccd (lamp scene, exposure error and row noise, every stack with
+its true times): the lamp's red channel clipped in every exposure and the
+nearest-neighbour fill put the veil's red 2.2× too high in the deep shadow
+(scene error 10.3 %); with the cross-channel fill 1.11× (2.8 %). Only the
+convolution sees the estimate: those pixels stay NaN in the result.
+
 The step's methods are ``function(data: GlareData, options) ->
 StepFit[GlareModel]`` in :data:`GLARE_METHODS`; ``"None"`` (no glare capture)
 gives the identity, which the correction skips: without a glare capture
@@ -38,6 +52,9 @@ References
 .. [BJA07] B. Bitlis, P. A. Jansson, J. P. Allebach, "Parametric point spread
    function modeling and reduction of stray light effects in digital still
    cameras", Proc. SPIE 6498, Computational Imaging V, 2007.
+.. [dcraw] D. Coffin, *dcraw* (``-H 2``, "blend" / ``-H 3+``, "rebuild":
+   a clipped channel reconstructed from the unclipped ones of the same
+   pixel), 1997-2018; darktable's "reconstruct color" does likewise.
 .. [Mof69] A. F. J. Moffat, "A theoretical investigation of focal stellar
    images in the photographic emulsion and application to photographic
    photometry", Astron. Astrophys. 3, 455–461, 1969.
@@ -52,7 +69,7 @@ from typing import Any
 
 import numpy as np
 import scipy.fft
-from scipy.ndimage import distance_transform_edt
+from scipy.ndimage import binary_dilation, distance_transform_edt, find_objects, label
 
 from photoquant._checks import check_array
 from photoquant.errors import InputError
@@ -66,6 +83,7 @@ __all__ = [
     "best_exposed_level",
     "characterise_glare_None",
     "glare_kernel_Moffat",
+    "fill_clipped_channels",
     "remove_glare",
 ]
 
@@ -152,6 +170,74 @@ def _fill_masked(image: np.ndarray, bad: np.ndarray) -> np.ndarray:
     return image[tuple(idx)]
 
 
+#: Width (pixels) of the rim around a clipped region over which the ratio of
+#: the clipped channel to a valid one is measured.
+_RIM_PX = 3
+
+
+def fill_clipped_channels(image: Any) -> np.ndarray:
+    """Estimate clipped (NaN) channels of a linear image from the pixel's valid channels.
+
+    For each channel ``c`` and each connected region of pixels where ``c``
+    is NaN, the valid channel ``o`` that covers most of the region is
+    scaled by the median ratio ``y_c / y_o`` over the region's rim (the
+    pixels within 3 px where both are valid and positive), and fills the
+    region wherever ``o`` is valid [dcraw]_. A region with no rim, or no
+    valid other channel, is left NaN.
+
+    Parameters
+    ----------
+    image : array_like, shape (H, W, C)
+        Linear image, NaN where a channel has no valid exposure.
+
+    Returns
+    -------
+    ndarray, shape (H, W, C), float64
+        A copy with the estimates written in; NaN where none could be made.
+
+    Notes
+    -----
+    The estimate assumes the region's colour equals its rim's: true of a
+    lamp or a sunlit surface of one colour, not of a source whose colour
+    changes under the clip. It is still far nearer the truth than the
+    nearest valid value of the same channel, which (the region being the
+    brightest part of the source) is a lower bound.
+    """
+    y = check_array(image, "image", ndim=3, kind="f").astype(np.float64)
+    bad = ~np.isfinite(y)
+    n_ch = y.shape[2]
+    if n_ch < 2 or not bad.any():
+        return y
+    out = y.copy()
+    h, w = y.shape[:2]
+    for c in range(n_ch):
+        regions, _ = label(bad[..., c])
+        for i, box in enumerate(find_objects(regions), start=1):
+            if box is None:
+                continue
+            # the region's box grown by the rim: every test below stays local
+            win = tuple(
+                slice(max(sl.start - _RIM_PX, 0), min(sl.stop + _RIM_PX, size))
+                for sl, size in zip(box, (h, w), strict=True)
+            )
+            region = regions[win] == i
+            yw, bw = y[win], bad[win]
+            cover = [
+                -1 if o == c else int(np.count_nonzero(region & ~bw[..., o])) for o in range(n_ch)
+            ]
+            best = int(np.argmax(cover))
+            if cover[best] <= 0:
+                continue
+            rim = binary_dilation(region, iterations=_RIM_PX) & ~region
+            rim &= ~bw[..., c] & ~bw[..., best] & (yw[..., best] > 0) & (yw[..., c] > 0)
+            if not rim.any():
+                continue
+            ratio = float(np.median(yw[..., c][rim] / yw[..., best][rim]))
+            fill = region & ~bw[..., best]
+            out[win][..., c][fill] = ratio * yw[..., best][fill]
+    return out
+
+
 def remove_glare(
     image: Any,
     fraction: Any,
@@ -168,8 +254,10 @@ def remove_glare(
     image : array_like, shape (H, W, C)
         Linear image on the sensor (the merged image divided by ``u``); NaN
         where no exposure was valid. Those pixels stay NaN; for the
-        convolution they take their nearest valid neighbour's value (a lower
-        bound of the light of a saturated source).
+        convolution a clipped channel is estimated from the pixel's valid
+        channels (:func:`fill_clipped_channels`), and where none is valid it
+        takes its nearest valid neighbour's value (a lower bound of the
+        light of a saturated source).
     fraction, width_px : array_like, shape (C,)
         ``f_λ`` in ``[0, 0.5)`` and ``w_λ ≥ 1`` pixels.
     beta : float
@@ -193,12 +281,13 @@ def remove_glare(
         raise InputError(f"the glare model has {f.size} channels, the image {y.shape[2]}")
     shape = (int(y.shape[0]), int(y.shape[1]))
     out = y.copy()
+    estimated = fill_clipped_channels(y) if np.any(f > 0) else y
     for ch in range(y.shape[2]):
         fc = float(f[ch])
         if fc == 0.0:
             continue
         bad = ~np.isfinite(y[..., ch])
-        yc = _fill_masked(y[..., ch], bad)
+        yc = _fill_masked(estimated[..., ch], ~np.isfinite(estimated[..., ch]))
         conv = _Convolver(shape, _kernel(shape, float(w[ch]), float(b)))
         x = yc
         scale = float(np.max(np.abs(yc), initial=0.0)) or 1.0

@@ -22,9 +22,11 @@ from photoquant.errors import CalibrationError, CameraModelError, InputError, Ma
 from photoquant.glare import (
     GlareModel,
     ParametricPSFOptions,
+    fill_clipped_channels,
     fit_glare_ParametricPSF,
     remove_glare,
 )
+from photoquant.glare.base import _fill_masked
 from pqsim.analytic import normalised_coordinates, scene_glare_source
 from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera import camera_from_preset
@@ -63,6 +65,60 @@ def test_removal_keeps_masked_pixels_masked_and_zero_fraction_untouched():
     out = remove_glare(x, [0.05, 0.0], [4.0, 4.0])
     assert np.isnan(out[3, 4, 0]) and np.isfinite(out[..., 0]).sum() == x[..., 0].size - 1
     assert np.array_equal(out[..., 1], x[..., 1])
+
+
+def _lamp_scene(shape=(64, 80)):
+    """A dim textured background and a bright lamp of one colour (R/G = 1.6, B/G = 0.5)."""
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.01, 0.02, (*shape, 3))
+    yy, xx = np.mgrid[: shape[0], : shape[1]]
+    lamp = (yy - 20) ** 2 + (xx - 25) ** 2 < 36
+    core = (yy - 20) ** 2 + (xx - 25) ** 2 < 16
+    level = np.where(core, 400.0, 40.0)  # a core 10x its rim, both far above the background
+    x[lamp] = level[lamp][:, None] * np.array([1.6, 1.0, 0.5])
+    return x, core
+
+
+def test_fill_clipped_channels_rebuilds_a_clipped_channel_from_its_rim_colour():
+    x, core = _lamp_scene()
+    clipped = x.copy()
+    clipped[core, 0] = np.nan  # red clipped in every exposure over the core, green valid
+    clipped[core & (np.arange(80)[None, :] < 24), 1] = np.nan  # green too on part of it
+    out = fill_clipped_channels(clipped)
+    # the rim has the core's colour: R = 1.6 G from G, R = 3.2 B where G is clipped too
+    np.testing.assert_allclose(out[core, 0], x[core, 0], rtol=1e-12)
+    np.testing.assert_allclose(out[core, 1], x[core, 1], rtol=1e-12)
+    assert np.array_equal(out[~core], x[~core])
+    every = clipped.copy()
+    every[core] = np.nan  # nothing valid to scale: left NaN
+    assert np.isnan(fill_clipped_channels(every)[core]).all()
+
+
+def test_removal_with_a_source_clipped_in_one_channel():
+    """The veil of a source whose red clipped is removed as if it had not (issue 12)."""
+    x, core = _lamp_scene()
+    f, w = [0.015] * 3, [20.0] * 3
+    y = GlareSpread(f, w).apply(x)
+    y[core, 0] = np.nan
+    back = remove_glare(y, f, w)
+    far = ~binary_dilation_disk(core, 6)
+    # the rim's colour is the core's but for the background under it (~0.015 of a rim
+    # of 40: a ratio off by < 4e-4), so the red veil is removed to < 1e-3 of itself;
+    # the nearest-neighbour fill (the rim's red, 10x below the core's) leaves most of it
+    veil = y[far, 0] - x[far, 0]
+    resid = np.abs(back[far, 0] - x[far, 0])
+    assert np.all(resid < 1e-3 * veil)
+    nearest = _fill_masked(y[..., 0], np.isnan(y[..., 0]))
+    lower = np.dstack([nearest, np.nan_to_num(y[..., 1]), np.nan_to_num(y[..., 2])])
+    naive = remove_glare(lower, f, w)[..., 0]
+    assert np.median(np.abs(naive[far] - x[far, 0]) / veil) > 0.5
+    assert np.isnan(back[core, 0]).all()
+
+
+def binary_dilation_disk(mask, radius):
+    from scipy import ndimage
+
+    return ndimage.binary_dilation(mask, iterations=radius)
 
 
 @pytest.mark.parametrize(
