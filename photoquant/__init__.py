@@ -43,6 +43,8 @@ _EXPORTS: dict[str, str] = {
     "correct_manifest": "photoquant.correction",
     "Correction": "photoquant.correction",
     "fit_response": "photoquant.response",
+    "characterise_dark_frames": "photoquant.darkframe",
+    "subtract_dark_frames": "photoquant.darkframe",
     # data and models
     "ExposureStack": "photoquant.stack",
     "CameraModel": "photoquant.model",
@@ -58,6 +60,7 @@ _EXPORTS: dict[str, str] = {
     "ExtendedGoldmanChenVignetting": "photoquant.vignetting",
     "GlareModel": "photoquant.glare",
     "GlareData": "photoquant.glare",
+    "DarkFrameModel": "photoquant.darkframe",
     "load_manifest": "photoquant.io",
     "load_stack": "photoquant.io",
     "read_exr": "photoquant.io",
@@ -88,6 +91,11 @@ __all__ = ["__version__", *_EXPORTS]
 # _EXPORTS by tests/photoquant/test_public_api.py; `X as X` marks a re-export.
 if TYPE_CHECKING:
     # isort: off
+    from photoquant.darkframe import (
+        DarkFrameModel as DarkFrameModel,
+        characterise_dark_frames as characterise_dark_frames,
+        subtract_dark_frames as subtract_dark_frames,
+    )
     from photoquant.balance import (
         BalanceModel as BalanceModel,
         BalanceData as BalanceData,

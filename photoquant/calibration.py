@@ -840,23 +840,28 @@ def calibrate_manifest(
     """Calibrate from a capture manifest (a path or a loaded ``CaptureManifest``).
 
     Uses ``views``, ``irradiance``, ``white_roi``, ``correspondences``,
-    ``flatfield`` and ``glare`` of the manifest; ``kwargs`` go to :func:`calibrate`.
+    ``flatfield`` and ``glare`` of the manifest (each frame set with its dark
+    signal subtracted when it says ``"dark_subtraction": true``); ``kwargs``
+    go to :func:`calibrate`.
     """
+    from photoquant.io.frames import dark_frame_model
     from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
 
     if not isinstance(manifest, CaptureManifest):
         manifest = load_manifest(manifest, allow_outside=allow_outside)
-    views = [load_stack(v, manifest, progress=progress_bars) for v in manifest.views]
-    irradiance = (
-        load_stack(manifest.irradiance, manifest, progress=progress_bars)
-        if manifest.irradiance is not None
-        else None
-    )
+    # with "dark_subtraction", the dark frames are read and fitted once for every frame set
+    dark = dark_frame_model(manifest) if manifest.dark_subtraction else None
+
+    def stack(frameset: Any) -> Any:
+        return load_stack(frameset, manifest, progress=progress_bars, dark_frames=dark)
+
+    views = [stack(v) for v in manifest.views]
+    irradiance = stack(manifest.irradiance) if manifest.irradiance is not None else None
     corr = list(manifest.correspondences) if manifest.correspondences else None
     if manifest.flatfield is not None and "flat_field" not in kwargs:
-        kwargs["flat_field"] = load_stack(manifest.flatfield, manifest, progress=progress_bars)
+        kwargs["flat_field"] = stack(manifest.flatfield)
     if manifest.glare is not None and "glare_capture" not in kwargs:
-        kwargs["glare_capture"] = load_stack(manifest.glare, manifest, progress=progress_bars)
+        kwargs["glare_capture"] = stack(manifest.glare)
     return calibrate(
         views,
         irradiance=irradiance,

@@ -89,7 +89,16 @@ current 150 px from it at 1 s."""
 
 MANIFEST_NAME = "capture.json"
 #: Top-level paths of a capture folder written by pqsim.
-_OWNED = ("views", "irradiance", "scene", "colorchecker", "glare", "truth", MANIFEST_NAME)
+_OWNED = (
+    "views",
+    "irradiance",
+    "scene",
+    "colorchecker",
+    "glare",
+    "dark",
+    "truth",
+    MANIFEST_NAME,
+)
 
 #: A capture, or a function simulating it when its frames are about to be written
 #: (so that only one capture's frames are in memory at a time).
@@ -296,6 +305,7 @@ def write_capture_folder(
     remove_previous: bool,
     workers: int | None = None,
     progress: bool = False,
+    manifest_fields: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a capture set — frames, ground truth (``truth/``), manifest — whole or not at all.
 
@@ -325,7 +335,9 @@ def write_capture_folder(
         ``name → (capture, fields)``: more frame sets written to ``name/`` and
         stored under the manifest key ``name`` as ``{"frames": [...], **fields}``
         (photoquant keeps unknown keys); truth ``name``. Names must be listed in
-        the owned paths (currently ``colorchecker``).
+        the owned paths (``colorchecker``, ``glare``, ``dark``). With ``dark``
+        frames the manifest states no ``black_level`` (the two exclude each
+        other: the dark frames measure it).
     white_roi : sequence of 4 int, optional
         The white chart's box in view 0.
     correspondences : list, optional
@@ -348,6 +360,8 @@ def write_capture_folder(
         Threads encoding and writing frames (every CPU by default).
     progress : bool
         Show a progress bar over the frame sets (simulated and written).
+    manifest_fields : mapping, optional
+        More top-level manifest keys (e.g. ``{"dark_subtraction": True}``).
 
     Returns
     -------
@@ -379,6 +393,7 @@ def write_capture_folder(
             truth_meta=truth_meta,
             workers=workers,
             progress=progress,
+            manifest_fields=dict(manifest_fields or {}),
         )
     return folder / MANIFEST_NAME
 
@@ -399,6 +414,7 @@ def _write_capture_contents(
     truth_meta: Mapping[str, Any],
     workers: int | None,
     progress: bool,
+    manifest_fields: Mapping[str, Any],
 ) -> None:
     """Write a capture set's frames, truth and manifest into the (new, temporary) ``folder``."""
     from photoquant import io as pqio
@@ -434,7 +450,7 @@ def _write_capture_contents(
     if write_saturation_level:
         manifest["saturation_level"] = camera.saturation_dn.tolist()
     dist = camera.disturbances
-    if dist is not None and any(dist.black_level_dn):
+    if dist is not None and any(dist.black_level_dn) and "dark" not in extra_sets:
         # the pedestal is the frames' black level, as a raw file's metadata gives it
         manifest["black_level"] = dist.per_channel(
             dist.black_level_dn, "black_level_dn", camera.n_channels
@@ -442,6 +458,7 @@ def _write_capture_contents(
     if dist is not None and dist.clip_spread_px:
         # demosaicing / JPEG after the clip: the camera's pipeline, as its user knows it
         manifest["saturation_spread"] = dist.clip_spread_px
+    manifest.update(manifest_fields)
     manifest["truth"] = "truth/truth.json"
     manifest["generator"] = dict(generator)
     bar.close()
@@ -471,6 +488,8 @@ def write_capture_set(
     overwrite: bool = False,
     workers: int | None = None,
     glare: bool | Mapping[str, Any] = False,
+    dark_frames: int = 0,
+    dark_subtraction: bool = False,
 ) -> Path:
     """Simulate and write a calibration capture set with its ground truth.
 
@@ -532,6 +551,15 @@ def write_capture_set(
         (of the source) and ``exposure_s`` (:data:`DEFAULT_GLARE_EXPOSURES_S`
         by default). Its noise is stream ``V + 3`` of the master seed; the
         other captures do not change.
+    dark_frames : int
+        Also write that many dark frames (lens capped: ``l = 0``) at each
+        exposure time of the views, the test scene and the glare capture
+        (``dark/``, manifest key ``"dark"``, instead of ``black_level``). Their
+        noise is stream ``V + 4``; the other captures do not change.
+    dark_subtraction : bool
+        Write ``"dark_subtraction": true``: the calibrator then subtracts the
+        dark frames' signal pixel by pixel (:mod:`photoquant.darkframe`).
+        Needs ``dark_frames``.
 
     Returns
     -------
@@ -587,6 +615,11 @@ def write_capture_set(
         scene_name = "array"
 
     glare_source = _glare_source(glare, (h, w), camera.n_channels)
+    check_int(dark_frames, "dark_frames", 0)
+    if not isinstance(dark_subtraction, bool):
+        raise InputError(f"`dark_subtraction` must be true or false, got {dark_subtraction!r}")
+    if dark_subtraction and not dark_frames:
+        raise InputError("`dark_subtraction` needs `dark_frames` (how many at each exposure)")
     folder, non_empty = check_output_folder(folder, overwrite)
 
     # -- simulate everything in memory first -----------------------------------------
@@ -617,6 +650,18 @@ def write_capture_set(
             camera.capture(l_glare, t_glare, n_repeats, glare_rng, workers=workers),
             {},
         )
+    if dark_frames:
+        # stream V + 4, as the glare capture's is V + 3: the other captures do not change
+        dark_rng = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(n_views + 5)[-1])
+        times = [t, t_scene] + ([glare_source[1]] if glare_source is not None else [])
+        t_dark = np.unique(np.concatenate(times))
+        l_dark = np.zeros((h, w, camera.n_channels))
+        extra["dark"] = (
+            camera.capture(
+                l_dark, t_dark, int(dark_frames), dark_rng, optics=False, workers=workers
+            ),
+            {},
+        )
 
     meta = {
         "seed": int(seed),
@@ -634,6 +679,8 @@ def write_capture_set(
     }
     if glare_source is not None:
         meta["glare_capture"] = {"exposure_s": glare_source[1].tolist()}
+    if dark_frames:
+        meta["dark_frames"] = {"n_repeats": int(dark_frames)}
     return write_capture_folder(
         folder,
         camera,
@@ -654,6 +701,7 @@ def write_capture_set(
         truth_meta=meta,
         remove_previous=non_empty,
         workers=workers,
+        manifest_fields={"dark_subtraction": True} if dark_subtraction else None,
     )
 
 

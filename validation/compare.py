@@ -48,7 +48,11 @@ from validation.metrics import (
     relative_error_eq8,
     response_error,
 )
-from validation.noise_model import predicted_log_error, predicted_relative_error
+from validation.noise_model import (
+    predicted_log_error,
+    predicted_log_error_with_glare,
+    predicted_relative_error,
+)
 from validation.truth_model import white_reference
 
 __all__ = [
@@ -246,7 +250,11 @@ def compare_with_truth(
     }
     e, stats, _ = relative_error_eq8(scene_l, res.photoquantity, res.mask)
     out["maps"]["scene"] = e
-    bias, var = predicted_log_error(cam, scene.l, scene.exposure_s, scene.n_repeats)
+    # with veiling glare that the camera model removes, the floor of the glare-free scene
+    # is held to the noise of the light the sensor received (veil included)
+    removes_glare = model.glare is not None and not model.glare.is_identity
+    noise = predicted_log_error_with_glare if removes_glare else predicted_log_error
+    bias, var = noise(cam, scene.l, scene.exposure_s, scene.n_repeats)
     floor = predicted_relative_error(scene.l, var, np.random.default_rng(0), log_bias=bias)
     ok = np.isfinite(e) & np.isfinite(floor)
     out["scene"] = {

@@ -13,6 +13,15 @@ log-exposure units ``Var(ln X̂_k) = Var(c̄_k) / (X·dc/dX)²`` — which for t
 shot-noise part is ``(n_e + σ_r²)/(N n_e²)`` whatever the response. The merge
 is a weighted mean, so ``Var(ln ĉ) = Σ_k w_k² Var_k / (Σ_k w_k)²``.
 
+Veiling glare (:func:`predicted_log_error_with_glare`): the sensor receives
+``y = G(x)`` (a fraction of the light spread by the lens); the noise is that
+of ``y``, and removing the glare exactly (a linear operator whose veil, an
+average over the kernel's width, carries almost no noise) leaves each
+pixel's noise ``δx̂ ≈ δŷ/(1 − f)``, so in logs
+``Var(ln x̂) ≈ Var(ln ŷ)·(y/((1 − f)·x))²``: where the veil is ``r`` times a
+shadow's own light the shadow's noise is about ``√(1 + r)`` times larger in
+relative terms, however well the glare is known. That is the floor a glare-corrected scene is held to.
+
 References
 ----------
 .. [EMVA1288] EMVA Standard 1288, Release 4.0 (2021): the linear noise model.
@@ -25,7 +34,12 @@ import numpy as np
 
 from photoquant.weighting import weighting_function
 
-__all__ = ["predicted_log_error", "predicted_log_variance", "predicted_relative_error"]
+__all__ = [
+    "predicted_log_error",
+    "predicted_log_error_with_glare",
+    "predicted_log_variance",
+    "predicted_relative_error",
+]
 
 
 def predicted_log_variance(camera, l, exposure_s, n_repeats, **kwargs) -> np.ndarray:  # noqa: E741
@@ -102,6 +116,33 @@ def predicted_log_error(
         den += w
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(den > 0, bias / den, np.nan), np.where(den > 0, num / den**2, np.inf)
+
+
+def predicted_log_error_with_glare(
+    camera,
+    l: np.ndarray,  # noqa: E741
+    exposure_s: np.ndarray,
+    n_repeats: int,
+    **kwargs,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`predicted_log_error` of a glare-corrected merge (see the module notes).
+
+    ``camera.glare`` (a :class:`pqsim.synth_camera.glare.GlareSpread`) spreads
+    ``v·l`` on the sensor; the frames' noise is that of the spread light, and
+    the bias and variance are carried back to ``l`` through the exact
+    removal (``× y/((1 − f) x)`` and its square). Without glare it is
+    :func:`predicted_log_error`.
+    """
+    glare = getattr(camera, "glare", None)
+    if glare is None or glare.is_identity:
+        return predicted_log_error(camera, l, exposure_s, n_repeats, **kwargs)
+    v = camera.vignetting
+    with np.errstate(divide="ignore", invalid="ignore"):
+        seen = glare.apply(v * l) / v  # the light on the sensor, in units of l
+        keep = 1.0 - np.asarray(glare.fraction, dtype=np.float64)
+        ratio = np.where(l > 0, seen / (keep * l), np.inf)
+    bias, var = predicted_log_error(camera, seen, exposure_s, n_repeats, **kwargs)
+    return bias * ratio, var * ratio**2
 
 
 def predicted_relative_error(

@@ -8,7 +8,7 @@ read_image, write_image, read_exr, write_exr, exif_exposure_time
     PNG, TIFF and JPEG frames, OpenEXR photoquantities, EXIF exposure times.
 CAPTURE_FORMAT, FrameRef, FrameSetRef, CaptureManifest, load_manifest, write_manifest
     Capture manifests (``photoquant.captures/1``): :mod:`photoquant.io.manifest`.
-load_stack, black_level_from_dark
+load_stack, black_level_from_dark, dark_frame_model
     Loading their frames (:mod:`photoquant.io.frames`).
 ExposureMetadata, read_exposure_metadata
     EXIF exposure time, f-number and ISO from image headers (:mod:`photoquant.io.exif`).
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from photoquant.io.atomic import atomic_write, write_bytes_atomic, write_text_atomic
 from photoquant.io.exif import ExposureMetadata, read_exposure_metadata
-from photoquant.io.frames import black_level_from_dark, load_stack
+from photoquant.io.frames import black_level_from_dark, dark_frame_model, load_stack
 from photoquant.io.images import exif_exposure_time, read_exr, read_image, write_exr, write_image
 from photoquant.io.manifest import (
     CAPTURE_FORMAT,
@@ -53,6 +53,7 @@ __all__ = [
     "extra_frameset",
     "extra_path",
     "black_level_from_dark",
+    "dark_frame_model",
     "ExposureMetadata",
     "read_exposure_metadata",
     "RawFrame",

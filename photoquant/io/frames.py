@@ -13,11 +13,14 @@ read through LibRaw as linear half-size R, G, B data
 white levels. Exposure times, f-numbers and ISO speeds missing from the
 manifest are read from the files' headers (:mod:`photoquant.io.exif`, and
 LibRaw's metadata for raw files); :func:`black_level_from_dark` estimates the
-black level from the manifest's ``dark`` frames.
+black level from the manifest's ``dark`` frames, and :func:`dark_frame_model`
+their signal pixel by pixel, which :func:`load_stack` subtracts when the
+manifest says ``"dark_subtraction": true`` (:mod:`photoquant.darkframe`).
 """
 
 from __future__ import annotations
 
+import zlib
 from collections import deque
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -28,6 +31,7 @@ import numpy as np
 from tqdm import tqdm
 
 from photoquant._checks import check_workers
+from photoquant.darkframe import DarkFrameModel, characterise_dark_frames, subtract_dark_frames
 from photoquant.errors import InputError, ManifestError
 from photoquant.io.exif import ExposureMetadata, read_exposure_metadata
 from photoquant.io.images import read_image
@@ -37,7 +41,13 @@ from photoquant.stack import ExposureStack
 if TYPE_CHECKING:
     from photoquant.io.manifest import CaptureManifest, FrameRef, FrameSetRef
 
-__all__ = ["load_stack", "black_level_from_dark", "exposure_value", "RAW_BLACK_TOLERANCE_DN"]
+__all__ = [
+    "load_stack",
+    "black_level_from_dark",
+    "dark_frame_model",
+    "exposure_value",
+    "RAW_BLACK_TOLERANCE_DN",
+]
 
 #: Largest spread (DN) of the black levels of a frame set's raw files that is
 #: averaged rather than refused (LibRaw estimates some cameras' black level per
@@ -331,6 +341,50 @@ def black_level_from_dark(
     return frames.reshape(-1, frames.shape[-1]).mean(axis=0, dtype=np.float64)
 
 
+def dark_frame_model(
+    manifest: CaptureManifest, *, progress: bool = False, workers: int | None = None
+) -> DarkFrameModel | None:
+    """The dark signal pixel by pixel from the manifest's ``dark`` frames (None without them).
+
+    The frames are grouped by exposure time (the same number of repeats at
+    each) and fitted by :func:`photoquant.darkframe.characterise_dark_frames`.
+
+    Raises
+    ------
+    ManifestError
+        If a dark frame has no exposure time (manifest or EXIF), the times
+        have different numbers of repeats, a frame does not match the
+        manifest, or the dark frames are clipped at 0 (no pedestal).
+    ImageReadError
+        If a dark frame cannot be read.
+    """
+    if manifest.dark is None:
+        return None
+
+    def error(message: str) -> ManifestError:
+        return ManifestError(f"manifest {manifest.path}: {message}")
+
+    times = []
+    for frame in manifest.dark.frames:
+        t = _metadata(frame, need_optics=False).exposure_time_s
+        if t is None:
+            raise error(
+                f"dark frame {frame.file} has no `exposure_s` in the manifest and no EXIF "
+                "ExposureTime: dark-frame subtraction needs each dark frame's time"
+            )
+        times.append(float(t))
+    groups = _group_by_exposure(manifest.dark.frames, times, "dark", error)
+    order = list(groups)
+    n_rep = len(groups[order[0]])
+    jobs = [groups[t][n] for t in order for n in range(n_rep)]
+    flat, _ = _read_frames(jobs, manifest, "dark", error, progress=progress, workers=workers)
+    frames = np.ascontiguousarray(flat.reshape(len(order), n_rep, *flat.shape[1:]).swapaxes(0, 1))
+    try:
+        return characterise_dark_frames(frames, order, channels=manifest.channels)
+    except InputError as exc:
+        raise error(f"`dark`: {exc}") from None
+
+
 def load_stack(
     frameset: FrameSetRef,
     manifest: CaptureManifest,
@@ -338,6 +392,8 @@ def load_stack(
     progress: bool = False,
     workers: int | None = None,
     black_level: np.ndarray | None = None,
+    dark_frames: DarkFrameModel | None = None,
+    dark_subtraction: bool | None = None,
 ) -> ExposureStack:
     """Read the frames of a frame set into an :class:`~photoquant.stack.ExposureStack`.
 
@@ -356,14 +412,23 @@ def load_stack(
     black_level : array_like (C,), optional
         The black level, when the caller has it already (e.g. from
         :func:`black_level_from_dark` once for every frame set).
+    dark_frames : DarkFrameModel, optional
+        The dark signal to subtract, when the caller has it already (e.g.
+        :func:`dark_frame_model` once for every frame set); by default it is
+        fitted from the manifest's ``dark`` frames.
+    dark_subtraction : bool, optional
+        Whether to subtract the dark signal pixel by pixel
+        (:func:`photoquant.darkframe.subtract_dark_frames`); by default the
+        manifest's ``dark_subtraction``, or true when ``dark_frames`` is given.
 
     Returns
     -------
     ExposureStack
         Frames ``(N, K, H, W, C)`` by increasing exposure; same exposure
         means repeats, ordered by their ``repeat`` index. Its black level is,
-        first found: ``black_level``, the manifest's ``black_level``, the mean
-        of its ``dark`` frames, the raw files' own, 0. Its saturation level:
+        first found: ``black_level``, the mean offset of the subtracted dark
+        signal, the manifest's ``black_level``, the mean of its ``dark``
+        frames, the raw files' own, 0. Its saturation level:
         the manifest's, the raw files' white level, detected from the data.
         Its ``exposure_basis`` says whether ``exposure_s`` holds times or
         exposure values (see :mod:`photoquant.io.manifest`).
@@ -407,6 +472,22 @@ def load_stack(
     saturation = None if raw is None else raw[1]
     if manifest.saturation_level is not None:
         saturation = np.asarray(manifest.saturation_level, dtype=np.int64)
+    if dark_subtraction is None:
+        dark_subtraction = dark_frames is not None or manifest.dark_subtraction
+    if not dark_subtraction:
+        dark_frames = None
+    elif dark_frames is None:
+        dark_frames = dark_frame_model(manifest, workers=workers)
+        if dark_frames is None:
+            raise error(f"`{where}`: dark-frame subtraction needs the manifest's `dark` frames")
+    if dark_frames is not None:
+        if basis != "time":
+            raise error(
+                f"`{where}` is measured in exposure values (its ISO speed or f-number varies); "
+                "dark-frame subtraction needs a bracket of exposure times at one ISO"
+            )
+        if black_level is None:
+            black_level = dark_frames.black_level
     if black_level is None and manifest.black_level is not None:
         black_level = np.asarray(manifest.black_level, dtype=np.float64)
     if black_level is None and manifest.dark is not None:
@@ -424,7 +505,7 @@ def load_stack(
             if saturation is None:
                 saturation = detect_saturation_levels_processed(stack, manifest.bit_depth)
             stack = spread_saturation(stack, saturation, manifest.saturation_spread)
-        return ExposureStack(
+        out = ExposureStack(
             frames=stack,
             exposure_s=np.asarray(times, dtype=np.float64),
             bit_depth=manifest.bit_depth,
@@ -433,6 +514,11 @@ def load_stack(
             black_level=black_level,
             exposure_basis=basis,
         )
+        if dark_frames is not None:
+            # the dither is seeded by the frame set's name: reproducible, and not the
+            # same draw in every frame set
+            out = subtract_dark_frames(out, dark_frames, rng=zlib.crc32(where.encode()))
+        return out
     except InputError as exc:
         raise error(f"`{where}`: {exc}") from None
 

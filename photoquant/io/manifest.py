@@ -36,6 +36,9 @@ Key                           Required  Meaning
                                         0 to 2**bit_depth - 1, below ``saturation_level``
 ``dark``                      no        a frame set of dark frames (lens capped); the
                                         black level is their mean per channel
+``dark_subtraction``          no        ``true``: subtract the ``dark`` frames' signal
+                                        pixel by pixel (:mod:`photoquant.darkframe`)
+                                        instead; ``false`` (default)
 ``exposure_basis``            no        ``"auto"`` (default), ``"time"`` or
                                         ``"exposure value"`` (see below)
 ``saturation_spread``         no        pixels over which the camera's processing
@@ -129,6 +132,7 @@ _KNOWN_KEYS = frozenset(
         "saturation_level",
         "black_level",
         "dark",
+        "dark_subtraction",
         "exposure_basis",
     }
 )
@@ -206,6 +210,9 @@ class CaptureManifest:
         Per-channel black level, if given.
     dark : FrameSetRef or None
         Dark frames, if given (the black level is their mean per channel).
+    dark_subtraction : bool
+        Whether the dark frames' signal is subtracted pixel by pixel
+        (:func:`photoquant.darkframe.subtract_dark_frames`) from every frame set.
     exposure_basis : {"auto", "time", "exposure value"}
         How exposures are measured (see the module docstring).
     flatfield : FrameSetRef or None
@@ -230,6 +237,7 @@ class CaptureManifest:
     extra: dict[str, Any] = field(default_factory=dict)
     black_level: tuple[float, ...] | None = None
     dark: FrameSetRef | None = None
+    dark_subtraction: bool = False
     exposure_basis: str = "auto"
     flatfield: FrameSetRef | None = None
     glare: FrameSetRef | None = None
@@ -292,6 +300,13 @@ class _Parser:
                 "give either `black_level` or `dark` frames, not both "
                 "(the dark frames would estimate the black level the manifest states)"
             )
+        dark_subtraction = data.get("dark_subtraction", False)
+        if not isinstance(dark_subtraction, bool):
+            raise self.error(
+                f"`dark_subtraction` must be true or false, got {_describe(dark_subtraction)}"
+            )
+        if dark_subtraction and dark is None:
+            raise self.error("`dark_subtraction` is true but the manifest has no `dark` frames")
         basis = data.get("exposure_basis", "auto")
         if basis not in EXPOSURE_BASIS_CHOICES:
             raise self.error(
@@ -317,6 +332,7 @@ class _Parser:
             extra=extra,
             black_level=black,
             dark=dark,
+            dark_subtraction=dark_subtraction,
             exposure_basis=basis,
             flatfield=flatfield,
             glare=glare,

@@ -147,6 +147,18 @@ DISTURBANCES: tuple[Disturbance, ...] = (
     Disturbance("tails", "heavy-tailed read noise (t3, 8 e⁻)", _sensor(**_TAILS)),
     Disturbance("banding", "row / column noise 0.5 / 0.25 DN", _sensor(**_BANDING)),
     Disturbance("dsnu", "DSNU 40 e⁻", _sensor(**_DSNU)),
+    Disturbance(
+        "dsnu_pedestal",
+        "DSNU 40 e⁻ on the 3 DN pedestal, 8 dark frames per exposure (their mean: the black level)",
+        _sensor(**_DSNU, **_BLACK),
+        capture={"dark_frames": 8},
+    ),
+    Disturbance(
+        "dsnu_dark",
+        "the same, the dark frames subtracted pixel by pixel (dark_subtraction)",
+        _sensor(**_DSNU, **_BLACK),
+        capture={"dark_frames": 8, "dark_subtraction": True},
+    ),
     Disturbance("defects", "hot + stuck pixels 0.1 % + 0.1 %", _sensor(**_DEFECTS)),
     Disturbance("bayer", "Bayer RGGB + bilinear demosaicing", _sensor(**_BAYER)),
     Disturbance(
