@@ -15,7 +15,8 @@ truth (:func:`validation.compare.compare_with_truth`): ``g`` rms (ln, worst
 channel), balance (worst channel), sensor LUT and vignetting map ``e_mean``,
 the corrected high-contrast test scene's eq. 8 ``e_mean`` and its ratio to
 the clean camera's, beside the scene's physics noise floor
-(:mod:`validation.noise_model`, the clean camera's noise).
+(:mod:`validation.noise_model`: the camera's noise, and for a camera that
+removes veiling glare the glare's own shot noise, which the removal keeps).
 
 Every variant uses the clean camera's capture seed: the disturbances draw
 from their own streams, so the clean noise is the same draw in every row and
@@ -382,8 +383,8 @@ def run(
         "(worst channel), sensor LUT and vignetting map e_mean, high-contrast test scene eq. 8 "
         "e_mean; 'scene ×r' is that error over the clean camera's, 'floor' the physics noise "
         "floor of the scene's e_mean (validation.noise_model: shot, read, dark noise and "
-        "quantisation of the clean camera), 'away from edges' the scene's e_mean more than 2 px "
-        "from a sharp edge (demosaicing and JPEG blur the analytic scene's pixel-sharp edges). "
+        "quantisation; with glare removed, the veil's shot noise too), 'away from edges' the "
+        "scene's e_mean more than 2 px from a sharp edge (demosaicing and JPEG blur the analytic scene's pixel-sharp edges). "
         "Every row has the clean camera's noise draw and is compared with the clean camera on "
         "the same test scene (the glare rows: the lamp scene); the default pipeline calibrates "
         "(exposure refinement on; a glare capture only where the row says). Reported, not "
