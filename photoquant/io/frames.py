@@ -303,6 +303,35 @@ def _raw_levels(
     return blacks.mean(axis=0), whites
 
 
+def _manifest_error(manifest: CaptureManifest) -> Callable[[str], ManifestError]:
+    """The error factory of a manifest: every message names its file."""
+
+    def error(message: str) -> ManifestError:
+        return ManifestError(f"manifest {manifest.path}: {message}")
+
+    return error
+
+
+def _read_grouped(
+    frames: Sequence[FrameRef],
+    exposures: Sequence[float],
+    manifest: CaptureManifest,
+    where: str,
+    error: Callable[[str], ManifestError],
+    *,
+    progress: bool,
+    workers: int | None,
+) -> tuple[np.ndarray, list[float], list[RawFrame | None], list[FrameRef]]:
+    """Frames grouped by exposure and read: ``(N, K, H, W, C)``, the K times, raw levels, order."""
+    groups = _group_by_exposure(frames, exposures, where, error)
+    times = list(groups)
+    n_rep = len(groups[times[0]])
+    jobs = [groups[t][n] for t in times for n in range(n_rep)]
+    flat, levels = _read_frames(jobs, manifest, where, error, progress=progress, workers=workers)
+    stack = np.ascontiguousarray(flat.reshape(len(times), n_rep, *flat.shape[1:]).swapaxes(0, 1))
+    return stack, times, levels, jobs
+
+
 def black_level_from_dark(
     manifest: CaptureManifest, *, progress: bool = False, workers: int | None = None
 ) -> np.ndarray | None:
@@ -331,10 +360,7 @@ def black_level_from_dark(
     """
     if manifest.dark is None:
         return None
-
-    def error(message: str) -> ManifestError:
-        return ManifestError(f"manifest {manifest.path}: {message}")
-
+    error = _manifest_error(manifest)
     frames, _ = _read_frames(
         manifest.dark.frames, manifest, "dark", error, progress=progress, workers=workers
     )
@@ -360,10 +386,7 @@ def dark_frame_model(
     """
     if manifest.dark is None:
         return None
-
-    def error(message: str) -> ManifestError:
-        return ManifestError(f"manifest {manifest.path}: {message}")
-
+    error = _manifest_error(manifest)
     times = []
     for frame in manifest.dark.frames:
         t = _metadata(frame, need_optics=False).exposure_time_s
@@ -373,12 +396,9 @@ def dark_frame_model(
                 "ExposureTime: dark-frame subtraction needs each dark frame's time"
             )
         times.append(float(t))
-    groups = _group_by_exposure(manifest.dark.frames, times, "dark", error)
-    order = list(groups)
-    n_rep = len(groups[order[0]])
-    jobs = [groups[t][n] for t in order for n in range(n_rep)]
-    flat, _ = _read_frames(jobs, manifest, "dark", error, progress=progress, workers=workers)
-    frames = np.ascontiguousarray(flat.reshape(len(order), n_rep, *flat.shape[1:]).swapaxes(0, 1))
+    frames, order, _, _ = _read_grouped(
+        manifest.dark.frames, times, manifest, "dark", error, progress=progress, workers=workers
+    )
     try:
         return characterise_dark_frames(frames, order, channels=manifest.channels)
     except InputError as exc:
@@ -449,17 +469,11 @@ def load_stack(
         included).
     """
     where = _frameset_name(frameset, manifest)
-
-    def error(message: str) -> ManifestError:
-        return ManifestError(f"manifest {manifest.path}: {message}")
-
+    error = _manifest_error(manifest)
     exposures, basis = _exposures(frameset, manifest, error)
-    groups = _group_by_exposure(frameset.frames, exposures, where, error)
-    times = list(groups)
-    n_rep = len(groups[times[0]])
-    jobs = [groups[t][n] for t in times for n in range(n_rep)]
-    flat, levels = _read_frames(jobs, manifest, where, error, progress=progress, workers=workers)
-    stack = np.ascontiguousarray(flat.reshape(len(times), n_rep, *flat.shape[1:]).swapaxes(0, 1))
+    stack, times, levels, jobs = _read_grouped(
+        frameset.frames, exposures, manifest, where, error, progress=progress, workers=workers
+    )
     if manifest.white_roi is not None and frameset == manifest.views[0]:
         x0, y0, x1, y1 = manifest.white_roi
         h, w = stack.shape[2:4]
