@@ -33,7 +33,13 @@ __all__ = ["main", "build_parser"]
 #: Default resolutions (H, W) per renderer.
 _DEFAULT_RESOLUTION = {"mitsuba": (768, 1024), "analytic": (240, 320)}
 #: Options that only the analytic renderer has (dest → flag).
-_ANALYTIC_ONLY = {"pan_px": "--pan-px", "scene": "--scene", "glare": "--glare"}
+_ANALYTIC_ONLY = {
+    "pan_px": "--pan-px",
+    "scene": "--scene",
+    "glare": "--glare",
+    "dark_frames": "--dark-frames",
+    "dark_subtraction": "--dark-subtraction",
+}
 #: Options that only the Mitsuba renderer has (dest → flag).
 _MITSUBA_ONLY = {
     "sensitivities": "--sensitivities",
@@ -146,6 +152,8 @@ def _cmd_capture(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
             workers=args.workers,
             glare=args.glare,
+            dark_frames=args.dark_frames or 0,
+            dark_subtraction=args.dark_subtraction,
         )
     else:
         manifest = _capture_rendered(args, camera, resolution, exposures)
@@ -336,6 +344,20 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="analytic: also write a glare capture (a small bright source on black, manifest "
         "key 'glare') from which photoquant calibrate fits the veiling glare",
+    )
+    cap.add_argument(
+        "--dark-frames",
+        type=int,
+        default=None,
+        metavar="M",
+        help="analytic: also write M dark frames (lens capped) at every exposure time "
+        "(manifest key 'dark', instead of 'black_level')",
+    )
+    cap.add_argument(
+        "--dark-subtraction",
+        action="store_true",
+        help="analytic: with --dark-frames, have photoquant subtract the dark signal pixel by "
+        "pixel (manifest key 'dark_subtraction')",
     )
     cap.add_argument("--bit-depth", type=int, default=None, help="override the preset's bit depth")
     cap.add_argument("--format", default="png", choices=["png", "tiff"], help="frame file format")

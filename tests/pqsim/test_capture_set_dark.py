@@ -51,3 +51,27 @@ def test_bad_dark_arguments(tmp_path):
         write_capture_set(tmp_path / "y", cam, dark_frames=-1, **_ARGS)
     with pytest.raises(InputError, match="`dark_subtraction` must be true or false"):
         write_capture_set(tmp_path / "z", cam, dark_frames=2, dark_subtraction="yes", **_ARGS)
+
+
+def _frames(data, key):
+    sets = data[key] if isinstance(data[key], list) else [data[key]]
+    return [f for fs in sets for f in fs["frames"]]
+
+
+def test_capture_dark_flags(tmp_path, capsys):
+    from pqsim.cli import main
+
+    out = tmp_path / "cap"
+    args = ["capture", "-o", str(out), "--renderer", "analytic", "--resolution", "24x16"]
+    args += ["--repeats", "1", "--exposures", "2", "--views", "1", "--seed", "5"]
+    assert main([*args, "--dark-frames", "2", "--dark-subtraction"]) == 0
+    data = json.loads((out / "capture.json").read_text())
+    times = {f["exposure_s"] for key in ("views", "scene") for f in _frames(data, key)}
+    assert data["dark_subtraction"] is True and len(data["dark"]["frames"]) == 2 * len(times)
+    capsys.readouterr()
+    assert (
+        main(["capture", "-o", str(tmp_path / "x"), "--renderer", "mitsuba", "--dark-frames", "2"])
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--dark-frames cannot be used with --renderer mitsuba" in err[0]
