@@ -835,13 +835,15 @@ def calibrate_manifest(
     *,
     allow_outside: bool = False,
     progress_bars: bool = False,
+    dark_subtraction: bool | None = None,
     **kwargs: Any,
 ) -> Any:
     """Calibrate from a capture manifest (a path or a loaded ``CaptureManifest``).
 
     Uses ``views``, ``irradiance``, ``white_roi``, ``correspondences``,
     ``flatfield`` and ``glare`` of the manifest (each frame set with its dark
-    signal subtracted when it says ``"dark_subtraction": true``); ``kwargs``
+    signal subtracted when it says ``"dark_subtraction": true``, or when
+    ``dark_subtraction`` says so: ``None`` follows the manifest); ``kwargs``
     go to :func:`calibrate`.
     """
     from photoquant.io.frames import dark_frame_model
@@ -850,10 +852,13 @@ def calibrate_manifest(
     if not isinstance(manifest, CaptureManifest):
         manifest = load_manifest(manifest, allow_outside=allow_outside)
     # with "dark_subtraction", the dark frames are read and fitted once for every frame set
-    dark = dark_frame_model(manifest) if manifest.dark_subtraction else None
+    subtract = manifest.dark_subtraction if dark_subtraction is None else dark_subtraction
+    dark = dark_frame_model(manifest) if subtract else None
 
     def stack(frameset: Any) -> Any:
-        return load_stack(frameset, manifest, progress=progress_bars, dark_frames=dark)
+        return load_stack(
+            frameset, manifest, progress=progress_bars, dark_frames=dark, dark_subtraction=subtract
+        )
 
     views = [stack(v) for v in manifest.views]
     irradiance = stack(manifest.irradiance) if manifest.irradiance is not None else None

@@ -133,6 +133,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         seed=args.seed,
         progress=step,
         refine_exposures=args.refine_exposures,
+        dark_subtraction=args.dark_subtraction,
         **specs,
     )
     done()
@@ -258,6 +259,7 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         allow_outside=args.allow_outside,
         progress_bars=not args.quiet,
         refine_exposures=args.refine_exposures,
+        dark_subtraction=args.dark_subtraction,
     )
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_output_file(out, overwrite=args.overwrite) as tmp:  # no replace without the flag
@@ -468,6 +470,20 @@ def build_parser() -> argparse.ArgumentParser:
             dest="refine_exposures",
             action="store_false",
             help="keep the frames' nominal exposure times",
+        )
+        p.add_argument(
+            "--dark-subtraction",
+            dest="dark_subtraction",
+            action="store_true",
+            default=None,
+            help="subtract the manifest's `dark` frames pixel by pixel (photoquant.darkframe); "
+            "default: the manifest's `dark_subtraction`",
+        )
+        p.add_argument(
+            "--no-dark-subtraction",
+            dest="dark_subtraction",
+            action="store_false",
+            help="use the `dark` frames' mean as the black level only",
         )
 
     info = sub.add_parser("info", help="describe a calibrated camera")

@@ -240,8 +240,13 @@ def correct_manifest(
     allow_outside: bool = False,
     progress_bars: bool = False,
     refine_exposures: bool | None = None,
+    dark_subtraction: bool | None = None,
 ) -> Correction:
-    """Correct the ``scene`` of a capture manifest (a path or ``CaptureManifest``)."""
+    """Correct the ``scene`` of a capture manifest (a path or ``CaptureManifest``).
+
+    ``dark_subtraction`` overrides the manifest's (``None``: the manifest's;
+    :mod:`photoquant.darkframe`).
+    """
     from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
 
     if not isinstance(manifest, CaptureManifest):
@@ -249,7 +254,9 @@ def correct_manifest(
     if manifest.scene is None:
         raise InputError(f"{manifest.path} has no `scene` frames to correct")
     return correct(
-        load_stack(manifest.scene, manifest, progress=progress_bars),
+        load_stack(
+            manifest.scene, manifest, progress=progress_bars, dark_subtraction=dark_subtraction
+        ),
         model,
         refine_exposures=refine_exposures,
     )

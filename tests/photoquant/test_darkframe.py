@@ -220,3 +220,23 @@ def test_dark_frames_without_exposure_times_are_refused_for_subtraction(tmp_path
     )
     with pytest.raises(ManifestError, match="dark frame .*d.png has no `exposure_s`"):
         dark_frame_model(manifest)
+
+
+def test_the_command_line_switches_dark_subtraction(dsnu_set, tmp_path):
+    """``--dark-subtraction`` / ``--no-dark-subtraction`` override the manifest's key."""
+    from photoquant.cli import main
+    from photoquant.io import black_level_from_dark
+
+    _, path = dsnu_set
+    manifest = load_manifest(path)
+    args = ["calibrate", str(path), "-q", "--method", "vignetting=None", "--no-refine-exposures"]
+    assert main([*args, "-o", str(tmp_path / "sub")]) == 0  # the manifest's: subtracted
+    assert main([*args, "-o", str(tmp_path / "plain"), "--no-dark-subtraction"]) == 0
+    sub, plain = pq.load_camera(tmp_path / "sub"), pq.load_camera(tmp_path / "plain")
+    np.testing.assert_allclose(sub.response.black_level, dark_frame_model(manifest).black_level)
+    np.testing.assert_allclose(plain.response.black_level, black_level_from_dark(manifest))
+    out = tmp_path / "scene.exr"
+    assert (
+        main(["correct", str(path), "--camera", str(tmp_path / "sub"), "-o", str(out), "-q"]) == 0
+    )
+    assert out.exists()
