@@ -106,6 +106,18 @@ class DarkFrameModel:
     exposure_s: np.ndarray
     n_frames: int
 
+    def __post_init__(self) -> None:
+        offset = check_array(self.offset, "dark offset", ndim=3, kind="iuf", finite=True)
+        rate = check_array(self.rate, "dark rate", ndim=3, kind="iuf", finite=True)
+        if rate.shape != offset.shape:
+            raise InputError(
+                f"the dark rate's shape {rate.shape} differs from the offset's {offset.shape}"
+            )
+        object.__setattr__(self, "offset", offset.astype(np.float64))
+        object.__setattr__(self, "rate", rate.astype(np.float64))
+        object.__setattr__(self, "exposure_s", check_exposure_times(self.exposure_s))
+        object.__setattr__(self, "n_frames", int(self.n_frames))
+
     @property
     def black_level(self) -> np.ndarray:
         """The per-channel black level ``b`` a subtracted stack keeps: the mean offset."""

@@ -176,7 +176,7 @@ _RIM_PX = 3
 
 
 def fill_clipped_channels(image: Any) -> np.ndarray:
-    """Estimate clipped (NaN) channels of a linear image from the pixel's valid channels.
+    """Estimate the NaN channels of a linear image (clipped, mostly) from the pixel's valid ones.
 
     For each channel ``c`` and each connected region of pixels where ``c``
     is NaN, the valid channel ``o`` that covers most of the region is
@@ -188,7 +188,8 @@ def fill_clipped_channels(image: Any) -> np.ndarray:
     Parameters
     ----------
     image : array_like, shape (H, W, C)
-        Linear image, NaN where a channel has no valid exposure.
+        Linear image, NaN where a channel has no valid exposure (saturated
+        in every one, or too dark in every one: both are estimated alike).
 
     Returns
     -------

@@ -446,9 +446,9 @@ def load_stack(
     ExposureStack
         Frames ``(N, K, H, W, C)`` by increasing exposure; same exposure
         means repeats, ordered by their ``repeat`` index. Its black level is,
-        first found: ``black_level``, the mean offset of the subtracted dark
-        signal, the manifest's ``black_level``, the mean of its ``dark``
-        frames, the raw files' own, 0. Its saturation level:
+        with dark-frame subtraction, the dark signal's mean offset; else, first
+        found: ``black_level``, the manifest's ``black_level``, the mean of
+        its ``dark`` frames, the raw files' own, 0. Its saturation level:
         the manifest's, the raw files' white level, detected from the data.
         Its ``exposure_basis`` says whether ``exposure_s`` holds times or
         exposure values (see :mod:`photoquant.io.manifest`).
@@ -500,8 +500,7 @@ def load_stack(
                 f"`{where}` is measured in exposure values (its ISO speed or f-number varies); "
                 "dark-frame subtraction needs a bracket of exposure times at one ISO"
             )
-        if black_level is None:
-            black_level = dark_frames.black_level
+        black_level = dark_frames.black_level  # what the subtracted stack sits on
     if black_level is None and manifest.black_level is not None:
         black_level = np.asarray(manifest.black_level, dtype=np.float64)
     if black_level is None and manifest.dark is not None:
