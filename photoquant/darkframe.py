@@ -45,10 +45,13 @@ What it assumes
     The dark signal adds to the values the converter codes, which holds for
     raw and machine-vision data (linear near black, with a pedestal: a black
     level above 0). For images with a tone curve it is exact where the curve
-    is linear near black, and an approximation elsewhere. Dark frames clipped
-    at 0 (no pedestal: most 8-bit camera JPEGs) do not measure the dark signal
-    of the pixels below their mean, and are refused: use the manifest's
-    ``black_level`` for those.
+    is linear near black, and an approximation elsewhere. A dark value at 0
+    is clipped: it does not measure its pixel's dark signal. A pixel with a
+    dark value at 0 in any dark frame is *unmeasured* and takes its
+    channel's mean offset and rate (no per-pixel correction: what the black
+    level alone would do); dark frames where most of a channel's pixels are
+    unmeasured (no pedestal: most 8-bit camera JPEGs) are refused: use the
+    manifest's ``black_level`` for those.
 
 References
 ----------
@@ -75,14 +78,15 @@ from photoquant.stack import ExposureStack
 
 __all__ = [
     "DarkFrameModel",
-    "MAX_CLIPPED_DARK_FRACTION",
+    "MAX_UNMEASURED_FRACTION",
     "characterise_dark_frames",
     "subtract_dark_frames",
 ]
 
-MAX_CLIPPED_DARK_FRACTION = 0.01
-"""Largest fraction of a channel's dark values at 0 that is accepted: above it
-the dark frames have no pedestal to read a pixel's dark signal from."""
+MAX_UNMEASURED_FRACTION = 0.5
+"""Largest fraction of a channel's pixels with a dark value at 0 (clipped) that
+is accepted: above it the dark frames have no pedestal to read a pixel's dark
+signal from."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,12 +103,16 @@ class DarkFrameModel:
         The dark frames' exposure times.
     n_frames : int
         How many dark frames were averaged.
+    unmeasured : ndarray, shape (H, W, C) of bool, optional
+        Pixels whose dark frames clipped at 0 (they hold their channel's
+        mean offset and rate); none by default.
     """
 
     offset: np.ndarray
     rate: np.ndarray
     exposure_s: np.ndarray
     n_frames: int
+    unmeasured: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         offset = check_array(self.offset, "dark offset", ndim=3, kind="iuf", finite=True)
@@ -117,6 +125,9 @@ class DarkFrameModel:
         object.__setattr__(self, "rate", rate.astype(np.float64))
         object.__setattr__(self, "exposure_s", check_exposure_times(self.exposure_s))
         object.__setattr__(self, "n_frames", int(self.n_frames))
+        if self.unmeasured is not None:
+            mask = check_array(self.unmeasured, "unmeasured", shape=offset.shape, kind="b")
+            object.__setattr__(self, "unmeasured", mask)
 
     @property
     def black_level(self) -> np.ndarray:
@@ -157,8 +168,9 @@ def characterise_dark_frames(
     Raises
     ------
     InputError
-        If the shapes disagree, or more than :data:`MAX_CLIPPED_DARK_FRACTION`
-        of a channel's dark values are 0 (no pedestal to measure from).
+        If the shapes disagree, or more than :data:`MAX_UNMEASURED_FRACTION`
+        of a channel's pixels have a dark value at 0 (no pedestal to measure
+        from).
     """
     arr = check_array(frames, "dark frames", ndim=5, kind="iu")
     t = check_exposure_times(exposure_s, "dark exposure_s")
@@ -166,12 +178,14 @@ def characterise_dark_frames(
     if t.size != m:
         raise InputError(f"dark frames have {m} exposures but {t.size} exposure times")
     names = channels or tuple(str(i) for i in range(c))
+    # a pixel with a dark value at 0 is clipped: its mean does not measure its dark signal
+    unmeasured = (arr == 0).any(axis=(0, 1))  # (H, W, C)
     for ch in range(c):
-        clipped = float(np.count_nonzero(arr[..., ch] == 0)) / (n * m * h * w)
-        if clipped > MAX_CLIPPED_DARK_FRACTION:
+        share = float(np.count_nonzero(unmeasured[..., ch])) / (h * w)
+        if share > MAX_UNMEASURED_FRACTION:
             raise InputError(
-                f"the dark frames of channel {names[ch]} read 0 in {100 * clipped:.1f} % of their "
-                "values: clipped with no pedestal, they cannot measure each pixel's dark signal "
+                f"the dark frames of channel {names[ch]} read 0 at {100 * share:.1f} % of the "
+                "pixels: clipped with no pedestal, they cannot measure each pixel's dark signal "
                 "(give `black_level` instead of dark-frame subtraction)"
             )
     mean = arr.mean(axis=0, dtype=np.float64)  # (M, H, W, C)
@@ -181,7 +195,15 @@ def characterise_dark_frames(
         dt = (t - t.mean())[:, None, None, None]
         rate = (dt * (mean - mean.mean(axis=0))).sum(axis=0) / float((dt**2).sum())
         offset = mean.mean(axis=0) - rate * float(t.mean())
-    return DarkFrameModel(offset=offset, rate=rate, exposure_s=t, n_frames=n * m)
+    for ch in range(c):
+        bad = unmeasured[..., ch]
+        if bad.any():  # the channel's mean over its measured pixels
+            good = ~bad
+            offset[..., ch][bad] = offset[..., ch][good].mean()
+            rate[..., ch][bad] = rate[..., ch][good].mean()
+    return DarkFrameModel(
+        offset=offset, rate=rate, exposure_s=t, n_frames=n * m, unmeasured=unmeasured
+    )
 
 
 def subtract_dark_frames(

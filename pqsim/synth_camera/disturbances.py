@@ -25,7 +25,9 @@ fixed per-pixel dark offset (DSNU, electrons), ``h_p`` the hot pixels'
 extra electrons, ``b_λ`` the black level (pedestal) with its temporal noise
 ``σ_b``, ``r_i ~ N(0, σ_row²)``, ``q_j ~ N(0, σ_col²)`` per-frame row and
 column offsets (DN; the same for every channel of a row or column, as one
-read-out line), ``W_λ`` a white level per channel. The pedestal, its noise
+read-out line), ``W_λ`` a white level per channel. With ``dsnu_stage =
+"readout"`` the DSNU leaves ``n`` and adds ``(c_max / w) · d_p`` to ``r`` with
+the pedestal instead (a readout offset, seen whole in dark frames). The pedestal, its noise
 and the banding are analog: added before the converter clips at ``c_max``;
 the colour balance ``a_λ`` is digital, after it (so a saturated channel
 holds one value, as when a camera white-balances clipped raw data), about
@@ -135,6 +137,13 @@ class SensorDisturbances:
         Standard deviation (electrons) of a fixed per-pixel dark offset
         (dark-signal non-uniformity), zero mean, drawn once from the
         camera's ``prnu_seed``.
+    dsnu_stage : {"charge", "readout"}
+        Where the DSNU adds. ``"charge"`` (default): to the pixel's electrons,
+        before the charge is clipped at zero (so a negative offset reads 0
+        in the dark but subtracts from light). ``"readout"``: to the raw value
+        with the pedestal, at the linear gain ``c_max / full_well`` DN per
+        electron (a fixed pattern of the readout chain's offset: dark frames
+        on a pedestal measure it whole, as EMVA 1288's DSNU).
     hot_pixel_fraction, stuck_pixel_fraction : float
         Fractions of pixels that are hot (``hot_pixel_level · full_well``
         electrons added in every frame, scaled per pixel by a uniform draw in
@@ -178,6 +187,7 @@ class SensorDisturbances:
     row_noise_dn: float = 0.0
     column_noise_dn: float = 0.0
     dsnu_e: float = 0.0
+    dsnu_stage: str = "charge"
     hot_pixel_fraction: float = 0.0
     hot_pixel_level: float = 0.5
     stuck_pixel_fraction: float = 0.0
@@ -218,6 +228,10 @@ class SensorDisturbances:
             set_(name, v)
         if self.hot_pixel_fraction + self.stuck_pixel_fraction > 0.5:
             raise InputError("`hot_pixel_fraction` + `stuck_pixel_fraction` must be at most 0.5")
+        if self.dsnu_stage not in ("charge", "readout"):
+            raise InputError(
+                f"`dsnu_stage` must be 'charge' or 'readout', got {self.dsnu_stage!r}"
+            )
         set_("cfa", None if self.cfa is None else _cfa.check_pattern(self.cfa))
         set_("demosaic", _cfa.check_demosaic(self.demosaic))
         if self.demosaic_stage not in ("output", "linear"):
@@ -358,8 +372,11 @@ class SensorDisturbances:
             nu = self.read_noise_tail_dof
             tail = np.random.default_rng([frame_seed, _TAG_TAIL]).standard_t(nu, size=e.shape)
             e += (self.read_noise_tail_e * math.sqrt((nu - 2) / nu) * tail).astype(e.dtype)
+        readout_dsnu = pattern is not None and self.dsnu_stage == "readout"
         if pattern is not None:
-            e += pattern.offset_e[..., None].astype(e.dtype, copy=False)
+            # the fixed charge: hot pixels' (and the DSNU, at the "charge" stage)
+            charge = pattern.offset_e - pattern.dsnu_e if readout_dsnu else pattern.offset_e
+            e += charge[..., None].astype(e.dtype, copy=False)
         np.maximum(e, 0, out=e)
         e /= f32(noise.full_well_e)
         linear_cfa = self.cfa is not None and self.demosaic_stage == "linear"
@@ -373,6 +390,9 @@ class SensorDisturbances:
         for ch, resp in enumerate(camera.responses):
             raw[..., ch] = camera.c_max * resp(e[..., ch])
         raw += black
+        if readout_dsnu:  # the readout's fixed offset pattern, with the pedestal
+            assert pattern is not None
+            raw += (camera.c_max / noise.full_well_e * pattern.dsnu_e)[..., None]
         if self.black_noise_dn > 0:
             rng = np.random.default_rng([frame_seed, _TAG_BLACK])
             raw += self.black_noise_dn * rng.standard_normal(raw.shape)

@@ -54,10 +54,34 @@ def test_a_single_exposure_time_gives_the_mean_dark_frame():
 def test_clipped_dark_frames_are_refused():
     frames = np.full((2, 2, 8, 8, 3), 5, dtype=np.uint8)
     frames[..., 1] = 0
-    with pytest.raises(InputError, match="channel G read 0 in 100.0 %.*black_level"):
+    with pytest.raises(InputError, match="channel G read 0 at 100.0 % of the pixels.*black_level"):
         characterise_dark_frames(frames, [0.1, 0.2], channels=("R", "G", "B"))
     with pytest.raises(InputError, match="2 exposures but 1 exposure times"):
         characterise_dark_frames(frames + 1, [0.1])
+
+
+def test_pixels_clipped_in_the_dark_take_their_channels_mean():
+    """A dark value at 0 does not measure its pixel: it gets the channel's mean offset and rate."""
+    rng = np.random.default_rng(4)
+    t = np.array([0.1, 1.0])
+    offset = rng.uniform(8.0, 12.0, (6, 6, 1))
+    ideal = offset + 2.0 * t[:, None, None, None]
+    frames = np.rint(np.broadcast_to(ideal, (3, *ideal.shape))).astype(np.uint16)
+    frames[1, 0, :2, :2, 0] = 0  # four pixels clip once in the dark
+    model = characterise_dark_frames(frames, t)
+    bad = np.zeros((6, 6, 1), bool)
+    bad[:2, :2] = True
+    assert np.array_equal(model.unmeasured, bad)
+    clean = characterise_dark_frames(
+        np.rint(np.broadcast_to(ideal, frames.shape)).astype(np.uint16), t
+    )
+    np.testing.assert_array_equal(model.offset[~bad], clean.offset[~bad])
+    np.testing.assert_allclose(model.offset[bad], clean.offset[~bad].mean())
+    np.testing.assert_allclose(model.rate[bad], clean.rate[~bad].mean())
+    too_many = frames.copy()
+    too_many[0, 0, :4] = 0  # 24 of 36 pixels
+    with pytest.raises(InputError, match="read 0 at 66.7 % of the pixels"):
+        characterise_dark_frames(too_many, t)
 
 
 # -- the subtraction --------------------------------------------------------------------

@@ -242,6 +242,29 @@ def test_dsnu_is_a_fixed_zero_mean_map_of_the_given_std() -> None:
     assert abs(np.corrcoef(d.ravel(), other.ravel())[0, 1]) < Z / math.sqrt(m)
 
 
+def test_readout_dsnu_is_seen_whole_in_dark_frames() -> None:
+    """``dsnu_stage="readout"``: the signed offset sits on the pedestal, lit or dark."""
+    sigma, pedestal = 10.0, 100.0
+    charge = probe(dsnu_e=sigma, black_level_dn=pedestal)
+    readout = probe(dsnu_e=sigma, black_level_dn=pedestal, dsnu_stage="readout")
+    d = readout.truth(SHAPE).fixed_pattern.dsnu_e  # the same map (prnu_seed)
+    np.testing.assert_array_equal(d, charge.truth(SHAPE).fixed_pattern.dsnu_e)
+    # 1 e⁻ = 1 DN here: the dark frames read pedestal + d_p, negative offsets included
+    frames = dark(readout, n=1, k=1)[0, 0]
+    assert np.all(np.abs(frames - (pedestal + d[..., None])) <= 0.5 + 1e-9)
+    assert np.count_nonzero(d < -1) > d.size // 4  # the negative half is there
+    # at the charge stage, a negative offset is clipped with the charge in the dark
+    dark_charge = dark(charge, n=1, k=1)[0, 0]
+    assert np.all(dark_charge[d < -1] == pedestal)
+    # lit, both stages add the same offset (charge far above zero)
+    np.testing.assert_array_equal(lit(readout), lit(charge))
+
+
+def test_bad_dsnu_stage() -> None:
+    with pytest.raises(InputError, match="`dsnu_stage` must be 'charge' or 'readout'"):
+        SensorDisturbances(dsnu_e=1.0, dsnu_stage="adc")
+
+
 def test_hot_and_stuck_pixels() -> None:
     f_hot, f_stuck, level, pedestal = 0.01, 0.02, 0.2, 50.0
     cam = probe(

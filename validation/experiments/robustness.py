@@ -103,6 +103,8 @@ _WHITE = {"white_level_dn": 240.0}
 _TAILS = {"read_noise_tail_e": 8.0, "read_noise_tail_dof": 3.0}
 _BANDING = {"row_noise_dn": 0.5, "column_noise_dn": 0.25}
 _DSNU = {"dsnu_e": 40.0}
+# the same offsets in the readout chain, on the pedestal (what dark frames measure whole)
+_DSNU_READOUT = {**_DSNU, "dsnu_stage": "readout"}
 _DEFECTS = {"hot_pixel_fraction": 1e-3, "stuck_pixel_fraction": 1e-3}
 _BAYER = {"cfa": "RGGB", "demosaic": "bilinear"}
 # a raw converter's order: the linear photosites demosaiced, the tone curve after
@@ -150,14 +152,15 @@ DISTURBANCES: tuple[Disturbance, ...] = (
     Disturbance("dsnu", "DSNU 40 e⁻", _sensor(**_DSNU)),
     Disturbance(
         "dsnu_pedestal",
-        "DSNU 40 e⁻ on the 3 DN pedestal, 8 dark frames per exposure (their mean: the black level)",
-        _sensor(**_DSNU, **_BLACK),
+        "DSNU 40 e⁻ of the readout on the 3 DN pedestal, 8 dark frames per exposure "
+        "(their mean: the black level)",
+        _sensor(**_DSNU_READOUT, **_BLACK),
         capture={"dark_frames": 8},
     ),
     Disturbance(
         "dsnu_dark",
         "the same, the dark frames subtracted pixel by pixel (dark_subtraction)",
-        _sensor(**_DSNU, **_BLACK),
+        _sensor(**_DSNU_READOUT, **_BLACK),
         capture={"dark_frames": 8, "dark_subtraction": True},
     ),
     Disturbance("defects", "hot + stuck pixels 0.1 % + 0.1 %", _sensor(**_DEFECTS)),
@@ -203,14 +206,15 @@ DISTURBANCES: tuple[Disturbance, ...] = (
     ),
     Disturbance(
         "all",
-        "all sensor and output disturbances together (demosaicing of the linear photosites)",
+        "all sensor and output disturbances together (demosaicing of the linear photosites; "
+        "the DSNU at the readout stage)",
         _sensor(
             **_EXPOSURE,
             **_BLACK,
             **_WHITE,
             **_TAILS,
             **_BANDING,
-            **_DSNU,
+            **_DSNU_READOUT,
             **_DEFECTS,
             **_BAYER_RAW,
             **_JPEG,
