@@ -230,6 +230,8 @@ class SensorDisturbances:
             raise InputError("`hot_pixel_fraction` + `stuck_pixel_fraction` must be at most 0.5")
         if self.dsnu_stage not in ("charge", "readout"):
             raise InputError(f"`dsnu_stage` must be 'charge' or 'readout', got {self.dsnu_stage!r}")
+        if self.dsnu_e == 0:  # no DSNU: its stage changes nothing (the clean path stays)
+            set_("dsnu_stage", "charge")
         set_("cfa", None if self.cfa is None else _cfa.check_pattern(self.cfa))
         set_("demosaic", _cfa.check_demosaic(self.demosaic))
         if self.demosaic_stage not in ("output", "linear"):

@@ -263,6 +263,7 @@ def test_readout_dsnu_is_seen_whole_in_dark_frames() -> None:
 def test_bad_dsnu_stage() -> None:
     with pytest.raises(InputError, match="`dsnu_stage` must be 'charge' or 'readout'"):
         SensorDisturbances(dsnu_e=1.0, dsnu_stage="adc")
+    assert not SensorDisturbances(dsnu_stage="readout").active  # without DSNU, nothing
 
 
 def test_hot_and_stuck_pixels() -> None:
