@@ -34,7 +34,7 @@ Integer frames
     the sum of the repeats (what the merge reads) is ``N(c − δ)`` to within
     one DN, a variance of at most ``1/(4N²)`` DN² on their mean instead of
     ``1/(4N)`` for independent draws (measured on pqsim's ccd, 3 DN pedestal
-    with a 40 e⁻ DSNU, ``N = 4``: the test scene's error 2.3 % with
+    with a 40 e⁻ DSNU at the charge stage, ``N = 4``: the test scene's error 2.3 % with
     independent draws, 1.9 % stratified, 3.3 % without the subtraction).
     ``u`` comes from a seeded generator: the same seed gives the same frames.
     Values at the saturation level are left as they are (the clip is the
