@@ -134,17 +134,9 @@ class DarkFrameModel:
         """The per-channel black level ``b`` a subtracted stack keeps: the mean offset."""
         return self.offset.reshape(-1, self.offset.shape[-1]).mean(axis=0)
 
-    @property
-    def image_shape(self) -> tuple[int, int]:
-        return int(self.offset.shape[0]), int(self.offset.shape[1])
-
     def at(self, exposure_s: float) -> np.ndarray:
         """The dark frame ``d_p(t)`` (H, W, C) at exposure time ``t``."""
         return self.offset + self.rate * float(exposure_s)
-
-    def mean_dark_current(self) -> np.ndarray:
-        """Per-channel mean dark current, DN per second."""
-        return self.rate.reshape(-1, self.rate.shape[-1]).mean(axis=0)
 
 
 def characterise_dark_frames(
