@@ -846,18 +846,26 @@ def calibrate_manifest(
     ``dark_subtraction`` says so: ``None`` follows the manifest); ``kwargs``
     go to :func:`calibrate`.
     """
-    from photoquant.io.frames import dark_frame_model
+    from photoquant.io.frames import black_level_from_dark, dark_frame_model
     from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
 
     if not isinstance(manifest, CaptureManifest):
         manifest = load_manifest(manifest, allow_outside=allow_outside)
-    # with "dark_subtraction", the dark frames are read and fitted once for every frame set
+    # the dark frames are read once for every frame set: fitted pixel by pixel with
+    # "dark_subtraction", else their mean is the black level (what load_stack would
+    # compute for each frame set)
     subtract = manifest.dark_subtraction if dark_subtraction is None else dark_subtraction
     dark = dark_frame_model(manifest) if subtract else None
+    black = None if subtract else black_level_from_dark(manifest)
 
     def stack(frameset: Any) -> Any:
         return load_stack(
-            frameset, manifest, progress=progress_bars, dark_frames=dark, dark_subtraction=subtract
+            frameset,
+            manifest,
+            progress=progress_bars,
+            black_level=black,
+            dark_frames=dark,
+            dark_subtraction=subtract,
         )
 
     views = [stack(v) for v in manifest.views]
