@@ -264,3 +264,33 @@ def test_the_command_line_switches_dark_subtraction(dsnu_set, tmp_path):
         main(["correct", str(path), "--camera", str(tmp_path / "sub"), "-o", str(out), "-q"]) == 0
     )
     assert out.exists()
+
+
+def test_load_stack_refuses_subtraction_it_cannot_do(tmp_path):
+    """No `dark` frames to subtract, or a bracket in exposure values: one-line errors."""
+    from photoquant.io import write_image
+
+    img = np.full((4, 4, 3), 9, dtype=np.uint8)
+    for name in ("a.png", "b.png", "d1.png", "d2.png"):
+        write_image(tmp_path / name, img + (name == "b.png"))
+    plain = load_manifest(_write(tmp_path, {}))
+    with pytest.raises(ManifestError, match="dark-frame subtraction needs the manifest's `dark`"):
+        load_stack(plain.views[0], plain, dark_subtraction=True)
+    dark = {
+        "frames": [{"file": "d1.png", "exposure_s": 0.1}, {"file": "d2.png", "exposure_s": 0.2}]
+    }
+    views = [
+        {
+            "frames": [
+                {"file": "a.png", "exposure_s": 0.1, "f_number": 2.0, "iso": 100},
+                {"file": "b.png", "exposure_s": 0.1, "f_number": 2.0, "iso": 400},
+            ]
+        }
+    ]
+    path = _write(tmp_path, {"dark": dark, "dark_subtraction": True})
+    data = json.loads(path.read_text())
+    data["views"] = views
+    path.write_text(json.dumps(data))
+    varied = load_manifest(path)
+    with pytest.raises(ManifestError, match="measured in exposure values.*one ISO"):
+        load_stack(varied.views[0], varied)
