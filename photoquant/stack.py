@@ -112,7 +112,49 @@ def _repeat_stats_py(frames: Any, total: Any, lo: Any, hi: Any) -> None:  # prag
             hi[i] = max(hi[i], f)
 
 
+def _gather_by_channel_py(
+    frames: Any,
+    sums: Any,
+    lo: Any,
+    hi: Any,
+    index: Any,
+    n_rep: float,
+    sat_thr: Any,
+    dark_thr: Any,
+    values: Any,
+    excluded: Any,
+) -> None:  # pragma: no cover
+    """numba body: at pixels ``index``, ``values (C, K, P)`` = the repeats' sum / ``n_rep``
+    and ``excluded (C, K, P)`` = a repeat at or above ``sat_thr`` or at or below
+    ``dark_thr``; from the cached ``sums, lo, hi (K, M, C)`` when ``frames`` is empty
+    (``(0, K, M, C)``), else from ``frames (N, K, M, C)``."""
+    n_c = values.shape[0]
+    n_k = values.shape[1]
+    from_frames = frames.shape[0] > 0
+    for k in range(n_k):
+        for i in range(index.size):
+            q = index[i]
+            for c in range(n_c):
+                if from_frames:
+                    f = frames[0, k, q, c]
+                    total = np.int64(f)
+                    low = f
+                    high = f
+                    for r in range(1, frames.shape[0]):
+                        f = frames[r, k, q, c]
+                        total += f
+                        low = min(low, f)
+                        high = max(high, f)
+                else:
+                    total = np.int64(sums[k, q, c])
+                    low = lo[k, q, c]
+                    high = hi[k, q, c]
+                values[c, k, i] = total / n_rep
+                excluded[c, k, i] = (high >= sat_thr[c]) or (low <= dark_thr[c])
+
+
 if HAVE_NUMBA:  # pragma: no cover - depends on the environment
+    _gather_by_channel_nb = compile_kernel(_gather_by_channel_py)
     _pile_counts_nb = compile_kernel(_pile_counts_py)
     _repeat_stats_nb = compile_kernel(_repeat_stats_py)
 
@@ -578,6 +620,39 @@ class ExposureStack:
         saturated = _compare_per_channel(np.greater_equal, hi, sat_thr)
         dark = _compare_per_channel(np.less_equal, lo, dark_thr)
         return sums, saturated, dark
+
+    def mean_at_pixels(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The denoised values and their exclusion at some pixels, channel by channel.
+
+        Returns ``(values, excluded)``, each ``(C, K, P)`` and C-contiguous:
+        :meth:`mean` and ``saturated() | dark_clipped()`` at the flat pixel
+        indices ``index`` (the same bits as :meth:`at_pixels`' sums divided by
+        ``N``), laid out for a consumer that reads one channel at a time (the
+        response fit). One compiled pass over the pixels when numba is there.
+        """
+        index = np.asarray(index, dtype=np.intp)
+        n, k, h, w, c = self.shape
+        sat_thr, dark_thr = _sat_threshold(self.saturation_level), _dark_threshold(self.black_level)
+        if not HAVE_NUMBA or self.frames.dtype.kind not in "iu":
+            sums, saturated, dark = self.at_pixels(index)
+            values = np.moveaxis(sums, -1, 0) / self.n_repeats
+            return np.ascontiguousarray(values), np.ascontiguousarray(
+                np.moveaxis(saturated | dark, -1, 0)
+            )
+        values = np.empty((c, k, index.size), dtype=np.float64)
+        excluded = np.empty((c, k, index.size), dtype=bool)
+        if self._sum and self._extremes:
+            sums = self._sum[0].reshape(k, h * w, c)
+            lo = self._extremes[0][0].reshape(k, h * w, c)
+            hi = self._extremes[0][1].reshape(k, h * w, c)
+            frames = np.zeros((0, k, 1, c), dtype=self.frames.dtype)
+        else:
+            frames = self.frames.reshape(n, k, h * w, c)
+            sums = lo = hi = np.zeros((k, 1, c), dtype=self.frames.dtype)
+        _gather_by_channel_nb(
+            frames, sums, lo, hi, index, float(self.n_repeats), sat_thr, dark_thr, values, excluded
+        )
+        return values, excluded
 
     def saturated(self, saturation_level: np.ndarray | None = None) -> np.ndarray:
         """``(K, H, W, C)`` bool: any repeat reached the channel's saturation level.

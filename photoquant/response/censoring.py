@@ -60,6 +60,7 @@ from __future__ import annotations
 import numpy as np
 
 from photoquant.errors import InputError
+from photoquant.response import _kernels
 
 __all__ = ["CENSORING_MODES", "trim_censored_partners"]
 
@@ -114,16 +115,63 @@ def trim_censored_partners(
         )
     if not spacing > 0:
         raise InputError(f"`spacing` must be positive, got {spacing}")
+    if values.shape[0] < 2:
+        return valid.copy()
+    if _kernels.HAVE_NUMBA and (values.dtype == np.float64 or values.dtype.kind in "iu"):
+        return _trim_compiled(values, valid, t, float(spacing))
+    return _trim_numpy(values, valid, t, float(spacing))
+
+
+def _partners(shared: np.ndarray, t: np.ndarray) -> list[tuple[int, list[int]]]:
+    """Each exposure (by increasing time) with its nearest shorter and longer partners
+    among the exposures it shares usable pixels with (module notes)."""
+    by_time = np.argsort(t, kind="stable")
+    out = []
+    for rank_k, k in enumerate(by_time):
+        shorter = [int(j) for j in by_time[:rank_k][::-1] if shared[k, j]][:1]
+        longer = [int(j) for j in by_time[rank_k + 1 :] if shared[k, j]][:1]
+        out.append((int(k), shorter + longer))
+    return out
+
+
+def _trim_compiled(
+    values: np.ndarray, valid: np.ndarray, t: np.ndarray, spacing: float
+) -> np.ndarray:
+    """:func:`_trim_numpy`'s result from the compiled kernels (:mod:`._kernels`): the same
+    bits, from one pass over the values and three over the pixels with one or two usable
+    values (the only ones trimmed), every (exposure, partner, level) cell at once."""
+    k_count, n_p = values.shape
+    masks = np.zeros(n_p, dtype=np.int64)
+    count = np.zeros(n_p, dtype=np.int64)
+    top = _kernels.usable_masks(values, valid, masks, count)
+    spacing = max(spacing, top / (_MAX_BINS - 1))  # at most _MAX_BINS levels
+    if k_count <= 62:
+        shared = np.zeros((k_count, k_count), dtype=bool)
+        _kernels.shared_exposures(masks, shared)
+    else:  # the kernel's bit masks hold 62 exposures
+        packed = np.packbits(valid, axis=1)
+        shared = np.stack([(packed[k] & packed).any(axis=1) for k in range(k_count)])
+    partners = np.full((k_count, 2), -1, dtype=np.int64)
+    longer = np.zeros((k_count, 2), dtype=bool)
+    for k, nearest in _partners(shared, t):
+        for s, j in enumerate(nearest):
+            partners[k, s], longer[k, s] = j, t[j] > t[k]
+    few = np.flatnonzero((count >= 1) & (count <= 2))
+    out = valid.copy()
+    _kernels.trim_few(values, valid, few, spacing, _MAX_BINS, partners, longer, out)
+    return out
+
+
+def _trim_numpy(values: np.ndarray, valid: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
+    """The readable version of :func:`trim_censored_partners` (numpy passes; the reference
+    of the compiled one)."""
     k_count = values.shape[0]
     out = valid.copy()
-    if k_count < 2:
-        return out
     top = float(np.max(values, where=valid, initial=0.0))
     spacing = max(float(spacing), top / (_MAX_BINS - 1))  # at most _MAX_BINS levels
     level = np.minimum(np.floor(np.where(valid, values, 0.0) / spacing), _MAX_BINS - 1)
     level = level.astype(np.int64)
     n_lev = int(level.max()) + 1
-    by_time = np.argsort(t, kind="stable")
     # pixels usable in both exposures of each pair: an exposure that shares none
     # with k (another stack's, in a combination of stacks) is no partner of k
     # (bit-packed rows ANDed: a float matrix product here goes through BLAS,
@@ -132,11 +180,8 @@ def trim_censored_partners(
     shared = np.stack([(packed[k] & packed).any(axis=1) for k in range(k_count)])
     # the pixels whose entry into the fit the pair decides: two usable values at most
     few = valid.sum(axis=0) <= 2
-    for rank_k, k in enumerate(by_time):
-        # the nearest shorter and nearest longer exposures (module notes)
-        shorter = [j for j in by_time[:rank_k][::-1] if shared[k, j]][:1]
-        longer = [j for j in by_time[rank_k + 1 :] if shared[k, j]][:1]
-        partners = np.array(shorter + longer, dtype=np.int64)
+    for k, nearest in _partners(shared, t):
+        partners = np.array(nearest, dtype=np.int64)
         if partners.size == 0:
             continue
         in_k = np.flatnonzero(valid[k] & few)

@@ -1,0 +1,331 @@
+"""Compiled inner loops of the Debevec 1997 response fit (optional numba).
+
+Three steps of :func:`~photoquant.response.debevec1997.camera_response_Debevec1997`
+walk every candidate pixel of every exposure (2¹⁷ pixels × K × C): the
+censored-pair trimming (:mod:`photoquant.response.censoring`), the histogram
+sample selection
+(:func:`~photoquant.response.debevec1997.select_samples_histogram`) and the
+normal equations of eq. 7. Their readable numpy versions make a dozen full
+passes each (``where``, ``floor``, ``bincount``, ``nonzero`` …); the kernels
+here make one or two, reading each value once. They are used when numba
+imports (``photoquant[fast]``) and give **the same bits** as the numpy
+versions, which stay the reference (``tests/photoquant/test_response_kernels.py``
+holds the two to equality on random data):
+
+* integer results (levels, bins, ranks, masks) are the same integers;
+* float sums are accumulated in the numpy version's order (``bincount``
+  adds its weights in the order of the flattened input, which the loops
+  follow), without ``fastmath``, so no reassociation.
+
+Measured 2026-12-02 on this 2-core machine under a load of 3-4 (per call
+for the three channels of the response benchmark's 1024×768×3, K = 8
+stack, 2¹⁷ candidates; line profiles, so only the ratios mean much): the
+trim 30 → 9 ms (the statistic needs only the pixels with one or two
+usable values, and every (exposure, partner, level) cell is counted in the
+same pass); the whole ``fit_response`` from the frames 164 → 108 ms of CPU
+(min of 9) against OpenCV's 70-sample ``CalibrateDebevec`` at 111-115 ms
+in the same processes. The benchmark's ``response`` row
+(``benchmarks/bench_calibrate.py``) has the figures on a quiet machine.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from photoquant._numba import HAVE_NUMBA, compile_kernel
+
+__all__ = [
+    "HAVE_NUMBA",
+    "usable_masks",
+    "shared_exposures",
+    "trim_few",
+    "histogram_bins",
+    "rank_candidates",
+    "normal_blocks",
+]
+
+
+# ---------------------------------------------------------------------------
+# censored-pair trimming (photoquant.response.censoring)
+# ---------------------------------------------------------------------------
+
+
+def _usable_masks_py(
+    values: Any, valid: Any, masks: Any, count: Any
+) -> float:  # pragma: no cover - compiled by numba
+    """numba body: per pixel, its usable values' count and exposure bit mask (``K ≤ 62``;
+    0 otherwise); returns the largest usable value (0 when none)."""
+    n_k, n_p = values.shape
+    top = 0.0
+    with_masks = n_k <= 62
+    for k in range(n_k):
+        bit = np.int64(1) << k if with_masks else np.int64(0)
+        for p in range(n_p):
+            if valid[k, p]:
+                v = float(values[k, p])
+                top = max(top, v)
+                count[p] += 1
+                masks[p] |= bit
+    return top
+
+
+def _shared_exposures_py(masks: Any, shared: Any) -> None:  # pragma: no cover - compiled
+    """numba body: ``shared[k, j]``: some pixel is usable at both ``k`` and ``j`` (from the
+    per-pixel bit masks; neighbouring pixels mostly repeat a mask, which is skipped)."""
+    n_k = shared.shape[0]
+    acc = np.zeros(n_k, dtype=np.int64)
+    last = np.int64(0)
+    for p in range(masks.size):
+        m = masks[p]
+        if m == last:
+            continue
+        last = m
+        for k in range(n_k):
+            if (m >> k) & 1:
+                acc[k] |= m
+    for k in range(n_k):
+        for j in range(n_k):
+            shared[k, j] = (acc[k] >> j) & 1 == 1
+
+
+def _trim_few_py(
+    values: Any,
+    valid: Any,
+    few: Any,
+    spacing: float,
+    max_bins: int,
+    partners: Any,
+    longer: Any,
+    out: Any,
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: :func:`photoquant.response.censoring.trim_censored_partners`'s statistic
+    for every (exposure ``k``, partner slot ``s``, level of ``k``) cell at once, over the
+    pixels ``few`` (those with one or two usable values: the only ones it trims).
+
+    ``partners (K, 2)``: each exposure's nearest shorter and longer partners
+    (−1: none); ``longer (K, 2)``: whether the partner is the longer one. A
+    level's partners are ranked by level (from the bottom for a longer
+    partner, from the top for a shorter one), ties in pixel order.
+    """
+    n_k = values.shape[0]
+    cap = float(max_bins - 1)
+    n_all = np.zeros((n_k, max_bins), dtype=np.int64)
+    n_cens = np.zeros((n_k, 2, max_bins), dtype=np.int64)
+    for i in range(few.size):
+        p = few[i]
+        for k in range(n_k):
+            if not valid[k, p]:
+                continue
+            lk = np.int64(min(np.floor(float(values[k, p]) / spacing), cap))
+            n_all[k, lk] += 1
+            for s in range(2):
+                j = partners[k, s]
+                if j >= 0 and not valid[j, p]:
+                    n_cens[k, s, lk] += 1
+    # per cell: 0 nothing censored, 1 every partner goes, 2 the partial tail (a row of hist)
+    row = np.full((n_k, 2, max_bins), -1, dtype=np.int64)
+    drop_all = np.zeros((n_k, 2, max_bins), dtype=np.bool_)
+    n_rows = 0
+    for k in range(n_k):
+        for s in range(2):
+            for lev in range(max_bins):
+                c = n_cens[k, s, lev]
+                if c > 0:
+                    if c >= n_all[k, lev] - c:
+                        drop_all[k, s, lev] = True
+                    else:
+                        row[k, s, lev] = n_rows
+                        n_rows += 1
+    hist = np.zeros((n_rows, max_bins), dtype=np.int64)
+    for i in range(few.size):
+        p = few[i]
+        for k in range(n_k):
+            if not valid[k, p]:
+                continue
+            lk = np.int64(min(np.floor(float(values[k, p]) / spacing), cap))
+            for s in range(2):
+                j = partners[k, s]
+                if j < 0 or not valid[j, p]:
+                    continue
+                if drop_all[k, s, lk]:
+                    out[j, p] = False
+                elif row[k, s, lk] >= 0:
+                    lj = np.int64(min(np.floor(float(values[j, p]) / spacing), cap))
+                    if not longer[k, s]:
+                        lj = np.int64(max_bins - 1) - lj
+                    hist[row[k, s, lk], lj] += 1
+    if n_rows == 0:
+        return
+    # per partial cell: the partner level holding its n_cens-th partner, and how many of
+    # the partners at that level still go (the first ones in pixel order)
+    thr = np.zeros(n_rows, dtype=np.int64)
+    left = np.zeros(n_rows, dtype=np.int64)
+    for k in range(n_k):
+        for s in range(2):
+            for lev in range(max_bins):
+                r = row[k, s, lev]
+                if r < 0:
+                    continue
+                need = n_cens[k, s, lev]
+                cum = np.int64(0)
+                for lev_j in range(max_bins):
+                    prev = cum
+                    cum += hist[r, lev_j]
+                    if cum >= need:
+                        thr[r] = lev_j
+                        left[r] = need - prev
+                        break
+    for i in range(few.size):
+        p = few[i]
+        for k in range(n_k):
+            if not valid[k, p]:
+                continue
+            lk = np.int64(min(np.floor(float(values[k, p]) / spacing), cap))
+            for s in range(2):
+                j = partners[k, s]
+                if j < 0 or not valid[j, p]:
+                    continue
+                r = row[k, s, lk]
+                if r < 0:
+                    continue
+                lj = np.int64(min(np.floor(float(values[j, p]) / spacing), cap))
+                if not longer[k, s]:
+                    lj = np.int64(max_bins - 1) - lj
+                if lj < thr[r]:
+                    out[j, p] = False
+                elif lj == thr[r] and left[r] > 0:
+                    out[j, p] = False
+                    left[r] -= 1
+
+
+# ---------------------------------------------------------------------------
+# histogram sample selection (select_samples_histogram)
+# ---------------------------------------------------------------------------
+
+
+def _histogram_bins_py(
+    values: Any, valid: Any, usable: Any, c_max: float, n_bins: int, bins: Any, counts: Any
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: each usable pixel's value bin per exposure (``n_bins`` when unusable) and
+    the count of each (exposure, bin) cell; the numpy version's float64 arithmetic.
+
+    The counts go to four sub-histograms in turn: neighbouring pixels mostly
+    share a bin, and one histogram would chain their increments.
+    """
+    n_k = values.shape[0]
+    pow2 = (n_bins & (n_bins - 1)) == 0
+    width = c_max / n_bins
+    cap = float(n_bins - 1)
+    sub = np.zeros((4, n_bins + 1), dtype=np.int64)
+    n_u = usable.size
+    n_4 = n_u - n_u % 4
+    for k in range(n_k):
+        for i in range(n_u):
+            p = usable[i]
+            if pow2:
+                s = float(values[k, p]) / width
+            else:
+                s = float(values[k, p]) / c_max * n_bins
+            bins[k, i] = np.int16(min(s, cap)) if valid[k, p] else np.int16(n_bins)
+        sub[:] = 0
+        for i in range(0, n_4, 4):
+            sub[0, bins[k, i]] += 1
+            sub[1, bins[k, i + 1]] += 1
+            sub[2, bins[k, i + 2]] += 1
+            sub[3, bins[k, i + 3]] += 1
+        for i in range(n_4, n_u):
+            sub[0, bins[k, i]] += 1
+        for b in range(n_bins + 1):
+            counts[k, b] += sub[0, b] + sub[1, b] + sub[2, b] + sub[3, b]
+
+
+def _rank_candidates_py(
+    bins: Any, key: Any, limits: Any, n_cells: int, best: Any
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: per exposure, the rank by key of each candidate (key below its cell's
+    limit) within its value bin; ``best`` keeps each pixel's lowest rank."""
+    n_k, n_u = bins.shape
+    cand = np.empty(n_u, dtype=np.int64)
+    start = np.empty(n_cells + 1, dtype=np.int64)
+    fill = np.empty(n_cells, dtype=np.int64)
+    grouped = np.empty(n_u, dtype=np.int64)
+    for k in range(n_k):
+        n_c = 0
+        start[:] = 0
+        for i in range(n_u):
+            b = bins[k, i]
+            if key[i] < limits[k, b]:
+                cand[n_c] = i
+                n_c += 1
+                start[b + 1] += 1
+        for b in range(n_cells):
+            start[b + 1] += start[b]
+        fill[:] = start[:n_cells]
+        for c in range(n_c):  # a stable counting sort by bin: pixel order within a bin
+            i = cand[c]
+            b = bins[k, i]
+            grouped[fill[b]] = i
+            fill[b] += 1
+        for b in range(n_cells):
+            lo = start[b]
+            hi = start[b + 1]
+            if hi - lo == 0:
+                continue
+            members = grouped[lo:hi]
+            order = np.argsort(key[members], kind="mergesort")  # stable: as lexsort
+            for r in range(order.size):
+                i = members[order[r]]
+                if r < best[i]:
+                    best[i] = r
+
+
+# ---------------------------------------------------------------------------
+# eq. 7's normal equations (debevec1997._normal_equations)
+# ---------------------------------------------------------------------------
+
+
+def _normal_blocks_py(
+    idx: Any,
+    coef: Any,
+    scaled: Any,
+    nge: Any,
+    n_k: int,
+    n_g: int,
+    s_pair: Any,
+    s_prod: Any,
+    n_gg: Any,
+    corr: Any,
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: eq. 7's ``N_gg`` (data rows, then the smoothness and gauge terms
+    ``s_pair, s_prod``) and the Schur correction ``Σ scaled_a nge_b``, both ``(n_g·n_g,)``.
+
+    The loops follow the flattened ``(2K, 2K, P)`` order of the numpy version's
+    ``bincount`` weights, so each entry's terms are added in the same order;
+    the data terms of two different rows, zero there, are skipped (adding
+    ``+0.0`` changes no sum of non-negative terms).
+    """
+    two_k, n_p = idx.shape
+    for a in range(two_k):
+        for b in range(two_k):
+            same = (a % n_k) == (b % n_k)
+            for p in range(n_p):
+                cell = idx[a, p] * n_g + idx[b, p]
+                if same:
+                    n_gg[cell] += coef[a, p] * coef[b, p]
+                corr[cell] += scaled[a, p] * nge[b, p]
+    for i in range(s_pair.size):
+        n_gg[s_pair[i]] += s_prod[i]
+
+
+if HAVE_NUMBA:  # pragma: no cover - depends on the environment
+    usable_masks = compile_kernel(_usable_masks_py)
+    shared_exposures = compile_kernel(_shared_exposures_py)
+    trim_few = compile_kernel(_trim_few_py)
+    histogram_bins = compile_kernel(_histogram_bins_py)
+    rank_candidates = compile_kernel(_rank_candidates_py)
+    normal_blocks = compile_kernel(_normal_blocks_py)
+else:  # pragma: no cover - depends on the environment
+    usable_masks = shared_exposures = trim_few = None
+    histogram_bins = rank_candidates = normal_blocks = None

@@ -1,0 +1,180 @@
+"""The response fit's compiled kernels give the numpy versions' bits (photoquant.response._kernels).
+
+Random stacks with censoring at both ends, partners that share no pixel
+(as in a combination of views), integer and fractional values: the
+censored-pair trimming, the histogram sample selection, eq. 7's normal
+equations and the whole fit must be equal to the last bit with and without
+numba. Without numba the compiled path is not taken and these reduce to the
+numpy path against itself, so they are skipped.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from photoquant.response import _kernels, camera_response_Debevec1997
+from photoquant.response.censoring import trim_censored_partners
+from photoquant.response.debevec1997 import select_samples_histogram
+
+pytestmark = pytest.mark.skipif(
+    not _kernels.HAVE_NUMBA, reason="numba is not installed (the numpy versions are used)"
+)
+
+
+@contextmanager
+def _numpy_only():
+    """The numpy versions, as without numba."""
+    old = _kernels.HAVE_NUMBA
+    _kernels.HAVE_NUMBA = False
+    try:
+        yield
+    finally:
+        _kernels.HAVE_NUMBA = old
+
+
+def _bracket(seed: int, k_count: int, n_pix: int, n_rep: int, split: bool, step: float = 8.0):
+    """A random bracket of one channel: values (K, P) clipped at 0 and 255 (censored there),
+    exposure times ``step`` apart (about), and the usable mask; ``split``: two groups of exposures that share no
+    pixel (another view's exposures are no partners)."""
+    rng = np.random.default_rng(seed)
+    t = rng.uniform(0.8, 1.25, k_count) * step ** np.arange(k_count)
+    radiance = np.exp(rng.uniform(-np.log(t[-1]) - 2.0, 2.0, n_pix))
+    raw = 255.0 * np.outer(t, radiance) ** 0.8
+    raw *= np.exp(rng.normal(0.0, 0.05, raw.shape))  # a spread that clips part of a level
+    raw += rng.normal(0.0, 2.0, raw.shape)
+    values = np.clip(np.round(raw * n_rep) / n_rep, 0.0, 255.0)
+    valid = (values > 0.0) & (values < 255.0)
+    if split and k_count >= 2:
+        half = rng.random(n_pix) < 0.5
+        valid[: k_count // 2, half] = False
+        valid[k_count // 2 :, ~half] = False
+    return values, valid, t
+
+
+brackets = st.builds(
+    _bracket,
+    seed=st.integers(0, 2**32 - 1),
+    k_count=st.integers(2, 9),
+    n_pix=st.integers(1, 3000),
+    n_rep=st.sampled_from([1, 3, 10]),
+    split=st.booleans(),
+    step=st.sampled_from([2.0, 8.0, 30.0]),
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(case=brackets, spacing=st.sampled_from([1.0, 0.5, 4.0]))
+def test_the_compiled_trim_drops_the_same_partners(case, spacing):
+    values, valid, t = case
+    fast = trim_censored_partners(values, valid, t, spacing)
+    with _numpy_only():
+        slow = trim_censored_partners(values, valid, t, spacing)
+    assert fast.dtype == slow.dtype == bool
+    np.testing.assert_array_equal(fast, slow)
+
+
+def test_the_compiled_trim_acts_where_partners_clip():
+    # not a vacuous equality: on a bracket with clipping, trimming drops values
+    values, valid, t = _bracket(3, 6, 3000, 1, False)
+    out = trim_censored_partners(values, valid, t)
+    assert np.count_nonzero(valid & ~out) > 0
+    assert not np.any(out & ~valid)
+
+
+@settings(max_examples=60, deadline=None)
+@given(case=brackets, n_samples=st.integers(2, 400), n_bins=st.sampled_from([64, 48, 7]))
+def test_the_compiled_sampler_picks_the_same_pixels(case, n_samples, n_bins):
+    values, valid, _ = case
+    fast = select_samples_histogram(
+        values, valid, 255.0, n_samples, np.random.default_rng(1), n_bins=n_bins
+    )
+    with _numpy_only():
+        slow = select_samples_histogram(
+            values, valid, 255.0, n_samples, np.random.default_rng(1), n_bins=n_bins
+        )
+    np.testing.assert_array_equal(fast, slow)
+
+
+def test_the_compiled_sampler_takes_integer_values():
+    values, valid, _ = _bracket(5, 5, 2500, 1, False)
+    ints = values.astype(np.uint8)
+    fast = select_samples_histogram(ints, valid, 255.0, 300, np.random.default_rng(2))
+    with _numpy_only():
+        slow = select_samples_histogram(ints, valid, 255.0, 300, np.random.default_rng(2))
+    assert fast.size == 300
+    np.testing.assert_array_equal(fast, slow)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    k_count=st.integers(2, 6),
+    n_rep=st.sampled_from([1, 4]),
+    censoring=st.sampled_from(["trimmed", "ignored"]),
+)
+def test_the_whole_fit_has_the_same_bits(seed, k_count, n_rep, censoring):
+    # every kernel at once (trim, sampler, normal equations), three channels, a stack
+    # large enough for the thinning (max_pixels) and the monotone solve
+    rng = np.random.default_rng(seed)
+    vals = np.stack([_bracket(seed + ch, k_count, 48 * 40, n_rep, False)[0] for ch in range(3)], -1)
+    t = _bracket(seed, k_count, 1, n_rep, False)[2]
+    values = vals.reshape(k_count, 48, 40, 3)
+    kwargs = dict(n_samples=int(rng.integers(20, 300)), censoring=censoring, max_pixels=1500)
+    fast = camera_response_Debevec1997(values, t, rng=seed, **kwargs)
+    with _numpy_only():
+        slow = camera_response_Debevec1997(values, t, rng=seed, **kwargs)
+    for name in (
+        "log_inverse_response",
+        "valid_min",
+        "n_samples",
+        "residual_rms",
+        "monotone_constrained",
+    ):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_rep=st.integers(1, 4),
+    bits=st.sampled_from([8, 12]),
+    cached=st.booleans(),
+    black=st.booleans(),
+)
+def test_mean_at_pixels_is_the_mean_and_mask_channel_by_channel(seed, n_rep, bits, cached, black):
+    # the response fit's gather (compiled) against the stack's own mean() and masks
+    import photoquant.stack as stack_module
+    from photoquant.stack import ExposureStack
+
+    rng = np.random.default_rng(seed)
+    c_max = 2**bits - 1
+    frames = rng.integers(0, c_max + 1, (n_rep, 3, 9, 7, 3))
+    frames[rng.random(frames.shape) < 0.1] = c_max  # clipped repeats
+    frames = frames.astype(np.uint8 if bits == 8 else np.uint16)
+    stack = ExposureStack(
+        frames, [0.01, 0.04, 0.16], bit_depth=bits, black_level=3 if black else None
+    )
+    if cached:
+        stack.repeat_sum()
+        stack._repeat_extremes()
+    index = np.sort(rng.choice(63, size=int(rng.integers(1, 63)), replace=False))
+    values, excluded = stack.mean_at_pixels(index)
+    assert values.flags.c_contiguous and excluded.flags.c_contiguous
+    mean = stack.mean().reshape(3, 63, 3)[:, index]
+    mask = (stack.saturated() | stack.dark_clipped()).reshape(3, 63, 3)[:, index]
+    np.testing.assert_array_equal(values, np.moveaxis(mean, -1, 0))
+    np.testing.assert_array_equal(excluded, np.moveaxis(mask, -1, 0))
+    assert excluded.any()  # the clipped repeats are there: the mask is not vacuous
+    old = stack_module.HAVE_NUMBA
+    stack_module.HAVE_NUMBA = False
+    try:
+        slow = stack.mean_at_pixels(index)
+    finally:
+        stack_module.HAVE_NUMBA = old
+    np.testing.assert_array_equal(values, slow[0])
+    np.testing.assert_array_equal(excluded, slow[1])
