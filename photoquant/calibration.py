@@ -387,7 +387,9 @@ def calibrate(
 
     # hot and stuck pixels are flagged, not merged (photoquant.defects): where every view
     # shows one, they are no response sample and get zero weight in every merge
+    t0 = time.perf_counter()
     defects = detect_defects(views)
+    timings["defects"] = time.perf_counter() - t0
 
     # 1. response -----------------------------------------------------------
     say("response")
