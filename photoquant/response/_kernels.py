@@ -90,6 +90,11 @@ def _shared_exposures_py(masks: Any, shared: Any) -> None:  # pragma: no cover -
             shared[k, j] = (acc[k] >> j) & 1 == 1
 
 
+def _level_py(v: Any, spacing: float, cap: float) -> Any:  # pragma: no cover - compiled
+    """numba body: a value's trim level, ``min(⌊v/spacing⌋, cap)`` (the numpy version's)."""
+    return np.int64(min(np.floor(float(v) / spacing), cap))
+
+
 def _trim_few_py(
     values: Any,
     valid: Any,
@@ -118,13 +123,13 @@ def _trim_few_py(
         for k in range(n_k):
             if not valid[k, p]:
                 continue
-            lk = np.int64(min(np.floor(float(values[k, p]) / spacing), cap))
+            lk = _level(values[k, p], spacing, cap)
             n_all[k, lk] += 1
             for s in range(2):
                 j = partners[k, s]
                 if j >= 0 and not valid[j, p]:
                     n_cens[k, s, lk] += 1
-    # per cell: 0 nothing censored, 1 every partner goes, 2 the partial tail (a row of hist)
+    # per cell: every partner goes (drop_all), or the partial tail (a row of hist), or none
     row = np.full((n_k, 2, max_bins), -1, dtype=np.int64)
     drop_all = np.zeros((n_k, 2, max_bins), dtype=np.bool_)
     n_rows = 0
@@ -139,29 +144,15 @@ def _trim_few_py(
                         row[k, s, lev] = n_rows
                         n_rows += 1
     hist = np.zeros((n_rows, max_bins), dtype=np.int64)
-    for i in range(few.size):
-        p = few[i]
-        for k in range(n_k):
-            if not valid[k, p]:
-                continue
-            lk = np.int64(min(np.floor(float(values[k, p]) / spacing), cap))
-            for s in range(2):
-                j = partners[k, s]
-                if j < 0 or not valid[j, p]:
-                    continue
-                if drop_all[k, s, lk]:
-                    out[j, p] = False
-                elif row[k, s, lk] >= 0:
-                    lj = np.int64(min(np.floor(float(values[j, p]) / spacing), cap))
-                    if not longer[k, s]:
-                        lj = np.int64(max_bins - 1) - lj
-                    hist[row[k, s, lk], lj] += 1
+    thr = np.zeros(n_rows, dtype=np.int64)
+    left = np.zeros(n_rows, dtype=np.int64)
+    data = (values, valid, few, spacing, cap, partners, longer)
+    cells = (drop_all, row, hist, thr, left)
+    _trim_visit(data, cells, out, False)
     if n_rows == 0:
         return
     # per partial cell: the partner level holding its n_cens-th partner, and how many of
     # the partners at that level still go (the first ones in pixel order)
-    thr = np.zeros(n_rows, dtype=np.int64)
-    left = np.zeros(n_rows, dtype=np.int64)
     for k in range(n_k):
         for s in range(2):
             for lev in range(max_bins):
@@ -177,23 +168,42 @@ def _trim_few_py(
                         thr[r] = lev_j
                         left[r] = need - prev
                         break
+    _trim_visit(data, cells, out, True)
+
+
+def _trim_visit_py(data: Any, cells: Any, out: Any, final: bool) -> None:  # pragma: no cover
+    """numba body: every usable partner value of the pixels ``few``, in pixel order. First
+    visit: the partners of drop-all cells go, the partial cells' partner levels are
+    counted (``hist``); final visit: the partial cells' partners below their threshold
+    level go, and the first ``left`` at it. ``data``: :func:`_trim_few_py`'s arguments,
+    ``cells``: its per-cell arrays."""
+    values, valid, few, spacing, cap, partners, longer = data
+    drop_all, row, hist, thr, left = cells
+    n_k = values.shape[0]
+    n_lev = hist.shape[1]
     for i in range(few.size):
         p = few[i]
         for k in range(n_k):
             if not valid[k, p]:
                 continue
-            lk = np.int64(min(np.floor(float(values[k, p]) / spacing), cap))
+            lk = _level(values[k, p], spacing, cap)
             for s in range(2):
                 j = partners[k, s]
                 if j < 0 or not valid[j, p]:
                     continue
+                if drop_all[k, s, lk]:
+                    if not final:
+                        out[j, p] = False
+                    continue
                 r = row[k, s, lk]
                 if r < 0:
                     continue
-                lj = np.int64(min(np.floor(float(values[j, p]) / spacing), cap))
+                lj = _level(values[j, p], spacing, cap)
                 if not longer[k, s]:
-                    lj = np.int64(max_bins - 1) - lj
-                if lj < thr[r]:
+                    lj = np.int64(n_lev - 1) - lj
+                if not final:
+                    hist[r, lj] += 1
+                elif lj < thr[r]:
                     out[j, p] = False
                 elif lj == thr[r] and left[r] > 0:
                     out[j, p] = False
@@ -322,6 +332,8 @@ def _normal_blocks_py(
 if HAVE_NUMBA:  # pragma: no cover - depends on the environment
     usable_masks = compile_kernel(_usable_masks_py)
     shared_exposures = compile_kernel(_shared_exposures_py)
+    _level = compile_kernel(_level_py)
+    _trim_visit = compile_kernel(_trim_visit_py)
     trim_few = compile_kernel(_trim_few_py)
     histogram_bins = compile_kernel(_histogram_bins_py)
     rank_candidates = compile_kernel(_rank_candidates_py)
