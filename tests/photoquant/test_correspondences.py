@@ -5,6 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from photoquant.correspondences import (
     Correspondences,
@@ -330,3 +332,32 @@ def test_pipeline_recovers_vignetting(rotated_set):
     assert fit.converged.all(), fit.message
     err = np.abs(vignetting_map(fit.params, (H, W)) / v - 1)
     assert err.mean() < 0.005 and err.max() < 0.02, (err.mean(), err.max())
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    shape=st.tuples(st.integers(2, 30), st.integers(2, 30), st.integers(1, 4)),
+    radius=st.integers(0, 3),
+    single=st.booleans(),
+)
+def test_sample_image_compiled_path_has_the_numpy_bits(seed, shape, radius, single):
+    # the compiled sampler (numba) against the numpy expression: points inside, on the
+    # border, outside and NaN, NaN pixels, float32 and float64 images
+    import photoquant.correspondences as corr
+
+    if not corr.HAVE_NUMBA:
+        pytest.skip("numba is not installed (the numpy path is used)")
+    rng = np.random.default_rng(seed)
+    h, w, c = shape
+    img = rng.normal(size=(h, w, c)).astype(np.float32 if single else np.float64)
+    img[rng.random(img.shape) < 0.05] = np.nan
+    pts = np.c_[rng.uniform(-3, w + 2, 40), rng.uniform(-3, h + 2, 40)]
+    pts[:4] = [[0, 0], [w - 1, h - 1], [w - 1, 0], [np.nan, 1]]
+    fast = sample_image(img, pts, radius)
+    corr.HAVE_NUMBA = False
+    try:
+        slow = sample_image(img, pts, radius)
+    finally:
+        corr.HAVE_NUMBA = True
+    np.testing.assert_array_equal(fast, slow)
