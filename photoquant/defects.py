@@ -55,7 +55,7 @@ from scipy import ndimage
 from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant._threads import thread_map
 from photoquant.errors import InputError
-from photoquant.stack import ExposureStack
+from photoquant.stack import ExposureStack, _compare_per_channel
 from photoquant.utils import check_positive
 
 __all__ = ["DefectMap", "detect_defects", "exclude_defects", "hide_defects"]
@@ -205,6 +205,64 @@ def _ring_rank_py(image: Any, rank: Any, out: Any) -> None:  # pragma: no cover 
 _ring_rank_nb = compile_kernel(_ring_rank_py) if HAVE_NUMBA else None
 
 
+def _key_bins_py(bits: Any, counts: Any) -> None:  # pragma: no cover - numba body
+    """numba body: the histogram of the top 16 bits of each float64's order key (its bits
+    as a uint64 that sorts as the floats do: sign flipped, negatives inverted)."""
+    top = np.uint64(1) << np.uint64(63)
+    for i in range(bits.size):
+        b = bits[i]
+        key = ~b if b & top else b | top
+        counts[key >> np.uint64(48)] += 1
+
+
+def _key_gather_py(x: Any, bits: Any, lo: int, hi: int, out: Any) -> int:  # pragma: no cover
+    """numba body: the values whose key's top 16 bits lie in ``[lo, hi]``, in order."""
+    top = np.uint64(1) << np.uint64(63)
+    n = 0
+    for i in range(bits.size):
+        b = bits[i]
+        key = (~b if b & top else b | top) >> np.uint64(48)
+        if key >= lo and key <= hi:
+            out[n] = x[i]
+            n += 1
+    return n
+
+
+if HAVE_NUMBA:  # pragma: no cover - depends on the environment
+    _key_bins_nb = compile_kernel(_key_bins_py)
+    _key_gather_nb = compile_kernel(_key_gather_py)
+
+
+def _median(x: np.ndarray) -> float:
+    """``np.median(x)`` of a 1-d float64 array: the same value (a zero's sign aside).
+
+    A median is one or the mean of two order statistics of the data: a
+    compiled pass bins the values by the top 16 bits of their order keys
+    (a radix select), and only the bin(s) holding the middle ranks are
+    partitioned, then averaged as numpy does. Measured 2026-12-02 (786 432
+    values, the defect search's per-channel spreads; loaded machine): about
+    3× faster than numpy's introselect over all of them. NaN (numpy's NaN
+    median) and small arrays go to numpy.
+    """
+    n = x.size
+    if not HAVE_NUMBA or n < 4096 or np.isnan(x).any():
+        return float(np.median(x))
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    bits = x.view(np.uint64)
+    counts = np.zeros(1 << 16, dtype=np.int64)
+    _key_bins_nb(bits, counts)
+    cum = np.cumsum(counts)
+    k_lo, k_hi = (n - 1) // 2, n // 2
+    b_lo = int(np.searchsorted(cum, k_lo, side="right"))
+    b_hi = int(np.searchsorted(cum, k_hi, side="right"))
+    below = int(cum[b_lo - 1]) if b_lo else 0
+    cand = np.empty(int(cum[b_hi]) - below)
+    _key_gather_nb(x, bits, b_lo, b_hi, cand)
+    part = np.partition(cand, [k_lo - below, k_hi - below])
+    # numpy's median: the mean of part[n//2 − 1 : n//2 + 1] (even n) or part[n//2] alone
+    return float(np.mean(part[k_lo - below : k_hi - below + 1]))
+
+
 def _ring_rank_fast(image: np.ndarray, rank: int) -> np.ndarray:
     """:func:`_ring_rank`, with a compiled kernel when numba is there (the same values).
 
@@ -287,7 +345,10 @@ def _one_stack(
     order = np.argsort(stack.exposure_s)
     mean = _plane_means(stack)  # mean(k): the repeat mean of exposure k, stack.mean()[k]
     not_stuck = lo != hi
-    stuck = (lo == hi) & (lo > black) & (lo < sat)
+    # per-channel thresholds compared along whole rows (_compare_per_channel), not in
+    # numpy's broadcast inner loops of length C: the same booleans, 5-6× faster
+    stuck = (lo == hi) & _compare_per_channel(np.greater, lo, black)
+    stuck &= _compare_per_channel(np.less, lo, sat)
     if stack.n_exposures >= 2:
         # the neighbours' medians only where a pixel is a candidate (few): the same
         # values as the filtered images (_ring_median) there
@@ -315,7 +376,7 @@ def _one_stack(
     keep_bytes = 0
     for k in order:
         mean_k = mean(k)
-        unsat_k = mean_k < sat - 0.5  # repeat mean below the clip
+        unsat_k = _compare_per_channel(np.less, mean_k, sat - 0.5)  # repeat mean below the clip
         n_unsat += unsat_k
         use_k = unsat_k & (n_unsat <= n_short)
         n_use += use_k
@@ -336,9 +397,10 @@ def _one_stack(
             spread = np.empty(excess.shape[-1])
             for ch in range(excess.shape[-1]):
                 e = excess[..., ch]
-                spread[ch] = 1.4826 * np.median(np.abs(e - np.median(e)))
+                e = e.ravel()  # a copy: one channel of the interleaved plane
+                spread[ch] = 1.4826 * _median(np.abs(e - _median(e)))
             thr = np.maximum(hot_min_dn, hot_sigmas * spread)
-            above &= (excess > thr) | ~use_k
+            above &= _compare_per_channel(np.greater, excess, thr) | ~use_k
     elif not used:
         above[:] = True  # no exposure used: "above" in none is vacuous (never told)
     told = n_use >= hot_min_exposures

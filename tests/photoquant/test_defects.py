@@ -347,3 +347,28 @@ def test_a_camera_file_with_a_tampered_defect_map_is_refused(tmp_path) -> None:
     (folder / "camera.json").write_text(json.dumps(doc))
     with pytest.raises(CameraModelError, match=r"camera\.json: `defects.hot` has an index outside"):
         pq.load_camera(folder)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(1, 30_000),
+    kind=st.sampled_from(["normal", "ties", "wide", "nan"]),
+)
+def test_the_radix_median_is_numpys(seed, n, kind):
+    # the defect search's robust spreads take their medians by a radix select
+    from photoquant.defects import _median
+
+    rng = np.random.default_rng(seed)
+    if kind == "normal":
+        x = rng.normal(size=n)
+    elif kind == "ties":  # repeat means of N = 10: a grid of 0.1 DN, many equal values
+        x = np.round(rng.normal(0.0, 3.0, n) * 10) / 10
+    elif kind == "wide":
+        x = np.exp(rng.normal(0.0, 30.0, n)) * rng.choice([-1.0, 1.0], n)
+    else:
+        x = rng.normal(size=n)
+        x[rng.integers(0, n)] = np.nan
+    expected = float(np.median(x))
+    got = _median(x)
+    assert got == expected or (np.isnan(got) and np.isnan(expected))
