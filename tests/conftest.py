@@ -19,6 +19,35 @@ from hypothesis import settings
 settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
+_BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _share_the_cores_between_workers() -> None:
+    """Each pytest-xdist worker's BLAS on its share of the cores (``-n auto``).
+
+    OpenBLAS starts a thread per core in every process; with one worker per
+    core, the workers' BLAS threads outnumber the cores, and OpenBLAS threads
+    that wait for each other spin: a least-squares solve of the size of the
+    validation job's colour-hdri peer took 40 s instead of 6 s beside other
+    busy processes. A worker gets ``cores // workers`` threads (at least one): the
+    BLAS libraries loaded already (numpy's) through threadpoolctl, the ones
+    loaded later (scipy's) and subprocesses through the variables. Nothing
+    changes in one process (``-n 0``) or where the variables are set already.
+    """
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if workers <= 1 or any(v in os.environ for v in _BLAS_THREAD_VARIABLES):
+        return
+    from threadpoolctl import threadpool_limits
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    threads = max(1, (cores or 1) // workers)
+    for variable in _BLAS_THREAD_VARIABLES:
+        os.environ[variable] = str(threads)
+    threadpool_limits(limits=threads, user_api="blas")
+
+
+_share_the_cores_between_workers()
+
 
 def pytest_configure(config: pytest.Config) -> None:
     """SIGINT delivered as from a terminal, however the suite was started.
@@ -39,6 +68,35 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("PHOTOQUANT_SHARED", REPO.parent / "shared"))
 FROBISHER = SHARED / "data" / "real" / "frobisher_001"
 MEMORIAL = SHARED / "data" / "real" / "memorial_debevec"
+
+
+RUN_FIRST = (
+    "tests/validation/test_validate_quick.py",
+    "tests/validation/test_leaderboard.py",
+    "tests/validation/test_validate_job.py",
+)
+"""The files whose module fixtures run a validation job or a whole leaderboard
+(minutes each, the quick job the longest), in the order they are started."""
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The longest files first, each file's tests in their order.
+
+    ``--dist loadfile --no-loadscope-reorder`` (``pyproject.toml``) hands the
+    files to the workers in the order collected, and these come last
+    (``tests/validation``; xdist's default order, most tests first, puts them
+    last too): started first, they run while the other worker goes through
+    the many short files, instead of after them.
+    """
+    del config
+    first = {name: i for i, name in enumerate(RUN_FIRST)}
+
+    def rank(item: pytest.Item) -> int:
+        path = item.path.resolve()
+        rel = path.relative_to(REPO).as_posix() if path.is_relative_to(REPO) else ""
+        return first.get(rel, len(RUN_FIRST))
+
+    items.sort(key=rank)  # stable: the order within each group is kept
 
 
 @pytest.fixture
