@@ -224,21 +224,27 @@ def _histogram_bins_py(
     The counts go to four sub-histograms in turn: neighbouring pixels mostly
     share a bin, and one histogram would chain their increments.
     """
-    n_k = values.shape[0]
+    n_k, n_p = values.shape
     pow2 = (n_bins & (n_bins - 1)) == 0
     width = c_max / n_bins
     cap = float(n_bins - 1)
+    full = np.empty(n_p, dtype=np.int16)
     sub = np.zeros((4, n_bins + 1), dtype=np.int64)
     n_u = usable.size
     n_4 = n_u - n_u % 4
     for k in range(n_k):
+        # every pixel's bin in one contiguous pass (it vectorises), then the usable ones:
+        # 4.5 -> 2.6 ms a channel of the response benchmark (2026-12-02)
+        if pow2:
+            for p in range(n_p):
+                s = min(float(values[k, p]) / width, cap)
+                full[p] = np.int16(s) if valid[k, p] else np.int16(n_bins)
+        else:
+            for p in range(n_p):
+                s = min(float(values[k, p]) / c_max * n_bins, cap)
+                full[p] = np.int16(s) if valid[k, p] else np.int16(n_bins)
         for i in range(n_u):
-            p = usable[i]
-            if pow2:
-                s = float(values[k, p]) / width
-            else:
-                s = float(values[k, p]) / c_max * n_bins
-            bins[k, i] = np.int16(min(s, cap)) if valid[k, p] else np.int16(n_bins)
+            bins[k, i] = full[usable[i]]
         sub[:] = 0
         for i in range(0, n_4, 4):
             sub[0, bins[k, i]] += 1
