@@ -24,8 +24,9 @@ trim 30 → 9 ms (the statistic needs only the pixels with one or two
 usable values, and every (exposure, partner, level) cell is counted in the
 same pass); the whole ``fit_response`` from the frames 164 → 108 ms of CPU
 (min of 9) against OpenCV's 70-sample ``CalibrateDebevec`` at 111-115 ms
-in the same processes. The benchmark's ``response`` row
-(``benchmarks/bench_calibrate.py``) has the figures on a quiet machine.
+in the same processes. On a quiet machine (the benchmark's ``response``
+row, ``benchmarks/bench_calibrate.py``): 76.8 ms against OpenCV's 54.3 ms,
+whose two threads then have two free cores (README, "Benchmarks").
 """
 
 from __future__ import annotations
