@@ -134,6 +134,17 @@ def _partners(shared: np.ndarray, t: np.ndarray) -> list[tuple[int, list[int]]]:
     return out
 
 
+def _shared_exposures(valid: np.ndarray) -> np.ndarray:
+    """``(K, K)`` bool: some pixel is usable in both exposures. An exposure that shares
+    none with ``k`` (another stack's, in a combination of stacks) is no partner of ``k``.
+
+    Bit-packed rows ANDed: a float matrix product here goes through BLAS, whose
+    threads made it take 5 ms to 1.9 s on a loaded machine.
+    """
+    packed = np.packbits(valid, axis=1)
+    return np.stack([(packed[k] & packed).any(axis=1) for k in range(valid.shape[0])])
+
+
 def _trim_compiled(
     values: np.ndarray, valid: np.ndarray, t: np.ndarray, spacing: float
 ) -> np.ndarray:
@@ -149,8 +160,7 @@ def _trim_compiled(
         shared = np.zeros((k_count, k_count), dtype=bool)
         _kernels.shared_exposures(masks, shared)
     else:  # the kernel's bit masks hold 62 exposures
-        packed = np.packbits(valid, axis=1)
-        shared = np.stack([(packed[k] & packed).any(axis=1) for k in range(k_count)])
+        shared = _shared_exposures(valid)
     partners = np.full((k_count, 2), -1, dtype=np.int64)
     longer = np.zeros((k_count, 2), dtype=bool)
     for k, nearest in _partners(shared, t):
@@ -165,19 +175,13 @@ def _trim_compiled(
 def _trim_numpy(values: np.ndarray, valid: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
     """The readable version of :func:`trim_censored_partners` (numpy passes; the reference
     of the compiled one)."""
-    k_count = values.shape[0]
     out = valid.copy()
     top = float(np.max(values, where=valid, initial=0.0))
     spacing = max(float(spacing), top / (_MAX_BINS - 1))  # at most _MAX_BINS levels
     level = np.minimum(np.floor(np.where(valid, values, 0.0) / spacing), _MAX_BINS - 1)
     level = level.astype(np.int64)
     n_lev = int(level.max()) + 1
-    # pixels usable in both exposures of each pair: an exposure that shares none
-    # with k (another stack's, in a combination of stacks) is no partner of k
-    # (bit-packed rows ANDed: a float matrix product here goes through BLAS,
-    # whose threads made it take 5 ms to 1.9 s on a loaded machine)
-    packed = np.packbits(valid, axis=1)
-    shared = np.stack([(packed[k] & packed).any(axis=1) for k in range(k_count)])
+    shared = _shared_exposures(valid)
     # the pixels whose entry into the fit the pair decides: two usable values at most
     few = valid.sum(axis=0) <= 2
     for k, nearest in _partners(shared, t):

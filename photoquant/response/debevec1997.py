@@ -259,29 +259,20 @@ def response_levels(bit_depth: int, max_levels: int = 1024) -> np.ndarray:
     return np.linspace(0.0, n - 1.0, int(max_levels))
 
 
-def _channel_major(
-    a: np.ndarray, dtype: type | np.dtype | None = None, divisor: float | None = None
-) -> np.ndarray:
-    """``a (..., C)`` (divided by ``divisor``, as ``dtype``) as a view of an array laid out
-    channel by channel, ``(C, ...)`` in memory: the same values, each channel contiguous.
+def _channel_major(a: np.ndarray) -> np.ndarray:
+    """``a (..., C)`` as a view of an array laid out channel by channel, ``(C, ...)`` in
+    memory: the same values, each channel contiguous (``a`` itself when it is already).
 
     The response fit reads one channel at a time, several passes each; on the
     interleaved layout every pass pulls the other channels' values through
     the cache as well (3× the memory traffic at C = 3; measured 2026-12-02 on
     the response benchmark, loaded machine: the per-channel usable mask 4.7 →
-    1.2 ms). An array already channel-major is returned as it is (when no
-    division is asked).
+    1.2 ms).
     """
-    dtype = a.dtype if dtype is None else np.dtype(dtype)
     moved = np.moveaxis(a, -1, 0)
-    if divisor is None and a.dtype == dtype and (a.shape[-1] == 1 or moved.flags.c_contiguous):
+    if a.shape[-1] == 1 or moved.flags.c_contiguous:
         return a
-    out = np.empty(moved.shape, dtype=dtype)
-    if divisor is None:
-        out[...] = moved
-    else:
-        np.divide(moved, divisor, out=out)
-    return np.moveaxis(out, 0, -1)
+    return np.moveaxis(np.ascontiguousarray(moved), 0, -1)
 
 
 def select_samples_histogram(
@@ -949,7 +940,7 @@ def characterise_response_Debevec1997(
         # stack's exact integer sums, so that no full-size float mean is formed
         cand = np.flatnonzero(rng.random(n_pix) < opts.max_pixels / n_pix)
         # the sums and masks at the candidates only (no full-size arrays made for them)
-        # = stack.mean() at cand, bit for bit, laid out channel by channel (_channel_major)
+        # = stack.mean() at cand, bit for bit, laid out channel by channel
         values, excluded = (np.moveaxis(a, 0, -1)[:, None] for a in stack.mean_at_pixels(cand))
     else:
         values, excluded = stack.mean(), stack.saturated() | stack.dark_clipped()
