@@ -630,8 +630,15 @@ class ExposureStack:
         ``N``), laid out for a consumer that reads one channel at a time (the
         response fit). One compiled pass over the pixels when numba is there.
         """
-        index = np.asarray(index, dtype=np.intp)
         n, k, h, w, c = self.shape
+        index = np.asarray(index)
+        if index.ndim != 1 or index.dtype.kind not in "iu":
+            raise InputError(
+                f"`index` must be a 1-d array of integers, got {index.dtype} {index.shape}"
+            )
+        if index.size and not (0 <= index.min() and index.max() < h * w):
+            raise InputError(f"`index` must lie in [0, {h * w}) (flat pixel indices of {h}×{w})")
+        index = index.astype(np.intp, copy=False)
         sat_thr, dark_thr = _sat_threshold(self.saturation_level), _dark_threshold(self.black_level)
         if not HAVE_NUMBA or self.frames.dtype.kind not in "iu":
             sums, saturated, dark = self.at_pixels(index)

@@ -182,3 +182,20 @@ def test_both_paths_detect_and_summarise_as_the_reference(compiled, seed, shape,
         np.testing.assert_array_equal(swapped.repeat_sum(), frames[:, ::-1].sum(axis=0))
     finally:
         stack_module.HAVE_NUMBA = old
+
+
+@pytest.mark.parametrize(
+    ("index", "message"),
+    [
+        (np.array([0, 63]), r"must lie in \[0, 63\)"),
+        (np.array([-1, 2]), r"must lie in \[0, 63\)"),
+        (np.array([[0, 1]]), "1-d array of integers"),
+        (np.array([0.0, 1.0]), "1-d array of integers"),
+    ],
+)
+def test_mean_at_pixels_refuses_bad_indices_in_one_line(index, message):
+    # the compiled gather does no bounds checks: the method refuses them first
+    frames = np.zeros((1, 2, 9, 7, 3), dtype=np.uint8)
+    stack = ExposureStack(frames, [0.01, 0.04], bit_depth=8)
+    with pytest.raises(InputError, match=message):
+        stack.mean_at_pixels(index)
