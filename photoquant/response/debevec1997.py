@@ -93,6 +93,8 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,6 +108,7 @@ from photoquant._checks import (
     check_exposure_times,
     check_int,
     check_positive,
+    check_workers,
     validate_method,
 )
 from photoquant.errors import CalibrationError, InputError
@@ -141,6 +144,9 @@ DEFAULT_SMOOTHNESS = 1000.0
 DEFAULT_MAX_PIXELS = 2**17
 """Default ``max_pixels`` of :func:`camera_response_Debevec1997`: candidates for the samples."""
 """Default β of eq. 7 (weights scaled to a peak of 1). The paper leaves β free."""
+
+_HISTOGRAM_BINS = 64
+"""Value bins per exposure of :func:`select_samples_histogram`."""
 
 TOE_MODES = ("continued", "solved")
 """Treatments of the dark end of ``g`` (module notes, *Toe*)."""
@@ -282,7 +288,7 @@ def select_samples_histogram(
     n_samples: int,
     rng: np.random.Generator,
     *,
-    n_bins: int = 64,
+    n_bins: int = _HISTOGRAM_BINS,
 ) -> np.ndarray:
     """Choose pixels whose values cover the whole intensity range.
 
@@ -309,13 +315,34 @@ def select_samples_histogram(
     ndarray of int
         Indices into ``P``, sorted.
     """
-    k_count = values.shape[0]
-    # count of valid exposures per pixel, in one byte (K < 256) rather than int64
-    n_valid = valid.view(np.uint8).sum(axis=0, dtype=np.uint8) if k_count < 256 else valid.sum(0)
-    usable = np.flatnonzero(n_valid >= 2)
+    usable = _usable_pixels(valid)
     if usable.size <= n_samples:
         return usable
     key = rng.random(usable.size)  # the random ranking
+    return _select_histogram_by_keys(values, valid, c_max, n_samples, usable, key, n_bins)
+
+
+def _usable_pixels(valid: np.ndarray) -> np.ndarray:
+    """Indices of the pixels with at least two valid exposures (``valid`` ``(K, P)``)."""
+    k_count = valid.shape[0]
+    # count of valid exposures per pixel, in one byte (K < 256) rather than int64
+    n_valid = valid.view(np.uint8).sum(axis=0, dtype=np.uint8) if k_count < 256 else valid.sum(0)
+    return np.flatnonzero(n_valid >= 2)
+
+
+def _select_histogram_by_keys(
+    values: np.ndarray,
+    valid: np.ndarray,
+    c_max: float,
+    n_samples: int,
+    usable: np.ndarray,
+    key: np.ndarray,
+    n_bins: int,
+) -> np.ndarray:
+    """:func:`select_samples_histogram` past its random draw ``key`` (one per ``usable``
+    pixel; more usable pixels than ``n_samples``): no randomness, so that channels can
+    run on threads once their draws are made in order."""
+    k_count = values.shape[0]
     if _kernels.HAVE_NUMBA and values.dtype.kind in "fiu" and values.dtype.itemsize <= 8:
         return _select_histogram_compiled(values, valid, c_max, n_samples, n_bins, usable, key)
     # bin = min(floor(v / c_max · n_bins), n_bins − 1) for valid values, n_bins
@@ -396,6 +423,33 @@ def _select_histogram_compiled(
         ranked = np.arange(usable.size)
     chosen = ranked[np.lexsort((key[ranked], best[ranked]))[:n_samples]]
     return np.sort(usable[chosen])
+
+
+def _draw_samples(
+    sampler: Callable[..., np.ndarray],
+    values: np.ndarray,
+    valid: np.ndarray,
+    usable: np.ndarray,
+    c_max: float,
+    n_samples: int,
+    rng: np.random.Generator,
+) -> Callable[[], np.ndarray]:
+    """Make a sampler's random draws now; return the rest of its work, which has none.
+
+    :func:`select_samples_histogram` draws one key per usable pixel and then
+    ranks them without randomness: the ranking is returned to be run later
+    (on a thread). Any other sampler runs here whole. Either way the picks are
+    the sampler's, bit for bit, and ``rng`` is left as the sampler leaves it.
+    """
+    if sampler is not select_samples_histogram:
+        idx = sampler(values, valid, c_max, n_samples, rng)
+        return lambda: idx
+    if usable.size <= n_samples:
+        return lambda: usable
+    key = rng.random(usable.size)  # the random ranking, as select_samples_histogram draws it
+    return lambda: _select_histogram_by_keys(
+        values, valid, c_max, n_samples, usable, key, _HISTOGRAM_BINS
+    )
 
 
 def select_samples_random(
@@ -632,6 +686,7 @@ def camera_response_Debevec1997(
     max_pixels: int | None = DEFAULT_MAX_PIXELS,
     censoring: str = "trimmed",
     wide_steps: str = "template",
+    workers: int | None = None,
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -695,6 +750,10 @@ def camera_response_Debevec1997(
         grows as ``(ρ/ρ₀)⁴`` (:mod:`photoquant.response.wide_steps`), so that
         the shape the data leave open follows a camera's, not a straight
         ``g``; ``"none"``: β as given (the paper's).
+    workers : int, optional
+        Threads for the channels (every CPU by default). The sampler's random
+        draws are made in channel order whatever the count, so the result does
+        not depend on it.
 
     Returns
     -------
@@ -717,6 +776,7 @@ def camera_response_Debevec1997(
         raise InputError(f"`wide_steps` must be one of {list(WIDE_STEP_MODES)}, got {wide_steps!r}")
     if int(n_samples) < 2:
         raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
+    workers = check_workers(workers)
     c_full = 2**bit_depth - 1
     if saturation_level is None:
         sat = np.full(n_ch, c_full, dtype=np.float64)
@@ -762,13 +822,21 @@ def camera_response_Debevec1997(
     constrained = np.zeros(n_ch, dtype=bool)
     valid_min = np.zeros(n_ch)
     factors = np.ones(n_ch)
-    for ch in range(n_ch):
+    n_draw = int(n_samples)
+
+    def usable_values(ch: int) -> tuple[np.ndarray, np.ndarray]:
+        """Stage 1 of a channel: its valid values (trimmed) and usable pixels."""
         vals = values[..., ch]
-        c_lo = float(floor[ch])
-        valid = (vals > c_lo) & (vals < sat[ch]) & ~saturated[..., ch]
+        valid = (vals > floor[ch]) & (vals < sat[ch]) & ~saturated[..., ch]
         if censoring == "trimmed":
             valid = trim_censored_partners(vals, valid, t, spacing)
-        idx = sampler(vals, valid, sat[ch], int(n_samples), rng)
+        return valid, _usable_pixels(valid)
+
+    def fit_channel(ch: int, valid: np.ndarray, pick: Callable[[], np.ndarray]) -> None:
+        """Stage 2 of a channel, past its random draws: samples, eq. 7, the toe."""
+        vals = values[..., ch]
+        c_lo = float(floor[ch])
+        idx = pick()
         weights = wfun(vals[:, idx], c_lo, sat[ch])
         valid_idx = valid[:, idx] & (weights > 0)
         if idx.size < 2:
@@ -795,20 +863,17 @@ def camera_response_Debevec1997(
                 g0 = emor_mean_log_inverse(levels[: top + 1], c_lo, sat[ch])
                 rows = smooth_w[1:top] ** 2
                 prior = smoothness * template_penalty(rows, g0, factors[ch])
-        # the dense systems are small (≤ 1024²): one BLAS thread is fastest, and
-        # a multi-threaded BLAS on a loaded machine can be 100× slower
-        with _blas_controller().limit(limits=1, user_api="blas"):
-            g, rms[ch], constrained[ch], n_eq[ch], support = _solve_channel(
-                valid_idx,
-                np.where(valid_idx, weights, 0.0),
-                log_t,
-                vals[:, idx] / spacing,
-                top,
-                smooth_w,
-                smoothness,
-                gauge,
-                prior,
-            )
+        g, rms[ch], constrained[ch], n_eq[ch], support = _solve_channel(
+            valid_idx,
+            np.where(valid_idx, weights, 0.0),
+            log_t,
+            vals[:, idx] / spacing,
+            top,
+            smooth_w,
+            smoothness,
+            gauge,
+            prior,
+        )
         # lowest measured level: below it g is extrapolated by the prior alone
         # (gaps between measured levels are interpolated, which is fine)
         measured = np.flatnonzero(support[: gauge + 1] >= min_support)
@@ -819,6 +884,32 @@ def camera_response_Debevec1997(
         g_all[ch, : top + 1] = g
         g_all[ch, top + 1 :] = g[-1]
         n_used[ch] = idx.size
+
+    # Channels are independent but for the sampler's random draws: those are made
+    # in channel order on this thread, everything else on `workers` threads (the
+    # compiled kernels, numpy's large passes and LAPACK release the GIL), so the
+    # result does not depend on the threads. The dense systems are small
+    # (≤ 1024²): one BLAS thread is fastest, and a multi-threaded BLAS on a
+    # loaded machine can be 100× slower.
+    n_workers = min(workers, n_ch)
+    with _blas_controller().limit(limits=1, user_api="blas"):
+        if n_workers <= 1:
+            for ch in range(n_ch):
+                valid, usable = usable_values(ch)
+                pick = _draw_samples(sampler, values[..., ch], valid, usable, sat[ch], n_draw, rng)
+                fit_channel(ch, valid, pick)
+        else:
+            with ThreadPoolExecutor(max_workers=n_workers) as pool:
+                stage1 = [pool.submit(usable_values, ch) for ch in range(n_ch)]
+                stage2 = []
+                for ch in range(n_ch):
+                    valid, usable = stage1[ch].result()
+                    pick = _draw_samples(
+                        sampler, values[..., ch], valid, usable, sat[ch], n_draw, rng
+                    )
+                    stage2.append(pool.submit(fit_channel, ch, valid, pick))
+                for job in stage2:  # the first channel's error first, as without threads
+                    job.result()
     del height, width
     return ResponseRecovery(
         levels=levels,

@@ -114,6 +114,36 @@ def test_same_seed_same_result(rng):
     np.testing.assert_array_equal(a.log_inverse_response, b.log_inverse_response)
 
 
+
+@pytest.mark.parametrize("sampling", ["histogram", "random"])
+def test_threads_give_the_same_bits_and_leave_the_generator_alike(rng, sampling):
+    # the channels run on threads but the sampler's draws are made in channel order:
+    # any thread count gives the same g, and the generator is left in the same state
+    l = log_uniform_scene(rng, (40, 50, 3))
+    frames = capture(l, EXPOSURES, noise_dn=1.0, rng=rng)
+    results = []
+    for workers in (1, 2, 3):
+        gen = np.random.default_rng(11)
+        rec = camera_response_Debevec1997(
+            frames[0], EXPOSURES, n_samples=300, rng=gen, sampling=sampling, workers=workers
+        )
+        results.append((rec.log_inverse_response, rec.valid_min, gen.random()))
+    for g, valid_min, next_draw in results[1:]:
+        np.testing.assert_array_equal(g, results[0][0])
+        np.testing.assert_array_equal(valid_min, results[0][1])
+        assert next_draw == results[0][2]
+
+
+def test_a_channel_error_is_the_first_channel_s_with_threads():
+    # channel 0 and 2 cannot be fitted: the error names channel 0, as without threads
+    values = np.zeros((2, 6, 6, 3))
+    values[0] = 255.0
+    values[:, :, :, 1] = np.linspace(20, 200, 36).reshape(6, 6)[None]
+    values[1, :, :, 1] *= 1.2
+    for workers in (1, 3):
+        with pytest.raises(CalibrationError, match="channel 0"):
+            camera_response_Debevec1997(values, [1.0, 100.0], workers=workers)
+
 def test_gauge_is_zero_mid_range(rng):
     frames = capture(log_uniform_scene(rng), EXPOSURES)
     sat = np.round(np.array(BALANCE) * 255)
@@ -151,6 +181,7 @@ def test_samples_cover_the_whole_range(rng):
         ({"bit_depth": 7}, InputError, "bit_depth"),
         ({"n_samples": 1}, InputError, "n_samples"),
         ({"max_pixels": 1}, InputError, "max_pixels"),
+        ({"workers": 0}, InputError, "workers"),
         (
             {"weighting": "triangle"},
             InputError,

@@ -145,15 +145,21 @@ def test_the_whole_fit_has_the_same_bits(seed, k_count, n_rep, censoring):
     bits=st.sampled_from([8, 12]),
     cached=st.booleans(),
     black=st.booleans(),
+    size=st.sampled_from([(9, 7), (90, 110)]),
+    threads=st.integers(1, 3),
 )
-def test_mean_at_pixels_is_the_mean_and_mask_channel_by_channel(seed, n_rep, bits, cached, black):
-    # the response fit's gather (compiled) against the stack's own mean() and masks
+def test_mean_at_pixels_is_the_mean_and_mask_channel_by_channel(
+    seed, n_rep, bits, cached, black, size, threads
+):
+    # the response fit's gather (compiled, in spans of the index on threads above 4096
+    # pixels) against the stack's own mean() and masks
     import photoquant.stack as stack_module
     from photoquant.stack import ExposureStack
 
     rng = np.random.default_rng(seed)
     c_max = 2**bits - 1
-    frames = rng.integers(0, c_max + 1, (n_rep, 3, 9, 7, 3))
+    n_pix = size[0] * size[1]
+    frames = rng.integers(0, c_max + 1, (n_rep, 3, *size, 3))
     frames[rng.random(frames.shape) < 0.1] = c_max  # clipped repeats
     frames[0, 0, 0, 0, 0] = c_max  # one at pixel 0, always gathered below
     frames = frames.astype(np.uint8 if bits == 8 else np.uint16)
@@ -163,11 +169,16 @@ def test_mean_at_pixels_is_the_mean_and_mask_channel_by_channel(seed, n_rep, bit
     if cached:
         stack.repeat_sum()
         stack._repeat_extremes()
-    index = np.union1d(0, rng.choice(63, size=int(rng.integers(1, 63)), replace=False))
-    values, excluded = stack.mean_at_pixels(index)
+    index = np.union1d(0, rng.choice(n_pix, size=int(rng.integers(1, n_pix)), replace=False))
+    old_workers = stack_module.default_workers
+    stack_module.default_workers = lambda: threads
+    try:
+        values, excluded = stack.mean_at_pixels(index)
+    finally:
+        stack_module.default_workers = old_workers
     assert values.flags.c_contiguous and excluded.flags.c_contiguous
-    mean = stack.mean().reshape(3, 63, 3)[:, index]
-    mask = (stack.saturated() | stack.dark_clipped()).reshape(3, 63, 3)[:, index]
+    mean = stack.mean().reshape(3, n_pix, 3)[:, index]
+    mask = (stack.saturated() | stack.dark_clipped()).reshape(3, n_pix, 3)[:, index]
     np.testing.assert_array_equal(values, np.moveaxis(mean, -1, 0))
     np.testing.assert_array_equal(excluded, np.moveaxis(mask, -1, 0))
     assert excluded[0, 0, 0]  # pixel 0's clipped repeat: the mask is not vacuous

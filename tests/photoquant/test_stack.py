@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from photoquant.errors import InputError
+from photoquant._numba import HAVE_NUMBA
 from photoquant.stack import ExposureStack, denoise_mean, detect_saturation_levels
 
 
@@ -182,6 +183,31 @@ def test_both_paths_detect_and_summarise_as_the_reference(compiled, seed, shape,
         np.testing.assert_array_equal(swapped.repeat_sum(), frames[:, ::-1].sum(axis=0))
     finally:
         stack_module.HAVE_NUMBA = old
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed (the numpy path is used)")
+@settings(max_examples=20, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_rows=st.integers(200, 800),
+    dtype=st.sampled_from([np.uint8, np.uint16]),
+)
+def test_compiled_pile_counts_carry_past_their_one_byte_blocks(seed, n_rows, dtype):
+    # the compiled counts go through one-byte accumulators, 255 rows at a time: with
+    # hundreds of rows at the top (more than a byte holds) they are still numpy's
+    from photoquant.stack import _pile_counts
+
+    rng = np.random.default_rng(seed)
+    n_ch = 3
+    top = np.array([255, 200, 17])
+    low = top - 4
+    rows = rng.choice(np.array([17, 14, 13, 199, 200, 255, 251, 0]), size=(n_rows, 2 * n_ch))
+    rows[:, :n_ch] = top  # the first pixel at the top in every row: n_rows counts each
+    rows = rows.astype(dtype)
+    pile, near = _pile_counts(rows, top, low, n_ch)
+    by_ch = rows.reshape(n_rows, -1, n_ch)
+    np.testing.assert_array_equal(pile, (by_ch == top).sum(axis=(0, 1)))
+    np.testing.assert_array_equal(near, ((by_ch >= low) & (by_ch < top)).sum(axis=(0, 1)))
 
 
 @pytest.mark.parametrize(
