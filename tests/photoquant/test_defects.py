@@ -353,22 +353,28 @@ def test_a_camera_file_with_a_tampered_defect_map_is_refused(tmp_path) -> None:
 @given(
     seed=st.integers(0, 2**32 - 1),
     n=st.integers(1, 30_000),
-    kind=st.sampled_from(["normal", "ties", "wide", "nan"]),
+    n_ch=st.integers(1, 4),
+    kinds=st.lists(st.sampled_from(["normal", "ties", "wide", "nan"]), min_size=4, max_size=4),
+    centred=st.booleans(),
 )
-def test_the_radix_median_is_numpys(seed, n, kind):
-    # the defect search's robust spreads take their medians by a radix select
-    from photoquant.defects import _median
+def test_the_radix_medians_are_numpys(seed, n, n_ch, kinds, centred):
+    # the defect search's robust spreads take their medians by a radix select, every
+    # channel of an interleaved plane at once: the median, then |x − median|'s
+    from photoquant.defects import _channel_medians
 
     rng = np.random.default_rng(seed)
-    if kind == "normal":
-        x = rng.normal(size=n)
-    elif kind == "ties":  # repeat means of N = 10: a grid of 0.1 DN, many equal values
-        x = np.round(rng.normal(0.0, 3.0, n) * 10) / 10
-    elif kind == "wide":
-        x = np.exp(rng.normal(0.0, 30.0, n)) * rng.choice([-1.0, 1.0], n)
-    else:
-        x = rng.normal(size=n)
-        x[rng.integers(0, n)] = np.nan
-    expected = float(np.median(x))
-    got = _median(x)
-    assert got == expected or (np.isnan(got) and np.isnan(expected))
+    x = np.empty((n, n_ch))
+    for c in range(n_ch):
+        if kinds[c] == "normal":
+            x[:, c] = rng.normal(size=n)
+        elif kinds[c] == "ties":  # repeat means of N = 10: a grid of 0.1 DN, many equal
+            x[:, c] = np.round(rng.normal(0.0, 3.0, n) * 10) / 10
+        elif kinds[c] == "wide":
+            x[:, c] = np.exp(rng.normal(0.0, 30.0, n)) * rng.choice([-1.0, 1.0], n)
+        else:
+            x[:, c] = rng.normal(size=n)
+            x[rng.integers(0, n), c] = np.nan
+    center = rng.normal(size=n_ch) if centred else None
+    cols = [x[:, c] if center is None else np.abs(x[:, c] - center[c]) for c in range(n_ch)]
+    expected = np.array([np.median(col) for col in cols])
+    np.testing.assert_array_equal(_channel_medians(x, center), expected)
