@@ -59,9 +59,12 @@ def _direct_py(
     """numba body: ``num = Σ_k wt / Σ_k w``, ``den = Σ_k w`` and the flags per value.
 
     Flat layouts: ``codes (K, n)``, outputs ``(n,)`` with the channel fastest
-    (``n = h·W·C``); flat indexing measured 2× faster than 4-d indexing. The
-    flagged values' test of their exposures sits in the branch of the flagged
-    values (with a test of its own before the common store: 2× slower).
+    (``n = h·W·C``); flat indexing measured 2× faster than 4-d indexing. A
+    value's flags are written only where it is flagged (no weight: rare), into
+    outputs zeroed before (:func:`_flat_outputs`), and the test of its
+    exposures is in that branch: writing the three flags of every value, and
+    the test ahead of the store, made this kernel 2× slower (one thread,
+    1024×768×3, K = 8: 40–46 → 17–21 ms, 2026-12-02, quiet machine).
     """
     n_k, n = codes.shape
     n_ch = w.shape[0]
@@ -98,14 +101,16 @@ def _store_py(
 ) -> None:  # pragma: no cover - compiled by numba
     """numba body: the quotient (NaN without weight), the sum and the three flags.
 
-    The flags are written only where they are set (no weight: rare); the
-    callers zero them first (:func:`_flat_outputs`). Three byte stores per
-    value in the common path made the whole merge 2× slower (one thread,
-    1024×768×3, K = 8: 46 → 21 ms; 2026-12-02, quiet machine).
+    Every flag is written (:func:`_direct_py` writes them only where they are
+    set, into zeroed outputs: 2× faster there, but 1.7× *slower* in
+    :func:`_summary_py`, measured 2026-12-02).
     """
     den[q] = d
     if d > 0:
         num[q] = s / d
+        mask[q] = False
+        all_sat[q] = False
+        all_dark[q] = False
     else:
         _flag(num, mask, all_sat, all_dark, q, unsat)
 
@@ -351,7 +356,7 @@ def accumulate_codes(
     backend : {"auto", "numba", "numpy"}
     """
     if _use_numba(backend):
-        outs = _flat_outputs(num, den, mask, all_sat, all_dark)
+        outs = _flat_outputs(num, den, mask, all_sat, all_dark, zero_flags=True)
         _direct_nb(codes.reshape(codes.shape[0], -1), w, wt, clip, *outs)
     else:
         _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
@@ -385,14 +390,15 @@ def accumulate_repeats(
         _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
 
 
-def _flat_outputs(*arrays: np.ndarray) -> list[np.ndarray]:
-    """Flat views of the outputs (a reshape of a non-contiguous array would be a copy), the
-    boolean ones (the flags) zeroed: the kernels set them only where they hold."""
+def _flat_outputs(*arrays: np.ndarray, zero_flags: bool = False) -> list[np.ndarray]:
+    """Flat views of the outputs (a reshape of a non-contiguous array would be a copy);
+    with ``zero_flags`` the boolean ones (the flags) zeroed, for :func:`_direct_py`,
+    which sets them only where they hold."""
     if not all(a.flags.c_contiguous for a in arrays):
         raise ValueError("the merge kernels write into C-contiguous outputs only")
     flat = [a.reshape(-1) for a in arrays]
     for a in flat:
-        if a.dtype == np.bool_:
+        if zero_flags and a.dtype == np.bool_:
             a.fill(False)
     return flat
 
