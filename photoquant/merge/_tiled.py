@@ -36,6 +36,7 @@ from typing import Protocol
 
 import numpy as np
 
+from photoquant._checks import check_workers
 from photoquant._threads import thread_map
 from photoquant.merge._kernels import accumulate_codes, accumulate_repeats, accumulate_summaries
 
@@ -263,10 +264,18 @@ class SummaryCodes:
         )
 
 
-def row_tiles(height: int, bytes_per_row: int, tile_rows: int | None = None) -> list[slice]:
-    """Row slices covering ``[0, height)``: ``tile_rows`` each, or about :data:`TILE_BYTES` of input."""
+def row_tiles(
+    height: int, bytes_per_row: int, tile_rows: int | None = None, workers: int = 1
+) -> list[slice]:
+    """Row slices covering ``[0, height)``: ``tile_rows`` each, or about :data:`TILE_BYTES` of
+    input, as many tiles as a multiple of ``workers`` (no thread left with one more tile
+    than the others: 9 tiles on 2 threads took as long as 10)."""
     if tile_rows is None:
-        tile_rows = max(1, TILE_BYTES // max(1, bytes_per_row))
+        rows = max(1, TILE_BYTES // max(1, bytes_per_row))
+        n_tiles = -(-height // rows)
+        if workers > 1:
+            n_tiles = -(-n_tiles // workers) * workers
+        tile_rows = max(1, -(-height // n_tiles))
     return [slice(r, min(r + tile_rows, height)) for r in range(0, height, tile_rows)]
 
 
@@ -293,7 +302,7 @@ def merge_tiles(
     photoquantity in place).
     """
     height = source.shape[0]
-    tiles = row_tiles(height, source.bytes_per_row, tile_rows)
+    tiles = row_tiles(height, source.bytes_per_row, tile_rows, check_workers(workers))
 
     def job(rows: slice) -> None:
         num = log_out[rows]
