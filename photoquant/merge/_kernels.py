@@ -47,6 +47,7 @@ _compile = compile_kernel
 
 def _direct_py(
     codes: Any,
+    start: int,
     w: Any,
     wt: Any,
     clip: Any,
@@ -58,15 +59,19 @@ def _direct_py(
 ) -> None:  # pragma: no cover - compiled by numba
     """numba body: ``num = Σ_k wt / Σ_k w``, ``den = Σ_k w`` and the flags per value.
 
-    Flat layouts: ``codes (K, n)``, outputs ``(n,)`` with the channel fastest
-    (``n = h·W·C``); flat indexing measured 2× faster than 4-d indexing. A
+    Flat layouts: ``codes (K, M)``, of which values ``start … start + n`` are
+    merged into the outputs ``(n,)``, the channel fastest (``n = h·W·C``); flat
+    indexing measured 2× faster than 4-d indexing, and a tile's values read
+    from the whole C-contiguous array 1.4× faster than from a strided view of
+    the tile (which numba compiles for any layout). A
     value's flags are written only where it is flagged (no weight: rare), into
     outputs zeroed before (:func:`_flat_outputs`), and the test of its
     exposures is in that branch: writing the three flags of every value, and
     the test ahead of the store, made this kernel 2× slower (one thread,
     1024×768×3, K = 8: 40–46 → 17–21 ms, 2026-12-02, quiet machine).
     """
-    n_k, n = codes.shape
+    n_k = codes.shape[0]
+    n = num.size
     n_ch = w.shape[0]
     for p in range(n // n_ch):
         for ch in range(n_ch):
@@ -74,7 +79,7 @@ def _direct_py(
             s = np.float32(0.0)
             d = np.float32(0.0)
             for k in range(n_k):
-                c = codes[k, q]
+                c = codes[k, start + q]
                 s += wt[k, ch, c]
                 d += w[ch, c]
             den[q] = d
@@ -83,7 +88,7 @@ def _direct_py(
             else:  # flagged (rare): was some exposure not clipped?
                 unsat = False
                 for k in range(n_k):
-                    if not clip[ch, codes[k, q]]:
+                    if not clip[ch, codes[k, start + q]]:
                         unsat = True
                 _flag(num, mask, all_sat, all_dark, q, unsat)
 
@@ -127,6 +132,7 @@ def _flag_py(
 
 def _repeats_py(
     frames: Any,
+    start: int,
     w: Any,
     wt: Any,
     clip: Any,
@@ -140,7 +146,8 @@ def _repeats_py(
     all_sat: Any,
     all_dark: Any,
 ) -> None:  # pragma: no cover - compiled by numba
-    """numba body: the codes of ``N`` repeats ``frames (N, K, n)`` (sum, or an exclusion code).
+    """numba body: the codes of ``N`` repeats ``frames (N, K, M)`` (sum, or an exclusion code),
+    values ``start … start + n`` into the outputs ``(n,)``.
 
     Blocked: for a block of values, each frame ``(r, k)`` is read as one
     contiguous run into per-value sums and extremes (one memory stream at a
@@ -152,7 +159,8 @@ def _repeats_py(
     Per value the K terms are still added in the order ``k = 0 … K−1``, so
     the bits are those of the numpy kernel.
     """
-    n_rep, n_k, n = frames.shape
+    n_rep, n_k = frames.shape[0], frames.shape[1]
+    n = num.size
     n_ch = w.shape[0]
     block = 2048 * n_ch
     # narrow accumulators (int32 sums: the tables, hence N · c_max, stay below 2²², see
@@ -170,13 +178,13 @@ def _repeats_py(
         unsat[:m] = False
         for k in range(n_k):
             for i in range(m):
-                f = frames[0, k, q0 + i]
+                f = frames[0, k, start + q0 + i]
                 tot[i] = f
                 hi[i] = f
                 lo[i] = f
             for r in range(1, n_rep):
                 for i in range(m):
-                    f = frames[r, k, q0 + i]
+                    f = frames[r, k, start + q0 + i]
                     tot[i] += np.int32(f)
                     hi[i] = max(hi[i], f)
                     lo[i] = min(lo[i], f)
@@ -201,6 +209,7 @@ def _summary_py(
     total: Any,
     lo: Any,
     hi: Any,
+    start: int,
     w: Any,
     wt: Any,
     clip: Any,
@@ -216,25 +225,28 @@ def _summary_py(
 ) -> None:  # pragma: no cover - compiled by numba
     """numba body: the codes of :func:`_repeats_py` from the stack's repeat sums and extremes.
 
-    ``total, lo, hi (K, n)``: what :meth:`ExposureStack.repeat_sum` and its
+    ``total, lo, hi (K, M)`` (values ``start … start + n``): what
+    :meth:`ExposureStack.repeat_sum` and its
     extremes already hold (a quarter of the frames' bytes at N = 10, 8 bits);
     the same codes, the same order of the K terms, the same bits.
     """
-    n_k, n = total.shape
+    n_k = total.shape[0]
+    n = num.size
     n_ch = w.shape[0]
     for p in range(n // n_ch):
         for ch in range(n_ch):
             q = p * n_ch + ch
+            v = start + q
             s = np.float32(0.0)
             d = np.float32(0.0)
             unsat = False
             for k in range(n_k):
-                if hi[k, q] >= sat_thr[ch]:
+                if hi[k, v] >= sat_thr[ch]:
                     c = np.int64(sat_code)
-                elif lo[k, q] <= dark_thr[ch]:
+                elif lo[k, v] <= dark_thr[ch]:
                     c = np.int64(dark_code)
                 else:
-                    c = np.int64(total[k, q])
+                    c = np.int64(total[k, v])
                 s += wt[k, ch, c]
                 d += w[ch, c]
                 if not clip[ch, c]:
@@ -336,6 +348,7 @@ def accumulate_codes(
     all_sat: np.ndarray,
     all_dark: np.ndarray,
     *,
+    rows: slice | None = None,
     backend: str = "auto",
 ) -> None:
     """Merge the codes of a tile: ``ln c``, ``Σ_k w`` and the three flags.
@@ -343,7 +356,8 @@ def accumulate_codes(
     Parameters
     ----------
     codes : ndarray, shape (K, h, W, C), integer
-        Table indices, all in range (not checked here).
+        Table indices, all in range (not checked here); with ``rows``, the
+        whole image's ``(K, H, W, C)``, of which the tile is ``rows``.
     w, wt, clip : ndarray, shapes (C, G), (K, C, G) float32 and (C, G) bool
         The tables (:class:`photoquant.merge._tiled.MergeTables`).
     num, den : ndarray, shape (h, W, C), float32
@@ -357,9 +371,11 @@ def accumulate_codes(
     """
     if _use_numba(backend):
         outs = _flat_outputs(num, den, mask, all_sat, all_dark, zero_flags=True)
-        _direct_nb(codes.reshape(codes.shape[0], -1), w, wt, clip, *outs)
+        flat, start = _flat_span(codes, rows, 1)
+        _direct_nb(flat, start, w, wt, clip, *outs)
     else:
-        _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
+        tile = codes if rows is None else codes[:, rows]
+        _direct_np(tile, w, wt, clip, num, den, mask, all_sat, all_dark)
 
 
 def accumulate_repeats(
@@ -377,17 +393,35 @@ def accumulate_repeats(
     all_sat: np.ndarray,
     all_dark: np.ndarray,
     *,
+    rows: slice | None = None,
     backend: str = "auto",
 ) -> None:
-    """As :func:`accumulate_codes` for ``frames (N, K, h, W, C)``, coded by :func:`repeat_codes`."""
+    """As :func:`accumulate_codes` for ``frames (N, K, h, W, C)``, coded by :func:`repeat_codes`
+    (with ``rows``: the whole ``(N, K, H, W, C)`` and the tile's rows)."""
     flags = (mask, all_sat, all_dark)
     if _use_numba(backend):
         outs = _flat_outputs(num, den, *flags)
-        flat = frames.reshape(*frames.shape[:2], -1)
-        _repeats_nb(flat, w, wt, clip, sat_thr, dark_thr, sat_code, dark_code, *outs)
+        flat, start = _flat_span(frames, rows, 2)
+        _repeats_nb(flat, start, w, wt, clip, sat_thr, dark_thr, sat_code, dark_code, *outs)
     else:
-        codes = repeat_codes(frames, sat_thr, dark_thr, sat_code, dark_code)
+        tile = frames if rows is None else frames[:, :, rows]
+        codes = repeat_codes(tile, sat_thr, dark_thr, sat_code, dark_code)
         _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)
+
+
+def _flat_span(a: np.ndarray, rows: slice | None, lead: int) -> tuple[np.ndarray, int]:
+    """``a (*lead, H, W, C)`` as ``(*lead, H·W·C)`` and the flat offset of the tile ``rows``.
+
+    A C-contiguous array is passed whole (a view), so that the kernels see a
+    C-contiguous array (numba's code for strided views of a tile was 1.4×
+    slower, measured 2026-12-02); otherwise the tile is copied contiguous.
+    """
+    if rows is not None and a.flags.c_contiguous:
+        first = rows.indices(a.shape[lead])[0]
+        return a.reshape(*a.shape[:lead], -1), first * a.shape[lead + 1] * a.shape[lead + 2]
+    tile = a if rows is None else a[(slice(None),) * lead + (rows,)]
+    tile = np.ascontiguousarray(tile)
+    return tile.reshape(*tile.shape[:lead], -1), 0
 
 
 def _flat_outputs(*arrays: np.ndarray, zero_flags: bool = False) -> list[np.ndarray]:
@@ -430,13 +464,20 @@ def accumulate_summaries(
     all_sat: np.ndarray,
     all_dark: np.ndarray,
     *,
+    rows: slice | None = None,
     backend: str = "auto",
 ) -> None:
-    """As :func:`accumulate_repeats`, from the repeat sums and extremes ``(K, h, W, C)``."""
+    """As :func:`accumulate_repeats`, from the repeat sums and extremes ``(K, h, W, C)``
+    (with ``rows``: the whole ``(K, H, W, C)`` and the tile's rows)."""
     if _use_numba(backend):
         outs = _flat_outputs(num, den, mask, all_sat, all_dark)
-        flat = [a.reshape(a.shape[0], -1) for a in (total, lo, hi)]
-        _summary_nb(*flat, w, wt, clip, sat_thr, dark_thr, sat_code, dark_code, *outs)
+        spans = [_flat_span(a, rows, 1) for a in (total, lo, hi)]
+        if len({start for _, start in spans}) > 1:  # some whole, some copied: copy all
+            spans = [_flat_span(np.ascontiguousarray(a[:, rows]), None, 1) for a in (total, lo, hi)]
+        flat = [f for f, _ in spans]
+        _summary_nb(*flat, spans[0][1], w, wt, clip, sat_thr, dark_thr, sat_code, dark_code, *outs)
     else:
+        if rows is not None:
+            total, lo, hi = total[:, rows], lo[:, rows], hi[:, rows]
         codes = summary_codes(total, lo, hi, sat_thr, dark_thr, sat_code, dark_code)
         _direct_np(codes, w, wt, clip, num, den, mask, all_sat, all_dark)

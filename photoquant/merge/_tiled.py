@@ -165,12 +165,16 @@ class DirectCodes:
         flags: tuple[np.ndarray, np.ndarray, np.ndarray],
         backend: str,
     ) -> None:
+        w, wt, clip = tables.w, tables.wt, tables.clip
+        if self.saturated is None and self.dark is None:
+            # the values are the codes: the whole array and the tile's rows (no view of it)
+            accumulate_codes(self.values, w, wt, clip, num, den, *flags, rows=rows, backend=backend)
+            return
         codes = self._override(
             self.values[:, rows],
             None if self.saturated is None else self.saturated[:, rows],
             None if self.dark is None else self.dark[:, rows],
         )
-        w, wt, clip = tables.w, tables.wt, tables.clip
         accumulate_codes(codes, w, wt, clip, num, den, *flags, backend=backend)
 
 
@@ -198,7 +202,7 @@ class RepeatCodes:
         backend: str,
     ) -> None:
         accumulate_repeats(
-            self.frames[:, :, rows],
+            self.frames,
             tables.w,
             tables.wt,
             tables.clip,
@@ -209,6 +213,7 @@ class RepeatCodes:
             num,
             den,
             *flags,
+            rows=rows,
             backend=backend,
         )
 
@@ -247,9 +252,9 @@ class SummaryCodes:
         backend: str,
     ) -> None:
         accumulate_summaries(
-            self.total[:, rows],
-            self.lo[:, rows],
-            self.hi[:, rows],
+            self.total,
+            self.lo,
+            self.hi,
             tables.w,
             tables.wt,
             tables.clip,
@@ -260,6 +265,7 @@ class SummaryCodes:
             num,
             den,
             *flags,
+            rows=rows,
             backend=backend,
         )
 

@@ -125,3 +125,41 @@ def test_a_whole_image_merge_method_still_corrects(rng):
     out = correct(stack, model, refine_exposures=False, tile_rows=2)
     assert out.photoquantity.dtype == np.float32 and out.photoquantity.shape == (*shape, 3)
     assert np.isfinite(out.photoquantity[~out.mask]).all()
+
+
+@pytest.mark.parametrize("layout", ["C", "F", "view"])
+@pytest.mark.parametrize(("tile_rows", "workers"), [(1, 1), (3, 2)])
+def test_merge_tiles_read_any_layout_alike(rng, layout, tile_rows, workers):
+    # a C-contiguous stack is read whole at each tile's offset, any other layout tile by
+    # tile copied: the same bits as the whole image in one tile
+    frames = capture(log_uniform_scene(rng, (9, 6, 3)), EXPOSURES, balance=BALANCE)[0]
+    g = np.stack([true_g(np.maximum(LEVELS, 0.5), ch, balance=BALANCE) for ch in range(3)])
+    whole = merge_Debevec1997(frames, EXPOSURES, LEVELS, g, tile_rows=10**6, workers=1)
+    if layout == "F":
+        values = np.asfortranarray(frames)
+    elif layout == "view":
+        values = np.concatenate([frames, frames], axis=2)[:, :, ::2]  # strided columns
+        values[:] = frames
+    else:
+        values = frames
+    tiled = merge_Debevec1997(values, EXPOSURES, LEVELS, g, tile_rows=tile_rows, workers=workers)
+    for name in ("log_photoquantity", "weight_sum", "mask", "all_saturated", "all_dark"):
+        np.testing.assert_array_equal(getattr(tiled, name), getattr(whole, name), err_msg=name)
+
+
+@pytest.mark.parametrize("cached", [False, True])
+def test_repeat_merges_in_tiles_equal_one_tile(rng, cached):
+    # N > 1: from the frames, or from the stack's cached repeat sums and extremes
+    stack = _stack(rng, (8, 5), 3)
+    if cached:
+        stack.repeat_sum()
+        stack.saturated()
+    from photoquant.merge.debevec1997 import DebevecMergeOptions, merge_stack_Debevec1997
+
+    opts = DebevecMergeOptions(weighting="hat")
+    response = _model((8, 5), rng).response
+    whole = merge_stack_Debevec1997(stack, response, opts, tile_rows=10**6, workers=1)
+    tiled = merge_stack_Debevec1997(stack, response, opts, tile_rows=3, workers=2)
+    assert (stack.cached_repeat_statistics() is not None) == cached  # the path under test
+    for name in ("log_photoquantity", "weight_sum", "mask", "all_saturated", "all_dark"):
+        np.testing.assert_array_equal(getattr(tiled, name), getattr(whole, name), err_msg=name)
