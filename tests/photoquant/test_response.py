@@ -114,7 +114,6 @@ def test_same_seed_same_result(rng):
     np.testing.assert_array_equal(a.log_inverse_response, b.log_inverse_response)
 
 
-
 @pytest.mark.parametrize("sampling", ["histogram", "random"])
 def test_threads_give_the_same_bits_and_leave_the_generator_alike(rng, sampling):
     # the channels run on threads but the sampler's draws are made in channel order:
@@ -143,6 +142,7 @@ def test_a_channel_error_is_the_first_channel_s_with_threads():
     for workers in (1, 3):
         with pytest.raises(CalibrationError, match="channel 0"):
             camera_response_Debevec1997(values, [1.0, 100.0], workers=workers)
+
 
 def test_gauge_is_zero_mid_range(rng):
     frames = capture(log_uniform_scene(rng), EXPOSURES)

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from photoquant.errors import InputError
 from photoquant._numba import HAVE_NUMBA
+from photoquant.errors import InputError
 from photoquant.stack import ExposureStack, denoise_mean, detect_saturation_levels
 
 
