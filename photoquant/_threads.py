@@ -8,7 +8,7 @@ from typing import Any, TypeVar
 
 from photoquant._checks import check_workers
 
-__all__ = ["thread_map"]
+__all__ = ["even_spans", "thread_map"]
 
 T = TypeVar("T")
 
@@ -25,3 +25,11 @@ def thread_map(fn: Callable[[Any], T], items: Iterable[Any], workers: int | None
         return [fn(job) for job in jobs]
     with ThreadPoolExecutor(max_workers=n_workers) as pool:
         return list(pool.map(fn, jobs))
+
+
+def even_spans(n: int, parts: int) -> list[slice]:
+    """``[0, n)`` cut into ``parts`` consecutive slices of nearly equal length (work for
+    :func:`thread_map`; fewer when ``n < parts``, none empty unless ``n`` is 0)."""
+    parts = max(1, min(int(parts), n))
+    bounds = [n * i // parts for i in range(parts + 1)]
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]

@@ -239,7 +239,7 @@ _ring_row: Any = compile_kernel(_ring_row_py, inline="always") if HAVE_NUMBA els
 _ring_rank_nb = compile_kernel(_ring_rank_py) if HAVE_NUMBA else None
 
 
-def _channel_value(x: Any, center: Any, i: int, c: int) -> Any:  # pragma: no cover
+def _channel_at_py(x: Any, center: Any, i: int, c: int) -> Any:  # pragma: no cover
     """numba body: ``x[i, c]``, or ``|x[i, c] − center[c]|`` when ``center`` is not empty."""
     v = x[i, c]
     if center.size > 0:
@@ -266,10 +266,10 @@ def _channel_key_bins_py(x: Any, center: Any, counts: Any, n_nan: Any) -> None: 
 
 
 def _channel_key_gather_py(
-    x: Any, center: Any, lo: Any, hi: Any, fill: Any, out: Any
+    x: Any, center: Any, lo: Any, hi: Any, starts: Any, out: Any
 ) -> None:  # pragma: no cover
     """numba body: channel ``c``'s values (as :func:`_channel_key_bins_py` sees them) whose
-    key's top 16 bits lie in ``[lo[c], hi[c]]`` go to ``out[fill[c]:]``, in order.
+    key's top 16 bits lie in ``[lo[c], hi[c]]`` go to ``out[starts[c]:]``, in order.
 
     Each channel writes one value past its own (overwritten by the next channel's
     first; ``out`` has one slot to spare at its end).
@@ -279,7 +279,7 @@ def _channel_key_gather_py(
     for c in range(n_ch):  # channel by channel, the bounds and count in registers
         if hi[c] < lo[c]:  # nothing to gather (a channel with a NaN)
             continue
-        n = fill[c]
+        n = starts[c]
         lo_c = np.uint64(lo[c])
         hi_c = np.uint64(hi[c])
         for i in range(m):
@@ -293,7 +293,7 @@ def _channel_key_gather_py(
 
 
 if HAVE_NUMBA:  # pragma: no cover - depends on the environment
-    _channel_at = compile_kernel(_channel_value, inline="always")
+    _channel_at = compile_kernel(_channel_at_py, inline="always")
     _channel_key_bins_nb = compile_kernel(_channel_key_bins_py)
     _channel_key_gather_nb = compile_kernel(_channel_key_gather_py)
 
@@ -314,12 +314,11 @@ def _channel_medians(x: np.ndarray, center: np.ndarray | None = None) -> np.ndar
     (itself ~3× faster than numpy's introselect).
     """
     m, n_ch = x.shape
-    absolute = center is not None
     if not HAVE_NUMBA or m < 4096 or x.dtype != np.float64:
         cols = [x[:, c] if center is None else np.abs(x[:, c] - center[c]) for c in range(n_ch)]
         return np.array([float(np.median(col)) for col in cols])
     x = np.ascontiguousarray(x)
-    cen = np.asarray(center, dtype=np.float64) if absolute else np.empty(0)
+    cen = np.empty(0) if center is None else np.asarray(center, dtype=np.float64)
     counts = np.zeros((n_ch, 1 << 16), dtype=np.int64)
     n_nan = np.zeros(n_ch, dtype=np.int64)
     _channel_key_bins_nb(x, cen, counts, n_nan)
@@ -338,10 +337,9 @@ def _channel_medians(x: np.ndarray, center: np.ndarray | None = None) -> np.ndar
         hi[c] = np.searchsorted(cum, k_hi, side="right")
         below[c] = cum[lo[c] - 1] if lo[c] else 0
         size[c] = cum[hi[c]] - below[c]
-    fill = np.concatenate([[0], np.cumsum(size)[:-1]])
-    starts = fill.copy()
+    starts = np.concatenate([[0], np.cumsum(size)[:-1]])
     cand = np.empty(int(size.sum()) + 1)  # + 1: the gather's spare slot
-    _channel_key_gather_nb(x, cen, lo, hi, fill, cand)
+    _channel_key_gather_nb(x, cen, lo, hi, starts, cand)
     for c in range(n_ch):
         if n_nan[c]:
             continue

@@ -35,7 +35,7 @@ from photoquant._checks import (
     default_workers,
 )
 from photoquant._numba import HAVE_NUMBA, compile_kernel
-from photoquant._threads import thread_map
+from photoquant._threads import even_spans, thread_map
 from photoquant.errors import InputError
 
 __all__ = [
@@ -676,8 +676,7 @@ class ExposureStack:
             frames = self.frames.reshape(n, k, h * w, c)
             sums = lo = hi = np.zeros((k, 1, c), dtype=self.frames.dtype)
         # each value is written once, by one thread: the result does not depend on them
-        bounds = np.linspace(0, index.size, min(default_workers(), 1 + index.size // 4096) + 1)
-        bounds = bounds.astype(np.int64)
+        spans = even_spans(index.size, min(default_workers(), 1 + index.size // 4096))
         thread_map(
             lambda span: _gather_by_channel_nb(
                 frames,
@@ -690,9 +689,10 @@ class ExposureStack:
                 dark_thr,
                 values,
                 excluded,
-                *span,
+                span.start,
+                span.stop,
             ),
-            zip(bounds[:-1], bounds[1:], strict=True),
+            spans,
         )
         return values, excluded
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from photoquant._checks import default_workers
-from photoquant._threads import thread_map
+from photoquant._threads import even_spans, thread_map
 
 __all__ = ["MergeResult", "apply_log_inverse_response"]
 
@@ -64,8 +64,7 @@ class MergeResult:
         if log_c.ndim < 1 or log_c.size < _THREADED_EXP_VALUES or log_c.shape[0] < 2:
             return np.exp(log_c)
         out = np.empty(log_c.shape, dtype=np.exp(log_c.reshape(-1)[:0]).dtype)
-        bounds = np.linspace(0, log_c.shape[0], min(default_workers(), log_c.shape[0]) + 1)
-        rows = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        rows = even_spans(log_c.shape[0], default_workers())
         thread_map(lambda r: np.exp(log_c[r], out=out[r]), rows)
         return out
 

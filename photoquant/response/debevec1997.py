@@ -315,18 +315,33 @@ def select_samples_histogram(
     ndarray of int
         Indices into ``P``, sorted.
     """
-    usable = _usable_pixels(valid)
+    return _draw_histogram(values, valid, _usable_pixels(valid), c_max, n_samples, rng, n_bins)()
+
+
+def _draw_histogram(
+    values: np.ndarray,
+    valid: np.ndarray,
+    usable: np.ndarray,
+    c_max: float,
+    n_samples: int,
+    rng: np.random.Generator,
+    n_bins: int,
+) -> Callable[[], np.ndarray]:
+    """:func:`select_samples_histogram`'s random draw (one key per ``usable`` pixel), made
+    now; returned: its ranking, which draws nothing (to run later, e.g. on a thread)."""
     if usable.size <= n_samples:
-        return usable
+        return lambda: usable
     key = rng.random(usable.size)  # the random ranking
-    return _select_histogram_by_keys(values, valid, c_max, n_samples, usable, key, n_bins)
+    return lambda: _select_histogram_by_keys(values, valid, c_max, n_samples, usable, key, n_bins)
 
 
 def _usable_pixels(valid: np.ndarray) -> np.ndarray:
     """Indices of the pixels with at least two valid exposures (``valid`` ``(K, P)``)."""
-    k_count = valid.shape[0]
-    # count of valid exposures per pixel, in one byte (K < 256) rather than int64
-    n_valid = valid.view(np.uint8).sum(axis=0, dtype=np.uint8) if k_count < 256 else valid.sum(0)
+    # count of valid exposures per pixel, in one byte (bool, K < 256) rather than int64
+    if valid.dtype == np.bool_ and valid.shape[0] < 256:
+        n_valid = valid.view(np.uint8).sum(axis=0, dtype=np.uint8)
+    else:
+        n_valid = valid.sum(axis=0)
     return np.flatnonzero(n_valid >= 2)
 
 
@@ -441,15 +456,10 @@ def _draw_samples(
     (on a thread). Any other sampler runs here whole. Either way the picks are
     the sampler's, bit for bit, and ``rng`` is left as the sampler leaves it.
     """
-    if sampler is not select_samples_histogram:
-        idx = sampler(values, valid, c_max, n_samples, rng)
-        return lambda: idx
-    if usable.size <= n_samples:
-        return lambda: usable
-    key = rng.random(usable.size)  # the random ranking, as select_samples_histogram draws it
-    return lambda: _select_histogram_by_keys(
-        values, valid, c_max, n_samples, usable, key, _HISTOGRAM_BINS
-    )
+    if sampler is select_samples_histogram:
+        return _draw_histogram(values, valid, usable, c_max, n_samples, rng, _HISTOGRAM_BINS)
+    idx = sampler(values, valid, c_max, n_samples, rng)
+    return lambda: idx
 
 
 def select_samples_random(
@@ -466,7 +476,7 @@ def select_samples_random(
     (``c_max`` is unused).
     """
     del c_max
-    usable = np.flatnonzero(valid.sum(axis=0) >= 2)
+    usable = _usable_pixels(valid)
     if usable.size <= n_samples:
         return usable
     del values
