@@ -50,6 +50,7 @@ import scipy.optimize
 
 from photoquant import __version__
 from photoquant.balance import BalanceData, BalanceModel, check_roi
+from photoquant.correspondences import float_tracks
 from photoquant.defects import detect_defects, exclude_defects, hide_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import (
@@ -151,7 +152,7 @@ def fit_vignetting_step(
     method, options = _step("vignetting", spec, profile)
     data = VignettingData(
         views,
-        [np.asarray(t, dtype=np.float64) for t in tracks],
+        float_tracks(tracks),
         views[0].shape[:2],
         flat_field=None if flat_field is None else np.asarray(flat_field),
         exposure_scale_std=exposure_scale_std,
@@ -572,7 +573,7 @@ def calibrate(
                 tracks = find_correspondences(uniform, steps["correspondences"])
                 source = f"automatic ({steps['correspondences'][0].name})"
             else:
-                tracks = [np.asarray(tr, dtype=np.float64) for tr in correspondences]
+                tracks = float_tracks(correspondences)
                 source = "given"
         if flat_field is not None:
             flat = merge_model.merge(flat_field, resp).photoquantity() / lut.lut

@@ -115,6 +115,17 @@ def tracks_to_observations(
     """
     if isinstance(tracks, np.ndarray) and tracks.ndim == 2:
         raise InputError("`tracks` must be a sequence of (n_i, 3) arrays, got one 2-D array")
+    rows = _concatenated_rows(tracks)
+    if rows is None:  # the readable path, which also names what is wrong
+        return _observations(*_converted_rows(tracks))
+    # the usual case: no per-track conversion (97 798 tracks: 51 → 22 ms, 2026-12-02)
+    lengths = np.fromiter(map(len, tracks), dtype=np.intp, count=len(tracks))
+    return _observations(rows, lengths)
+
+
+def _converted_rows(tracks: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """Every track converted to float64 and checked in turn: the rows ``(M, 3)`` and the
+    tracks' lengths (the readable version of :func:`_concatenated_rows`)."""
     try:
         arrays = [np.asarray(t, dtype=np.float64) for t in tracks]
     except (TypeError, ValueError) as exc:
@@ -127,8 +138,43 @@ def tracks_to_observations(
             f"`tracks[{bad[0]}]` must have shape (n, 3) with rows [view, x, y], "
             f"got {arrays[bad[0]].shape}"
         )
-    lengths = np.array([t.shape[0] for t in arrays])
-    rows = np.concatenate(arrays, axis=0)
+    lengths = np.array([t.shape[0] for t in arrays], dtype=np.intp)
+    return np.concatenate(arrays, axis=0), lengths
+
+
+def _concatenated_rows(tracks: Sequence[Any]) -> np.ndarray | None:
+    """Every track's rows in one float64 ``(M, 3)`` array, or ``None`` where the tracks are
+    not all 2-D with three columns (then :func:`tracks_to_observations` converts them one
+    by one, and says which is wrong).
+
+    ``np.concatenate`` requires the same number of dimensions and the same trailing
+    shape of every track, so a 2-D ``(M, 3)`` result means every track is ``(n_i, 3)``.
+    """
+    if len(tracks) == 0:
+        return None
+    try:
+        rows = np.concatenate(tracks, axis=0, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    if rows.ndim != 2 or rows.shape[1] != 3:
+        return None
+    return rows
+
+
+def float_tracks(tracks: Sequence[Any]) -> list[np.ndarray]:
+    """``tracks`` as a list of float64 arrays: each as it is where it is one already
+    (no per-track ``np.asarray`` call: 97 798 tracks, 26 → 6.5 ms), else converted."""
+    f64 = np.dtype(np.float64)
+    return [
+        t if type(t) is np.ndarray and t.dtype == f64 else np.asarray(t, dtype=np.float64)
+        for t in tracks
+    ]
+
+
+def _observations(
+    rows: np.ndarray, lengths: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The checks and the outputs of :func:`tracks_to_observations` from the rows ``(M, 3)``."""
     if rows.shape[0] == 0:
         raise InputError("`tracks` holds no observations")
     if not np.all(np.isfinite(rows)):
@@ -136,7 +182,7 @@ def tracks_to_observations(
     view_f = rows[:, 0]
     if np.any(view_f < 0) or np.any(view_f != np.round(view_f)):
         raise InputError("`tracks` views (column 0) must be non-negative integers")
-    track = np.repeat(np.arange(len(arrays)), lengths)
+    track = np.repeat(np.arange(lengths.size), lengths)
     return view_f.astype(np.intp), rows[:, 1:3].copy(), track
 
 

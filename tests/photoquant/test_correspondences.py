@@ -10,7 +10,10 @@ from hypothesis import strategies as st
 
 from photoquant.correspondences import (
     Correspondences,
+    _concatenated_rows,
+    _converted_rows,
     find_correspondences_homography,
+    float_tracks,
     sample_image,
     tracks_to_observations,
 )
@@ -129,6 +132,66 @@ def test_tracks_to_observations_flattens():
 def test_tracks_to_observations_rejects(tracks, match):
     with pytest.raises(InputError, match=match):
         tracks_to_observations(tracks)
+
+
+@pytest.mark.parametrize(
+    ("tracks", "match"),
+    [
+        ([np.zeros((2, 3)), np.zeros(3)], r"tracks\[1\]"),  # one track 1-D
+        ([np.zeros((2, 3)), np.zeros((1, 4))], r"tracks\[1\]"),  # four columns
+        ([np.zeros((2, 3, 1))], r"tracks\[0\]"),  # 3-D
+        ([[0, 1, 2]], r"tracks\[0\]"),  # one row, not a track of rows
+        ([[["a", "b", "c"]]], "numeric"),
+        ([np.zeros((2, 3)), np.zeros((0,))], r"tracks\[1\]"),
+    ],
+)
+def test_tracks_to_observations_names_the_bad_track(tracks, match):
+    # what the one-call concatenation cannot take goes through the readable path,
+    # which names the track
+    assert _concatenated_rows(tracks) is None
+    with pytest.raises(InputError, match=match):
+        tracks_to_observations(tracks)
+
+
+_TRACK = st.lists(
+    st.tuples(st.integers(0, 4), st.floats(-50, 50, width=32), st.floats(-50, 50, width=32)),
+    max_size=4,
+)
+
+
+@given(
+    st.lists(_TRACK, min_size=1, max_size=8),
+    st.sampled_from(["float64", "float32", "int64", "list"]),
+)
+def test_tracks_concatenated_as_converted_one_by_one(tracks, kind):
+    # the fast path gives the readable path's rows and lengths, for arrays of any
+    # numeric dtype and for nested lists; a track may be empty
+    data = [
+        [list(r) for r in t] if kind == "list" else np.array(t, dtype=kind).reshape(-1, 3)
+        for t in tracks
+    ]
+    if kind == "list" and any(len(t) == 0 for t in data):
+        data = [t if t else np.zeros((0, 3)) for t in data]
+    rows = _concatenated_rows(data)
+    assert rows is not None
+    ref_rows, ref_lengths = _converted_rows(data)
+    np.testing.assert_array_equal(rows, ref_rows)
+    assert rows.dtype == np.float64
+    if ref_rows.shape[0]:
+        view, xy, track = tracks_to_observations(data)
+        np.testing.assert_array_equal(track, np.repeat(np.arange(len(data)), ref_lengths))
+        np.testing.assert_array_equal(xy, ref_rows[:, 1:])
+        np.testing.assert_array_equal(view, ref_rows[:, 0])
+
+
+def test_float_tracks_keeps_float_arrays_and_converts_the_rest():
+    f = np.array([[0, 1.5, 2.0]])
+    i = np.array([[1, 2, 3]])
+    out = float_tracks([f, i, [[2, 3, 4]]])
+    assert out[0] is f  # no copy, no new array
+    assert all(t.dtype == np.float64 for t in out)
+    np.testing.assert_array_equal(out[1], i)
+    np.testing.assert_array_equal(out[2], [[2, 3, 4]])
 
 
 # ---------------------------------------------------------------------------
