@@ -970,22 +970,20 @@ def fit_affine_shutter(
         coef = np.linalg.lstsq(design, y, rcond=None)[0]
         return coef, y - design @ coef
 
+    def sse(lag: float) -> float:
+        res = linear_fit(lag)[1]
+        return float(res @ res)
+
     # profile over the lag, on a log-spaced bracket of both signs (a shutter
     # that closes early has a negative lag), then refined
     grid = np.r_[
         -np.geomspace(0.9 * t_min, 1e-4 * t_min, 40), 0.0, np.geomspace(1e-4 * t_min, t_max, 80)
     ]
-    cost = [float(linear_fit(g)[1] @ linear_fit(g)[1]) for g in grid]
+    cost = [sse(g) for g in grid]
     i = int(np.argmin(cost))
     lo_b, hi_b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
     if hi_b > lo_b:
-        lag = float(
-            minimize_scalar(
-                lambda v: float(linear_fit(v)[1] @ linear_fit(v)[1]),
-                bounds=(lo_b, hi_b),
-                method="bounded",
-            ).x
-        )
+        lag = float(minimize_scalar(sse, bounds=(lo_b, hi_b), method="bounded").x)
     else:
         lag = float(grid[i])
     coef, res = linear_fit(lag)
