@@ -86,6 +86,7 @@ from typing import Any, Literal
 import numpy as np
 
 from photoquant._checks import check_array
+from photoquant._interp import interp
 from photoquant._threads import thread_map
 from photoquant.errors import CalibrationError, InputError
 from photoquant.stack import ExposureStack
@@ -173,7 +174,7 @@ class ExposureRefinement:
 
 def _interp_g(z: np.ndarray, levels: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``g(z)`` and its slope, linear interpolation between levels."""
-    value = np.interp(z, levels, g)
+    value = interp(z, levels, g)
     slope_tab = np.diff(g) / np.diff(levels)
     idx = np.clip(np.searchsorted(levels, z, side="right") - 1, 0, levels.size - 2)
     return value, slope_tab[idx]
@@ -563,7 +564,7 @@ def refine_exposure_times(
             table = tables[ch]
             if table is None:
                 return np.ones_like(zz)
-            return np.interp(zz, table[0], table[1])
+            return interp(zz, table[0], table[1])
 
         def variance(zz: np.ndarray) -> np.ndarray:
             return per_channel(zz, lambda ch, v: var_one(v, ch))
@@ -601,7 +602,7 @@ def refine_exposure_times(
         d1_tab = [np.nan_to_num(d) for d in d1]
 
         def at(zz: np.ndarray, tabs: list[np.ndarray]) -> np.ndarray:
-            return per_channel(zz, lambda ch, v: np.interp(v, levels, tabs[ch]))
+            return per_channel(zz, lambda ch, v: interp(v, levels, tabs[ch]))
 
         y_obs = y
         z_ref = z  # where weights are evaluated: first the observed levels, then predictions

@@ -1,0 +1,79 @@
+"""Tests of photoquant._interp: ``np.interp`` on evenly spaced tables, bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from photoquant import _interp
+from photoquant._interp import interp
+
+needs_numba = pytest.mark.skipif(_interp._interp_even_nb is None, reason="needs numba")
+
+_SPECIAL = [np.nan, np.inf, -np.inf, 0.0, -0.0]
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=np.float64)
+    return np.where(np.isnan(a), np.nan, a).view(np.uint64)  # one NaN for every NaN
+
+
+def _assert_same_bits(x, xp, fp) -> None:
+    got = interp(x, xp, fp)
+    want = np.interp(x, xp, fp)
+    assert got.shape == np.shape(want)
+    np.testing.assert_array_equal(_bits(got), _bits(want))
+
+
+@needs_numba
+@settings(max_examples=300, deadline=None)
+@given(
+    n=st.integers(2, 40),
+    start=st.floats(-300, 300),
+    step=st.floats(1e-3, 50),
+    jitter=st.floats(0, 0.2),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_interp_matches_numpy_bit_for_bit(n, start, step, jitter, seed):
+    # even and nearly even grids, tables with infinities and NaNs, values on the grid
+    # points, between them, just beside them, outside, NaN and infinite
+    rng = np.random.default_rng(seed)
+    xp = start + step * (np.arange(n) + jitter * rng.uniform(-1, 1, n))
+    xp = np.unique(xp)
+    if xp.size < 2:
+        return
+    fp = rng.normal(0, 10, xp.size)
+    fp[rng.uniform(size=xp.size) < 0.1] = rng.choice(_SPECIAL)
+    x = np.concatenate(
+        [
+            xp,
+            np.nextafter(xp, np.inf),
+            np.nextafter(xp, -np.inf),
+            rng.uniform(xp[0] - 2 * step, xp[-1] + 2 * step, 200),
+            _SPECIAL,
+        ]
+    )
+    _assert_same_bits(x, xp, fp)
+    grid = x[: x.size // 5 * 5].reshape(-1, 5)
+    _assert_same_bits(grid[:, ::2], xp, fp)  # a strided 2-D view keeps its shape
+
+
+@needs_numba
+@given(hnp.arrays(np.float64, st.integers(0, 50), elements=st.floats(allow_nan=True)))
+def test_interp_any_values_on_the_response_levels(x):
+    levels = np.arange(256.0)
+    g = np.log(np.maximum(levels, 0.5))  # -inf-free, with a flat start
+    _assert_same_bits(x, levels, g)
+
+
+def test_interp_uneven_and_short_tables_are_numpy():
+    xp = np.array([0.0, 1.0, 10.0, 11.0])  # uneven: numpy itself
+    fp = np.array([1.0, 2.0, 3.0, 5.0])
+    x = np.linspace(-1, 12, 27)
+    _assert_same_bits(x, xp, fp)
+    _assert_same_bits(x, [2.0], [7.0])  # one point
+    assert not _interp._evenly_spaced(xp)
+    assert _interp._evenly_spaced(np.arange(5.0))
