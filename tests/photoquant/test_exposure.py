@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
+from photoquant import exposure
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import (
     ExposureRefinement,
@@ -184,6 +188,26 @@ def test_rounding_variance_limits():
     assert rounding_variance(0.0) == pytest.approx(1 / 12, rel=0.02)  # 64 terms of Σ 1/k²
     assert rounding_variance(0.5) < 1e-5
     assert np.all(np.diff(rounding_variance(np.linspace(0, 1, 11))) <= 0)
+
+
+@pytest.mark.skipif(exposure._rounding_lookup_nb is None, reason="needs numba")
+@given(
+    hnp.arrays(
+        np.float64,
+        st.integers(65, 400),
+        elements=st.one_of(
+            st.floats(0, 1.5), st.floats(allow_nan=True, allow_infinity=True), st.just(1.0)
+        ),
+    )
+)
+def test_rounding_variance_compiled_lookup_is_the_numpy_one(sigma):
+    # the compiled table look-up gives the numpy formula's bits: on the grid, between,
+    # above 1 DN, at 1, NaN, infinite, negative (|σ|)
+    got = rounding_variance(sigma)
+    with np.errstate(over="ignore"):  # σ·16384 overflows to inf (then 0) for σ > 1e304
+        want = exposure._rounding_lookup(np.abs(sigma), exposure._rounding_table()[1])
+    np.testing.assert_array_equal(got, want)
+    assert np.array_equal(np.signbit(got), np.signbit(want))
 
 
 def test_refined_scene_times_restore_the_test_scene_error():
