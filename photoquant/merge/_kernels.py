@@ -40,7 +40,6 @@ __all__ = [
     "accumulate_summaries",
     "repeat_codes",
     "summary_codes",
-    "table_pairs",
 ]
 
 _compile = compile_kernel
@@ -49,7 +48,8 @@ _compile = compile_kernel
 def _direct_py(
     codes: Any,
     start: int,
-    pairs: Any,
+    w: Any,
+    wt: Any,
     clip: Any,
     num: Any,
     den: Any,
@@ -69,14 +69,10 @@ def _direct_py(
     exposures is in that branch: writing the three flags of every value, and
     the test ahead of the store, made this kernel 2× slower (one thread,
     1024×768×3, K = 8: 40–46 → 17–21 ms, 2026-12-02, quiet machine).
-    ``w·(g − ln t_k)`` and ``w`` are read as one pair ``pairs (K, C, G, 2)``
-    (:func:`table_pairs`): one cache line and one address for both, 1.2×
-    faster than from two tables (12.0 → 9.9 ms on one thread, the same stack,
-    2026-12-02); the sums are the same.
     """
     n_k = codes.shape[0]
     n = num.size
-    n_ch = pairs.shape[1]
+    n_ch = w.shape[0]
     for p in range(n // n_ch):
         for ch in range(n_ch):
             q = p * n_ch + ch
@@ -84,8 +80,8 @@ def _direct_py(
             d = np.float32(0.0)
             for k in range(n_k):
                 c = codes[k, start + q]
-                s += pairs[k, ch, c, 0]
-                d += pairs[k, ch, c, 1]
+                s += wt[k, ch, c]
+                d += w[ch, c]
             den[q] = d
             if d > 0:
                 num[q] = s / d
@@ -341,15 +337,6 @@ def summary_codes(
     return np.where(hi >= sat_thr, np.int64(sat_code), codes)
 
 
-def table_pairs(w: np.ndarray, wt: np.ndarray) -> np.ndarray:
-    """``pairs[k, ch, c] = (wt[k, ch, c], w[ch, c])``, float32 ``(K, C, G, 2)``: the two
-    tables interleaved, for :func:`_direct_py`."""
-    pairs = np.empty((*wt.shape, 2), dtype=np.float32)
-    pairs[..., 0] = wt
-    pairs[..., 1] = w[None]
-    return pairs
-
-
 def accumulate_codes(
     codes: np.ndarray,
     w: np.ndarray,
@@ -363,7 +350,6 @@ def accumulate_codes(
     *,
     rows: slice | None = None,
     backend: str = "auto",
-    pairs: np.ndarray | None = None,
 ) -> None:
     """Merge the codes of a tile: ``ln c``, ``Σ_k w`` and the three flags.
 
@@ -382,14 +368,11 @@ def accumulate_codes(
         Outputs: no exposure with weight; that, with every exposure clipped;
         that, with some exposure not clipped (too dark).
     backend : {"auto", "numba", "numpy"}
-    pairs : ndarray, optional
-        :func:`table_pairs` of ``w`` and ``wt``, made once by the caller for
-        every tile (made here otherwise).
     """
     if _use_numba(backend):
         outs = _flat_outputs(num, den, mask, all_sat, all_dark, zero_flags=True)
         flat, start = _flat_span(codes, rows, 1)
-        _direct_nb(flat, start, table_pairs(w, wt) if pairs is None else pairs, clip, *outs)
+        _direct_nb(flat, start, w, wt, clip, *outs)
     else:
         tile = codes if rows is None else codes[:, rows]
         _direct_np(tile, w, wt, clip, num, den, mask, all_sat, all_dark)

@@ -32,20 +32,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Protocol
 
 import numpy as np
 
 from photoquant._checks import check_workers
 from photoquant._threads import thread_map
-from photoquant.merge._kernels import (
-    HAVE_NUMBA,
-    accumulate_codes,
-    accumulate_repeats,
-    accumulate_summaries,
-    table_pairs,
-)
+from photoquant.merge._kernels import accumulate_codes, accumulate_repeats, accumulate_summaries
 
 __all__ = [
     "MergeTables",
@@ -113,12 +106,6 @@ class MergeTables:
         clip[:, size] = True
         return cls(w, wt, clip, size, size + 1)
 
-    @cached_property
-    def pairs(self) -> np.ndarray:
-        """``w·(g − ln t_k)`` and ``w`` interleaved, ``(K, C, G+2, 2)`` (the direct kernel's
-        layout, :func:`~photoquant.merge._kernels.table_pairs`), made once for every tile."""
-        return table_pairs(self.w, self.wt)
-
 
 class CodeSource(Protocol):
     """Where a tile's codes come from."""
@@ -179,19 +166,16 @@ class DirectCodes:
         backend: str,
     ) -> None:
         w, wt, clip = tables.w, tables.wt, tables.clip
-        pairs = tables.pairs if HAVE_NUMBA and backend != "numpy" else None
         if self.saturated is None and self.dark is None:
             # the values are the codes: the whole array and the tile's rows (no view of it)
-            accumulate_codes(
-                self.values, w, wt, clip, num, den, *flags, rows=rows, backend=backend, pairs=pairs
-            )
+            accumulate_codes(self.values, w, wt, clip, num, den, *flags, rows=rows, backend=backend)
             return
         codes = self._override(
             self.values[:, rows],
             None if self.saturated is None else self.saturated[:, rows],
             None if self.dark is None else self.dark[:, rows],
         )
-        accumulate_codes(codes, w, wt, clip, num, den, *flags, backend=backend, pairs=pairs)
+        accumulate_codes(codes, w, wt, clip, num, den, *flags, backend=backend)
 
 
 class RepeatCodes:
