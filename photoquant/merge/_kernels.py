@@ -193,18 +193,20 @@ def _repeats_py(
                     tot[i] += np.int32(f)
                     hi[i] = max(hi[i], f)
                     lo[i] = min(lo[i], f)
+            uk = np.uint64(k)  # unsigned indices: no wrap of negative ones (_direct_py)
             for p in range(m // n_ch):
                 for ch in range(n_ch):
-                    i = p * n_ch + ch
-                    if hi[i] >= sat_thr[ch]:
-                        c = np.int64(sat_code)
-                    elif lo[i] <= dark_thr[ch]:
-                        c = np.int64(dark_code)
+                    i = np.uint64(p * n_ch + ch)
+                    uch = np.uint64(ch)
+                    if hi[i] >= sat_thr[uch]:
+                        c = np.uint64(sat_code)
+                    elif lo[i] <= dark_thr[uch]:
+                        c = np.uint64(dark_code)
                     else:
-                        c = np.int64(tot[i])
-                    s[i] += wt[k, ch, c]
-                    d[i] += w[ch, c]
-                    if not clip[ch, c]:
+                        c = np.uint64(tot[i])
+                    s[i] += wt[uk, uch, c]
+                    d[i] += w[uch, c]
+                    if not clip[uch, c]:
                         unsat[i] = True
         for i in range(m):
             _store(num, den, mask, all_sat, all_dark, q0 + i, s[i], d[i], unsat[i])
@@ -241,20 +243,22 @@ def _summary_py(
     for p in range(n // n_ch):
         for ch in range(n_ch):
             q = p * n_ch + ch
-            v = start + q
+            v = np.uint64(start + q)
+            uch = np.uint64(ch)
             s = np.float32(0.0)
             d = np.float32(0.0)
             unsat = False
             for k in range(n_k):
-                if hi[k, v] >= sat_thr[ch]:
-                    c = np.int64(sat_code)
-                elif lo[k, v] <= dark_thr[ch]:
-                    c = np.int64(dark_code)
+                uk = np.uint64(k)  # unsigned indices: no wrap of negative ones (_direct_py)
+                if hi[uk, v] >= sat_thr[uch]:
+                    c = np.uint64(sat_code)
+                elif lo[uk, v] <= dark_thr[uch]:
+                    c = np.uint64(dark_code)
                 else:
-                    c = np.int64(total[k, v])
-                s += wt[k, ch, c]
-                d += w[ch, c]
-                if not clip[ch, c]:
+                    c = np.uint64(total[uk, v])
+                s += wt[uk, uch, c]
+                d += w[uch, c]
+                if not clip[uch, c]:
                     unsat = True
             _store(num, den, mask, all_sat, all_dark, q, s, d, unsat)
 
