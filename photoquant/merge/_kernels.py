@@ -196,18 +196,18 @@ def _repeats_py(
             uk = np.uint64(k)  # unsigned indices: no wrap of negative ones (_direct_py)
             for p in range(m // n_ch):
                 for ch in range(n_ch):
-                    i = np.uint64(p * n_ch + ch)
+                    j = np.uint64(p * n_ch + ch)
                     uch = np.uint64(ch)
-                    if hi[i] >= sat_thr[uch]:
+                    if hi[j] >= sat_thr[uch]:
                         c = np.uint64(sat_code)
-                    elif lo[i] <= dark_thr[uch]:
+                    elif lo[j] <= dark_thr[uch]:
                         c = np.uint64(dark_code)
                     else:
-                        c = np.uint64(tot[i])
-                    s[i] += wt[uk, uch, c]
-                    d[i] += w[uch, c]
+                        c = np.uint64(tot[j])
+                    s[j] += wt[uk, uch, c]
+                    d[j] += w[uch, c]
                     if not clip[uch, c]:
-                        unsat[i] = True
+                        unsat[j] = True
         for i in range(m):
             _store(num, den, mask, all_sat, all_dark, q0 + i, s[i], d[i], unsat[i])
 
