@@ -281,6 +281,16 @@ def _channel_major(a: np.ndarray) -> np.ndarray:
     return np.moveaxis(np.ascontiguousarray(moved), 0, -1)
 
 
+def _at_or_above_by_channel(values: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """``values >= level`` for channel-major ``values (..., C)`` (:func:`_channel_major`),
+    channel-major too: one contiguous comparison per channel, not numpy's broadcast
+    inner loops of length C (a K = 8 stack's 2¹⁷ candidates: 6 → 0.4 ms)."""
+    out = np.empty((values.shape[-1], *values.shape[:-1]), dtype=bool)
+    for ch in range(values.shape[-1]):
+        np.greater_equal(values[..., ch], level[ch], out=out[ch])
+    return np.moveaxis(out, 0, -1)
+
+
 def select_samples_histogram(
     values: np.ndarray,
     valid: np.ndarray,
@@ -813,13 +823,16 @@ def camera_response_Debevec1997(
     if max_pixels is not None and n_pix > max_pixels:
         # the candidates: a random thinning, in pixel order (module notes, *Samples*)
         cand = np.flatnonzero(rng.random(n_pix) < max_pixels / n_pix)
-        values = values[:, cand]
-        saturated = None if saturated is None else saturated[:, cand]
-    if saturated is None:
-        saturated = values >= sat
+        # np.take along the pixels, not values[:, cand]: the fancy index walks the
+        # trailing channels three at a time (4× slower, as in exposure._take_pixels)
+        values = np.take(values, cand, axis=1)
+        saturated = None if saturated is None else np.take(saturated, cand, axis=1)
     # every step below reads one channel at a time, several times over
     values = _channel_major(values)
-    saturated = _channel_major(saturated)
+    if saturated is None:
+        saturated = _at_or_above_by_channel(values, sat)
+    else:
+        saturated = _channel_major(saturated)
 
     levels = response_levels(bit_depth, max_levels)
     spacing = levels[1] - levels[0]

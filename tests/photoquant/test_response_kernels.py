@@ -19,7 +19,11 @@ from hypothesis import strategies as st
 
 from photoquant.response import _kernels, camera_response_Debevec1997
 from photoquant.response.censoring import trim_censored_partners
-from photoquant.response.debevec1997 import select_samples_histogram
+from photoquant.response.debevec1997 import (
+    _at_or_above_by_channel,
+    _channel_major,
+    select_samples_histogram,
+)
 
 pytestmark = pytest.mark.skipif(
     not _kernels.HAVE_NUMBA, reason="numba is not installed (the numpy versions are used)"
@@ -220,3 +224,23 @@ def test_the_template_penalty_gram_matrix_is_scipys_sparse_product(n, seed, zero
         expected -= (2.0 - 0.5) * np.outer(r, r) / norm
     np.testing.assert_array_equal(template_penalty(w, g0, 2.0), expected)
     np.testing.assert_array_equal(template_penalty(w, g0, 1.0), 0.0 * gram)
+
+
+@given(
+    st.integers(1, 4),
+    st.integers(1, 40),
+    st.sampled_from([np.uint8, np.uint16]),
+    st.integers(0, 2**32 - 1),
+)
+def test_at_or_above_by_channel_is_the_broadcast_comparison(n_ch, n_pix, dtype, seed):
+    # channel by channel on the channel-major layout: the values and the layout of
+    # `values >= level`, with fractional levels and values on them
+    rng = np.random.default_rng(seed)
+    top = np.iinfo(dtype).max
+    values = rng.integers(0, top, (3, n_pix, n_ch), endpoint=True).astype(dtype)
+    level = rng.integers(0, top, n_ch).astype(np.float64) + rng.choice([0.0, 0.5], n_ch)
+    values[0, 0] = np.ceil(level).astype(dtype)  # exactly at the (rounded-up) level
+    cm = _channel_major(values)
+    got = _at_or_above_by_channel(cm, level)
+    np.testing.assert_array_equal(got, values >= level)
+    assert np.moveaxis(got, -1, 0).flags.c_contiguous or n_ch == 1
