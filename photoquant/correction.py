@@ -189,7 +189,8 @@ def correct(
     if plan is not None:  # one pass: frames -> ln c -> l, tile by tile
         shape = (*stack.image_shape, stack.n_channels)
         photoquantity = np.empty(shape, dtype=np.float32)
-        mask, all_saturated, all_dark = (np.empty(shape, dtype=bool) for _ in range(3))
+        # zeroed flags, set only where they hold (photoquant.merge._tiled.merge_tiles)
+        mask, all_saturated, all_dark = (np.zeros(shape, dtype=bool) for _ in range(3))
 
         def uniformise(rows: slice, log_c: np.ndarray, flagged: np.ndarray) -> None:
             del flagged  # NaN there already, and exp(NaN) · gain stays NaN
@@ -205,6 +206,7 @@ def correct(
             tile_rows=tile_rows,
             workers=workers,
             on_tile=uniformise,
+            flags_zeroed=True,
         )
     else:  # a method that merges the whole image at once, or glare to remove
         merged = merger.merge(stack, model.balanced_response())

@@ -359,6 +359,7 @@ def accumulate_codes(
     *,
     rows: slice | None = None,
     backend: str = "auto",
+    flags_zeroed: bool = False,
 ) -> None:
     """Merge the codes of a tile: ``ln c``, ``Σ_k w`` and the three flags.
 
@@ -377,9 +378,13 @@ def accumulate_codes(
         Outputs: no exposure with weight; that, with every exposure clipped;
         that, with some exposure not clipped (too dark).
     backend : {"auto", "numba", "numpy"}
+    flags_zeroed : bool
+        ``mask``, ``all_sat`` and ``all_dark`` are all false already: the
+        numba kernel, which sets a flag only where it holds, then writes
+        nothing else into them (they are not cleared first).
     """
     if _use_numba(backend):
-        outs = _flat_outputs(num, den, mask, all_sat, all_dark, zero_flags=True)
+        outs = _flat_outputs(num, den, mask, all_sat, all_dark, zero_flags=not flags_zeroed)
         flat, start = _flat_span(codes, rows, 1)
         _direct_nb(flat, start, w, wt, clip, *outs)
     else:

@@ -121,6 +121,7 @@ class CodeSource(Protocol):
         den: np.ndarray,
         flags: tuple[np.ndarray, np.ndarray, np.ndarray],
         backend: str,
+        flags_zeroed: bool = False,
     ) -> None: ...
 
 
@@ -164,18 +165,32 @@ class DirectCodes:
         den: np.ndarray,
         flags: tuple[np.ndarray, np.ndarray, np.ndarray],
         backend: str,
+        flags_zeroed: bool = False,
     ) -> None:
         w, wt, clip = tables.w, tables.wt, tables.clip
         if self.saturated is None and self.dark is None:
             # the values are the codes: the whole array and the tile's rows (no view of it)
-            accumulate_codes(self.values, w, wt, clip, num, den, *flags, rows=rows, backend=backend)
+            accumulate_codes(
+                self.values,
+                w,
+                wt,
+                clip,
+                num,
+                den,
+                *flags,
+                rows=rows,
+                backend=backend,
+                flags_zeroed=flags_zeroed,
+            )
             return
         codes = self._override(
             self.values[:, rows],
             None if self.saturated is None else self.saturated[:, rows],
             None if self.dark is None else self.dark[:, rows],
         )
-        accumulate_codes(codes, w, wt, clip, num, den, *flags, backend=backend)
+        accumulate_codes(
+            codes, w, wt, clip, num, den, *flags, backend=backend, flags_zeroed=flags_zeroed
+        )
 
 
 class RepeatCodes:
@@ -200,7 +215,9 @@ class RepeatCodes:
         den: np.ndarray,
         flags: tuple[np.ndarray, np.ndarray, np.ndarray],
         backend: str,
+        flags_zeroed: bool = False,
     ) -> None:
+        del flags_zeroed  # this kernel writes every flag
         accumulate_repeats(
             self.frames,
             tables.w,
@@ -250,7 +267,9 @@ class SummaryCodes:
         den: np.ndarray,
         flags: tuple[np.ndarray, np.ndarray, np.ndarray],
         backend: str,
+        flags_zeroed: bool = False,
     ) -> None:
+        del flags_zeroed  # this kernel writes every flag
         accumulate_summaries(
             self.total,
             self.lo,
@@ -298,6 +317,7 @@ def merge_tiles(
     workers: int | None = None,
     on_tile: Callable[[slice, np.ndarray, np.ndarray], None] | None = None,
     backend: str = "auto",
+    flags_zeroed: bool = False,
 ) -> None:
     """Merge ``source`` tile by tile into the caller's ``(H, W, C)`` arrays.
 
@@ -305,7 +325,11 @@ def merge_tiles(
     ``weight_out`` (float32, optional) ``Σ_k w``; the masks as in
     :class:`~photoquant.merge.MergeResult`. ``on_tile(rows, log_c, mask)`` is
     called on each finished tile (e.g. to turn ``ln c`` into the corrected
-    photoquantity in place).
+    photoquantity in place). ``flags_zeroed``: the three flag outputs are all
+    false already (made by ``np.zeros``), so the direct kernel, which writes a
+    flag only where it is set, leaves the rest of their memory untouched (a
+    fresh ``np.zeros`` array is mapped page by page on first write: 7 MiB of
+    flags for 1024×768×3 are not written at all).
     """
     height = source.shape[0]
     tiles = row_tiles(height, source.bytes_per_row, tile_rows, check_workers(workers))
@@ -315,7 +339,8 @@ def merge_tiles(
         shape = num.shape
         den = weight_out[rows] if weight_out is not None else np.empty(shape, dtype=np.float32)
         flags = (mask_out[rows], all_saturated_out[rows], all_dark_out[rows])
-        source.accumulate(rows, tables, num, den, flags, backend)  # num: ln c (NaN: no weight)
+        # num: ln c (NaN: no weight)
+        source.accumulate(rows, tables, num, den, flags, backend, flags_zeroed)
         if on_tile is not None:
             on_tile(rows, num, flags[0])
 

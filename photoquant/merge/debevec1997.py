@@ -262,9 +262,10 @@ def _run_tiles(
     shape = source.shape
     log_c = np.empty(shape, dtype=np.float32)
     weight = np.empty(shape, dtype=np.float32)
-    mask = np.empty(shape, dtype=bool)
-    all_sat = np.empty(shape, dtype=bool)
-    all_dark = np.empty(shape, dtype=bool)
+    # zeroed flags, set only where they hold (mapped on first write; see merge_tiles)
+    mask = np.zeros(shape, dtype=bool)
+    all_sat = np.zeros(shape, dtype=bool)
+    all_dark = np.zeros(shape, dtype=bool)
     merge_tiles(
         source,
         tables,
@@ -275,6 +276,7 @@ def _run_tiles(
         weight_out=weight,
         tile_rows=tile_rows,
         workers=workers,
+        flags_zeroed=True,
     )
     return MergeResult(
         log_photoquantity=log_c,

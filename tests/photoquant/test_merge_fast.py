@@ -127,6 +127,25 @@ def _run(stack, response, opts, backend, tile_rows=2):
     return [*out, weight]
 
 
+@settings(max_examples=25, deadline=None)
+@given(case=stacks())
+def test_flags_made_zero_or_cleared_by_the_merge_alike(case):
+    # flags_zeroed: the caller's flags are all false (np.zeros) and only the set ones are
+    # written; otherwise the merge clears them first (here: all true before)
+    stack, response, opts = case
+    plan = plan_stack_Debevec1997(stack, response, opts)
+    assert plan is not None
+    shape = stack.image_shape + (stack.n_channels,)
+    results = []
+    for zeroed in (True, False):
+        flags = [(np.zeros if zeroed else np.ones)(shape, bool) for _ in range(3)]
+        log_c = np.empty(shape, np.float32)
+        merge_tiles(*plan, log_c, *flags, tile_rows=2, workers=2, flags_zeroed=zeroed)
+        results.append([log_c, *flags])
+    for a, b in zip(*results, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed (the numpy kernels are used)")
 @settings(max_examples=40, deadline=None)
 @given(case=stacks())
