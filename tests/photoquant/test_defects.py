@@ -378,3 +378,31 @@ def test_the_radix_medians_are_numpys(seed, n, n_ch, kinds, centred):
     cols = [x[:, c] if center is None else np.abs(x[:, c] - center[c]) for c in range(n_ch)]
     expected = np.array([np.median(col) for col in cols])
     np.testing.assert_array_equal(_channel_medians(x, center), expected)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.integers(2, 12),
+    st.sampled_from([8, 12]),
+    st.integers(0, 2**31),
+)
+def test_below_clip_from_the_integer_sums_is_the_mean_comparison(n, bit_depth, seed) -> None:
+    # "repeat mean below the saturation level − ½", from the sums with an integer limit:
+    # the booleans of the float64 means, with sums on and beside the limit
+    from photoquant.defects import _below_clip, _plane_means
+
+    rng = np.random.default_rng(seed)
+    top = 2**bit_depth - 1
+    sat = rng.integers(top // 2, top, 3, endpoint=True)
+    frames = rng.integers(0, top, (n, 2, 4, 5, 3), endpoint=True)
+    # values whose mean lies at and just around sat − ½
+    frames[:, :, 0] = sat
+    frames[: n // 2, :, 1] = sat - 1
+    frames[n // 2 :, :, 1] = sat
+    frames = frames.astype(np.uint8 if bit_depth == 8 else np.uint16)
+    stack = ExposureStack(frames, np.array([1e-3, 4e-3]), bit_depth=bit_depth, saturation_level=sat)
+    below = _below_clip(stack, _plane_means(stack))
+    got = [below(k) for k in range(2)]
+    assert not stack._mean  # the integer path was the one under test (no means made)
+    for k in range(2):
+        np.testing.assert_array_equal(got[k], stack.mean()[k] < sat - 0.5)
