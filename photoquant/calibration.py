@@ -126,8 +126,7 @@ def find_correspondences(
 ) -> list[np.ndarray]:
     """Tracks ``[view, x, y]`` across the views by the correspondences step's method."""
     method, options = _step("correspondences", spec, profile)
-    tracks = method.function(list(uniform_views), options)
-    return [np.asarray(t, dtype=np.float64) for t in tracks]
+    return float_tracks(method.function(list(uniform_views), options))
 
 
 def fit_vignetting_step(
