@@ -246,7 +246,11 @@ def test_three_channel_kernel_gives_the_bits_of_the_any_channel_kernel(zeroed):
     tables = plan[1]
     flat = codes.reshape(k, -1)
     results = []
-    for kernel in (_kernels._direct_rgb_nb, _kernels._direct_nb):
+    kernels = (
+        lambda flat, *args: _kernels._direct_rgb_nb(tuple(flat), flat, *args),
+        _kernels._direct_nb,
+    )
+    for kernel in kernels:
         outs = [np.full(flat.shape[1], -1.0, np.float32), np.empty(flat.shape[1], np.float32)]
         outs += [(np.zeros if zeroed else np.ones)(flat.shape[1], bool) for _ in range(3)]
         for rows in (slice(0, 4), slice(4, 10), slice(10, 20), slice(20, 23)):
