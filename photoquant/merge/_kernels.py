@@ -130,7 +130,9 @@ def _direct_rgb_py(
     computed per pixel (11.1 ms: the gain is the constant rows); the
     run-time channel loop without flag work (11.2 ms). Each value's terms
     are still added in the order ``k = 0 … K−1`` from 0, so the bits are
-    those of :func:`_direct_py`.
+    those of :func:`_direct_py`. One channel goes through this kernel as
+    three with the same tables (:func:`_direct_compiled`): 12.0 → 7.8 ms for
+    1024×768×3 values of one channel, K = 8, one thread.
     """
     n_k = len(rows)
     zero, one, two = np.uint64(0), np.uint64(1), np.uint64(2)
@@ -480,13 +482,42 @@ def accumulate_codes(
     if _use_numba(backend):
         outs = _flat_outputs(num, den, mask, all_sat, all_dark, zero_flags=not flags_zeroed)
         flat, start = _flat_span(codes, rows, 1)
-        if w.shape[0] == 3 and flat.shape[0] <= _MAX_UNROLLED_EXPOSURES:
-            _direct_rgb_nb(tuple(flat), flat, start, w, wt, clip, *outs)
-        else:
-            _direct_nb(flat, start, w, wt, clip, *outs)
+        _direct_compiled(flat, start, w, wt, clip, outs)
     else:
         tile = codes if rows is None else codes[:, rows]
         _direct_np(tile, w, wt, clip, num, den, mask, all_sat, all_dark)
+
+
+def _direct_compiled(
+    flat: np.ndarray,
+    start: int,
+    w: np.ndarray,
+    wt: np.ndarray,
+    clip: np.ndarray,
+    outs: list[np.ndarray],
+) -> None:
+    """The numba direct merge of ``flat`` codes from ``start`` into the flat ``outs``.
+
+    Three channels, or one, go to the three-value kernel :func:`_direct_rgb_py`
+    (one channel as three with the same tables: three consecutive values a
+    pass, and the last one or two by :func:`_direct_py`), other channel counts
+    and more than :data:`_MAX_UNROLLED_EXPOSURES` exposures to
+    :func:`_direct_py`. Every path adds a value's terms in the same order:
+    the same bits.
+    """
+    n_ch, size = w.shape[0], outs[0].size
+    if n_ch not in (1, 3) or flat.shape[0] > _MAX_UNROLLED_EXPOSURES:
+        _direct_nb(flat, start, w, wt, clip, *outs)
+        return
+    body = size - size % 3  # all of it for three channels
+    rows = tuple(flat)
+    if n_ch == 1:
+        three = (np.tile(w, (3, 1)), np.tile(wt, (1, 3, 1)), np.tile(clip, (3, 1)))
+        _direct_rgb_nb(rows, flat, start, *three, *(o[:body] for o in outs))
+        if body < size:
+            _direct_nb(flat, start + body, w, wt, clip, *(o[body:] for o in outs))
+    else:
+        _direct_rgb_nb(rows, flat, start, w, wt, clip, *outs)
 
 
 def accumulate_repeats(
