@@ -93,8 +93,8 @@ References
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,6 +111,7 @@ from photoquant._checks import (
     check_workers,
     validate_method,
 )
+from photoquant._threads import thread_map
 from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import StepFit
 from photoquant.response import _kernels
@@ -909,30 +910,26 @@ def camera_response_Debevec1997(
         n_used[ch] = idx.size
 
     # Channels are independent but for the sampler's random draws: those are made
-    # in channel order on this thread, everything else on `workers` threads (the
-    # compiled kernels, numpy's large passes and LAPACK release the GIL), so the
-    # result does not depend on the threads. The dense systems are small
-    # (≤ 1024²): one BLAS thread is fastest, and a multi-threaded BLAS on a
-    # loaded machine can be 100× slower.
-    n_workers = min(workers, n_ch)
+    # in channel order (each channel's after the one before it), everything else
+    # runs on `workers` threads (the compiled kernels, numpy's large passes and
+    # LAPACK release the GIL), so the result does not depend on the threads. The
+    # dense systems are small (≤ 1024²): one BLAS thread is fastest, and a
+    # multi-threaded BLAS on a loaded machine can be 100× slower.
+    drawn = [threading.Event() for _ in range(n_ch)]
+
+    def channel(ch: int) -> None:
+        """A channel's usable values, its draws once the channel before has drawn, its fit."""
+        try:
+            valid, usable = usable_values(ch)
+            if ch:
+                drawn[ch - 1].wait()  # set by a job taken before this one: it runs
+            pick = _draw_samples(sampler, values[..., ch], valid, usable, sat[ch], n_draw, rng)
+        finally:
+            drawn[ch].set()  # also on failure (whose error thread_map raises first)
+        fit_channel(ch, valid, pick)
+
     with _blas_controller().limit(limits=1, user_api="blas"):
-        if n_workers <= 1:
-            for ch in range(n_ch):
-                valid, usable = usable_values(ch)
-                pick = _draw_samples(sampler, values[..., ch], valid, usable, sat[ch], n_draw, rng)
-                fit_channel(ch, valid, pick)
-        else:
-            with ThreadPoolExecutor(max_workers=n_workers) as pool:
-                stage1 = [pool.submit(usable_values, ch) for ch in range(n_ch)]
-                stage2 = []
-                for ch in range(n_ch):
-                    valid, usable = stage1[ch].result()
-                    pick = _draw_samples(
-                        sampler, values[..., ch], valid, usable, sat[ch], n_draw, rng
-                    )
-                    stage2.append(pool.submit(fit_channel, ch, valid, pick))
-                for job in stage2:  # the first channel's error first, as without threads
-                    job.result()
+        thread_map(channel, range(n_ch), min(workers, n_ch))
     del height, width
     return ResponseRecovery(
         levels=levels,

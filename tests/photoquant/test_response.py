@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -142,6 +144,38 @@ def test_a_channel_error_is_the_first_channel_s_with_threads():
     for workers in (1, 3):
         with pytest.raises(CalibrationError, match="channel 0"):
             camera_response_Debevec1997(values, [1.0, 100.0], workers=workers)
+
+
+def test_a_channel_failing_before_its_draws_neither_hangs_nor_hides_its_error(rng, monkeypatch):
+    # channel 0 fails before drawing (in its trimming); channel 1, which waits for
+    # channel 0's draws, must go on: the call ends, with channel 0's error
+    import photoquant.response.debevec1997 as module
+
+    real = module.trim_censored_partners
+    first = 0.5  # marks channel 0's values below (frames hold integers)
+
+    def failing(vals, valid, *args):
+        if vals.flat[0] == first:
+            raise CalibrationError("channel 0 trimming failed")
+        return real(vals, valid, *args)
+
+    monkeypatch.setattr(module, "trim_censored_partners", failing)
+    frames = capture(log_uniform_scene(rng, (20, 20, 3)), EXPOSURES, noise_dn=1.0, rng=rng)
+    values = frames[0].astype(np.float64)
+    values[0, 0, 0, 0] = first  # channel 0's first value: its marker
+    outcome: list[BaseException] = []
+
+    def call() -> None:
+        try:
+            camera_response_Debevec1997(values, EXPOSURES, n_samples=100, workers=3)
+        except BaseException as exc:
+            outcome.append(exc)
+
+    worker = threading.Thread(target=call, daemon=True)
+    worker.start()
+    worker.join(60)
+    assert not worker.is_alive(), "the response fit hung on a channel's failure"
+    assert len(outcome) == 1 and "channel 0 trimming failed" in str(outcome[0])
 
 
 def test_gauge_is_zero_mid_range(rng):
