@@ -1051,10 +1051,16 @@ def characterise_response_Debevec1997(
         # stack's exact integer sums, so that no full-size float mean is formed
         cand = np.flatnonzero(rng.random(n_pix) < opts.max_pixels / n_pix)
         # the sums and masks at the candidates only (no full-size arrays made for them)
-        # = stack.mean() at cand, bit for bit, laid out channel by channel
-        values, excluded = (np.moveaxis(a, 0, -1)[:, None] for a in stack.mean_at_pixels(cand))
+        # = stack.mean() at cand, bit for bit, laid out channel by channel; single
+        # integer frames as they are (the same numbers, no float64 copy: the fit
+        # gives the same bits; 2¹⁷ candidates × K = 8 × 3 of uint8: 3 MB, not 25)
+        at_cand = stack.mean_at_pixels(cand, exact_integers=True)
+        values, excluded = (np.moveaxis(a, 0, -1)[:, None] for a in at_cand)
     else:
-        values, excluded = stack.mean(), stack.saturated() | stack.dark_clipped()
+        # single integer frames as they are (the same numbers as their float mean)
+        single = stack.n_repeats == 1 and stack.frames.dtype.kind in "iu"
+        values = stack.frames[0] if single else stack.mean()
+        excluded = stack.saturated() | stack.dark_clipped()
     rec = camera_response_Debevec1997(
         values,
         stack.exposure_s,

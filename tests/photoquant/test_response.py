@@ -332,12 +332,13 @@ def test_continue_toe_extends_below_the_steepest_level():
     assert j0 == 1 and np.array_equal(same, flat)
 
 
-def test_candidate_thinning_is_exact_below_the_cap_and_the_same_in_both_paths(rng):
+@pytest.mark.parametrize("n_repeats", [1, 3])
+def test_candidate_thinning_is_exact_below_the_cap_and_the_same_in_both_paths(rng, n_repeats):
     """``max_pixels``: no effect at or below the cap; above it, the stack path thins as the array path.
 
     The characterise path thins the stack's exact integer sums (no full-size
-    float mean), which must give, bit for bit, the array function run on
-    ``stack.mean()`` with the same draw.
+    float mean; single frames kept as integers), which must give, bit for
+    bit, the array function run on ``stack.mean()`` with the same draw.
     """
     from photoquant.response.debevec1997 import (
         DebevecResponseOptions,
@@ -345,7 +346,7 @@ def test_candidate_thinning_is_exact_below_the_cap_and_the_same_in_both_paths(rn
     )
 
     l = log_uniform_scene(rng, (40, 50, 3))
-    frames = capture(l, EXPOSURES, noise_dn=1.0, n_repeats=3, rng=rng)
+    frames = capture(l, EXPOSURES, noise_dn=1.0, n_repeats=n_repeats, rng=rng)
     stack = ExposureStack(frames, EXPOSURES)
     sat = np.asarray(stack.saturation_level, dtype=float)
     excluded = stack.saturated() | stack.dark_clipped()
@@ -359,6 +360,10 @@ def test_candidate_thinning_is_exact_below_the_cap_and_the_same_in_both_paths(rn
     )
     np.testing.assert_array_equal(fit.model.log_inverse_response, thinned.log_inverse_response)
     np.testing.assert_array_equal(fit.report["n_samples"], thinned.n_samples)
+    whole = characterise_response_Debevec1997(
+        stack, DebevecResponseOptions(n_samples=300, max_pixels=None), rng=3
+    )
+    np.testing.assert_array_equal(whole.model.log_inverse_response, full.log_inverse_response)
 
 
 def test_thinned_candidates_keep_the_accuracy(rng):

@@ -210,6 +210,29 @@ def test_compiled_pile_counts_carry_past_their_one_byte_blocks(seed, n_rows, dty
     np.testing.assert_array_equal(near, ((by_ch >= low) & (by_ch < top)).sum(axis=(0, 1)))
 
 
+@pytest.mark.parametrize("n_repeats", [1, 3])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("cached", [False, True])
+def test_mean_at_pixels_exact_integers_are_the_mean_s_numbers(n_repeats, dtype, cached):
+    # one repeat of integer frames: the frames' own dtype, the same numbers as the float
+    # mean; more repeats: the float64 mean itself; from the frames or the cached sums
+    rng = np.random.default_rng(5)
+    frames = rng.integers(0, 256, size=(n_repeats, 3, 9, 7, 3)).astype(dtype)
+    stack = ExposureStack(frames, [0.01, 0.04, 0.16], bit_depth=8, black_level=2.0)
+    if cached:
+        stack.repeat_sum()
+        stack.saturated()
+    index = np.array([0, 5, 6, 40, 62])
+    mean, excluded = stack.mean_at_pixels(index)
+    exact, excluded_too = stack.mean_at_pixels(index, exact_integers=True)
+    assert mean.dtype == np.float64
+    assert exact.dtype == (dtype if n_repeats == 1 else np.float64)
+    np.testing.assert_array_equal(exact, mean)
+    np.testing.assert_array_equal(excluded_too, excluded)
+    expected = np.moveaxis(stack.mean().reshape(3, 63, 3)[:, index], -1, 0)
+    np.testing.assert_array_equal(mean, expected)
+
+
 @pytest.mark.parametrize(
     ("index", "message"),
     [
