@@ -109,6 +109,7 @@ from photoquant._checks import (
     check_int,
     check_positive,
     check_workers,
+    default_workers,
     validate_method,
 )
 from photoquant._threads import thread_map
@@ -772,9 +773,14 @@ def camera_response_Debevec1997(
         the shape the data leave open follows a camera's, not a straight
         ``g``; ``"none"``: β as given (the paper's).
     workers : int, optional
-        Threads for the channels (every CPU by default). The sampler's random
-        draws are made in channel order whatever the count, so the result does
-        not depend on it.
+        Threads for the channels. By default one per channel wherever the
+        process may run on two CPUs or more, and one thread otherwise: three
+        channels on two cores run as three threads, which the system shares
+        out, rather than two that leave the third channel alone on one core
+        at the end (the response benchmark on 2 cores, alternated: min 29–31
+        → 27–28 ms, median 38–39 → 32 ms, 2026-12-02). The sampler's random
+        draws are made in channel order whatever the count, so the result
+        does not depend on it.
 
     Returns
     -------
@@ -797,6 +803,8 @@ def camera_response_Debevec1997(
         raise InputError(f"`wide_steps` must be one of {list(WIDE_STEP_MODES)}, got {wide_steps!r}")
     if int(n_samples) < 2:
         raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
+    if workers is None:  # one thread per channel wherever there is more than one CPU
+        workers = n_ch if default_workers() > 1 else 1
     workers = check_workers(workers)
     c_full = 2**bit_depth - 1
     if saturation_level is None:

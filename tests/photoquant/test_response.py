@@ -135,6 +135,29 @@ def test_threads_give_the_same_bits_and_leave_the_generator_alike(rng, sampling)
         assert next_draw == results[0][2]
 
 
+@pytest.mark.parametrize(("cpus", "threads"), [(1, 1), (2, 3)])
+def test_channels_get_a_thread_each_on_two_cpus_or_more(rng, monkeypatch, cpus, threads):
+    # the documented default: one thread per channel where the process may use two
+    # CPUs or more (the system shares them out), one thread on one CPU
+    import photoquant.response.debevec1997 as module
+
+    seen = set()
+    barrier = threading.Barrier(threads, timeout=30)
+    real = module._solve_channel
+
+    def solve(*args):
+        seen.add(threading.get_ident())
+        if threads > 1:
+            barrier.wait()  # all three at once: each on its own thread
+        return real(*args)
+
+    monkeypatch.setattr(module, "_solve_channel", solve)
+    monkeypatch.setattr(module, "default_workers", lambda: cpus)
+    frames = capture(log_uniform_scene(rng, (20, 20, 3)), EXPOSURES, noise_dn=1.0, rng=rng)
+    camera_response_Debevec1997(frames[0], EXPOSURES, n_samples=100)
+    assert len(seen) == threads
+
+
 def test_a_channel_error_is_the_first_channel_s_with_threads():
     # channel 0 and 2 cannot be fitted: the error names channel 0, as without threads
     values = np.zeros((2, 6, 6, 3))
