@@ -49,7 +49,9 @@ def thread_map(fn: Callable[[Any], T], items: Iterable[Any], workers: int | None
                 errors[i] = exc
                 stop.set()
 
-    threads = [threading.Thread(target=run, daemon=True) for _ in range(n_workers - 1)]
+    # not daemons: interrupted while joining them, the caller raises at once, and each
+    # thread ends with the job it holds (none is started after) before Python exits
+    threads = [threading.Thread(target=run) for _ in range(n_workers - 1)]
     for thread in threads:
         thread.start()
     try:
