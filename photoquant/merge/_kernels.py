@@ -96,12 +96,8 @@ def _direct_py(
             den[q] = d
             if d > 0:
                 num[q] = s / d
-            else:  # flagged (rare): was some exposure not clipped?
-                unsat = False
-                for k in range(n_k):
-                    if not clip[ch, codes[k, start + q]]:
-                        unsat = True
-                _flag(num, mask, all_sat, all_dark, q, unsat)
+            else:  # flagged (rare)
+                _flag_codes(codes, start + q, clip, ch, num, mask, all_sat, all_dark, q)
 
 
 def _direct_rgb_py(
@@ -183,16 +179,10 @@ def _flag_unweighted_py(
     all_dark: Any,
 ) -> None:  # pragma: no cover - compiled by numba
     """numba body: flag the values of the outputs whose ``den`` is not positive (no weight)."""
-    n_k = codes.shape[0]
     n_ch = clip.shape[0]
     for q in range(num.size):
         if not den[q] > 0:
-            ch = q % n_ch
-            unsat = False
-            for k in range(n_k):
-                if not clip[ch, codes[k, start + q]]:
-                    unsat = True
-            _flag(num, mask, all_sat, all_dark, q, unsat)
+            _flag_codes(codes, start + q, clip, q % n_ch, num, mask, all_sat, all_dark, q)
 
 
 def _store_py(
@@ -230,6 +220,26 @@ def _flag_py(
     mask[q] = True
     all_sat[q] = not unsat
     all_dark[q] = unsat
+
+
+def _flag_codes_py(
+    codes: Any,
+    v: int,
+    clip: Any,
+    ch: int,
+    num: Any,
+    mask: Any,
+    all_sat: Any,
+    all_dark: Any,
+    q: int,
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: :func:`_flag_py` for value ``q`` of channel ``ch``, whose codes are
+    column ``v`` of ``codes (K, M)``: all dark where some exposure is not clipped."""
+    unsat = False
+    for k in range(codes.shape[0]):
+        if not clip[ch, codes[k, v]]:
+            unsat = True
+    _flag(num, mask, all_sat, all_dark, q, unsat)
 
 
 def _repeats_py(
@@ -361,8 +371,10 @@ def _summary_py(
 
 
 if HAVE_NUMBA:  # pragma: no cover - depends on the environment
-    # numpy's error model: s / d needs no zero test (it is taken where d > 0 only)
+    # numpy's error model: s / d needs no zero test (it is taken where d > 0, or, in the
+    # three-value kernel, gives 0 / 0 = NaN where d = 0 and the value is flagged after)
     _flag = _compile(_flag_py, inline="always")
+    _flag_codes = _compile(_flag_codes_py, inline="always")
     _flag_unweighted = _compile(_flag_unweighted_py)
     _store = _compile(_store_py, inline="always", error_model="numpy")
     _direct_nb = _compile(_direct_py, error_model="numpy")
