@@ -666,16 +666,14 @@ class ExposureStack:
             raise InputError(f"`index` must lie in [0, {h * w}) (flat pixel indices of {h}×{w})")
         index = index.astype(np.intp, copy=False)
         sat_thr, dark_thr = _sat_threshold(self.saturation_level), _dark_threshold(self.black_level)
+        # the frames' own values: a single repeat of integers
+        integers = exact_integers and n == 1 and self.frames.dtype.kind in "iu"
         if not HAVE_NUMBA or self.frames.dtype.kind not in "iu":
             sums, saturated, dark = self.at_pixels(index)
-            if exact_integers and n == 1 and self.frames.dtype.kind in "iu":
-                sums = sums.astype(self.frames.dtype)  # the frames' values (sums of one)
-            else:
-                sums = sums / self.n_repeats
+            sums = sums.astype(self.frames.dtype) if integers else sums / self.n_repeats
             return np.ascontiguousarray(np.moveaxis(sums, -1, 0)), np.ascontiguousarray(
                 np.moveaxis(saturated | dark, -1, 0)
             )
-        integers = exact_integers and n == 1
         values = np.empty((c, k, index.size), dtype=self.frames.dtype if integers else np.float64)
         excluded = np.empty((c, k, index.size), dtype=bool)
         if self._sum and self._extremes:
