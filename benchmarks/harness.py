@@ -8,7 +8,10 @@ peers, each ``fn(ctx) -> output``) and an ``accuracy`` function
 implementation's output against the truth the setup knows. The runner
 (:mod:`benchmarks.run`) times the implementations **in one process,
 interleaved** (repeat 1 of every implementation, then repeat 2, ...), so
-that a machine's slow moments hit every implementation alike, and reports
+that a machine's slow moments hit every implementation alike, each repeat
+starting one implementation further on (*rotated*), so that what an
+implementation leaves behind (caches it filled, a heap it released back to
+the system) does not always fall on the same successor, and reports
 min and median per implementation, the ratio ``ours / peer`` of both, and
 each one's accuracy (computed once, on the first run's output).
 
@@ -230,8 +233,11 @@ def run_case(case: Case, config: Config, log: Callable[[str], None] | None = Non
     setup_s = time.perf_counter() - t0
     results = {name: ImplResult(name) for name in case.implementations}
     repeats = max(1, config.repeats) if case.timed else 1
+    order = list(case.implementations)
     for rep in range(repeats):
-        for name, fn in case.implementations.items():
+        shift = rep % len(order)
+        for name in order[shift:] + order[:shift]:
+            fn = case.implementations[name]
             res = results[name]
             if res.error is not None:
                 continue

@@ -31,7 +31,8 @@ def test_run_case_interleaves_and_scores() -> None:
         accuracy=lambda ctx, name, out: {"max_err": float(np.max(np.abs(out - 2 * ctx["x"])))},
     )
     res = run_case(case, Config(repeats=3))
-    assert calls == ["ours", "peer"] * 3  # interleaved, not all of one then the other
+    # interleaved, not all of one then the other, each repeat starting one further on
+    assert calls == ["ours", "peer", "peer", "ours", "ours", "peer"]
     assert len(res.results["ours"].times_s) == 3
     assert res.results["peer"].accuracy == {"max_err": 0.0}
     assert res.results["ours"].metrics == {"bytes": 8.0}
@@ -57,7 +58,7 @@ def test_a_failing_implementation_is_its_row_not_the_run() -> None:
         implementations={"ours": ours, "broken": broken},
     )
     res = run_case(case, Config(repeats=3))
-    assert calls == ["ours", "broken", "ours", "ours"]
+    assert calls == ["ours", "broken", "ours", "ours"]  # repeat 2 starts with the broken one
     assert res.results["broken"].error == "RuntimeError: last line: out of memory"
     assert res.results["broken"].times_s == []
     assert res.results["ours"].error is None and len(res.results["ours"].times_s) == 3
