@@ -41,15 +41,18 @@ def _merge_setup(config: Config) -> dict[str, Any]:
 
 
 def _ours_hat(ctx: dict[str, Any]) -> np.ndarray:
-    res = merge_Debevec1997(
+    # the linear photoquantity written tile by tile (a fresh array each run, as the peers')
+    linear = np.empty(ctx["frames"].shape[1:], dtype=np.float32)
+    merge_Debevec1997(
         ctx["frames"],
         ctx["data"].exposure_s,
         ctx["levels"],
         ctx["g"],
         saturation_level=ctx["saturation"],
         weighting="hat",
+        photoquantity_out=linear,
     )
-    return res.photoquantity()
+    return linear
 
 
 def _opencv(ctx: dict[str, Any]) -> np.ndarray:

