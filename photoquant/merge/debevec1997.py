@@ -285,7 +285,9 @@ def _check_photoquantity_out(out: np.ndarray | None, inp: _Inputs) -> np.ndarray
         raise InputError("`photoquantity_out` is read-only")
     inputs = (inp.values, inp.saturated, inp.dark_clipped)
     if any(a is not None and np.may_share_memory(out, a) for a in inputs):
-        raise InputError("`photoquantity_out` overlaps the merge's inputs")
+        raise InputError(
+            "`photoquantity_out` may overlap the merge's inputs (it lies in their memory)"
+        )
     return out
 
 
