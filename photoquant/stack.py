@@ -651,8 +651,8 @@ class ExposureStack:
         ``N``), laid out for a consumer that reads one channel at a time (the
         response fit). One compiled pass over the pixels when numba is there.
 
-        ``exact_integers``: for a single repeat of integer frames the values
-        come in the frames' own dtype (the same numbers as the float64 mean:
+        ``exact_integers``: for a single repeat (a stack's frames are
+        integers) the values come in the frames' own dtype (the same numbers as the float64 mean:
         the frames themselves), an eighth of the memory for 8-bit frames;
         float64 means otherwise.
         """
@@ -666,8 +666,8 @@ class ExposureStack:
             raise InputError(f"`index` must lie in [0, {h * w}) (flat pixel indices of {h}×{w})")
         index = index.astype(np.intp, copy=False)
         sat_thr, dark_thr = _sat_threshold(self.saturation_level), _dark_threshold(self.black_level)
-        # the frames' own values: a single repeat of integers
-        integers = exact_integers and n == 1 and self.frames.dtype.kind in "iu"
+        # the frames' own values (a stack's frames are integers): a single repeat
+        integers = exact_integers and n == 1
         if not HAVE_NUMBA or self.frames.dtype.kind not in "iu":
             sums, saturated, dark = self.at_pixels(index)
             sums = sums.astype(self.frames.dtype) if integers else sums / self.n_repeats

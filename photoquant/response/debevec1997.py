@@ -1065,9 +1065,8 @@ def characterise_response_Debevec1997(
         at_cand = stack.mean_at_pixels(cand, exact_integers=True)
         values, excluded = (np.moveaxis(a, 0, -1)[:, None] for a in at_cand)
     else:
-        # single integer frames as they are (the same numbers as their float mean)
-        single = stack.n_repeats == 1 and stack.frames.dtype.kind in "iu"
-        values = stack.frames[0] if single else stack.mean()
+        # a single repeat's integer frames as they are (the numbers of their float mean)
+        values = stack.frames[0] if stack.n_repeats == 1 else stack.mean()
         excluded = stack.saturated() | stack.dark_clipped()
     rec = camera_response_Debevec1997(
         values,
