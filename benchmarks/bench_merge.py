@@ -16,7 +16,7 @@ import numpy as np
 
 from benchmarks._data import hdr_stack, log_error_pct, true_log_inverse_response
 from benchmarks.harness import Case, Config
-from photoquant.merge import MergeModel, merge_Debevec1997
+from photoquant.merge import MergeModel, merge_Debevec1997, merge_photoquantity_Debevec1997
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack, detect_saturation_levels
 
@@ -41,7 +41,19 @@ def _merge_setup(config: Config) -> dict[str, Any]:
 
 
 def _ours_hat(ctx: dict[str, Any]) -> np.ndarray:
-    # the linear photoquantity written tile by tile (a fresh array each run, as the peers')
+    # the HDR image alone, as the peers give theirs (a fresh array each run)
+    return merge_photoquantity_Debevec1997(
+        ctx["frames"],
+        ctx["data"].exposure_s,
+        ctx["levels"],
+        ctx["g"],
+        saturation_level=ctx["saturation"],
+        weighting="hat",
+    )
+
+
+def _ours_hat_result(ctx: dict[str, Any]) -> np.ndarray:
+    # the whole MergeResult (ln c, Σw, flags) and the image written tile by tile beside it
     linear = np.empty(ctx["frames"].shape[1:], dtype=np.float32)
     merge_Debevec1997(
         ctx["frames"],
@@ -130,14 +142,18 @@ def cases(config: Config) -> list[Case]:
             setup=_merge_setup,
             implementations={
                 "photoquant": _ours_hat,
+                "photoquant, the whole MergeResult": _ours_hat_result,
                 "OpenCV MergeDebevec": _opencv,
                 "colour-hdri": _colour_hdri,
                 "floor: u8→f32 reduce": _floor_reduce,
                 "floor: memcpy": _floor_copy,
             },
             accuracy=_merge_accuracy,
-            notes="every merge gets the camera's true response; accuracy: RMS relative error "
-            "of u·v·l on the measurable pixels, one scale per channel removed",
+            notes="every merge gets the camera's true response; photoquant: "
+            "merge_photoquantity_Debevec1997 (the image alone, as the peers'), and "
+            "merge_Debevec1997 with photoquantity_out (ln c, Σw and flags kept as well); "
+            "accuracy: RMS relative error of u·v·l on the measurable pixels, one scale per "
+            "channel removed",
         ),
         Case(
             name="merge-pipeline",

@@ -53,6 +53,7 @@ from photoquant.merge._tiled import CodeSource, MergeTables
 from photoquant.merge.debevec1997 import (
     DebevecMergeOptions,
     merge_Debevec1997,
+    merge_photoquantity_Debevec1997,
     merge_stack_Debevec1997,
     plan_stack_Debevec1997,
 )
@@ -76,6 +77,7 @@ __all__ = [
     "MergeModel",
     "MergeResult",
     "merge_Debevec1997",
+    "merge_photoquantity_Debevec1997",
     "merge_stack_Debevec1997",
     "merge_stack_NoiseAware",
     "merge_stack_Robertson2003",

@@ -17,9 +17,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from photoquant.errors import InputError
-from photoquant.merge import DebevecMergeOptions, merge_Debevec1997, merge_stack_Debevec1997
+from photoquant.merge import (
+    DebevecMergeOptions,
+    merge_Debevec1997,
+    merge_photoquantity_Debevec1997,
+    merge_stack_Debevec1997,
+)
 from photoquant.merge._kernels import HAVE_NUMBA
-from photoquant.merge._tiled import merge_tiles
+from photoquant.merge._tiled import merge_tiles, merge_tiles_linear
 from photoquant.merge.debevec1997 import plan_stack_Debevec1997
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
@@ -312,6 +317,67 @@ def test_photoquantity_out_holds_the_results_photoquantity_to_the_bit(
         np.testing.assert_array_equal(getattr(res, field), getattr(plain, field), err_msg=field)
 
 
+@settings(max_examples=30, deadline=None)
+@given(
+    case=stacks(),
+    tile_rows=st.integers(1, 4),
+    workers=st.integers(1, 3),
+    out_dtype=st.sampled_from([None, np.float32, np.float64]),
+    as_float=st.booleans(),
+)
+def test_merge_photoquantity_is_the_results_photoquantity_to_the_bit(
+    case, tile_rows, workers, out_dtype, as_float
+):
+    """The image alone: ``merge_Debevec1997(...).photoquantity()``, NaN where flagged, in
+    out's dtype (without out: the result's dtype, float32 from integer values)."""
+    stack, response, opts = case
+    values = stack.repeat_sum()
+    if as_float:
+        values = values / stack.n_repeats
+    kw = {
+        "saturation_level": response.saturation_level,
+        "min_level": response.valid_min if opts.exclude_below_valid_min else None,
+        "weighting": opts.weighting,
+        "c_min": np.asarray(response.black_level, dtype=np.float64),
+        "repeats": 1 if as_float else stack.n_repeats,
+        "tile_rows": tile_rows,
+        "workers": workers,
+    }
+    args = (values, stack.exposure_s, response.levels, response.log_inverse_response)
+    expected = merge_Debevec1997(*args, **kw).photoquantity()
+    if out_dtype is None:
+        image = merge_photoquantity_Debevec1997(*args, **kw)
+        assert image.dtype == (np.float64 if as_float else np.float32)
+    else:
+        out = np.full(values.shape[1:], -1.0, dtype=out_dtype)  # every value must be written
+        image = merge_photoquantity_Debevec1997(*args, out=out, **kw)
+        assert image is out
+        expected = expected.astype(out_dtype)
+    np.testing.assert_array_equal(image, expected)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    case=stacks(),
+    backend=st.sampled_from(["numpy", "numba"] if HAVE_NUMBA else ["numpy"]),
+    tile_rows=st.integers(1, 4),
+    summarised=st.booleans(),
+)
+def test_linear_tiles_are_the_exponential_of_the_tiles_log(case, backend, tile_rows, summarised):
+    # every code source (single frames, repeat sums from the frames or from the stack's
+    # cached statistics) and kernel: exp of merge_tiles' ln c, NaN where it flags
+    stack, response, opts = case
+    if summarised:
+        stack.saturated()  # caches the repeat sums and extremes (SummaryCodes when N > 1)
+    plan = plan_stack_Debevec1997(stack, response, opts)
+    assert plan is not None
+    log_c, mask, *_ = _run(stack, response, opts, backend, tile_rows=tile_rows)
+    out = np.full(log_c.shape, -1.0, np.float32)
+    merge_tiles_linear(*plan, out, tile_rows=tile_rows, workers=2, backend=backend)
+    np.testing.assert_array_equal(out, np.exp(log_c))
+    assert np.isnan(out[mask]).all() and np.isfinite(out[~mask]).all()
+
+
 @pytest.mark.parametrize(
     ("make_out", "match"),
     [
@@ -322,10 +388,12 @@ def test_photoquantity_out_holds_the_results_photoquantity_to_the_bit(
         (lambda v: v[0].view(np.float32), "may overlap the merge's inputs"),
     ],
 )
-def test_bad_photoquantity_out_is_named(make_out, match):
+@pytest.mark.parametrize(
+    ("merge", "name"),
+    [(merge_Debevec1997, "photoquantity_out"), (merge_photoquantity_Debevec1997, "out")],
+)
+def test_bad_photoquantity_out_is_named(make_out, match, merge, name):
     values = np.full((2, 2, 4, 3), 100, dtype=np.uint32)
     g = np.tile(np.linspace(-5.0, 5.0, 256), (3, 1))
-    with pytest.raises(InputError, match=match):
-        merge_Debevec1997(
-            values, [1.0, 2.0], np.arange(256.0), g, photoquantity_out=make_out(values)
-        )
+    with pytest.raises(InputError, match=f"^`{name}` .*{match}"):
+        merge(values, [1.0, 2.0], np.arange(256.0), g, **{name: make_out(values)})
