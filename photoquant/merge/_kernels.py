@@ -13,14 +13,17 @@ Two implementations with **bit-identical** results:
   indexing is 2× faster than 4-d indexing. Three channels (and one, as
   three) take a kernel that merges three values a pass with the exposure
   loop unrolled (:func:`_direct_rgb_py`: 7.6 ms on one thread for the same
-  stack, 2026-12-02).
+  stack, 2026-12-02), reading a code's two table entries as one 8-byte pair
+  and adding it to the value's two sums by one two-lane float32 vector add
+  (an LLVM intrinsic, :func:`_pair_add`: 5.0–5.4 ms).
 * numpy (always there): per channel plane and exposure, the codes are cast
   once into a reused intp buffer, gathered with ``take(out=, mode="clip")``
   (no buffering) and added into float32 plane accumulators.
 
 Both add the K terms of a value in the order ``k = 0 … K−1`` starting from
-0 in float32 (numba compiles without ``fastmath``, so no reassociation), so
-they give the same bits; :mod:`tests.photoquant.test_merge_fast` checks it.
+0 in float32 (numba compiles without ``fastmath``, so no reassociation; a
+lane of a vector add is the same IEEE float32 add), so they give the same
+bits; :mod:`tests.photoquant.test_merge_fast` checks it.
 
 A *code* is what indexes the tables: the integer value (or the sum of its
 ``N`` repeats), or one of two extra codes past the grid for values that
@@ -104,8 +107,7 @@ def _direct_rgb_py(
     rows: Any,
     codes: Any,
     start: int,
-    w: Any,
-    wt: Any,
+    pairs: Any,
     clip: Any,
     num: Any,
     den: Any,
@@ -115,23 +117,35 @@ def _direct_rgb_py(
 ) -> None:  # pragma: no cover - compiled by numba
     """numba body: :func:`_direct_py` for three channels, the three values of a pixel at once.
 
-    Six independent sums per pass over the exposures, with the channels'
-    table rows known at compile time, and no flag work in the loop: a value
-    without weight gets ``0 / 0`` there and is flagged by a second pass over
-    the tile's ``den``, run only when the tile has one. One thread,
-    1024×768×3, K = 8, alternated in one process (2026-12-02): 10.9–11.0 →
-    8.5–8.6 ms. The exposures' codes come as a tuple ``rows`` of K flat
+    Three independent pair sums per pass over the exposures, with the
+    channels' table rows known at compile time, and no flag work in the
+    loop: a value without weight gets ``0 / 0`` there and is flagged by a
+    second pass over the tile's ``den``, run only when the tile has one. One
+    thread, 1024×768×3, K = 8, alternated in one process (2026-12-02): 10.9–11.0
+    → 8.5–8.6 ms. The exposures' codes come as a tuple ``rows`` of K flat
     arrays (the rows of ``codes``), whose length numba compiles in (one
     compilation per K, cached on disk): the loop over the exposures is
-    unrolled, 8.4–8.5 → 7.6 ms. Measured and not kept: the flags set in
-    the loop (a call the loop must keep its registers for: 9.1–9.3 ms);
-    three values at a time for any channel count, their table rows
-    computed per pixel (11.1 ms: the gain is the constant rows); the
-    run-time channel loop without flag work (11.2 ms). Each value's terms
-    are still added in the order ``k = 0 … K−1`` from 0, so the bits are
-    those of :func:`_direct_py`. One channel goes through this kernel as
-    three with the same tables (:func:`_direct_compiled`): 12.0 → 7.8 ms for
-    1024×768×3 values of one channel, K = 8, one thread.
+    unrolled, 8.4–8.5 → 7.6 ms.
+
+    ``pairs`` (K, C, G) holds each code's ``w·(g − ln t_k)`` and ``w`` side by
+    side as one 8-byte entry (:attr:`~photoquant.merge._tiled.MergeTables.pairs`),
+    loaded at once and added into a pair of float32 sums by one two-lane
+    vector add (:func:`_pair_add`): one load and one add per exposure and
+    value instead of two of each. The lanes are IEEE float32 adds in the
+    same order as the scalar ones, so the bits are those of
+    :func:`_direct_py`; 7.4–7.7 → 5.0–5.4 ms on one thread, the same stack
+    (20 alternated repeats, 2026-12-02). The same pairs as numba complex64
+    values were not faster (7.46 against 7.40 ms): numba loads and adds a
+    complex number's halves apart.
+
+    Measured and not kept: the flags set in the loop (a call the loop must
+    keep its registers for: 9.1–9.3 ms); three values at a time for any
+    channel count, their table rows computed per pixel (11.1 ms: the gain
+    is the constant rows); the run-time channel loop without flag work
+    (11.2 ms). Each value's terms are added in the order ``k = 0 … K−1``
+    from 0. One channel goes through this kernel as three with the same
+    tables (:func:`_direct_compiled`): 12.0 → 7.8 ms for 1024×768×3 values
+    of one channel, K = 8, one thread (separate tables).
     """
     n_k = len(rows)
     zero, one, two = np.uint64(0), np.uint64(1), np.uint64(2)
@@ -139,30 +153,24 @@ def _direct_rgb_py(
     for p in range(num.size // 3):
         q = np.uint64(3 * p)
         v = np.uint64(start) + q
-        s0 = np.float32(0.0)
-        s1 = np.float32(0.0)
-        s2 = np.float32(0.0)
-        d0 = np.float32(0.0)
-        d1 = np.float32(0.0)
-        d2 = np.float32(0.0)
+        a0 = 0.0  # the bits of two float32 zeros: (Σ w·(g − ln t), Σ w)
+        a1 = 0.0
+        a2 = 0.0
         for k in range(n_k):
             uk = np.uint64(k)
             row = rows[k]
-            c0 = row[v]
-            c1 = row[v + one]
-            c2 = row[v + two]
-            s0 += wt[uk, zero, c0]
-            d0 += w[zero, c0]
-            s1 += wt[uk, one, c1]
-            d1 += w[one, c1]
-            s2 += wt[uk, two, c2]
-            d2 += w[two, c2]
+            a0 = _pair_add(a0, pairs[uk, zero, row[v]])
+            a1 = _pair_add(a1, pairs[uk, one, row[v + one]])
+            a2 = _pair_add(a2, pairs[uk, two, row[v + two]])
+        d0 = _pair_second(a0)
+        d1 = _pair_second(a1)
+        d2 = _pair_second(a2)
         den[q] = d0
         den[q + one] = d1
         den[q + two] = d2
-        num[q] = s0 / d0  # 0 / 0 without weight: flagged below
-        num[q + one] = s1 / d1
-        num[q + two] = s2 / d2
+        num[q] = _pair_first(a0) / d0  # 0 / 0 without weight: flagged below
+        num[q + one] = _pair_first(a1) / d1
+        num[q + two] = _pair_first(a2) / d2
         unweighted |= not (d0 > 0 and d1 > 0 and d2 > 0)
     if unweighted:
         _flag_unweighted(codes, start, clip, num, den, mask, all_sat, all_dark)
@@ -371,6 +379,47 @@ def _summary_py(
 
 
 if HAVE_NUMBA:  # pragma: no cover - depends on the environment
+    from llvmlite import ir as _ir  # type: ignore[import-untyped]
+    from numba import extending as _extending
+    from numba import types as _types
+
+    _intrinsic: Any = _extending.intrinsic  # typed by numba for its own calls only
+
+    _PAIR = _ir.VectorType(_ir.FloatType(), 2)
+
+    @_intrinsic
+    def _pair_add(typingctx: Any, a: Any, b: Any) -> Any:
+        """``a + b`` lane by lane, each a float64 that carries two float32 (one vector add)."""
+        del typingctx
+        if a != _types.float64 or b != _types.float64:
+            return None
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            del context, signature  # numba's codegen arguments, not needed here
+            x, y = (builder.bitcast(arg, _PAIR) for arg in args)
+            return builder.bitcast(builder.fadd(x, y), _ir.DoubleType())
+
+        return _types.float64(_types.float64, _types.float64), codegen
+
+    def _pair_lane(lane: int) -> Any:
+        @_intrinsic
+        def lane_of(typingctx: Any, a: Any) -> Any:
+            del typingctx
+            if a != _types.float64:
+                return None
+
+            def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+                del context, signature
+                pair = builder.bitcast(args[0], _PAIR)
+                return builder.extract_element(pair, _ir.Constant(_ir.IntType(32), lane))
+
+            return _types.float32(_types.float64), codegen
+
+        return lane_of
+
+    _pair_first = _pair_lane(0)  # the float32 at the lower address
+    _pair_second = _pair_lane(1)
+
     # numpy's error model: s / d needs no zero test (it is taken where d > 0, or, in the
     # three-value kernel, gives 0 / 0 = NaN where d = 0 and the value is flagged after)
     _flag = _compile(_flag_py, inline="always")
@@ -471,6 +520,7 @@ def accumulate_codes(
     rows: slice | None = None,
     backend: str = "auto",
     flags_zeroed: bool = False,
+    pairs: np.ndarray | None = None,
 ) -> None:
     """Merge the codes of a tile: ``ln c``, ``Σ_k w`` and the three flags.
 
@@ -493,11 +543,15 @@ def accumulate_codes(
         ``mask``, ``all_sat`` and ``all_dark`` are all false already: the
         numba kernel, which sets a flag only where it holds, then writes
         nothing else into them (they are not cleared first).
+    pairs : ndarray, shape (K, C, G) float64, optional
+        ``wt`` and ``w`` paired per entry
+        (:attr:`~photoquant.merge._tiled.MergeTables.pairs`), for the numba
+        three-value kernel; the same bits without.
     """
     if _use_numba(backend):
         outs = _flat_outputs(num, den, mask, all_sat, all_dark, zero_flags=not flags_zeroed)
         flat, start = _flat_span(codes, rows, 1)
-        _direct_compiled(flat, start, w, wt, clip, outs)
+        _direct_compiled(flat, start, w, wt, clip, outs, pairs)
     else:
         tile = codes if rows is None else codes[:, rows]
         _direct_np(tile, w, wt, clip, num, den, mask, all_sat, all_dark)
@@ -510,29 +564,31 @@ def _direct_compiled(
     wt: np.ndarray,
     clip: np.ndarray,
     outs: list[np.ndarray],
+    pairs: np.ndarray | None = None,
 ) -> None:
     """The numba direct merge of ``flat`` codes from ``start`` into the flat ``outs``.
 
-    Three channels, or one, go to the three-value kernel :func:`_direct_rgb_py`
-    (one channel as three with the same tables: three consecutive values a
-    pass, and the last one or two by :func:`_direct_py`), other channel counts
-    and more than :data:`_MAX_UNROLLED_EXPOSURES` exposures to
-    :func:`_direct_py`. Every path adds a value's terms in the same order:
-    the same bits.
+    Three channels, or one, with the paired tables ``pairs`` go to the
+    three-value kernel :func:`_direct_rgb_py` (one channel as three with the
+    same tables: three consecutive values a pass, and the last one or two by
+    :func:`_direct_py`); other channel counts, more than
+    :data:`_MAX_UNROLLED_EXPOSURES` exposures, or no ``pairs`` (tables too
+    large to pair) to :func:`_direct_py`. Every path adds a value's terms in
+    the same order: the same bits.
     """
     n_ch, size = w.shape[0], outs[0].size
-    if n_ch not in (1, 3) or flat.shape[0] > _MAX_UNROLLED_EXPOSURES:
+    if pairs is None or n_ch not in (1, 3) or flat.shape[0] > _MAX_UNROLLED_EXPOSURES:
         _direct_nb(flat, start, w, wt, clip, *outs)
         return
     body = size - size % 3  # all of it for three channels
     rows = tuple(flat)
     if n_ch == 1:
-        three = (np.tile(w, (3, 1)), np.tile(wt, (1, 3, 1)), np.tile(clip, (3, 1)))
+        three = (np.tile(pairs, (1, 3, 1)), np.tile(clip, (3, 1)))
         _direct_rgb_nb(rows, flat, start, *three, *(o[:body] for o in outs))
         if body < size:
             _direct_nb(flat, start + body, w, wt, clip, *(o[body:] for o in outs))
     else:
-        _direct_rgb_nb(rows, flat, start, w, wt, clip, *outs)
+        _direct_rgb_nb(rows, flat, start, pairs, clip, *outs)
 
 
 def accumulate_repeats(

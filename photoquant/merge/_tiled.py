@@ -51,6 +51,11 @@ __all__ = [
     "merge_tiles_linear",
 ]
 
+PAIRED_TABLE_SIZE = (1 << 16) + 2
+"""Most codes per table (the grid and the two exclusion codes) for which the tables are also
+kept paired (:attr:`MergeTables.pairs`): single frames of up to 16 bits (a K = 8, RGB
+stack's pairs: 12.6 MB at 16 bits, 50 KB at 8)."""
+
 TILE_BYTES = 2 << 20
 """Input bytes per row tile when the caller gives no ``tile_rows`` (2 MiB: the tile's
 frames, codes and accumulators stay in the cache, and a 1024×768 image gives
@@ -65,6 +70,13 @@ class MergeTables:
     ``0 … G−1`` are the grid, ``sat_code = G`` a value with a repeat at
     saturation (no weight, clipped) and ``dark_code = G+1`` one with a repeat
     at the dark floor (no weight, not clipped).
+
+    ``pairs`` (K, C, G+2) float64, up to :data:`PAIRED_TABLE_SIZE` codes
+    (``None`` above): the same tables paired, each entry the 8 bytes of the
+    float32 ``wt[k, ch, code]`` followed by ``w[ch, code]``, so that the
+    numba three-value kernel loads both at once and adds them to its two sums
+    in one vector add (the same float32 adds: the same bits). Not float64
+    numbers: only those kernels read them.
     """
 
     w: np.ndarray
@@ -72,6 +84,7 @@ class MergeTables:
     clip: np.ndarray
     sat_code: int
     dark_code: int
+    pairs: np.ndarray | None = None
 
     @classmethod
     def build(
@@ -105,7 +118,13 @@ class MergeTables:
                 wt[k, ch, :size] = w64 * (g64 - lt)
             clip[ch, :size] = grid >= saturation[ch]
         clip[:, size] = True
-        return cls(w, wt, clip, size, size + 1)
+        pairs = None
+        if size + 2 <= PAIRED_TABLE_SIZE:
+            both = np.empty(wt.shape + (2,), dtype=np.float32)
+            both[..., 0] = wt
+            both[..., 1] = w
+            pairs = both.view(np.float64).reshape(wt.shape)
+        return cls(w, wt, clip, size, size + 1, pairs)
 
 
 class CodeSource(Protocol):
@@ -182,6 +201,7 @@ class DirectCodes:
                 rows=rows,
                 backend=backend,
                 flags_zeroed=flags_zeroed,
+                pairs=tables.pairs,
             )
             return
         codes = self._override(
@@ -190,7 +210,16 @@ class DirectCodes:
             None if self.dark is None else self.dark[:, rows],
         )
         accumulate_codes(
-            codes, w, wt, clip, num, den, *flags, backend=backend, flags_zeroed=flags_zeroed
+            codes,
+            w,
+            wt,
+            clip,
+            num,
+            den,
+            *flags,
+            backend=backend,
+            flags_zeroed=flags_zeroed,
+            pairs=tables.pairs,
         )
 
 

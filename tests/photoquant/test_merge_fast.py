@@ -24,8 +24,8 @@ from photoquant.merge import (
     merge_stack_Debevec1997,
 )
 from photoquant.merge._kernels import HAVE_NUMBA
-from photoquant.merge._tiled import merge_tiles, merge_tiles_linear
-from photoquant.merge.debevec1997 import plan_stack_Debevec1997
+from photoquant.merge._tiled import PAIRED_TABLE_SIZE, merge_tiles, merge_tiles_linear
+from photoquant.merge.debevec1997 import _check_inputs, _table_plan, plan_stack_Debevec1997
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
@@ -227,11 +227,16 @@ def test_merge_from_the_cached_repeat_statistics_gives_the_same_bits(case, backe
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed (the numpy kernels are used)")
 @pytest.mark.parametrize("zeroed", [True, False])
 @pytest.mark.parametrize("n_ch", [1, 3])
-def test_three_value_kernel_gives_the_bits_of_the_any_channel_kernel(zeroed, n_ch):
+def test_three_value_kernel_gives_the_bits_of_the_any_channel_kernel(zeroed, n_ch, monkeypatch):
     # the three-value kernel (RGB, or one channel three values a pass and a tail of one or
-    # two; flags set by a second pass) against the per-value kernel: tiles that start
-    # inside the array, values flagged all saturated and all dark, in some tiles only
+    # two; paired tables and vector adds; flags set by a second pass) against the per-value
+    # kernel: tiles that start inside the array, values flagged all saturated and all dark,
+    # in some tiles only
     from photoquant.merge import _kernels
+
+    calls = []
+    rgb = _kernels._direct_rgb_nb
+    monkeypatch.setattr(_kernels, "_direct_rgb_nb", lambda *args: calls.append(1) or rgb(*args))
 
     rng = np.random.default_rng(11)
     k, h, width = 5, 23, 17  # 17 values a row for one channel: tiles end mid-triple
@@ -259,8 +264,9 @@ def test_three_value_kernel_gives_the_bits_of_the_any_channel_kernel(zeroed, n_c
     tables = plan[1]
     flat = codes.reshape(k, -1)
     results = []
+    assert tables.pairs is not None
     kernels = (
-        lambda *args: _kernels._direct_compiled(*args[:5], list(args[5:])),
+        lambda *args: _kernels._direct_compiled(*args[:5], list(args[5:]), tables.pairs),
         _kernels._direct_nb,
     )
     for kernel in kernels:
@@ -274,12 +280,50 @@ def test_three_value_kernel_gives_the_bits_of_the_any_channel_kernel(zeroed, n_c
                     f.fill(False)
             kernel(flat, start, tables.w, tables.wt, tables.clip, *tile)
         results.append(outs)
+    assert len(calls) == 4  # the three-value kernel merged every tile
     log_c, _, mask, all_sat, all_dark = results[0]
     assert mask[n_ch * (3 * width + 4) + n_ch - 1] and all_sat[n_ch * (3 * width + 4) + n_ch - 1]
     assert mask[n_ch * (9 * width + 2)] and all_dark[n_ch * (9 * width + 2)]
     assert np.isnan(log_c[mask]).all() and np.isfinite(log_c[~mask]).all()
     assert 0 < mask.sum() < mask.size // 4
     for a, b in zip(*results, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=20, deadline=None)
+@given(case=stacks())
+def test_paired_tables_hold_the_tables_side_by_side(case):
+    # each 8-byte entry: the float32 w·(g − ln t_k) at the lower address, then w
+    stack, response, opts = case
+    tables = plan_stack_Debevec1997(stack, response, opts)[1]
+    assert tables.pairs is not None and tables.pairs.dtype == np.float64
+    assert tables.pairs.flags.c_contiguous and tables.pairs.shape == tables.wt.shape
+    halves = tables.pairs.view(np.float32).reshape(tables.wt.shape + (2,))
+    np.testing.assert_array_equal(halves[..., 0], tables.wt)
+    np.testing.assert_array_equal(halves[..., 1], np.broadcast_to(tables.w, tables.wt.shape))
+
+
+def test_tables_past_the_paired_size_are_not_paired_and_merge_alike():
+    # codes above 16 bits: no pairs (their memory), the per-value kernel, the numpy bits
+    rng = np.random.default_rng(5)
+    values = rng.integers(0, 70_000, size=(3, 4, 5, 3)).astype(np.uint32)
+    values[-1] = rng.integers(1, 60_000, size=(4, 5, 3))
+    levels = np.linspace(0.0, 70_000.0, 64)
+    g = np.tile(np.linspace(-6.0, 4.0, 64), (3, 1))
+    inputs = _check_inputs(
+        values, [1e-3, 1e-2, 1e-1], levels, g, None, None, None, None, "hat", 0.0, 1
+    )
+    source, tables = _table_plan(inputs)
+    assert tables.pairs is None and tables.w.shape[1] > PAIRED_TABLE_SIZE
+    outs = []
+    for backend in ("numpy", "numba") if HAVE_NUMBA else ("numpy",):
+        out = [np.empty((4, 5, 3), np.float32), np.zeros((4, 5, 3), bool)]
+        out += [np.zeros((4, 5, 3), bool), np.zeros((4, 5, 3), bool)]
+        weight = np.empty((4, 5, 3), np.float32)
+        merge_tiles(source, tables, *out, weight_out=weight, tile_rows=2, backend=backend)
+        outs.append([*out, weight])
+    assert np.isfinite(outs[0][0]).mean() > 0.5
+    for a, b in zip(outs[0], outs[-1], strict=True):
         np.testing.assert_array_equal(a, b)
 
 
