@@ -40,30 +40,23 @@ def _merge_setup(config: Config) -> dict[str, Any]:
     return ctx
 
 
+def _hat_arguments(ctx: dict[str, Any]) -> tuple[tuple[Any, ...], dict[str, Any]]:
+    """The stack, its times and the true response; the detected saturation levels, the hat."""
+    args = (ctx["frames"], ctx["data"].exposure_s, ctx["levels"], ctx["g"])
+    return args, {"saturation_level": ctx["saturation"], "weighting": "hat"}
+
+
 def _ours_hat(ctx: dict[str, Any]) -> np.ndarray:
     # the HDR image alone, as the peers give theirs (a fresh array each run)
-    return merge_photoquantity_Debevec1997(
-        ctx["frames"],
-        ctx["data"].exposure_s,
-        ctx["levels"],
-        ctx["g"],
-        saturation_level=ctx["saturation"],
-        weighting="hat",
-    )
+    args, kw = _hat_arguments(ctx)
+    return merge_photoquantity_Debevec1997(*args, **kw)
 
 
 def _ours_hat_result(ctx: dict[str, Any]) -> np.ndarray:
     # the whole MergeResult (ln c, Σw, flags) and the image written tile by tile beside it
     linear = np.empty(ctx["frames"].shape[1:], dtype=np.float32)
-    merge_Debevec1997(
-        ctx["frames"],
-        ctx["data"].exposure_s,
-        ctx["levels"],
-        ctx["g"],
-        saturation_level=ctx["saturation"],
-        weighting="hat",
-        photoquantity_out=linear,
-    )
+    args, kw = _hat_arguments(ctx)
+    merge_Debevec1997(*args, photoquantity_out=linear, **kw)
     return linear
 
 

@@ -327,6 +327,23 @@ def test_tables_past_the_paired_size_are_not_paired_and_merge_alike():
         np.testing.assert_array_equal(a, b)
 
 
+def _array_merge_arguments(case, as_float, **kw):  # noqa: ANN001, ANN003, ANN202
+    """``merge_Debevec1997``'s arguments for a drawn stack: its repeat sums (or their float
+    means) and the stack's response and options, plus ``kw``."""
+    stack, response, opts = case
+    values = stack.repeat_sum()
+    if as_float:
+        values = values / stack.n_repeats
+    kw |= {
+        "saturation_level": response.saturation_level,
+        "min_level": response.valid_min if opts.exclude_below_valid_min else None,
+        "weighting": opts.weighting,
+        "c_min": np.asarray(response.black_level, dtype=np.float64),
+        "repeats": 1 if as_float else stack.n_repeats,
+    }
+    return (values, stack.exposure_s, response.levels, response.log_inverse_response), kw
+
+
 @settings(max_examples=30, deadline=None)
 @given(
     case=stacks(),
@@ -339,20 +356,8 @@ def test_photoquantity_out_holds_the_results_photoquantity_to_the_bit(
     case, tile_rows, workers, out_dtype, as_float
 ):
     """Tile by tile (integer values) or after the float merge: ``photoquantity()``, in out's dtype."""
-    stack, response, opts = case
-    values = stack.repeat_sum()
-    if as_float:
-        values = values / stack.n_repeats
-    kw = {
-        "saturation_level": response.saturation_level,
-        "min_level": response.valid_min if opts.exclude_below_valid_min else None,
-        "weighting": opts.weighting,
-        "c_min": np.asarray(response.black_level, dtype=np.float64),
-        "repeats": 1 if as_float else stack.n_repeats,
-        "tile_rows": tile_rows,
-        "workers": workers,
-    }
-    args = (values, stack.exposure_s, response.levels, response.log_inverse_response)
+    args, kw = _array_merge_arguments(case, as_float, tile_rows=tile_rows, workers=workers)
+    values = args[0]
     out = np.full(values.shape[1:], -1.0, dtype=out_dtype)  # every value must be written
     res = merge_Debevec1997(*args, photoquantity_out=out, **kw)
     np.testing.assert_array_equal(out, res.photoquantity().astype(out_dtype))
@@ -374,20 +379,8 @@ def test_merge_photoquantity_is_the_results_photoquantity_to_the_bit(
 ):
     """The image alone: ``merge_Debevec1997(...).photoquantity()``, NaN where flagged, in
     out's dtype (without out: the result's dtype, float32 from integer values)."""
-    stack, response, opts = case
-    values = stack.repeat_sum()
-    if as_float:
-        values = values / stack.n_repeats
-    kw = {
-        "saturation_level": response.saturation_level,
-        "min_level": response.valid_min if opts.exclude_below_valid_min else None,
-        "weighting": opts.weighting,
-        "c_min": np.asarray(response.black_level, dtype=np.float64),
-        "repeats": 1 if as_float else stack.n_repeats,
-        "tile_rows": tile_rows,
-        "workers": workers,
-    }
-    args = (values, stack.exposure_s, response.levels, response.log_inverse_response)
+    args, kw = _array_merge_arguments(case, as_float, tile_rows=tile_rows, workers=workers)
+    values = args[0]
     expected = merge_Debevec1997(*args, **kw).photoquantity()
     if out_dtype is None:
         image = merge_photoquantity_Debevec1997(*args, **kw)
