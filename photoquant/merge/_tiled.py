@@ -96,6 +96,7 @@ class MergeTables:
         log_t: np.ndarray,
         *,
         dark_below: np.ndarray | None = None,
+        paired: bool = True,
     ) -> MergeTables:
         """Tables on ``grid`` (the mean each code stands for).
 
@@ -103,6 +104,8 @@ class MergeTables:
         float64 and each term ``w·(g − ln t_k)`` is rounded to float32 once.
         ``dark_below`` (C,): codes ``≤`` it get no weight (single frames,
         where "a repeat at the dark floor" is a function of the value).
+        ``paired``: also build :attr:`pairs` (when small enough), which only
+        the kernel of single frames' codes (:class:`DirectCodes`) reads.
         """
         n_ch, size = saturation.size, grid.size
         w = np.zeros((n_ch, size + 2), dtype=np.float32)
@@ -119,7 +122,7 @@ class MergeTables:
             clip[ch, :size] = grid >= saturation[ch]
         clip[:, size] = True
         pairs = None
-        if size + 2 <= PAIRED_TABLE_SIZE:
+        if paired and size + 2 <= PAIRED_TABLE_SIZE:
             both = np.empty(wt.shape + (2,), dtype=np.float32)
             both[..., 0] = wt
             both[..., 1] = w
@@ -392,7 +395,7 @@ def merge_tiles_linear(
     the values :func:`merge_tiles` gives ``ln c``, exponentiated as
     :meth:`~photoquant.merge.MergeResult.photoquantity` does. A tile's
     ``ln c``, ``Σ_k w`` and flags live in tile-sized work arrays (about a MiB
-    each, reused from the allocator's heap), so ``out`` is the only
+    each for the default tiles), so ``out`` is the only
     image-sized memory the merge writes. Writing ``ln c`` and ``Σ_k w`` into
     image-sized arrays as well, first touched by this merge, cost 1.6–3.9 ms
     more in the paired median (1024×768×3, K = 8, 2 cores, 20–40 alternated

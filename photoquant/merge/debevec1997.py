@@ -532,6 +532,7 @@ def plan_stack_Debevec1997(
         inp.sat,
         inp.log_t,
         dark_below=black if single else None,
+        paired=single,  # repeat sums are merged by kernels that read w and wt apart
     )
     source: CodeSource
     if single:

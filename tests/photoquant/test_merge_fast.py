@@ -295,7 +295,21 @@ def test_three_value_kernel_gives_the_bits_of_the_any_channel_kernel(zeroed, n_c
 def test_paired_tables_hold_the_tables_side_by_side(case):
     # each 8-byte entry: the float32 w·(g − ln t_k) at the lower address, then w
     stack, response, opts = case
-    tables = plan_stack_Debevec1997(stack, response, opts)[1]
+    # the stack's plan pairs the tables of single frames only (repeat sums: kernels that
+    # read w and wt apart); the array merge pairs those of any integer values
+    assert (plan_stack_Debevec1997(stack, response, opts)[1].pairs is None) == (stack.n_repeats > 1)
+    args, kw = _array_merge_arguments(case, False)
+    checked = _check_inputs(
+        *args,
+        kw["saturation_level"],
+        None,
+        None,
+        kw["min_level"],
+        kw["weighting"],
+        kw["c_min"],
+        kw["repeats"],
+    )
+    tables = _table_plan(checked)[1]
     assert tables.pairs is not None and tables.pairs.dtype == np.float64
     assert tables.pairs.flags.c_contiguous and tables.pairs.shape == tables.wt.shape
     halves = tables.pairs.view(np.float32).reshape(tables.wt.shape + (2,))
