@@ -44,6 +44,7 @@ __all__ = [
     "accumulate_codes",
     "accumulate_repeats",
     "accumulate_summaries",
+    "three_value_tables",
     "repeat_codes",
     "summary_codes",
 ]
@@ -520,7 +521,7 @@ def accumulate_codes(
     rows: slice | None = None,
     backend: str = "auto",
     flags_zeroed: bool = False,
-    pairs: np.ndarray | None = None,
+    three_value: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> None:
     """Merge the codes of a tile: ``ln c``, ``Σ_k w`` and the three flags.
 
@@ -543,18 +544,37 @@ def accumulate_codes(
         ``mask``, ``all_sat`` and ``all_dark`` are all false already: the
         numba kernel, which sets a flag only where it holds, then writes
         nothing else into them (they are not cleared first).
-    pairs : ndarray, shape (K, C, G) float64, optional
-        ``wt`` and ``w`` paired per entry
-        (:attr:`~photoquant.merge._tiled.MergeTables.pairs`), for the numba
-        three-value kernel; the same bits without.
+    three_value : (ndarray, ndarray), optional
+        The tables as the numba three-value kernel reads them
+        (:func:`three_value_tables`, built once per tables); the same bits
+        without.
     """
     if _use_numba(backend):
         outs = _flat_outputs(num, den, mask, all_sat, all_dark, zero_flags=not flags_zeroed)
         flat, start = _flat_span(codes, rows, 1)
-        _direct_compiled(flat, start, w, wt, clip, outs, pairs)
+        _direct_compiled(flat, start, w, wt, clip, outs, three_value)
     else:
         tile = codes if rows is None else codes[:, rows]
         _direct_np(tile, w, wt, clip, num, den, mask, all_sat, all_dark)
+
+
+def three_value_tables(
+    pairs: np.ndarray | None, clip: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The paired tables and ``clip`` as :func:`_direct_rgb_py` reads them: three channel rows.
+
+    Three channels as they are; one channel's rows repeated three times (the
+    kernel merges its values three a pass with the same tables); ``None``
+    for other channel counts or without ``pairs`` (tables too large to
+    pair), which :func:`_direct_py` merges. Made once per tables
+    (:attr:`~photoquant.merge._tiled.MergeTables.three_value`), not per
+    tile: a 16-bit table's pairs are megabytes.
+    """
+    if pairs is None or clip.shape[0] not in (1, 3):
+        return None
+    if clip.shape[0] == 1:
+        return np.tile(pairs, (1, 3, 1)), np.tile(clip, (3, 1))
+    return pairs, clip
 
 
 def _direct_compiled(
@@ -564,31 +584,26 @@ def _direct_compiled(
     wt: np.ndarray,
     clip: np.ndarray,
     outs: list[np.ndarray],
-    pairs: np.ndarray | None = None,
+    three_value: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> None:
     """The numba direct merge of ``flat`` codes from ``start`` into the flat ``outs``.
 
-    Three channels, or one, with the paired tables ``pairs`` go to the
+    Three channels, or one, with their :func:`three_value_tables` go to the
     three-value kernel :func:`_direct_rgb_py` (one channel as three with the
     same tables: three consecutive values a pass, and the last one or two by
     :func:`_direct_py`); other channel counts, more than
-    :data:`_MAX_UNROLLED_EXPOSURES` exposures, or no ``pairs`` (tables too
-    large to pair) to :func:`_direct_py`. Every path adds a value's terms in
-    the same order: the same bits.
+    :data:`_MAX_UNROLLED_EXPOSURES` exposures, or no ``three_value`` (tables
+    too large to pair) to :func:`_direct_py`. Every path adds a value's
+    terms in the same order: the same bits.
     """
-    n_ch, size = w.shape[0], outs[0].size
-    if pairs is None or n_ch not in (1, 3) or flat.shape[0] > _MAX_UNROLLED_EXPOSURES:
+    size = outs[0].size
+    if three_value is None or flat.shape[0] > _MAX_UNROLLED_EXPOSURES:
         _direct_nb(flat, start, w, wt, clip, *outs)
         return
     body = size - size % 3  # all of it for three channels
-    rows = tuple(flat)
-    if n_ch == 1:
-        three = (np.tile(pairs, (1, 3, 1)), np.tile(clip, (3, 1)))
-        _direct_rgb_nb(rows, flat, start, *three, *(o[:body] for o in outs))
-        if body < size:
-            _direct_nb(flat, start + body, w, wt, clip, *(o[body:] for o in outs))
-    else:
-        _direct_rgb_nb(rows, flat, start, pairs, clip, *outs)
+    _direct_rgb_nb(tuple(flat), flat, start, *three_value, *(o[:body] for o in outs))
+    if body < size:  # one channel: the last one or two values
+        _direct_nb(flat, start + body, w, wt, clip, *(o[body:] for o in outs))
 
 
 def accumulate_repeats(

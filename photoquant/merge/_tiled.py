@@ -32,13 +32,19 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Protocol
 
 import numpy as np
 
 from photoquant._checks import check_workers
 from photoquant._threads import thread_map
-from photoquant.merge._kernels import accumulate_codes, accumulate_repeats, accumulate_summaries
+from photoquant.merge._kernels import (
+    accumulate_codes,
+    accumulate_repeats,
+    accumulate_summaries,
+    three_value_tables,
+)
 
 __all__ = [
     "MergeTables",
@@ -85,6 +91,12 @@ class MergeTables:
     sat_code: int
     dark_code: int
     pairs: np.ndarray | None = None
+
+    @cached_property
+    def three_value(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``pairs`` and ``clip`` as the three-value kernel reads them
+        (:func:`~photoquant.merge._kernels.three_value_tables`), made on first use."""
+        return three_value_tables(self.pairs, self.clip)
 
     @classmethod
     def build(
@@ -204,7 +216,7 @@ class DirectCodes:
                 rows=rows,
                 backend=backend,
                 flags_zeroed=flags_zeroed,
-                pairs=tables.pairs,
+                three_value=tables.three_value,
             )
             return
         codes = self._override(
@@ -222,7 +234,7 @@ class DirectCodes:
             *flags,
             backend=backend,
             flags_zeroed=flags_zeroed,
-            pairs=tables.pairs,
+            three_value=tables.three_value,
         )
 
 

@@ -264,9 +264,10 @@ def test_three_value_kernel_gives_the_bits_of_the_any_channel_kernel(zeroed, n_c
     tables = plan[1]
     flat = codes.reshape(k, -1)
     results = []
-    assert tables.pairs is not None
+    assert tables.pairs is not None and tables.three_value is not None
+    assert tables.three_value is tables.three_value  # made once per tables, not per tile
     kernels = (
-        lambda *args: _kernels._direct_compiled(*args[:5], list(args[5:]), tables.pairs),
+        lambda *args: _kernels._direct_compiled(*args[:5], list(args[5:]), tables.three_value),
         _kernels._direct_nb,
     )
     for kernel in kernels:
