@@ -49,16 +49,20 @@ import numpy as np
 import scipy.optimize
 
 from photoquant import __version__
+from photoquant._threads import thread_map
 from photoquant.balance import BalanceData, BalanceModel, check_roi
 from photoquant.correspondences import float_tracks
 from photoquant.defects import detect_defects, exclude_defects, hide_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import (
+    MIN_FLOOR_LOG,
     ExposureRefinement,
     _stack_of_pixels,
     fit_affine_shutter,
+    judge_exposure_times,
     refine_against_response,
     refine_jointly,
+    self_consistency_floor,
 )
 from photoquant.flatfield import SensorLUTModel
 from photoquant.glare import GlareData, GlareModel, best_exposed_level
@@ -424,6 +428,13 @@ def calibrate(
             notes.append(f"exposure refinement failed ({exc}); nominal times kept")
             refine_exposures = False
     if refs is not None:
+        # the refined times replace the labels only where the data contradict them
+        decision = judge_exposure_times(refs)
+        exposures["decision"] = decision.as_dict()
+        notes.append(f"views' exposure times: {decision.describe()}")
+        if not decision.refine:
+            refs = None
+    if refs is not None:
         resp_fit = fits[-1]
         views = [r.apply(v) for r, v in zip(refs, views, strict=True)]
         shutter = fit_affine_shutter(refs)[1]
@@ -432,6 +443,7 @@ def calibrate(
         scale_std = shutter.jitter_rms / np.sqrt(min(int(r.refined.sum()) for r in refs))
         exposures = {
             "refined": True,
+            "decision": exposures["decision"],
             "views": [r.as_dict() for r in refs],
             "shutter": {
                 "lag_s": shutter.lag_s,
@@ -450,20 +462,33 @@ def calibrate(
         resp_fit = fit_response(hide_defects(ref, defects), response_spec, rng=seed)
     ref = views[0]
     resp: ResponseModel = resp_fit.model
+    floor = MIN_FLOOR_LOG
+    if refine_exposures:
+        floor = _response_floor(views, resp, seed, defects)
+        exposures["floor_log"] = floor
     if refine_exposures and irradiance is not None:
         irr_ref = _refine_against(irradiance, resp, seed)
-        irradiance = irr_ref.apply(irradiance)
-        exposures["irradiance"] = irr_ref.as_dict()
+        irradiance, exposures["irradiance"] = _apply_if_contradicted(
+            irradiance, irr_ref, floor, "irradiance scene", notes
+        )
     if refine_exposures and flat_field is not None:
         flat_ref = _refine_against(flat_field, resp, seed)
-        flat_field = flat_ref.apply(flat_field)
-        exposures["flat_field"] = flat_ref.as_dict()
+        flat_field, exposures["flat_field"] = _apply_if_contradicted(
+            flat_field, flat_ref, floor, "flat field", notes
+        )
     if refine_exposures and glare_capture is not None and steps["glare"][0].name != "None":
+        glare_ref: ExposureRefinement | None = None
         try:
             glare_ref = _refine_against(glare_capture, resp, seed)
+            glare_decision = judge_exposure_times(glare_ref, floor_log=floor)
         except CalibrationError as exc:
             notes.append(f"glare capture's exposures not refined, nominal times kept: {exc}")
         else:
+            if not glare_decision.refine and refs is None:
+                notes.append(f"glare capture's exposure times: {glare_decision.describe()}")
+                exposures["glare"] = {"decision": glare_decision.as_dict()}
+                glare_ref = None
+        if glare_ref is not None:
             glare_ref, lag_info = _refine_source_exposures(
                 glare_capture,
                 glare_ref,
@@ -630,6 +655,7 @@ def calibrate(
         "steps": {step: _spec_record(*spec) for step, spec in used.items()},
         "seed": int(seed),
         "refine_exposures": bool(refine_exposures),
+        "exposure_floor_log": float(floor),
         "n_views": len(views),
         "white_roi": None if white_roi is None else [int(v) for v in white_roi],
     }
@@ -819,6 +845,45 @@ def _refine_source_exposures(
         log_std[idx] = group.log_std[k]
         info["group_exposures"] = idx.tolist()
     return dataclasses.replace(ref, exposure_s=out, refined=refined, log_std=log_std), info
+
+
+def _response_floor(
+    views: Sequence[ExposureStack], response: ResponseModel, seed: int, defects: Any
+) -> float:
+    """The systematic error per exposure the response leaves on its own views, at least
+    :data:`~photoquant.exposure.MIN_FLOOR_LOG` (:func:`~photoquant.exposure.self_consistency_floor`).
+
+    Each view, labelled with the times the response was recovered with, is
+    refined against it as a scene is at correction (the same pixel sample:
+    ``exhaustive=False``); where a view's exposures are not related by its
+    data it is left out.
+    """
+
+    def refine(view: ExposureStack) -> ExposureRefinement | None:
+        try:
+            return refine_against_response(
+                hide_defects(view, defects), response, seed=seed, exhaustive=False
+            )
+        except CalibrationError:
+            return None
+
+    refs = [r for r in thread_map(refine, list(views)) if r is not None]
+    return max(MIN_FLOOR_LOG, self_consistency_floor(refs))
+
+
+def _apply_if_contradicted(
+    stack: ExposureStack,
+    refinement: ExposureRefinement,
+    floor: float,
+    what: str,
+    notes: list[str],
+) -> tuple[ExposureStack, dict[str, Any]]:
+    """``stack`` with the refined times where the data contradict its labels
+    (:func:`~photoquant.exposure.judge_exposure_times`), else as it is; and the report entry."""
+    decision = judge_exposure_times(refinement, floor_log=floor)
+    notes.append(f"{what}'s exposure times: {decision.describe()}")
+    entry = {**refinement.as_dict(), "decision": decision.as_dict()}
+    return (refinement.apply(stack) if decision.refine else stack), entry
 
 
 def _refine_against(stack: ExposureStack, response: ResponseModel, seed: int) -> ExposureRefinement:

@@ -365,6 +365,7 @@ def _cmd_crossval(args: argparse.Namespace) -> int:
         seed=args.seed,
         profile=args.profile,
         options=_crossval_options(args.option),
+        calibration_only=args.calibration_only,
     )
     print(json.dumps(result.to_json(), indent=1) if args.json else result.format_table())
     return 0
@@ -497,7 +498,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     xval = sub.add_parser(
         "crossval",
-        help="leave-one-exposure-out cross-validation of the response on views[0] of a manifest",
+        help="leave-one-exposure-out cross-validation on views[0] of a manifest: calibrate on "
+        "K - 1 frames, correct them, predict the held-out one",
     )
     xval.add_argument("manifest", help="capture manifest (photoquant.captures/1 JSON)")
     xval.add_argument(
@@ -527,6 +529,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME=VALUE",
         help="an option of the response method (repeatable; VALUE is JSON or text), "
         "e.g. --option wide_steps=none",
+    )
+    xval.add_argument(
+        "--calibration-only",
+        action="store_true",
+        help="predict from the calibration's own merge, not from `correct` of the same frames "
+        "with the calibrated camera (the default, the path users run): scores the response "
+        "and merge alone",
     )
     xval.add_argument(
         "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"

@@ -10,7 +10,8 @@ tile merged and multiplied by the float32 gain ``1 / (u·v)`` straight into
 the result (bounded extra memory, the same bits for any tile size). The scene's exposure times are first re-estimated against the
 camera's response (:func:`photoquant.exposure.refine_exposure_times`) when the
 camera was calibrated with exposure refinement (the photoquant profile's
-default) or when asked.
+default) or when asked, and the refined times replace the labels only where
+the data contradict them (:func:`photoquant.exposure.judge_exposure_times`).
 """
 
 from __future__ import annotations
@@ -22,14 +23,20 @@ import numpy as np
 
 from photoquant.defects import detect_defects
 from photoquant.errors import CalibrationError, InputError
-from photoquant.exposure import ExposureRefinement, refine_against_response
+from photoquant.exposure import (
+    MIN_FLOOR_LOG,
+    ExposureDecision,
+    ExposureRefinement,
+    judge_exposure_times,
+    refine_against_response,
+)
 from photoquant.merge import MergeModel
 from photoquant.merge._tiled import merge_tiles
 from photoquant.methods import resolve_method
 from photoquant.model import CameraModel
 from photoquant.stack import ExposureStack
 
-__all__ = ["Correction", "correct", "correct_manifest", "gain_map_f32"]
+__all__ = ["Correction", "camera_floor_log", "correct", "correct_manifest", "gain_map_f32"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,10 +52,14 @@ class Correction:
     all_saturated, all_dark : ndarray, shape (H, W, C), bool
         Why a pixel is flagged.
     exposures : ExposureRefinement, optional
-        The scene's nominal and refined exposure times, when they were
-        refined (``None``: the nominal times were used).
+        The scene's nominal and refined exposure times, when the refined
+        ones were used (``None``: the nominal times were used).
     notes : tuple of str
-        Why refinement did not run when it would have by default.
+        Why refinement did not run when it would have by default, and its
+        decision.
+    exposure_decision : ExposureDecision, optional
+        The test of the refined against the nominal times, when the scene's
+        times were refined (:func:`photoquant.exposure.judge_exposure_times`).
     """
 
     photoquantity: np.ndarray
@@ -57,6 +68,7 @@ class Correction:
     all_dark: np.ndarray
     exposures: ExposureRefinement | None = None
     notes: tuple[str, ...] = ()
+    exposure_decision: ExposureDecision | None = None
 
 
 def _camera_refines(model: CameraModel) -> bool:
@@ -119,9 +131,16 @@ def correct(
         refined times keep the nominal geometric mean, so the photoquantity's
         scale stays that of the nominal times). ``None`` (default): as the
         camera was calibrated (``model.parameters["refine_exposures"]``, else
-        its profile's setting); a scene whose exposures the data do not
-        relate (one exposure, or no pixel valid in two) then keeps its nominal
-        times, with a note. ``True`` refuses such a scene.
+        its profile's setting), and the refined times are used only where
+        the data contradict the nominal ones beyond what the camera's
+        response itself leaves (a likelihood-ratio test,
+        :func:`photoquant.exposure.judge_exposure_times`, with the floor
+        :func:`camera_floor_log`; the decision is
+        :attr:`Correction.exposure_decision`): a scene whose times are right,
+        such as the camera's own calibration frames, keeps them. A scene whose
+        exposures the data do not relate (one exposure, or no pixel valid in
+        two) keeps its nominal times, with a note. ``True`` uses the refined
+        times whatever the test says, and refuses such a scene.
     tile_rows : int, optional
         Rows per tile of the one-pass correction (a merge method that merges
         each pixel on its own, such as ``"Debevec 1997"``): frames → ``ln c``
@@ -170,20 +189,9 @@ def correct(
         raise InputError(
             f"`refine_exposures` must be true, false or None, got {refine_exposures!r}"
         )
-    refinement: ExposureRefinement | None = None
-    notes: list[str] = []
-    if refine_exposures or (refine_exposures is None and _camera_refines(model)):
-        try:
-            refinement = refine_against_response(stack, model.response)
-        except CalibrationError as exc:
-            if refine_exposures:
-                raise CalibrationError(
-                    f"exposure refinement of the scene failed ({exc}); correct with "
-                    "refine_exposures=False (--no-refine-exposures) to keep the nominal times"
-                ) from None
-            notes.append(f"scene exposures not refined, nominal times kept: {exc}")
-        else:
-            stack = refinement.apply(stack)
+    refinement, decision, notes = _scene_exposures(stack, model, refine_exposures)
+    if refinement is not None:
+        stack = refinement.apply(stack)
     gain = gain_map_f32(model)
     plan = merger.tile_plan(stack, model.balanced_response()) if model.glare.is_identity else None
     if plan is not None:  # one pass: frames -> ln c -> l, tile by tile
@@ -232,7 +240,50 @@ def correct(
         all_dark=all_dark,
         exposures=refinement,
         notes=tuple(notes),
+        exposure_decision=decision,
     )
+
+
+def camera_floor_log(model: CameraModel) -> float:
+    """The systematic error per exposure the camera's response leaves (``ln t``): what its
+    calibration measured on its own views, at least :data:`~photoquant.exposure.MIN_FLOOR_LOG`
+    (a camera written before it was measured: the least)."""
+    value = model.parameters.get("exposure_floor_log")
+    if isinstance(value, int | float) and not isinstance(value, bool) and np.isfinite(value):
+        return max(float(value), MIN_FLOOR_LOG)
+    return MIN_FLOOR_LOG
+
+
+def _scene_exposures(
+    stack: ExposureStack, model: CameraModel, refine_exposures: bool | None
+) -> tuple[ExposureRefinement | None, ExposureDecision | None, list[str]]:
+    """The scene's refined times where they are to be used, the decision, and notes.
+
+    ``True``: refined and used whatever the test says (a failure is an error).
+    ``None``: as the camera was calibrated; the refined times are used only
+    where they contradict the nominal ones beyond the camera's response floor
+    (:func:`photoquant.exposure.judge_exposure_times`), so the camera's own
+    frames, whose times the response was recovered with, keep them.
+    """
+    notes: list[str] = []
+    if not (refine_exposures or (refine_exposures is None and _camera_refines(model))):
+        return None, None, notes
+    try:
+        # the sample's answer, as the camera's floor was measured (exhaustive=False)
+        refinement = refine_against_response(stack, model.response, exhaustive=False)
+    except CalibrationError as exc:
+        if refine_exposures:
+            raise CalibrationError(
+                f"exposure refinement of the scene failed ({exc}); correct with "
+                "refine_exposures=False (--no-refine-exposures) to keep the nominal times"
+            ) from None
+        notes.append(f"scene exposures not refined, nominal times kept: {exc}")
+        return None, None, notes
+    decision = judge_exposure_times(refinement, floor_log=camera_floor_log(model))
+    if refine_exposures:
+        return refinement, decision, notes
+    notes.append(f"scene's exposure times: {decision.describe()}")
+    return (refinement if decision.refine else None), decision, notes
 
 
 def correct_manifest(

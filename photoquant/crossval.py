@@ -24,11 +24,17 @@ saturated, the lowest level if all were dark. Both counts are reported.
 
 Methods
 -------
-* any key of :data:`photoquant.response.RESPONSE_METHODS`, run as
-  ``photoquant calibrate``'s pipeline: :func:`photoquant.calibrate` on the
-  ``K − 1`` frames (one view, the given response method, the profile's
-  choices otherwise), then the camera's own merge
-  (:meth:`photoquant.model.CameraModel.merge_stack`), as the correction does;
+* any key of :data:`photoquant.response.RESPONSE_METHODS`, run as a user
+  runs it: :func:`photoquant.calibrate` on the ``K − 1`` frames (one view,
+  the given response method, the profile's choices otherwise), then
+  :func:`photoquant.correct` of the same frames with that camera and its
+  defaults (as ``photoquant calibrate`` then ``photoquant correct`` would:
+  the exposure-time test, the defect map, ``l = exp(merge) / (u·v)``), and
+  the held-out frame predicted from ``l`` through the camera's balanced
+  response, ``g_bal(ẑ) = ln(l·u·v) + ln t_k``. With ``calibration_only``
+  (``--calibration-only``) the correction is left out: the calibration's
+  own merge of the ``K − 1`` frames (:meth:`photoquant.model.CameraModel.merge_stack`)
+  predicts, which scores the response and merge alone;
 * a peer (:data:`photoquant.peers.PEER_METHODS`, e.g. ``"opencv"``: OpenCV's
   ``CalibrateDebevec`` + ``MergeDebevec`` with OpenCV's defaults), predicted
   through the peer's own response table.
@@ -55,6 +61,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -63,6 +70,7 @@ from typing import Any
 import numpy as np
 
 from photoquant.errors import InputError
+from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
 __all__ = [
@@ -138,6 +146,9 @@ class CrossvalResult:
         Scored region ``(x0, y0, x1, y1)``, end exclusive; the whole frame if None.
     rows : tuple of HeldOutScore
         One per held-out (inner) exposure.
+    pipeline : {"calibrate + correct", "calibration only", "peer"}
+        What predicted the held-out frames: the user's path (calibrate, then
+        correct with the defaults), the calibration's merge alone, or a peer.
     """
 
     method: str
@@ -147,6 +158,7 @@ class CrossvalResult:
     score_range: tuple[float, float]
     roi: tuple[int, int, int, int] | None
     rows: tuple[HeldOutScore, ...]
+    pipeline: str = "calibrate + correct"
 
     @property
     def n_scored(self) -> int:
@@ -176,6 +188,7 @@ class CrossvalResult:
         """A JSON-ready dict (``overall_mae_dn`` is the value-weighted mean)."""
         return {
             "method": self.method,
+            "pipeline": self.pipeline,
             "exposure_s": list(self.exposure_s),
             "bit_depth": self.bit_depth,
             "channels": list(self.channels),
@@ -205,7 +218,7 @@ class CrossvalResult:
         """A plain-text table: one row per held-out exposure, then the overall scores."""
         lo, hi = self.score_range
         head = (
-            f"leave-one-exposure-out cross-validation — {self.method}; "
+            f"leave-one-exposure-out cross-validation — {self.method} ({self.pipeline}); "
             f"|predicted − observed| in DN over observed values in [{lo:g}, {hi:g}]"
             + (f", ROI {list(self.roi)}" if self.roi is not None else "")
         )
@@ -314,29 +327,74 @@ def _is_peer(method: str) -> bool:
     return name in {k.lower() for k in PEER_METHODS}
 
 
+def _given_response(response: ResponseModel, stack: ExposureStack) -> ResponseModel:
+    """A known response checked against the bracket, with the bracket's black level."""
+    if response.n_channels != stack.n_channels:
+        raise InputError(
+            f"the given response has {response.n_channels} channel(s), the bracket "
+            f"{stack.n_channels}"
+        )
+    top = 2**stack.bit_depth - 1
+    if response.levels[0] < 0 or response.levels[-1] > top:
+        raise InputError(
+            f"the given response's levels span [{response.levels[0]:g}, {response.levels[-1]:g}],"
+            f" outside [0, {top}] for the bracket's {stack.bit_depth} bits"
+        )
+    return dataclasses.replace(
+        response, black_level=np.asarray(stack.black_level, dtype=np.float64).copy()
+    )
+
+
 def _fit_photoquant(
     stack: ExposureStack,
     method: str,
     seed: int,
     profile: str = "photoquant",
     options: Mapping[str, Any] | None = None,
+    *,
+    calibration_only: bool = False,
+    given: Any = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any]:
-    """``photoquant calibrate``'s pipeline on one view (the profile's, with ``method`` as the
-    response, with ``options`` over its defaults): response, then the camera's own merge."""
-    from photoquant.calibration import calibrate
+    """The ``K − 1`` frames through photoquant (the profile's pipeline, with ``method`` as
+    the response, ``options`` over its defaults): the response table the prediction goes
+    through, ``ln X − ln t`` of every value (the fallback merge where the pipeline leaves a
+    value without one), and where it did.
+
+    The user's path: calibrate, then correct the same frames with the camera's
+    defaults, ``ln X − ln t = ln(l·u·v)`` through the balanced response; with
+    ``calibration_only`` the calibration's own merge through its response.
+    ``given``: a known response replaces the recovered one (the other steps
+    and the camera's exposure floor are measured with it).
+    """
+    from photoquant.calibration import _response_floor, calibrate
+    from photoquant.correction import correct, gain_map_f32
     from photoquant.merge import MergeModel
 
     spec: Any = method if not options else (method, dict(options))
     model = calibrate([stack], profile=profile, response=spec, seed=seed)
-    merged = model.merge_stack(stack)
-    log_e = merged.log_photoquantity
-    if np.any(merged.mask):
+    if given is not None:
+        floor = _response_floor([stack], given, seed, model.defects)
+        model = dataclasses.replace(
+            model, response=given, parameters={**model.parameters, "exposure_floor_log": floor}
+        )
+    if calibration_only:
+        resp = model.response
+        merged = model.merge_stack(stack)
+        log_e, flagged = merged.log_photoquantity, merged.mask
+    else:
+        resp = model.balanced_response()
+        corrected = correct(stack, model)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_e = np.log(corrected.photoquantity.astype(np.float64)) - np.log(
+                gain_map_f32(model).astype(np.float64)
+            )
+        flagged = corrected.mask | ~np.isfinite(log_e)
+    if np.any(flagged):
         fallback = MergeModel(
             "Debevec 1997", {"weighting": "uniform", "exclude_below_valid_min": False}
-        ).merge(stack, model.response)
-        log_e = np.where(merged.mask, fallback.log_photoquantity, log_e)
-    resp = model.response
-    return resp.levels, resp.log_inverse_response, resp.saturation_level, log_e, merged.mask
+        ).merge(stack, resp)
+        log_e = np.where(flagged, fallback.log_photoquantity, log_e)
+    return resp.levels, resp.log_inverse_response, resp.saturation_level, log_e, flagged
 
 
 def crossval_stack(
@@ -347,6 +405,7 @@ def crossval_stack(
     seed: int = 0,
     profile: str = "photoquant",
     options: Mapping[str, Any] | None = None,
+    calibration_only: bool = False,
 ) -> CrossvalResult:
     """Leave-one-exposure-out cross-validation of ``method`` on a single-view bracket.
 
@@ -355,10 +414,13 @@ def crossval_stack(
     stack : ExposureStack
         The bracket (``K ≥ 3`` exposures; ``N`` repeats are averaged, eq. 2, for
         the observed values).
-    method : str
+    method : str or ResponseModel
         A key of :data:`photoquant.response.RESPONSE_METHODS` (run through
         ``calibrate``'s default pipeline) or of :data:`photoquant.peers.PEER_METHODS`
-        (``"opencv"`` accepted), case-insensitive.
+        (``"opencv"`` accepted), case-insensitive; or a known response (e.g.
+        a dataset's own photometric calibration), which replaces the
+        recovered one in the same pipeline: the same merge, correction and
+        scoring, so the two responses are compared on equal terms.
     roi : sequence of 4 int, optional
         Scored region ``[x0, y0, x1, y1]``, end exclusive (the whole frame by default).
     seed : int
@@ -368,6 +430,11 @@ def crossval_stack(
     options : mapping, optional
         Options of the response method over its defaults (e.g.
         ``{"wide_steps": "none"}``), checked by the method; not for peers.
+    calibration_only : bool
+        Predict from the calibration's own merge of the ``K − 1`` frames
+        instead of their correction with the calibrated camera (module
+        notes): a score of the response and merge alone, not of the path a
+        user runs. Not for peers.
 
     Returns
     -------
@@ -386,9 +453,17 @@ def crossval_stack(
         raise InputError(
             f"cross-validation needs at least 3 exposures (an inner one to hold out), got {k_count}"
         )
+    given = None
+    if isinstance(method, ResponseModel):
+        given = _given_response(method, stack)
+        method = "Debevec 1997"
     peer = None
     if options and _is_peer(method):
         raise InputError(f"options are for photoquant's response methods, not the peer {method!r}")
+    if calibration_only and _is_peer(method):
+        raise InputError(
+            f"calibration_only is for photoquant's response methods, not the peer {method!r}"
+        )
     if _is_peer(method):
         from photoquant.peers import get_peer
 
@@ -405,7 +480,7 @@ def crossval_stack(
                 f"{', '.join(sorted(RESPONSE_METHODS))} and the peers "
                 f"{', '.join(sorted(PEER_METHODS))} ('opencv')"
             )
-        name = lookup[str(method).lower()]
+        name = lookup[str(method).lower()] if given is None else given.method
     height, width = stack.image_shape
     box = None if roi is None else parse_roi(list(roi), (height, width))
     lo, hi = score_range(stack.bit_depth)
@@ -428,7 +503,15 @@ def crossval_stack(
             channels=stack.channels,
         )
         if peer is None:
-            levels, g, sat, log_e, flagged = _fit_photoquant(sub, name, seed, profile, options)
+            levels, g, sat, log_e, flagged = _fit_photoquant(
+                sub,
+                name if given is None else method,
+                seed,
+                profile,
+                options,
+                calibration_only=calibration_only,
+                given=given,
+            )
         else:
             fit = peer.fit(sub)
             levels, g, sat, log_e = (
@@ -476,6 +559,9 @@ def crossval_stack(
         score_range=(lo, hi),
         roi=box,
         rows=tuple(rows),
+        pipeline="peer"
+        if peer is not None
+        else ("calibration only" if calibration_only else "calibrate + correct"),
     )
 
 
@@ -488,6 +574,7 @@ def crossval_manifest(
     seed: int = 0,
     profile: str = "photoquant",
     options: Mapping[str, Any] | None = None,
+    calibration_only: bool = False,
 ) -> CrossvalResult:
     """Cross-validate on ``views[0]`` of a capture manifest (a path or a ``CaptureManifest``).
 
@@ -506,4 +593,12 @@ def crossval_manifest(
             stack.image_shape,
             where=f"manifest {manifest.path}: crossval_roi",
         )
-    return crossval_stack(stack, method, roi=roi, seed=seed, profile=profile, options=options)
+    return crossval_stack(
+        stack,
+        method,
+        roi=roi,
+        seed=seed,
+        profile=profile,
+        options=options,
+        calibration_only=calibration_only,
+    )

@@ -232,3 +232,33 @@ def test_options_of_the_response_method(tmp_path, gamma_stack, capsys):
         assert main(["crossval", str(path), "--option", bad]) == 2
         err = capsys.readouterr().err.strip()
         assert phrase in err and len(err.splitlines()) == 1
+
+
+def test_the_default_predicts_through_the_users_path(tmp_path, gamma_stack, monkeypatch, capsys):
+    """The default is calibrate, then ``correct`` of the same frames with its defaults;
+    ``calibration_only`` (``--calibration-only``) is the calibration's own merge, labelled."""
+    import photoquant.correction as correction
+
+    calls = []
+    real = correction.correct
+
+    def spy(stack, model, **kwargs):
+        calls.append(kwargs)
+        return real(stack, model, **kwargs)
+
+    monkeypatch.setattr(correction, "correct", spy)
+    user = crossval_stack(gamma_stack)
+    assert calls == [{}] * (gamma_stack.n_exposures - 2)  # once per fold, with the defaults
+    assert user.pipeline == "calibrate + correct" and "(calibrate + correct)" in user.format_table()
+    alone = crossval_stack(gamma_stack, calibration_only=True)
+    assert len(calls) == gamma_stack.n_exposures - 2
+    assert alone.pipeline == "calibration only" and alone.to_json()["pipeline"] == alone.pipeline
+    # exact labels: the correction keeps them, and its merge is the calibration's up to
+    # its float32 output (far below the 1/4 DN of the observed values' rounding)
+    assert user.overall_mae_dn == pytest.approx(alone.overall_mae_dn, abs=1e-3)
+    path = _write_set(tmp_path, gamma_stack)
+    assert main(["crossval", str(path), "--json", "--calibration-only"]) == 0
+    assert json.loads(capsys.readouterr().out)["pipeline"] == "calibration only"
+    assert crossval_stack(gamma_stack, "opencv").pipeline == "peer"
+    with pytest.raises(InputError, match="calibration_only is for photoquant"):
+        crossval_stack(gamma_stack, "opencv", calibration_only=True)
