@@ -319,7 +319,10 @@ def calibrate(
     refine_exposures : bool, optional
         Re-estimate every stack's exposure times from the data (Notes).
         ``None`` (default): the profile's setting (``"photoquant"``: on,
-        ``"paper"``: off, the nominal times as the paper uses them).
+        ``"paper"``: off, the nominal times as the paper uses them), and the
+        refined times replace the labels only where a test says the data
+        contradict them (Notes). ``True``: the refined times whatever the
+        test says.
     progress : callable, optional
         Called with a short message as each step starts.
     return_intermediates : bool
@@ -350,6 +353,21 @@ def calibrate(
     ``model.parameters["refine_exposures"]`` whether it was on; with one
     view only (no independent shutter errors) the views keep their nominal
     times and a note says so.
+
+    *Which times are used.* Refined times that agree with the labels within
+    their errors would only add their noise, so by default each stack's
+    refined times replace its labels only where the likelihood-ratio test of
+    :func:`photoquant.exposure.judge_exposure_times` rejects the labels at
+    the 1 % level, allowing a systematic error per exposure of at least
+    0.3 % (:data:`photoquant.exposure.MIN_FLOOR_LOG`); where the views keep
+    their labels the calibration is, to the bit, the one without
+    refinement. The decision and its statistic are in the report
+    (``report["exposures"]["decision"]``) and the notes. The response's own
+    views, refined against it, measure the systematic error it leaves
+    (``parameters["exposure_floor_log"]``,
+    :func:`photoquant.exposure.self_consistency_floor`), against which
+    :func:`photoquant.correct` judges a scene's times, so that the camera's
+    own frames keep the times it was calibrated with.
 
     References
     ----------
@@ -431,9 +449,10 @@ def calibrate(
         # the refined times replace the labels only where the data contradict them
         decision = judge_exposure_times(refs)
         exposures["decision"] = decision.as_dict()
-        notes.append(f"views' exposure times: {decision.describe()}")
-        if not decision.refine:
-            refs = None
+        if not asked:  # refine_exposures=True: the refined times whatever the test says
+            notes.append(f"views' exposure times: {decision.describe()}")
+            if not decision.refine:
+                refs = None
     if refs is not None:
         resp_fit = fits[-1]
         views = [r.apply(v) for r, v in zip(refs, views, strict=True)]
@@ -467,14 +486,12 @@ def calibrate(
         floor = _response_floor(views, resp, seed, defects)
         exposures["floor_log"] = floor
     if refine_exposures and irradiance is not None:
-        irr_ref = _refine_against(irradiance, resp, seed)
-        irradiance, exposures["irradiance"] = _apply_if_contradicted(
-            irradiance, irr_ref, floor, "irradiance scene", notes
+        irradiance, exposures["irradiance"] = _refine_stack(
+            irradiance, resp, seed, floor, "irradiance scene", notes, asked=asked
         )
     if refine_exposures and flat_field is not None:
-        flat_ref = _refine_against(flat_field, resp, seed)
-        flat_field, exposures["flat_field"] = _apply_if_contradicted(
-            flat_field, flat_ref, floor, "flat field", notes
+        flat_field, exposures["flat_field"] = _refine_stack(
+            flat_field, resp, seed, floor, "flat field", notes, asked=asked
         )
     if refine_exposures and glare_capture is not None and steps["glare"][0].name != "None":
         glare_ref: ExposureRefinement | None = None
@@ -484,7 +501,7 @@ def calibrate(
         except CalibrationError as exc:
             notes.append(f"glare capture's exposures not refined, nominal times kept: {exc}")
         else:
-            if not glare_decision.refine and refs is None:
+            if not (glare_decision.refine or asked) and refs is None:
                 notes.append(f"glare capture's exposure times: {glare_decision.describe()}")
                 exposures["glare"] = {"decision": glare_decision.as_dict()}
                 glare_ref = None
@@ -550,7 +567,8 @@ def calibrate(
     else:
         say("glare")
         glare_fit = fit_glare_step(
-            merge_model.merge(glare_capture, resp),
+            # the views' hot and stuck pixels are the same sensor's: no light of the source
+            exclude_defects(merge_model.merge(glare_capture, resp), defects),
             lut.lut,
             glare_spec,
             best_level=best_exposed_level(glare_capture, resp.saturation_level),
@@ -817,9 +835,12 @@ def _refine_source_exposures(
     fitted = None if group is None else _lag_from_group(group)
     lags, weights = [], []
     if fitted is not None:
+        info.update(group_lag_s=fitted[0], group_lag_std_s=fitted[1])
+    if fitted is not None and fitted[0] > 3.0 * fitted[1]:
+        # as the views' lag: only one the group determines (3 σ); a lag its noise
+        # leaves open would set the short exposures to anything
         lags.append(fitted[0])
         weights.append(1.0 / max(fitted[1], 1e-12) ** 2)
-        info.update(group_lag_s=fitted[0], group_lag_std_s=fitted[1])
     if lag_s is not None and lag_std_s is not None and lag_s > 3.0 * lag_std_s:
         # a lag the views determine (3 σ; a clean shutter's noise would move a
         # 15 µs exposure by its own few µs)
@@ -871,19 +892,35 @@ def _response_floor(
     return max(MIN_FLOOR_LOG, self_consistency_floor(refs))
 
 
-def _apply_if_contradicted(
+def _refine_stack(
     stack: ExposureStack,
-    refinement: ExposureRefinement,
+    response: ResponseModel,
+    seed: int,
     floor: float,
     what: str,
     notes: list[str],
+    *,
+    asked: bool,
 ) -> tuple[ExposureStack, dict[str, Any]]:
-    """``stack`` with the refined times where the data contradict its labels
-    (:func:`~photoquant.exposure.judge_exposure_times`), else as it is; and the report entry."""
+    """``stack`` with its times refined against ``response`` where the data contradict its
+    labels (:func:`~photoquant.exposure.judge_exposure_times`) or where refinement was
+    ``asked`` for, else as it is; and the report entry.
+
+    Where its data do not relate its exposures, an ``asked`` refinement is an
+    error; the default keeps the labels, with a note.
+    """
+    try:
+        refinement = _refine_against(stack, response, seed)
+    except CalibrationError as exc:
+        if asked:
+            raise
+        notes.append(f"{what}'s exposure times not refined, nominal times kept: {exc}")
+        return stack, {"refined": False, "error": str(exc)}
     decision = judge_exposure_times(refinement, floor_log=floor)
-    notes.append(f"{what}'s exposure times: {decision.describe()}")
+    if not asked:
+        notes.append(f"{what}'s exposure times: {decision.describe()}")
     entry = {**refinement.as_dict(), "decision": decision.as_dict()}
-    return (refinement.apply(stack) if decision.refine else stack), entry
+    return (refinement.apply(stack) if decision.refine or asked else stack), entry
 
 
 def _refine_against(stack: ExposureStack, response: ResponseModel, seed: int) -> ExposureRefinement:

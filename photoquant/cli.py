@@ -199,7 +199,7 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     if isinstance(exposures.get("irradiance"), dict):
         stacks.append(("irradiance", exposures["irradiance"]))
     for name, e in stacks:
-        if isinstance(e, dict):
+        if isinstance(e, dict) and "exposure_s" in e:
             lines.append(f"exposures {name}: {_exposure_line(e)}")
     notes = rep.get("notes", [])
     for note in notes if isinstance(notes, list) else []:

@@ -610,7 +610,10 @@ def exclude_defects(merged: Any, defects: DefectMap | None) -> Any:
     Flagged pixels get the merge's own treatment of a pixel without a valid
     exposure: ``mask`` set, ``log_photoquantity`` NaN, ``weight_sum`` 0, so
     that every later step (sensor LUT, vignetting, balance, correction)
-    leaves them out. ``None`` or an empty map returns ``merged`` unchanged.
+    leaves them out. Their ``all_saturated`` and ``all_dark`` flags are
+    cleared: a stuck or hot pixel's value is not light, so it says nothing of
+    a source too bright (or a shadow too dark) for the exposures. ``None`` or
+    an empty map returns ``merged`` unchanged.
     """
     if defects is None or not defects.mask.any():
         return merged
@@ -623,6 +626,8 @@ def exclude_defects(merged: Any, defects: DefectMap | None) -> Any:
         merged,
         log_photoquantity=np.where(bad, np.nan, merged.log_photoquantity),
         mask=merged.mask | bad,
+        all_saturated=merged.all_saturated & ~bad,
+        all_dark=merged.all_dark & ~bad,
         weight_sum=np.where(bad, 0.0, merged.weight_sum),
         report={**merged.report, "defects": defects.report()},
     )

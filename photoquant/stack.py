@@ -784,13 +784,18 @@ def _check_black_level(
             f"`black_level` {black[ch]:g} of channel {channels[ch]} is at or above its "
             f"saturation level {int(saturation[ch])}: no value could carry light"
         )
+    # a right black level has the dark values around it (half below, by the noise), a
+    # mislabelled one has them below it: most of the longest exposure's values at or below
+    # it *and* their median below it by more than noise (2 DN, or 2 % of the range above it).
+    # A capture dark by design (a glare source on black, dark frames) sits at the black level.
     longest = frames[:, -1].reshape(-1, n_ch)
     for ch in range(n_ch):
         if black[ch] <= 0:
             continue
         dark = float(np.count_nonzero(longest[:, ch] <= black[ch])) / longest.shape[0]
-        if dark > 0.5:
-            median = float(np.median(longest[:, ch]))
+        median = float(np.median(longest[:, ch])) if dark > 0.5 else float(black[ch])
+        allowance = max(2.0, 0.02 * (float(saturation[ch]) - black[ch]))
+        if dark > 0.5 and black[ch] - median > allowance:
             raise InputError(
                 f"`black_level` {black[ch]:g} of channel {channels[ch]} lies above the data: "
                 f"{100 * dark:.0f} % of the longest exposure's values are at or below it "

@@ -180,6 +180,47 @@ class GlareFit:
         }
 
 
+def find_source(
+    y: np.ndarray, valid: np.ndarray, saturated: np.ndarray, core_threshold: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The glare capture's source: the brightest compact region, not any bright or clipped pixel.
+
+    A sensor's hot and stuck pixels are as bright as a small source in a
+    capture that is dark elsewhere, and a stuck pixel reads saturated in
+    every exposure. Single pixels are not a source: the image is median
+    filtered over 3×3 (an isolated pixel leaves no trace, a source of a few
+    pixels across keeps its level), and a saturated pixel with no saturated
+    neighbour is a defect (a source too bright for the exposures clips as a
+    patch). The core is the connected region at the filtered peak of values
+    at least ``core_threshold`` of it and ten times the image's median (a
+    bright glare tail or dark offset is not the source). Returns
+    the core ``(H, W)`` and the saturated pixels that are not the source's
+    (defects, to be left out).
+    """
+    from scipy.ndimage import median_filter
+
+    patches, _ = label(saturated, structure=np.ones((3, 3)))
+    sizes = np.bincount(patches.ravel())
+    lone = saturated & (sizes[patches] == 1)
+    clipped = saturated & ~lone
+    level = np.where(valid, y, 0.0)
+    top = float(np.max(level)) if valid.any() else 0.0
+    # a pixel clipped in every exposure is at least as bright as anything measured
+    level = np.where(clipped, max(top, 1.0), np.where(lone, 0.0, level))
+    smooth = median_filter(level, size=3, mode="nearest")
+    peak = float(np.max(smooth))
+    if not peak > 0:  # nothing wider than a pixel: the brightest value is all there is
+        smooth, peak = level, top
+    row, col = np.unravel_index(np.argmax(smooth), y.shape)  # where the source is
+    floor = 10.0 * float(np.median(level[valid])) if valid.any() else 0.0
+    threshold = max(core_threshold * peak, floor) if floor < peak else core_threshold * peak
+    labels, _ = label((level >= threshold) & (valid | clipped))
+    near = labels[max(row - 1, 0) : row + 2, max(col - 1, 0) : col + 2]
+    near = near[near > 0]
+    core = labels == (np.bincount(near).argmax() if near.size else labels[row, col])
+    return core, lone | (clipped & ~binary_dilation(core, iterations=2))
+
+
 def _channel_fit(
     y: np.ndarray,
     saturated: np.ndarray,
@@ -188,18 +229,16 @@ def _channel_fit(
     ch: int,
 ) -> tuple[float, float, float, float, float, int, float, float, int, float]:
     valid = np.isfinite(y) & (y > 0)
-    if saturated.any():
-        raise CalibrationError(
-            f"glare capture, channel {ch}: {int(saturated.sum())} pixel(s) of the source are "
-            "saturated in every exposure; add shorter exposures (or dim the source)"
-        )
     if not valid.any():
         raise CalibrationError(f"glare capture, channel {ch}: no pixel has a valid exposure")
-    peak = float(np.max(y[valid]))
-    bright = valid & (y >= opts.core_threshold * peak)
-    # the source is the bright region holding the peak (a hot pixel elsewhere is not)
-    labels, _ = label(bright)
-    core = labels == labels[np.unravel_index(np.argmax(np.where(valid, y, -np.inf)), y.shape)]
+    core, defects = find_source(y, valid, saturated, opts.core_threshold)
+    in_source = saturated & ~defects & binary_dilation(core)
+    if in_source.any():
+        raise CalibrationError(
+            f"glare capture, channel {ch}: {int(in_source.sum())} pixel(s) of the source are "
+            "saturated in every exposure; add shorter exposures (or dim the source)"
+        )
+    valid &= ~defects  # clipped pixels that are not the source's: no glare
     core = binary_dilation(core) & valid
     source = np.where(core, y, 0.0)
     yy, xx = np.nonzero(core)

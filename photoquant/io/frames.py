@@ -135,6 +135,8 @@ def _frameset_name(frameset: FrameSetRef, manifest: CaptureManifest) -> str:
         ("irradiance", manifest.irradiance),
         ("scene", manifest.scene),
         ("dark", manifest.dark),
+        ("flatfield", manifest.flatfield),
+        ("glare", manifest.glare),
     ]:
         if candidate == frameset:
             return name

@@ -77,6 +77,24 @@ def test_bad_black_levels_are_refused(rng, black, match):
         ExposureStack(frames, t, bit_depth=12, saturation_level=[3000] * 3, black_level=black)
 
 
+def test_a_capture_dark_by_design_sits_at_its_black_level(rng):
+    """A glare capture (a small source on black) or dark frames: most values at the pedestal,
+    half of them below it by the noise. Not a mislabelled black level; one a few DN above
+    the pedestal is (its median lies below it by more than the noise)."""
+    shape, t = (40, 50, 3), np.array([1e-4, 1e-3, 1e-2])
+    source = np.zeros(shape)
+    source[18:22, 23:27] = 2e4  # the disc, 1 % of the frame
+    pedestal = 3.0
+    c = pedestal + source[None, None] * t[None, :, None, None, None]
+    c = c + rng.normal(0, 0.8, (2, t.size, *shape))
+    frames = np.clip(np.round(c), 0, 255).astype(np.uint8)
+    assert (frames[:, -1] <= pedestal).mean() > 0.5  # the old check's "lies above the data"
+    stack = ExposureStack(frames, t, black_level=[pedestal] * 3)
+    np.testing.assert_array_equal(stack.black_level, [pedestal] * 3)
+    with pytest.raises(InputError, match="of channel R lies above the data"):
+        ExposureStack(frames, t, black_level=[pedestal + 6.0] * 3)
+
+
 def test_a_black_level_below_most_data_is_accepted(rng):
     """The data check is "more than half of the longest exposure": a real black passes."""
     frames, t = _offset_frames(rng)

@@ -154,13 +154,36 @@ def test_fit_recovers_a_noise_free_glare_exactly():
 def test_fit_refuses_a_saturated_source_and_a_dark_tail():
     y = GlareSpread(0.02, 10.0).apply(scene_glare_source((40, 50)))
     sat = np.zeros(y.shape, bool)
-    sat[20, 25] = True
-    with pytest.raises(CalibrationError, match="saturated"):
-        fit_glare_ParametricPSF(y, sat)
+    sat[19:22, 24:27] = True  # the source's centre clipped in every exposure: a patch
+    with pytest.raises(CalibrationError, match="9 pixel.* of the source are saturated"):
+        fit_glare_ParametricPSF(np.where(sat, np.nan, y), sat)
     dark = y.copy()
     dark[dark < 0.5 * dark.max()] = np.nan
     with pytest.raises(CalibrationError, match="dark|annuli"):
         fit_glare_ParametricPSF(dark)
+
+
+def test_defects_are_not_the_source():
+    """Hot pixels brighter than the source and stuck pixels clipped in every exposure,
+    scattered over a glare capture, are neither taken for the source nor refused."""
+    f, w = 0.015, 40.0
+    clean = GlareSpread(f, w).apply(scene_glare_source((120, 160)))
+    rng = np.random.default_rng(5)
+    y = clean.copy()
+    hot = rng.choice(y[..., 0].size, 40, replace=False)
+    stuck = rng.choice(np.setdiff1d(np.arange(y[..., 0].size), hot), 7, replace=False)
+    hy, hx = np.unravel_index(hot, y.shape[:2])
+    y[hy, hx] = 5 * clean.max()  # brighter than the source's core
+    sat = np.zeros(y.shape, bool)
+    sy, sx = np.unravel_index(stuck, y.shape[:2])
+    sat[sy, sx] = True
+    y[sat] = np.nan
+    fit = fit_glare_ParametricPSF(y, sat)
+    # the tail's robust annulus means drop the hot pixels: the clean fit's values
+    ref = fit_glare_ParametricPSF(clean)
+    np.testing.assert_allclose(fit.fraction, ref.fraction, rtol=0.02)
+    np.testing.assert_allclose(fit.width_px, ref.width_px, rtol=0.02)
+    np.testing.assert_array_equal(fit.core_pixels, ref.core_pixels)
 
 
 TRUE_F, TRUE_W = 0.03, 12.0
