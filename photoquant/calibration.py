@@ -50,6 +50,7 @@ import scipy.optimize
 
 from photoquant import __version__
 from photoquant._threads import thread_map
+from photoquant.adequacy import global_response_departure
 from photoquant.balance import BalanceData, BalanceModel, check_roi
 from photoquant.correspondences import float_tracks
 from photoquant.defects import detect_defects, exclude_defects, hide_defects
@@ -529,6 +530,17 @@ def calibrate(
     merged = [merge_model.merge(view, resp) for view in views]
     merged = [exclude_defects(m, defects) for m in merged]  # defects: not merged
     timings["merge_per_view"] = (time.perf_counter() - t0) / len(views)
+    adequacy = global_response_departure(
+        views[0],
+        merged[0].log_photoquantity,
+        resp.levels,
+        resp.log_inverse_response,
+        ~(views[0].saturated(resp.saturation_level) | views[0].dark_clipped()),
+        valid_min=resp.valid_min,
+    )
+    report["model_adequacy"] = adequacy.as_dict()
+    if not adequacy.adequate:
+        notes.append(adequacy.describe())
     report["merge"] = {
         "method": merge_model.method,
         "flagged_fraction_view0": float(merged[0].mask.mean()),

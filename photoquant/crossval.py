@@ -149,6 +149,10 @@ class CrossvalResult:
     pipeline : {"calibrate + correct", "calibration only", "peer"}
         What predicted the held-out frames: the user's path (calibrate, then
         correct with the defaults), the calibration's merge alone, or a peer.
+    model_adequacy : mapping, optional
+        How far the bracket departs from one global response per channel
+        (:mod:`photoquant.adequacy`), the mean over the folds' calibrations;
+        ``None`` for a peer.
     """
 
     method: str
@@ -159,6 +163,7 @@ class CrossvalResult:
     roi: tuple[int, int, int, int] | None
     rows: tuple[HeldOutScore, ...]
     pipeline: str = "calibrate + correct"
+    model_adequacy: Mapping[str, Any] | None = None
 
     @property
     def n_scored(self) -> int:
@@ -189,6 +194,7 @@ class CrossvalResult:
         return {
             "method": self.method,
             "pipeline": self.pipeline,
+            "model_adequacy": None if self.model_adequacy is None else dict(self.model_adequacy),
             "exposure_s": list(self.exposure_s),
             "bit_depth": self.bit_depth,
             "channels": list(self.channels),
@@ -239,6 +245,12 @@ class CrossvalResult:
             f"values; mean over held-out frames: {self.mean_of_frames_mae_dn:.3f} DN; "
             f"fallback-predicted values: {self.n_fallback}"
         )
+        if self.model_adequacy is not None:
+            from photoquant.adequacy import ModelAdequacy
+
+            fields = ("departure", "noise", "block_px", "n_blocks", "code_range")
+            adequacy = ModelAdequacy(**{k: self.model_adequacy[k] for k in fields})
+            lines.append(f"model adequacy: {adequacy.describe()}")
         return "\n".join(lines)
 
 
@@ -354,6 +366,7 @@ def _fit_photoquant(
     *,
     calibration_only: bool = False,
     given: Any = None,
+    adequacies: list[Any] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any]:
     """The ``K − 1`` frames through photoquant (the profile's pipeline, with ``method`` as
     the response, ``options`` over its defaults): the response table the prediction goes
@@ -377,6 +390,8 @@ def _fit_photoquant(
         model = dataclasses.replace(
             model, response=given, parameters={**model.parameters, "exposure_floor_log": floor}
         )
+    if adequacies is not None:
+        adequacies.append(model.report.get("model_adequacy"))
     if calibration_only:
         resp = model.response
         merged = model.merge_stack(stack)
@@ -493,6 +508,7 @@ def crossval_stack(
         region[y0:y1, x0:x1] = True
 
     rows = []
+    adequacies: list[Any] = []
     for k in range(1, k_count - 1):
         t0 = time.perf_counter()
         keep = [i for i in range(k_count) if i != k]
@@ -511,6 +527,7 @@ def crossval_stack(
                 options,
                 calibration_only=calibration_only,
                 given=given,
+                adequacies=adequacies,
             )
         else:
             fit = peer.fit(sub)
@@ -562,7 +579,25 @@ def crossval_stack(
         pipeline="peer"
         if peer is not None
         else ("calibration only" if calibration_only else "calibrate + correct"),
+        model_adequacy=_mean_adequacy(adequacies),
     )
+
+
+def _mean_adequacy(records: Sequence[Any]) -> dict[str, Any] | None:
+    """The folds' model-adequacy records averaged (``None`` without any)."""
+    from photoquant.adequacy import ADEQUACY_WARN
+
+    found = [
+        r for r in records if isinstance(r, Mapping) and np.isfinite(r.get("departure", np.nan))
+    ]
+    if not found:
+        return None
+    out = dict(found[0])
+    for key in ("departure", "noise"):
+        out[key] = float(np.mean([r[key] for r in found]))
+    out["n_folds"] = len(found)
+    out["adequate"] = not out["departure"] > ADEQUACY_WARN * float(out.get("code_range", 255.0))
+    return out
 
 
 def crossval_manifest(

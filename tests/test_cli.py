@@ -36,6 +36,12 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     assert channels == ("R", "G", "B") and img.dtype == np.float32 and img.shape == (48, 64, 3)
     assert "photoquantity written" in capsys.readouterr().out
 
+    assert main(["info", str(cam)]) == 0
+    text = capsys.readouterr().out
+    # the model's adequacy and the exposure-time decision, each with its statistic
+    assert "model adequacy: the data depart from one global response" in text
+    assert "views' exposure times: nominal times kept: likelihood ratio" in text
+
     assert main(["info", str(cam), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["parameters"]["n_views"] == 3 and "report" in info
@@ -245,18 +251,33 @@ def test_calibrate_method_and_option_flags(capture, tmp_path, capsys):
 
 
 def test_exposure_refinement_flags_and_summary(capture, tmp_path, capsys):
-    """By default (the photoquant profile, as ``--refine-exposures``) the times are
-    refined and printed beside the nominal ones; ``--no-refine-exposures`` keeps
-    the nominal times."""
+    """By default (the photoquant profile) the times are refined and the refined ones used
+    only where a test says the labels are wrong: the views' exact labels are kept, with
+    the decision and its statistic printed. ``--refine-exposures`` uses the refined times
+    (printed beside the nominal ones); ``--no-refine-exposures`` does not refine."""
     cam = tmp_path / "cam"
     assert main(["calibrate", str(capture), "-o", str(cam), "-q"]) == 0
+    out = capsys.readouterr().out
+    assert "views' exposure times: nominal times kept: likelihood ratio" in out
+    assert "exposures view" not in out
+    assert load_camera(cam).parameters["refine_exposures"] is True
+    exr = tmp_path / "scene.exr"
+    assert main(["correct", str(capture), "--camera", str(cam), "-o", str(exr), "-q"]) == 0
+    out = capsys.readouterr().out
+    # the scene's decision is printed with its statistic (its exact labels may still be
+    # refined: the scene's levels reach parts of g the views' floor does not measure)
+    assert re.search(r"note: scene's exposure times: .*likelihood ratio [0-9.]+ on \d+ dof", out)
+
+    forced = tmp_path / "forced"
+    args = ["calibrate", str(capture), "-o", str(forced), "-q", "--refine-exposures"]
+    assert main(args) == 0
     out = capsys.readouterr().out
     lines = [ln for ln in out.splitlines() if ln.startswith("exposures view")]
     assert len(lines) == 3 and "nominal -> refined" in lines[0] and "1 -> " in lines[0]
     assert "exposures irradiance:" in out
-    assert load_camera(cam).parameters["refine_exposures"] is True
-    exr = tmp_path / "scene.exr"
-    assert main(["correct", str(capture), "--camera", str(cam), "-o", str(exr), "-q"]) == 0
+    exr = tmp_path / "forced.exr"
+    args = ["correct", str(capture), "--camera", str(forced), "-o", str(exr), "-q"]
+    assert main([*args, "--refine-exposures"]) == 0
     assert "scene exposures: ms nominal -> refined" in capsys.readouterr().out
 
     plain = tmp_path / "plain"

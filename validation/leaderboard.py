@@ -364,9 +364,6 @@ def find_real_sets(real_dir: str | Path, workdir: str | Path) -> list[RealSet]:
     stay where they are, read with ``allow_outside``). Folders that are
     neither are ignored; a missing ``real_dir`` gives none.
     """
-    from photoquant.errors import PhotoquantError
-    from photoquant.io import read_image
-
     root = Path(real_dir)
     out: list[RealSet] = []
     if not root.is_dir():
@@ -389,15 +386,36 @@ def find_real_sets(real_dir: str | Path, workdir: str | Path) -> list[RealSet]:
                 continue
         if len(frames) < 3:
             continue
-        try:  # 8 or 16 bits, as the first frame is stored
-            bits = 8 if read_image(frames[0]["file"]).dtype == np.uint8 else 16
-        except PhotoquantError:
-            bits = 8  # unreadable: load_stack names the file later
+        manifest = {"format": "photoquant.captures/1", **_stored_depth(frames)}
         path = Path(workdir) / f"real-{folder.name}.json"
         path.parent.mkdir(parents=True, exist_ok=True)
-        manifest = {"format": "photoquant.captures/1", "bit_depth": bits}
         path.write_text(json.dumps(manifest | {"views": [{"frames": frames}]}))
         out.append(RealSet(folder.name, path))
+    return out
+
+
+def _stored_depth(frames: list[dict[str, Any]]) -> dict[str, Any]:
+    """``bit_depth`` (and ``channels`` of a one-channel set) of a listing's frames.
+
+    8 bits for 8-bit files; for 16-bit files the smallest depth of 10 to 16
+    bits that holds every frame's values (a 12-bit sensor's values stored in
+    16-bit files, unscaled, are 12-bit data: its range, not the file's, is
+    the range the scores are scaled to). An unreadable frame gives 8 bits:
+    ``load_stack`` names the file later.
+    """
+    from photoquant.errors import PhotoquantError
+    from photoquant.io import read_image
+
+    try:
+        images = [read_image(f["file"]) for f in frames]
+    except PhotoquantError:
+        return {"bit_depth": 8}
+    out: dict[str, Any] = {"bit_depth": 8}
+    if images[0].dtype != np.uint8:
+        top = max(int(im.max()) for im in images)
+        out["bit_depth"] = next(b for b in range(10, 17) if top <= 2**b - 1)
+    if images[0].ndim == 2 or images[0].shape[-1] == 1:
+        out["channels"] = ["Y"]
     return out
 
 
@@ -987,7 +1005,9 @@ def _crossval_real(
     if lb.real_sets:
         lb.notes.append(
             "crossval: leave-one-exposure-out mean |predicted − observed| in DN over the "
-            f"values in [10, 245] of each held-out inner frame (photoquant.crossval), "
+            f"values in [10, 245] of each held-out inner frame (photoquant.crossval: each "
+            "photoquant method calibrated on the other frames and the frames corrected with "
+            "the defaults, as a user runs them; a peer through its own pipeline), "
             f"real sets: {', '.join(lb.real_sets)}; static borders are not scored"
         )
 

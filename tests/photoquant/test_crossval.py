@@ -143,7 +143,9 @@ def test_json_and_table(gamma_stack):
     assert len(data["held_out"]) == 4 and data["score_range"] == [10.0, 245.0]
     assert {"mae_dn", "bias_dn", "n_scored", "n_fallback", "n_bound"} <= set(data["held_out"][0])
     table = res.format_table()
-    assert "overall (every scored value)" in table and len(table.splitlines()) == 2 + 4 + 1
+    # the header, a row per held-out frame, the overall scores, the model's adequacy
+    assert "overall (every scored value)" in table and len(table.splitlines()) == 2 + 4 + 1 + 1
+    assert table.splitlines()[-1].startswith("model adequacy: ")
 
 
 def test_bad_input_is_named(gamma_stack):

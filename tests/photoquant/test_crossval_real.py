@@ -1,8 +1,16 @@
-"""Issue 9's target on real brackets: cross-validation, photoquant against OpenCV.
+"""Real brackets: leave-one-exposure-out cross-validation on the path users run.
 
-Both numbers are computed in the same run, on the same frames and the same
-scored values; the sets are read from ``../shared/data/real`` (skipped when
-absent) through a manifest written in a temporary folder.
+photoquant is scored as a user runs it (calibrate on ``K − 1`` frames, then
+``correct`` them with that camera's defaults, predict the held-out frame),
+beside OpenCV's Debevec pipeline (8-bit sets) or the dataset authors' own
+response through the same pipeline (the 12-bit set), on the same frames and
+the same scored values. The sets are read from ``../shared/data/real``
+(skipped when absent) through a manifest written in a temporary folder.
+
+Measured 2026-12-03 (ratio to OpenCV, DN): Memorial 2.370 against 4.265
+(0.56), frobisher 6.30 against 14.55 (0.43), St. Louis 16.85 against 14.48
+(1.16), the 12-bit bracket 95.76 against its authors' response's 92.32
+(1.04).
 """
 
 from __future__ import annotations
@@ -19,7 +27,7 @@ from photoquant.crossval import crossval_manifest
 MEMORIAL_ROI = [0, 0, 509, 766]
 
 
-def _manifest(folder: Path, tmp: Path, roi=None) -> Path:
+def _manifest(folder: Path, tmp: Path, roi=None, **extra) -> Path:
     rows = [
         line.split()
         for line in (folder / "exposures.txt").read_text().splitlines()
@@ -28,6 +36,7 @@ def _manifest(folder: Path, tmp: Path, roi=None) -> Path:
     data = {
         "format": "photoquant.captures/1",
         "bit_depth": 8,
+        **extra,
         "views": [
             {"frames": [{"file": str(folder / r[0]), "exposure_s": float(r[1])} for r in rows]}
         ],
@@ -48,22 +57,103 @@ def _scores(path: Path) -> tuple[float, float]:
     return ours.overall_mae_dn, peer.overall_mae_dn
 
 
-@pytest.mark.slow  # 16 frames of 512x768, 14 fits per method: 15-30 s here
-def test_memorial_crossval_is_25_percent_below_opencv(tmp_path):
-    from tests.conftest import MEMORIAL
+def _real(name: str) -> Path:
+    from tests.conftest import SHARED
 
-    if not MEMORIAL.is_dir():
-        pytest.skip("../shared/data/real/memorial_debevec is not available")
-    ours, opencv = _scores(_manifest(MEMORIAL, tmp_path, MEMORIAL_ROI))
-    assert ours <= 0.75 * opencv, f"photoquant {ours:.3f} DN, OpenCV {opencv:.3f} DN"
+    folder = SHARED / "data" / "real" / name
+    if not folder.is_dir():
+        pytest.skip(f"../shared/data/real/{name} is not available")
+    return folder
 
 
-def test_frobisher_crossval_is_25_percent_below_opencv(tmp_path, frobisher_dir):
+@pytest.mark.slow  # 16 frames of 512x768, 14 folds per method: ~40 s here
+def test_memorial_on_the_users_path_is_40_percent_below_opencv(tmp_path):
+    ours, opencv = _scores(_manifest(_real("memorial_debevec"), tmp_path, MEMORIAL_ROI))
+    assert ours <= 0.60 * opencv, f"photoquant {ours:.3f} DN, OpenCV {opencv:.3f} DN"
+
+
+def test_frobisher_on_the_users_path_is_half_opencvs(tmp_path, frobisher_dir):
     """Two calibration frames six stops apart: the shape of g is the prior's.
 
     Eq. 7's straight-line prior gave 19.9 DN against OpenCV's 14.6; the
     smoothness scaled with the step about the EMoR mean
-    (:mod:`photoquant.response.wide_steps`) gives 6.3 (measured 2026-12-01).
+    (:mod:`photoquant.response.wide_steps`) gives 6.3.
     """
     ours, opencv = _scores(_manifest(frobisher_dir, tmp_path))
+    assert ours <= 0.50 * opencv, f"photoquant {ours:.3f} DN, OpenCV {opencv:.3f} DN"
+
+
+def test_correcting_memorials_own_frames_reproduces_the_calibrations_merge(tmp_path):
+    """Calibration and correction agree on a real bracket: the frames a camera was
+    calibrated from keep their times at correction (the exposure test finds the shifts
+    of the response's own floor), and their photoquantity is the calibration's merge up to
+    the correction's float32 arithmetic."""
+    import numpy as np
+
+    import photoquant as pq
+    from photoquant.io import load_manifest, load_stack
+
+    m = load_manifest(_manifest(_real("memorial_debevec"), tmp_path), allow_outside=True)
+    stack = load_stack(m.views[0], m)
+    result = pq.calibrate([stack], return_intermediates=True)
+    model, merged = result.model, result.intermediates.merged_views[0]
+    corrected = pq.correct(stack, model)
+    assert corrected.exposure_decision is not None and not corrected.exposure_decision.refine
+    assert corrected.exposures is None
+    ok = ~corrected.mask & ~merged.mask
+    assert ok.mean() > 0.9
+    expected = np.exp(merged.log_photoquantity[ok])  # one view: u = v = a = 1
+    diff = np.abs(np.log(corrected.photoquantity[ok]) - np.log(expected))
+    big = np.abs(merged.log_photoquantity[ok]).max() + np.abs(np.log(stack.exposure_s)).max()
+    assert diff.max() < (stack.n_exposures + 1) * big * 2.0**-24
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="St. Louis (4 JPEG frames 3 stops apart, a phone-class camera): 16.85 DN against "
+    "OpenCV's 14.48 on the user's path (1.16x; target 0.75x); a smoother g fits it better "
+    "(smoothness 1e4: 14.13), which a selection of the response model by the data would "
+    "choose (measured 2026-12-03)",
+)
+def test_stlouis_on_the_users_path_is_25_percent_below_opencv(tmp_path):
+    ours, opencv = _scores(_manifest(_real("stlouis_arch_canon_s3is"), tmp_path))
     assert ours <= 0.75 * opencv, f"photoquant {ours:.3f} DN, OpenCV {opencv:.3f} DN"
+
+
+def _authors_response(folder: Path):
+    """The BorealHDR authors' inverse response (TUM/DSO pcalib: irradiance at
+    ``linspace(0, 4095, 256)``) as a response table, ``g = ln``."""
+    import numpy as np
+
+    from photoquant.response.model import ResponseModel
+
+    values = np.array((folder / "reference_pcalib_inside1.txt").read_text().split(), dtype=float)
+    return ResponseModel(
+        method="BorealHDR authors' response",
+        levels=np.linspace(0.0, 4095.0, values.size),
+        log_inverse_response=np.log(values)[None, :],
+        saturation_level=np.array([4094.0]),
+    )
+
+
+@pytest.mark.slow  # 6 frames of 1920x1200, 4 folds each for two responses: ~60 s here
+@pytest.mark.xfail(
+    strict=True,
+    reason="12-bit machine-vision bracket: 95.76 DN against 92.32 with its authors' response "
+    "through the same pipeline (1.04x; target 1.0x); EMoR 2004 gives 92.95 (measured "
+    "2026-12-03)",
+)
+def test_twelve_bit_bracket_is_within_its_authors_response(tmp_path):
+    from photoquant.crossval import crossval_manifest
+
+    folder = _real("borealhdr_mv12bit")
+    path = _manifest(folder, tmp_path, bit_depth=12, channels=["Y"])
+    ours = crossval_manifest(path, allow_outside=True)
+    authors = crossval_manifest(path, _authors_response(folder), allow_outside=True)
+    assert [r.n_scored for r in ours.rows] == [r.n_scored for r in authors.rows]
+    assert authors.method == "BorealHDR authors' response"
+    assert ours.overall_mae_dn <= authors.overall_mae_dn, (
+        ours.overall_mae_dn,
+        authors.overall_mae_dn,
+    )

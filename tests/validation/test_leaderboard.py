@@ -345,6 +345,26 @@ def test_static_border_is_not_scored():
     assert _static_border_roi(frames) == [0, 0, 11, 8]
 
 
+def test_a_real_listing_of_twelve_bit_mono_files_is_twelve_bit_mono(tmp_path, rng):
+    """A machine-vision camera's 12-bit values stored unscaled in 16-bit one-channel files
+    are 12-bit data in one channel; 8-bit colour files stay 8-bit colour."""
+    from photoquant.io import load_manifest, load_stack, write_image
+
+    mono = tmp_path / "real" / "mono"
+    mono.mkdir(parents=True)
+    lines = []
+    for k, t in enumerate((0.001, 0.002, 0.004)):
+        write_image(mono / f"f{k}.png", rng.integers(0, 4095, (8, 10)).astype(np.uint16))
+        lines.append(f"f{k}.png {t}")
+    (mono / "exposures.txt").write_text("\n".join(lines) + "\n")
+    [found] = find_real_sets(tmp_path / "real", tmp_path / "m")
+    data = json.loads(found.manifest.read_text())
+    assert data["bit_depth"] == 12 and data["channels"] == ["Y"]
+    m = load_manifest(found.manifest, allow_outside=True)
+    stack = load_stack(m.views[0], m)
+    assert stack.bit_depth == 12 and stack.n_channels == 1
+
+
 def test_real_brackets_add_a_crossval_column(registered, tmp_path):
     from pqsim.capture_set import write_capture_set
     from pqsim.synth_camera.presets import camera_from_preset
