@@ -23,7 +23,7 @@ command builds its parser with :func:`add_validate_arguments` on every call.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §6.
+.. [PQ] The photoquantity paper, §6.
 """
 
 from __future__ import annotations

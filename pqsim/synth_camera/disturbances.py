@@ -53,7 +53,7 @@ References
 .. [3] EMVA Standard 1288, release 4.0 (2021) (DSNU, PRNU, defect pixels).
 .. [4] :mod:`pqsim.synth_camera.cfa` (Bayer 1976; OpenCV demosaicing).
 .. [5] ITU-T T.81 (JPEG).
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, §3.2.
+.. [PQ] The photoquantity paper: eq. 1, §3.2.
 """
 
 from __future__ import annotations
