@@ -173,7 +173,8 @@ def _report(res: ExperimentResult, lb, PRIMARY) -> None:  # noqa: N803 - the mod
             slug = f"{board.step}.{_slug(e.method)}"
             where = f"{board.step}: {'n/a' if e.rank is None else f'#{e.rank}'} {e.method}"
             if e.status != "ok":
-                res.row(where, f"{e.status}: {e.reason}", "–", "")
+                not_installed = e.reason.startswith("not installed")
+                res.row(where, e.reason if not_installed else f"{e.status}: {e.reason}", "–", "")
                 continue
             for preset in lb.presets:
                 scores = e.scores[preset]
