@@ -31,7 +31,6 @@ version = ".".join(release.split(".")[:2])
 extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.autosummary",
-    "sphinx.ext.intersphinx",
     "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",
     "numpydoc",
@@ -48,6 +47,7 @@ nitpicky = False
 # -- API reference -----------------------------------------------------------
 autosummary_generate = True
 autosummary_imported_members = False
+autosummary_ignore_module_all = False  # a module's public names are its __all__
 autodoc_default_options = {"members": True, "show-inheritance": False}
 autodoc_typehints = "none"
 autodoc_member_order = "bysource"
@@ -61,12 +61,6 @@ bibtex_bibfiles = ["references.bib"]
 bibtex_default_style = "plain"
 bibtex_reference_style = "author_year"
 
-intersphinx_mapping = {
-    "python": ("https://docs.python.org/3", None),
-}
-# the build runs offline (CI): no inventories fetched
-intersphinx_disabled_reftypes = ["*"]
-intersphinx_timeout = 1
 
 # -- gallery -------------------------------------------------------------------
 sphinx_gallery_conf = {

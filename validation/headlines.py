@@ -13,7 +13,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["MAX_LINES", "Headline", "headlines", "format_summary"]
+__all__ = ["MAX_LINES", "headlines", "format_summary"]
 
 MAX_LINES = 40
 """Most lines of the summary without a ``--check`` verdict."""

@@ -252,9 +252,9 @@ def generate_methods() -> None:
 
 
 def _md_inline(text: str) -> str:
+    text = re.sub(r"(?<!`)`([^`]+)`(?!`)", r"``\1``", text)
     text = re.sub(r"\[([^\]]+)\]\((https?://[^)]+)\)", r"`\1 <\2>`__", text)
     text = re.sub(r"\[([^\]]+)\]\(([^)]+)\)", r"\1", text)
-    text = re.sub(r"(?<!`)`([^`]+)`(?!`)", r"``\1``", text)
     text = re.sub(r"(?<![*\w])\*([^*\s][^*]*)\*(?![*\w])", r"*\1*", text)
     return text
 
@@ -350,6 +350,36 @@ def generate_all(app: Any = None) -> None:  # noqa: ARG001 - Sphinx passes the a
     generate_validation()
 
 
+_CITATION_DEF = re.compile(r"^(\s*)\.\. \[([^\]]+)\] ?(.*)$")
+
+
+def plain_citations(app: Any, what: str, name: str, obj: Any, options: Any, lines: list[str]) -> None:  # noqa: ARG001
+    """Docstrings' citations as plain text: ``[PQ]_`` → ``[PQ]``, ``.. [PQ] ...`` → a bullet.
+
+    The packages' docstrings define their references per module (numpydoc's
+    convention); the API pages would otherwise see duplicate or unreferenced
+    citation labels across modules. The full references are on the
+    *How to cite* page.
+    """
+    out: list[str] = []
+    cont: str | None = None
+    for line in lines:
+        m = _CITATION_DEF.match(line)
+        if m:
+            indent = m.group(1)
+            text = _CITATION.sub(r"[\1]", m.group(3))
+            out.append(f"{indent}* [{m.group(2)}] {text}".rstrip())
+            cont = indent + "   "
+            continue
+        if cont is not None and line.startswith(cont) and line.strip():
+            out.append(cont[:-1] + line[len(cont):])
+            continue
+        cont = None
+        out.append(_CITATION.sub(r"[\1]", line))
+    lines[:] = out
+
+
 def setup(app: Any) -> dict[str, Any]:
     app.connect("builder-inited", generate_all)
+    app.connect("autodoc-process-docstring", plain_citations, priority=400)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

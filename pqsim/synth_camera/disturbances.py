@@ -8,7 +8,7 @@ the dotted path ``"disturbances.<field>"``), each zero / off by default.
 With every field off, :meth:`SyntheticCamera.capture` takes its clean path
 and the frames are bit-identical to a camera without disturbances.
 
-For frame ``(n, k)`` with nominal exposure ``t_k`` the disturbed camera computes
+For frame ``(n, k)`` with nominal exposure ``t_k`` the disturbed camera computes::
 
     t_nk  = t_k · (1 + σ_t · z_nk) + τ                       exposure-time error [1]
     μ     = u·v·l · s · t_nk + D · t_nk                       mean electrons
