@@ -82,9 +82,7 @@ def test_methods_from_papers_cite_them():
             docs = [inspect.getdoc(fn) or "", (module.__doc__ if module else "") or ""]
             if not any(SECTION.search(d) for d in docs):
                 missing.append(f"{step} / {name} ({fn.__module__}.{fn.__name__})")
-    assert not missing, "methods from papers without References or Examples:\n" + "\n".join(
-        missing
-    )
+    assert not missing, "methods from papers without References or Examples:\n" + "\n".join(missing)
 
 
 @pytest.mark.parametrize("name", ["calibrate", "correct", "load_manifest", "ExposureStack"])

@@ -187,8 +187,8 @@ def _method_section(step: str, method: Any) -> str:
     reference, peer = _reference(method)
     model = method.model or getattr(pq.registry(step), "default_model", None)
     facts = [
-        f"* **Select**: ``photoquant calibrate ... --method {step}=\"{name}\"`` or "
-        f"``photoquant.calibrate(..., {step}=\"{name}\")``",
+        f'* **Select**: ``photoquant calibrate ... --method {step}="{name}"`` or '
+        f'``photoquant.calibrate(..., {step}="{name}")``',
         f"* **Function**: :func:`{fn.__module__}.{fn.__name__}`",
     ]
     if model is not None:
@@ -231,7 +231,7 @@ def generate_methods() -> None:
         reg = pq.registry(step)
         names = list(reg)
         text = [
-            f".. This page is generated from photoquant's registries (docs/_ext/pq_generate.py).",
+            ".. This page is generated from photoquant's registries (docs/_ext/pq_generate.py).",
             "",
             f".. _methods-{step}:",
             "",
@@ -335,7 +335,12 @@ def generate_validation() -> None:
         if rows:
             out.append(
                 _list_table(
-                    ["quantity", "photoquant (synthetic camera)", "paper (real camera)", "reference"],
+                    [
+                        "quantity",
+                        "photoquant (synthetic camera)",
+                        "paper (real camera)",
+                        "reference",
+                    ],
                     rows,
                     "34 26 16 24",
                 )
@@ -353,7 +358,9 @@ def generate_all(app: Any = None) -> None:  # noqa: ARG001 - Sphinx passes the a
 _CITATION_DEF = re.compile(r"^(\s*)\.\. \[([^\]]+)\] ?(.*)$")
 
 
-def plain_citations(app: Any, what: str, name: str, obj: Any, options: Any, lines: list[str]) -> None:  # noqa: ARG001
+def plain_citations(
+    app: Any, what: str, name: str, obj: Any, options: Any, lines: list[str]
+) -> None:  # noqa: ARG001
     """Docstrings' citations as plain text: ``[PQ]_`` → ``[PQ]``, ``.. [PQ] ...`` → a bullet.
 
     The packages' docstrings define their references per module (numpydoc's
@@ -372,7 +379,7 @@ def plain_citations(app: Any, what: str, name: str, obj: Any, options: Any, line
             cont = indent + "   "
             continue
         if cont is not None and line.startswith(cont) and line.strip():
-            out.append(cont[:-1] + line[len(cont):])
+            out.append(cont[:-1] + line[len(cont) :])
             continue
         cont = None
         out.append(_CITATION.sub(r"[\1]", line))

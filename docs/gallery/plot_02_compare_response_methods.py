@@ -37,7 +37,9 @@ for method in ("Debevec 1997", "Robertson 2003"):
     rep = compare_with_truth(manifest, model, truth)
     results[method] = (model, rep)
     rms = max(r["rms"] for r in rep["response"])
-    print(f"{method:15s} g rms {rms:.4f} (ln)   test scene {100 * rep['scene']['error'].e_mean:.2f} %")
+    print(
+        f"{method:15s} g rms {rms:.4f} (ln)   test scene {100 * rep['scene']['error'].e_mean:.2f} %"
+    )
 
 # %%
 # The green channel's recovered ``g`` minus the true one (after the additive

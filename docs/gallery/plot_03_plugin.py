@@ -36,7 +36,7 @@ class LinearOptions:
     floor: float = 0.5
 
 
-def linear_response(stack, options, rng):
+def linear_response(stack, options, rng):  # noqa: ARG001 - the step's signature
     """A linear sensor's response, ``g = ln(max(z, floor))`` per channel (the response step's signature)."""
     options = options or LinearOptions()
     levels = np.arange(2**stack.bit_depth, dtype=float)
@@ -75,7 +75,9 @@ for method in ("Debevec 1997", ("Linear (gallery)", {"floor": 0.5})):
     rep = compare_with_truth(manifest, model, truth)
     name = method if isinstance(method, str) else method[0]
     rms = max(r["rms"] for r in rep["response"])
-    print(f"{name:17s} g rms {rms:.4f} (ln)   test scene e_mean {100 * rep['scene']['error'].e_mean:.2f} %")
+    print(
+        f"{name:17s} g rms {rms:.4f} (ln)   test scene e_mean {100 * rep['scene']['error'].e_mean:.2f} %"
+    )
 
 # %%
 # The camera folder stores the method by name; loading it needs the method

@@ -14,10 +14,9 @@ as one would an external scheduler's.
 """
 
 # %%
+import logging
 import tempfile
 from pathlib import Path
-
-import logging
 
 import matplotlib.pyplot as plt
 from distributed import LocalCluster
@@ -37,6 +36,7 @@ with LocalCluster(
     run_sweep(spec, out, scheduler=cluster.scheduler_address, quiet=True)
 rows = read_results(out).to_pylist()  # a pyarrow table: one row per cell and metric
 print(sorted(p.name for p in out.iterdir()))
+
 
 # %%
 # The test scene's error and its noise floor, per cell.
@@ -58,10 +58,18 @@ for pipeline in ("paper", "photoquant"):
 # %%
 fig, ax = plt.subplots(figsize=(6, 3.6), layout="constrained")
 for pipeline in ("paper", "photoquant"):
-    ax.plot([1, 4], [100 * value("scene_e_mean", pipeline, n) for n in (1, 4)], "o-",
-            label=f"{pipeline} pipeline")
-ax.plot([1, 4], [100 * value("scene_noise_floor", "photoquant", n) for n in (1, 4)], "k--",
-        label="noise floor")
+    ax.plot(
+        [1, 4],
+        [100 * value("scene_e_mean", pipeline, n) for n in (1, 4)],
+        "o-",
+        label=f"{pipeline} pipeline",
+    )
+ax.plot(
+    [1, 4],
+    [100 * value("scene_noise_floor", "photoquant", n) for n in (1, 4)],
+    "k--",
+    label="noise floor",
+)
 ax.set(xlabel="repeats N", ylabel="test scene e_mean (%)", xticks=[1, 4])
 ax.legend()
 plt.show()
