@@ -93,4 +93,9 @@ html_theme_options = {
     "header_links_before_dropdown": 8,
 }
 html_context = {"default_mode": "light"}
+# single pages: no empty section navigation beside them
+html_sidebars = {
+    page: []
+    for page in ("index", "getting-started", "validation", "benchmarks", "changelog", "cite")
+}
 html_show_sourcelink = False
