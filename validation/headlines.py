@@ -221,6 +221,8 @@ def headlines(run: Any) -> list[tuple[str, list[Headline]]]:
             rows = HEADLINES[name](m)
         else:
             rows = []
+        if all(set(h[1]) <= set("–/, ") for h in rows):  # none of its metrics were measured
+            rows = []
         if not rows:
             main = [r for r in res.rows if not r.detail]
             rows = [(main[0].quantity, main[0].ours, main[0].paper, "")] if main else []
@@ -250,7 +252,7 @@ def format_summary(run: Any, check: Any = None, report: Path | str | None = None
             rows.append((name if i == 0 else "", *h))
     widths = [
         min(max(len(c[j]) for c in [head, *rows]), cap)
-        for j, cap in enumerate((20, 30, 28, 26, 13))
+        for j, cap in enumerate((20, 30, 34, 26, 13))
     ]
 
     def fmt(c: Sequence[str]) -> str:

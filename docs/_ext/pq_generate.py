@@ -360,8 +360,8 @@ _CITATION_DEF = re.compile(r"^(\s*)\.\. \[([^\]]+)\] ?(.*)$")
 
 
 def plain_citations(
-    app: Any, what: str, name: str, obj: Any, options: Any, lines: list[str]
-) -> None:  # noqa: ARG001
+    _app: Any, _what: str, _name: str, _obj: Any, _options: Any, lines: list[str]
+) -> None:
     """Docstrings' citations as plain text: ``[PQ]_`` → ``[PQ]``, ``.. [PQ] ...`` → a bullet.
 
     The packages' docstrings define their references per module (numpydoc's
