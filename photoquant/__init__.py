@@ -2,8 +2,8 @@
 
 Calibrate a camera once (response per channel, colour balance, sensor
 non-uniformity, vignetting) and then measure the photoquantity of any static
-scene from a few exposures, following the reference paper
-(``shared/reference/paper.txt``)::
+scene from a few exposures, following the photoquantity paper (its full
+reference: the documentation's *How to cite* page)::
 
     import photoquant as pq
 

@@ -8,7 +8,7 @@ makes the chart neutral; equivalently ``ln a_λ`` is added to ``g_λ``
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.3.
+.. [PQ] The photoquantity paper, §5.3.
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ Public objects
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.5: "this
+.. [PQ] The photoquantity paper, §5.5: "this
    vignetting calibration method requires us to identify the position of a
    scene point in the different images [...] using feature detection".
 .. [Low04] D. G. Lowe, "Distinctive image features from scale-invariant

@@ -56,7 +56,7 @@ References
 .. [Stone1974] Stone, M. (1974). Cross-validatory choice and assessment of
    statistical predictions. J. R. Stat. Soc. B 36(2), 111-147.
    doi:10.1111/j.2517-6161.1974.tb00994.x
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 5-7.
+.. [PQ] The photoquantity paper, eq. 5-7.
 """
 
 from __future__ import annotations

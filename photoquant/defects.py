@@ -39,7 +39,7 @@ References
 ----------
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021) (defect pixels: hot,
    dead and stuck pixels, found from dark and flat images).
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, §5.2 (merge).
+.. [PQ] The photoquantity paper: eq. 1, §5.2 (merge).
 """
 
 from __future__ import annotations
@@ -450,7 +450,7 @@ def _one_stack(
     black = np.asarray(stack.black_level, dtype=np.float64)
     sat = np.asarray(stack.saturation_level, dtype=np.float64)
     # every frame's extremes: of the per-repeat extremes the stack keeps (cached, shared
-    # with its saturation and dark masks), not a second pass over the (N, K) frames
+    # with its saturation and dark masks), not another pass over the (N, K) frames
     rep_lo, rep_hi = stack._repeat_extremes()
     lo, hi = rep_lo.min(axis=0), rep_hi.max(axis=0)
     order = np.argsort(stack.exposure_s)

@@ -59,7 +59,7 @@ What the data determine, and what they do not
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 1, 2.
+.. [PQ] The photoquantity paper, eq. 1, 2.
 .. [Mitsunaga1999] T. Mitsunaga, S. K. Nayar, "Radiometric self calibration",
    CVPR 1999: exposure ratios re-estimated from the data, alternating with
    the response.

@@ -6,7 +6,7 @@ normalised to a mean of 1 per channel, is the per-pixel sensitivity ``u_pλ``.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.4.
+.. [PQ] The photoquantity paper, §5.4.
 .. [EMVA1288] EMVA Standard 1288, Release 4.0 (2021): photo response
    non-uniformity.
 """

@@ -40,7 +40,7 @@ reader never sees a half-written camera.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §4-5.
+.. [PQ] The photoquantity paper, §4-5.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ the RMS of ``v``, without which the objective taken literally is minimised by
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §5.2 (500
+.. [PQ] The photoquantity paper: §5.2 (500
    reference points, the hat of eq. 6), §5.3 (balance from the linearised
    chart), §5.5 (the vignetting residual ``c_is v_js − c_js v_is``).
 """
@@ -94,7 +94,7 @@ PROFILES: Mapping[str, Mapping[str, tuple[str, Mapping[str, Any]]]] = MappingPro
 PROFILE_SETTINGS: Mapping[str, Mapping[str, Any]] = MappingProxyType(
     {
         # exposure times re-estimated from the data (photoquant.exposure): real shutters
-        # are a few percent off their labels (issue 9); at 320x240 it costs ~0.9 s of CPU
+        # are a few percent off their labels; at 320x240 it costs ~0.9 s of CPU
         # over a 0.5 s calibration (was 27 s; measured 2026-12-01)
         "photoquant": MappingProxyType({"refine_exposures": True}),
         # the paper takes the exposure times as labelled

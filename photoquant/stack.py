@@ -16,7 +16,7 @@ saturation level, because the mean of partly clipped samples is biased.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1 (model),
+.. [PQ] The photoquantity paper: eq. 1 (model),
    eq. 2 (denoising), appendix A (1/sqrt(N) noise reduction).
 """
 
@@ -570,7 +570,7 @@ class ExposureStack:
 
         The same integers as ``frames.sum/min/max(axis=0)``; taken when numba
         is there, ``N > 1`` and neither is cached yet (the extremes then cost
-        no second pass over the frames).
+        no further pass over the frames).
         """
         frames = self.frames
         if (

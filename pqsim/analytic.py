@@ -24,7 +24,7 @@ Public objects
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, §5.1.1
+.. [PQ] The photoquantity paper: eq. 1, §5.1.1
    (acquisition scenes), §5.4, §5.5, §6.1 (Fig. 2).
 """
 

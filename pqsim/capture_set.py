@@ -29,7 +29,7 @@ manifest in one place.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §5.1 (image
+.. [PQ] The photoquantity paper: §5.1 (image
    acquisition), §6.1 (1–200 ms, ``N = 10, K = 8, V = 3``; ``N = K = 4`` suffice).
 """
 

@@ -40,7 +40,7 @@ come from ``render_seed`` only, so a re-capture with a new camera-noise
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, §3.3
+.. [PQ] The photoquantity paper: eq. 1, §3.3
    (spectral sensitivities), §5.1.1 (calibration scenes), §5.4 (irradiance
    scene), §5.5 (views rotated about the centre of projection), §6.1 (camera
    and settings: 1024 × 768, 1–200 ms, K = 8, N = 10, V = 3), §6.3 (ColorChecker).

@@ -3,7 +3,7 @@
 A baseline (``validation/baselines/default.json`` for the default quick
 configuration) stores, for every checked metric, the value of the reference
 run (master seed 0), the direction that is better, and a tolerance derived
-from the seed-to-seed spread:
+from the seed-to-seed spread::
 
     tolerance = max(K_SIGMA · s, REL_FLOOR · |value|, ABS_FLOOR)
 

@@ -23,7 +23,7 @@ command builds its parser with :func:`add_validate_arguments` on every call.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §6.
+.. [PQ] The photoquantity paper, §6.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
         dest="mode",
         action="store_const",
         const="quick",
-        help="the default: 320x240, N = 4, K = 8, V = 3 (about half a minute on 2 cores)",
+        help="the default: 320x240, N = 4, K = 8, V = 3 (several minutes on 2 cores)",
     )
     mode.add_argument(
         "--full",
@@ -201,8 +201,9 @@ def run_validate(args: argparse.Namespace) -> int:
     from validation.baseline import check_results
     from validation.config import ValidationError
     from validation.experiments import run_validation
+    from validation.headlines import format_summary
     from validation.regression import DEFAULT_SEEDS, prepare_check, record_baseline, write_junit
-    from validation.report import format_table, results_json, write_report
+    from validation.report import results_json, write_report
 
     if args.seed < 0:
         raise ValidationError(f"--seed must be non-negative, got {args.seed}")
@@ -283,11 +284,13 @@ def run_validate(args: argparse.Namespace) -> int:
         if args.junit:
             write_junit(args.junit, results, check, prepared.baseline, overwrite=args.overwrite)
     folder = write_report(run, out, check=check, overwrite=args.overwrite, progress=say)
-    table = format_table(run, check)
+    # the compact summary (validation.headlines); every table is in the report
+    summary = format_summary(run, check)
     stream = sys.stderr if args.json else sys.stdout
-    print(table, file=stream)
+    print(summary, file=stream)
     print(
-        f"\nreport: {folder / 'report.md'} ({time.perf_counter() - t0:.0f} s in all)",
+        f"\nreport (every table, the figures, the definitions): {folder / 'report.md'} "
+        f"({time.perf_counter() - t0:.0f} s in all)",
         file=stream,
         flush=True,
     )

@@ -23,7 +23,7 @@ The same comparison ends ``photoquant demo``.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 8 (relative
+.. [PQ] The photoquantity paper: eq. 8 (relative
    error), §6.2–6.4, Table 1.
 """
 

@@ -27,7 +27,7 @@ global random state is used.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §6.1
+.. [PQ] The photoquantity paper, §6.1
    (acquisition settings) and §6.3 (``N = 4``; ``N = 1`` vs ``N = 10``).
 """
 

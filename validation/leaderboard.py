@@ -781,9 +781,10 @@ def _unavailable(method: Any) -> str | None:
             except Exception as exc:  # noqa: BLE001 - a broken check means it cannot run
                 return f"not available: {_one_line(exc)}"
             if answer is False:
-                return "not available (not installed)"
+                return "not installed"
             if isinstance(answer, str) and answer:
-                return f"not available: {answer}"
+                # a peer says "not installed (install: COMMAND)" (photoquant.peers)
+                return answer if answer.startswith("not installed") else f"not available: {answer}"
     return None
 
 
@@ -1045,7 +1046,8 @@ def _columns(board: Board, lb: Leaderboard) -> tuple[list[str], list[tuple[list[
         cells = ["n/a" if e.rank is None else str(e.rank), e.method]
         if e.status != "ok":
             cells += [""] * (len(head) - 3) + [e.reference]
-            rows.append((cells, f"{e.status}: {e.reason}"))
+            not_installed = e.reason.startswith("not installed")
+            rows.append((cells, e.reason if not_installed else f"{e.status}: {e.reason}"))
             continue
         cells += [_fmt(e.scores[p][key], unit) for p in lb.presets]
         if key != "scene":

@@ -13,7 +13,7 @@ nothing else:
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 8 and §6.3.
+.. [PQ] The photoquantity paper, eq. 8 and §6.3.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ them. Error *maps* are drawn by the report's ``maps`` figures
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 7.
+.. [PQ] The photoquantity paper, eq. 7.
 """
 
 from __future__ import annotations

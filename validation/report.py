@@ -9,7 +9,7 @@ matplotlib the report says the figures are missing and the rest is written.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §6.
+.. [PQ] The photoquantity paper, §6.
 """
 
 from __future__ import annotations

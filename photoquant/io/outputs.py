@@ -179,6 +179,10 @@ def folder_of_kind(
             return f"it holds files that are not part of a {kind} ({shown}{more})"
         return None
 
+    problem.__doc__ = (
+        f"Why a folder may not be replaced as a {kind}: a one-line reason, or ``None`` "
+        "when it holds nothing but such an output's own files."
+    )
     return problem
 
 

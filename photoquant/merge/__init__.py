@@ -35,7 +35,7 @@ References
 .. [Robertson2003] Robertson, M. A., Borman, S., & Stevenson, R. L. (2003).
    Estimation-theoretic approach to dynamic range enhancement using multiple
    exposures. J. Electronic Imaging 12(2), 219-228. doi:10.1117/1.1557695
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 5-6.
+.. [PQ] The photoquantity paper, eq. 5-6.
 """
 
 from __future__ import annotations

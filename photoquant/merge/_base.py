@@ -2,7 +2,7 @@
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 5-6.
+.. [PQ] The photoquantity paper, eq. 5-6.
 """
 
 from __future__ import annotations

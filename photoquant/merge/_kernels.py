@@ -5,7 +5,7 @@ Two implementations with **bit-identical** results:
 * numba (optional, ``pip install numba``; used when it imports): one fused
   pass per pixel, reading each value once and gathering ``w`` and
   ``w·(g − ln t_k)`` from per-exposure float32 tables; ``nogil`` so that the
-  merge's row tiles run on every CPU. Measured on the issue's stack
+  merge's row tiles run on every CPU. Measured on a paper-sized stack
   (1024×768×3, K = 8, uint8, one thread, 2026-12-01 on the shared 2-core
   machine): 25 ms against 72 ms for the best numpy formulation below and
   199 ms for the former numpy merge (an intp index plus a length-3 offset
@@ -121,7 +121,7 @@ def _direct_rgb_py(
     Three independent pair sums per pass over the exposures, with the
     channels' table rows known at compile time, and no flag work in the
     loop: a value without weight gets ``0 / 0`` there and is flagged by a
-    second pass over the tile's ``den``, run only when the tile has one. One
+    further pass over the tile's ``den``, run only when the tile has one. One
     thread, 1024×768×3, K = 8, alternated in one process (2026-12-02): 10.9–11.0
     → 8.5–8.6 ms. The exposures' codes come as a tuple ``rows`` of K flat
     arrays (the rows of ``codes``), whose length numba compiles in (one

@@ -140,7 +140,7 @@ class NoiseAwareMergeOptions:
         the gain when not given (``N ≥ 2``); 0 with ``N = 1``.
     iterations : int
         Passes with weights from the predicted signal ``Ê·t_k`` after the
-        first pass with weights from the observed values (0 to 5; default 1).
+        initial pass with weights from the observed values (0 to 5; default 1).
     exclude_below_valid_min : bool
         Give no weight to values below the response's ``valid_min`` (default).
     min_signal_dn : float

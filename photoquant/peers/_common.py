@@ -30,6 +30,7 @@ __all__ = [
     "check_channels",
     "response_from_inverse",
     "register_peer",
+    "install_command",
     "run_tool",
     "write_ppm",
 ]
@@ -179,8 +180,19 @@ def register_peer(
     requirement: str,
     needs: frozenset[str] | None = None,
 ) -> Method:
-    """Register a peer's method; its reference says whether it is installed."""
+    """Register a peer's method; its reference says whether it is installed.
+
+    The function gets an ``available()`` attribute (the convention the
+    leaderboard reads): ``True`` when the peer can run, otherwise
+    ``"not installed (install: COMMAND)"`` with the one command that installs it.
+    """
     status = "installed" if available() else f"NOT INSTALLED: needs {requirement}"
+    command = install_command(requirement)
+
+    def availability() -> bool | str:
+        return True if available() else f"not installed (install: {command})"
+
+    setattr(function, "available", availability)  # noqa: B010 - an attribute of a function
     method = Method(
         step,
         name,
@@ -191,6 +203,14 @@ def register_peer(
         needs=needs,
     )
     return REGISTRIES[step].add(method, replace=True)
+
+
+def install_command(requirement: str) -> str:
+    """The install command quoted in a peer's requirement (between backticks), or the requirement."""
+    quoted = requirement.split("`")
+    if len(quoted) >= 3:
+        return quoted[1].split(":")[0].strip()
+    return requirement
 
 
 def run_tool(args: Sequence[str], *, cwd: Path, peer: str, timeout: float = 600.0) -> str:

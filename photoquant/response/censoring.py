@@ -52,7 +52,7 @@ References
    doi:10.2307/1914308
 .. [Tobin1958] Tobin, J. (1958). Estimation of relationships for limited
    dependent variables. *Econometrica* 26(1), 24-36. doi:10.2307/1907382
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.2, eq. 7.
+.. [PQ] The photoquantity paper, §5.2, eq. 7.
 """
 
 from __future__ import annotations

@@ -82,7 +82,7 @@ References
 .. [Debevec1997] Debevec, P. E., & Malik, J. (1997). Recovering high dynamic
    range radiance maps from photographs. SIGGRAPH '97, 369-378.
    doi:10.1145/258734.258884
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.2, eq. 7.
+.. [PQ] The photoquantity paper, §5.2, eq. 7.
 .. [Powell1986] Powell, J. L. (1986). Symmetrically trimmed least squares
    estimation for Tobit models. *Econometrica* 54(6), 1435-1460.
    doi:10.2307/1914308

@@ -111,7 +111,7 @@ References
 .. [GrossbergNayar2004] M. D. Grossberg, S. K. Nayar, "Modeling the space of
    camera response functions", IEEE Transactions on Pattern Analysis and
    Machine Intelligence 26(10), 1272-1282, 2004. doi:10.1109/TPAMI.2004.88
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 6.
+.. [PQ] The photoquantity paper, eq. 6.
 .. [Robertson2003] M. A. Robertson, S. Borman, R. L. Stevenson, "Estimation-theoretic
    approach to dynamic range enhancement using multiple exposures", Journal of
    Electronic Imaging 12(2), 219-228, 2003. doi:10.1117/1.1557695

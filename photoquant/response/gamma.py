@@ -31,7 +31,7 @@ References
    cameras: extending dynamic range by combining differently exposed
    pictures", IS&T 48th Annual Conference, 1995, 442-448 (the power-law
    response and its estimation from exposure pairs).
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, eq. 6.
+.. [PQ] The photoquantity paper, eq. 6.
 """
 
 from __future__ import annotations

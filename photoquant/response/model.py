@@ -13,7 +13,7 @@ References
 .. [Debevec1997] Debevec, P. E., & Malik, J. (1997). Recovering high dynamic
    range radiance maps from photographs. SIGGRAPH '97, 369-378.
    doi:10.1145/258734.258884
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.2.
+.. [PQ] The photoquantity paper, §5.2.
 """
 
 from __future__ import annotations

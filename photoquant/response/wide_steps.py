@@ -14,7 +14,7 @@ the data constrain the curve at little more than its ends, and eq. 7's prior
 ``g'' = 0`` — a *straight* ``g``, i.e. an exponential response, unlike any
 camera — fills in the shape: on Debevec's Memorial Church set the default
 recovers the response well (2.4 DN of cross-validation error), on a
-three-exposure JPEG bracket it is worse than OpenCV's 70-sample solve (issue 9).
+three-exposure JPEG bracket it is worse than OpenCV's 70-sample solve.
 
 What
 ----

@@ -33,7 +33,7 @@ Public objects
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.5
+.. [PQ] The photoquantity paper, §5.5
    "Vignetting" (model and calibration) and §6.3 (fitted values).
 .. [GC05] D. B. Goldman and J.-H. Chen, "Vignette and exposure calibration and
    compensation", Proc. IEEE ICCV 2005, vol. 1, pp. 899–906.

@@ -41,7 +41,7 @@ References
 .. [GC05] D. B. Goldman and J.-H. Chen, "Vignette and exposure calibration and
    compensation", Proc. IEEE ICCV 2005, vol. 1, pp. 899–906.
    doi:10.1109/ICCV.2005.249
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.5.
+.. [PQ] The photoquantity paper, §5.5.
 .. [LF] lensfun, ``libs/lensfun/mod-color.cpp`` (vignetting model ``pa``,
    Pablo d'Angelo's, as in Hugin: ``1 + k1 r² + k2 r⁴ + k3 r⁶``).
    https://lensfun.github.io/

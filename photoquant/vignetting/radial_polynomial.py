@@ -41,7 +41,7 @@ References
 .. [Hug] Hugin, photometric optimisation (``vig_optimize``), image variables
    ``Va, Vb, Vc, Vd`` (radial vignetting polynomial) and ``Vx, Vy`` (centre
    shift). https://hugin.sourceforge.io/
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.5.
+.. [PQ] The photoquantity paper, §5.5.
 .. [Mor78] J. J. Moré, "The Levenberg–Marquardt algorithm: implementation and
    theory", Lecture Notes in Mathematics 630, 1978. doi:10.1007/BFb0067700
 """

@@ -16,7 +16,7 @@ error of 1.6 %).
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5.5, §6.3.
+.. [PQ] The photoquantity paper, §5.5, §6.3.
 .. [GC05] D. B. Goldman and J.-H. Chen, "Vignette and exposure calibration
    and compensation", ICCV 2005 (the pair residuals of the fit).
 """

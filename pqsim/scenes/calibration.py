@@ -16,7 +16,7 @@ References
 .. [1] W. Jakob et al., *Mitsuba 3 renderer*, 2022, https://mitsuba.readthedocs.io
    (scene dicts, ``perspective``/``orthographic`` sensors, ``specfilm``,
    ``path`` integrator, ``multijitter`` sampler).
-.. [2] The photoquantity paper (``shared/reference/paper.txt``), §5.1
+.. [2] The photoquantity paper, §5.1
    acquisition scenes, §5.5 vignetting from view directions, §6 results.
 .. [3] R. Hartley, A. Zisserman, *Multiple View Geometry*, 2nd ed., 2004,
    §8.4.2: images from a camera rotating about its centre are related by the

@@ -5,7 +5,7 @@ an :class:`IrradianceScene` with the analytic irradiance pattern it converges to
 
 References
 ----------
-.. [2] The photoquantity paper (``shared/reference/paper.txt``), §5.1
+.. [2] The photoquantity paper, §5.1
    acquisition scenes, §5.5 vignetting from view directions, §6 results.
 """
 

@@ -20,7 +20,7 @@ itself here.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1 (model),
+.. [PQ] The photoquantity paper: eq. 1 (model),
    §3.2 (distortions), §5.4 (irradiance scene, no optics).
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021), §2 (linear camera model).
 """

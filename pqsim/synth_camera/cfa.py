@@ -25,7 +25,7 @@ References
 .. [JPEG] ITU-T T.81 | ISO/IEC 10918-1 (1992), baseline sequential DCT.
 .. [OpenCV] OpenCV ``imgproc`` "Color conversions: Bayer → RGB",
    https://docs.opencv.org/4.x/de/d25/imgproc_color_conversions.html.
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1.
+.. [PQ] The photoquantity paper: eq. 1.
 """
 
 from __future__ import annotations

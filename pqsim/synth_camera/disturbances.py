@@ -8,7 +8,7 @@ the dotted path ``"disturbances.<field>"``), each zero / off by default.
 With every field off, :meth:`SyntheticCamera.capture` takes its clean path
 and the frames are bit-identical to a camera without disturbances.
 
-For frame ``(n, k)`` with nominal exposure ``t_k`` the disturbed camera computes
+For frame ``(n, k)`` with nominal exposure ``t_k`` the disturbed camera computes::
 
     t_nk  = t_k · (1 + σ_t · z_nk) + τ                       exposure-time error [1]
     μ     = u·v·l · s · t_nk + D · t_nk                       mean electrons
@@ -53,7 +53,7 @@ References
 .. [3] EMVA Standard 1288, release 4.0 (2021) (DSNU, PRNU, defect pixels).
 .. [4] :mod:`pqsim.synth_camera.cfa` (Bayer 1976; OpenCV demosaicing).
 .. [5] ITU-T T.81 (JPEG).
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, §3.2.
+.. [PQ] The photoquantity paper: eq. 1, §3.2.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ has normalised coordinates ``x_n = (x + 0.5) / W``, ``y_n = (y + 0.5) / H``.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, §5.5.
+.. [PQ] The photoquantity paper: eq. 1, §5.5.
 .. [GC05] D. B. Goldman and J.-H. Chen, "Vignette and exposure calibration and
    compensation", ICCV 2005, doi:10.1109/ICCV.2005.249.
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021), §8 (spatial non-uniformity,

@@ -59,7 +59,7 @@ these presets model — is in the response curve, noise and vignetting, not in
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §6.1, Fig. 3.
+.. [PQ] The photoquantity paper: §6.1, Fig. 3.
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021) — typical CCD/CMOS data sheets
    give full wells of 5–40 ke⁻ and read noise of 2–20 e⁻.
 .. [GN04] M. D. Grossberg and S. K. Nayar, "Modeling the space of camera

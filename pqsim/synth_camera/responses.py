@@ -32,7 +32,7 @@ Public objects
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1 (model),
+.. [PQ] The photoquantity paper: eq. 1 (model),
    eq. 5 and 7 (log inverse response ``g_λ``), §3.2.2 (exposure and response).
 .. [DM97] P. E. Debevec and J. Malik, "Recovering high dynamic range radiance
    maps from photographs", SIGGRAPH 1997, doi:10.1145/258734.258884.

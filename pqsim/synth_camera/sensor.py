@@ -17,7 +17,7 @@ References
 .. [EMVA] EMVA Standard 1288, "Standard for characterization of image sensors
    and cameras", release 4.0 (2021), §2 (linear sensor model, eq. 1–8),
    https://www.emva.org/standards-technology/emva-1288/.
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1 and §3.2.4.
+.. [PQ] The photoquantity paper: eq. 1 and §3.2.4.
 """
 
 from __future__ import annotations

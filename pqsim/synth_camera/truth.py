@@ -19,7 +19,7 @@ of photo-electrons.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 1, 3, 5, 7.
+.. [PQ] The photoquantity paper: eq. 1, 3, 5, 7.
 """
 
 from __future__ import annotations

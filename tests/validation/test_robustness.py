@@ -1,4 +1,4 @@
-"""The robustness experiment (issue 12): rows, metrics, selection."""
+"""The robustness experiment : rows, metrics, selection."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ def test_every_row_switches_something_on_for_both_presets() -> None:
 
     keys = [d.key for d in DISTURBANCES]
     assert len(set(keys)) == len(keys) and keys[-1] == "all"
-    assert {"issue", "issue_glare", "glare", "glare_capture", "cos4", "emor"} <= set(keys)
+    assert {"typical", "typical_glare", "glare", "glare_capture", "cos4", "emor"} <= set(keys)
     for preset in ("ccd", "cmos"):
         clean = camera_from_preset(preset)
         assert clean.disturbances is None and clean.glare is None
@@ -44,18 +44,18 @@ def test_in_full_and_on_request_not_in_quick() -> None:
 
 @pytest.mark.slow
 def test_run_reports_each_quantity_against_the_clean_camera(tmp_path) -> None:
-    rows = [d for d in DISTURBANCES if d.key in ("defects", "issue")]
+    rows = [d for d in DISTURBANCES if d.key in ("defects", "typical")]
     cfg = TINY.replace(presets=("ccd",))
     res = run(cfg, 0, tmp_path, disturbances=rows)
     m = res.metrics
-    for key in ("clean", "defects", "issue"):
+    for key in ("clean", "defects", "typical"):
         for q, _, _ in QUANTITIES:
             assert m[f"robustness.ccd.{key}.{q}"] is not None
     assert m["robustness.ccd.clean.scene_ratio"] == pytest.approx(1.0)
     floor = m["robustness.ccd.scene_noise_floor"]
     assert 0 < floor <= m["robustness.ccd.clean.scene"] * 1.5
-    # the issue's set costs accuracy: 3 % exposure jitter per frame is a gain error per
+    # the typical set costs accuracy: 3 % exposure jitter per frame is a gain error per
     # exposure, far above the scene's noise floor
-    assert m["robustness.ccd.issue.scene"] > 1.2 * m["robustness.ccd.clean.scene"]
+    assert m["robustness.ccd.typical.scene"] > 1.2 * m["robustness.ccd.clean.scene"]
     assert len(res.rows) == 3
     assert not any((tmp_path / "robustness" / "ccd").iterdir())  # capture sets removed

@@ -19,8 +19,8 @@ preset is simulated and calibrated once) and gathers every metric.
 | ``timings`` | step times | §6.1 |
 | ``rendered`` | calibration from a Mitsuba-rendered capture set (``--full``) | §5, §6 |
 | ``ablation`` | the paper's profile, photoquant's, each deviation alone | §5, §6 |
-| ``leaderboard`` | every registered method ranked against the truth | issue 11 |
-| ``robustness`` | each real-camera disturbance alone and all together (``--full``) | issue 12 |
+| ``leaderboard`` | every registered method ranked against the truth | §6 (beyond) |
+| ``robustness`` | each real-camera disturbance alone and all together (``--full``) | §3.2 (beyond) |
 
 Experiments in :data:`OPT_IN` run by default only when their configuration
 flag is on (``robustness``: :attr:`ValidationConfig.robustness`, set by

@@ -21,7 +21,7 @@ is within the run-to-run noise shows as such.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5-6.
+.. [PQ] The photoquantity paper, §5-6.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from validation.experiments.shared import PIPELINE_QUANTITIES, Shared, pipeline_
 
 __all__ = ["run", "TITLE", "QUANTITIES", "variants"]
 
-TITLE = "Paper profile, photoquant profile and ablation (issue 8)"
+TITLE = "Paper profile, photoquant profile and ablation"
 
 QUANTITIES = PIPELINE_QUANTITIES
 """Metric key, column label and unit of each quantity compared with the truth."""

@@ -18,7 +18,7 @@ The paper gives no accuracy for the balance (only its time, 1 ms).
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §5.3, §6.1
+.. [PQ] The photoquantity paper: §5.3, §6.1
    "Colour balancing".
 """
 

@@ -25,7 +25,7 @@ blur of the patch edges included, as it is what reached the sensor.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §6.3, §6.4.
+.. [PQ] The photoquantity paper, §6.3, §6.4.
 .. [MCC] C. S. McCamy, H. Marcus, J. G. Davidson, "A color-rendition chart",
    J. Appl. Photogr. Eng. 2(3), 1976 (the ColorChecker); spectral data:
    BabelColor average, via colour-science.

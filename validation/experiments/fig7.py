@@ -16,7 +16,7 @@ against the true camera photoquantity; every combination is in the results.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §6.3
+.. [PQ] The photoquantity paper: §6.3
    "Linearization and colour-correction", Fig. 6, Fig. 7.
 """
 

@@ -1,4 +1,4 @@
-"""Experiment 11 — the leaderboard: every registered method ranked against the truth (issue 11).
+"""Experiment 11 — the leaderboard: every registered method ranked against the truth.
 
 :func:`validation.leaderboard.run_leaderboard` on the run's presets and
 configuration, reusing the run's capture sets (:class:`Shared`): each
@@ -38,7 +38,7 @@ __all__ = ["run", "TITLE", "steps_for", "extra_cameras_for", "EXTRA_CAMERAS"]
 EXTRA_CAMERAS: tuple[str, ...] = ("emor", "emor-1", "film")
 """Cameras beside the presets on the response board of the full job (pqsim presets)."""
 
-TITLE = "Leaderboard: every registered method ranked against the truth (issue 11)"
+TITLE = "Leaderboard: every registered method ranked against the truth"
 
 
 def steps_for(config: ValidationConfig) -> tuple[str, ...]:
@@ -66,7 +66,7 @@ def run(
     from validation.leaderboard import PRIMARY, run_leaderboard
 
     shared = shared or Shared(config, seed, workdir)
-    res = ExperimentResult("leaderboard", TITLE, "issue 11; validation.leaderboard")
+    res = ExperimentResult("leaderboard", TITLE, "validation.leaderboard")
     lb = run_leaderboard(
         steps_for(config),
         presets=config.presets,
@@ -173,7 +173,8 @@ def _report(res: ExperimentResult, lb, PRIMARY) -> None:  # noqa: N803 - the mod
             slug = f"{board.step}.{_slug(e.method)}"
             where = f"{board.step}: {'n/a' if e.rank is None else f'#{e.rank}'} {e.method}"
             if e.status != "ok":
-                res.row(where, f"{e.status}: {e.reason}", "–", "")
+                not_installed = e.reason.startswith("not installed")
+                res.row(where, e.reason if not_installed else f"{e.status}: {e.reason}", "–", "")
                 continue
             for preset in lb.presets:
                 scores = e.scores[preset]

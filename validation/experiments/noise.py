@@ -35,7 +35,7 @@ Every relative error is eq. 8 after one global scale fit
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 2, eq. 8,
+.. [PQ] The photoquantity paper: eq. 2, eq. 8,
    §6.3 "Noise", Fig. 8, appendix A.
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021): the linear noise model.
 """

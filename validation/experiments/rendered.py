@@ -21,7 +21,7 @@ against a baseline. The experiment runs in ``--full`` and with
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §5.1–5.5
+.. [PQ] The photoquantity paper: §5.1–5.5
    (calibration scenes), §6.1–6.4 (results).
 """
 

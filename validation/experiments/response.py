@@ -15,7 +15,7 @@ ground truth for a real camera.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 6, 7;
+.. [PQ] The photoquantity paper: eq. 6, 7;
    §6.1 "Response functions", Fig. 3.
 .. [DM97] P. E. Debevec, J. Malik, "Recovering high dynamic range radiance
    maps from photographs", SIGGRAPH 1997, doi:10.1145/258734.258884.

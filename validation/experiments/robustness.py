@@ -1,13 +1,13 @@
 """Experiment 12 — robustness: which real-camera disturbances the calibrator survives.
 
 The synthetic camera of the other experiments follows eq. 1 of [PQ]
-exactly; real cameras do not (issue 12). Here each preset's camera is
+exactly; real cameras do not. Here each preset's camera is
 simulated with one disturbance at a realistic level — of the sensor and
 the camera's output (:mod:`pqsim.synth_camera.disturbances`), of the optics
 (cos⁴ vignetting with a cut-off, per-channel fall-off, veiling glare with
 and without a glare capture), of the response (EMoR-drawn, film-like, a
-knee) or of the capture (a flat field's fall-off) — then with the issue's
-set, with its glare, and with all sensor and output disturbances together,
+knee) or of the capture (a flat field's fall-off) — then with a typical
+camera's set, with its glare, and with all sensor and output disturbances together,
 and calibrated and
 corrected by the default pipeline (the configuration's calibrate arguments,
 exactly as the clean camera); every recovered quantity is compared with the
@@ -35,7 +35,7 @@ Not in the quick job (its baseline is unchanged): ``--full`` runs it, and
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §5-6.
+.. [PQ] The photoquantity paper, §5-6.
 .. [McCann2007] J. J. McCann, A. Rizzi, "Camera and visual veiling glare in
    HDR images", J. SID 15(9), 2007 (glare, the limit of HDR measurement).
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021): typical sensor levels.
@@ -62,7 +62,7 @@ from validation.experiments.shared import (
 
 __all__ = ["DISTURBANCES", "Disturbance", "TITLE", "QUANTITIES", "run"]
 
-TITLE = "Robustness to real-camera disturbances (issue 12)"
+TITLE = "Robustness to real-camera disturbances"
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ def _sensor(**fields: Any) -> dict[str, Any]:
 
 
 # Realistic levels for the presets' 8-bit cameras (1 DN = 78 e⁻ for the ccd,
-# 39 e⁻ for the cmos); the exposure error is the real-cameras issue's.
+# 39 e⁻ for the cmos); the exposure error is a real camera's.
 _EXPOSURE = {"exposure_jitter": 0.03, "exposure_lag_s": 1e-4}
 _BLACK = {"black_level_dn": 3.0, "black_noise_dn": 0.5}
 _WHITE = {"white_level_dn": 240.0}
@@ -127,7 +127,7 @@ _FILM = [
     {"kind": "film", "params": {"toe": 1.7, "shoulder": 0.9, "pivot": 0.28, "knee": 0.97}},
 ]
 _KNEE = [{"kind": "linear", "params": {"knee": 0.9}}] * 3
-# Veiling glare at the issue's level: 1.5 % of the light in a 40 px Moffat
+# Veiling glare at a real lens's level: 1.5 % of the light in a 40 px Moffat
 # spread, measured on the lamp scene (the lamp 30× the white chart).
 _GLARE = {"glare": {"fraction": 0.015, "width_px": 40.0, "beta": 1.5}}
 _LAMP = {"scene": "lamp"}
@@ -135,7 +135,7 @@ _LAMP_GLARE = {"scene": "lamp", "glare": True}
 # With a 0.1 ms shutter lag no exposure is shorter than 0.1 ms: the glare capture's
 # source (l = 300 by default, clipped there) is dimmed to l = 30, as a user would.
 _LAMP_GLARE_DIM = {"scene": "lamp", "glare": {"level": 30.0}}
-_ISSUE = {**_EXPOSURE, **_BLACK, "row_noise_dn": 0.5, "stuck_pixel_fraction": 1e-3}
+_TYPICAL = {**_EXPOSURE, **_BLACK, "row_noise_dn": 0.5, "stuck_pixel_fraction": 1e-3}
 
 DISTURBANCES: tuple[Disturbance, ...] = (
     Disturbance("exposure", "exposure-time error (3 % jitter, 0.1 ms lag)", _sensor(**_EXPOSURE)),
@@ -194,14 +194,14 @@ DISTURBANCES: tuple[Disturbance, ...] = (
         capture=_LAMP_GLARE,
     ),
     Disturbance(
-        "issue",
-        "issue 12's set: exposure error, row noise, 3 DN pedestal, stuck pixels",
-        _sensor(**_ISSUE),
+        "typical",
+        "a typical camera's set: exposure error, row noise, 3 DN pedestal, stuck pixels",
+        _sensor(**_TYPICAL),
     ),
     Disturbance(
-        "issue_glare",
-        "issue 12's set and its glare, with a glare capture (source dimmed to l = 30)",
-        {**_sensor(**_ISSUE), **_GLARE},
+        "typical_glare",
+        "a typical camera's set and its glare, with a glare capture (source dimmed to l = 30)",
+        {**_sensor(**_TYPICAL), **_GLARE},
         capture=_LAMP_GLARE_DIM,
     ),
     Disturbance(
@@ -222,8 +222,8 @@ DISTURBANCES: tuple[Disturbance, ...] = (
     ),
 )
 """The rows after the clean camera, in the report's order: each disturbance alone
-(the exposure error also with the nominal times kept), the set the issue
-measured, that set with its glare and a glare capture (the issue's target:
+(the exposure error also with the nominal times kept), a typical camera's
+set, that set with its glare and a glare capture (the target:
 within 1.3× of the clean camera on the lamp scene), and ``"all"``: every
 sensor and output disturbance above (glare, optics and responses apart)."""
 
@@ -314,7 +314,7 @@ def run(
 
     shared = shared or Shared(config, seed, workdir)
     rows = list(DISTURBANCES if disturbances is None else disturbances)
-    res = ExperimentResult("robustness", TITLE, "issue 12; McCann & Rizzi 2007")
+    res = ExperimentResult("robustness", TITLE, "McCann & Rizzi 2007")
     res.paper = {"levels": {d.key: d.label for d in rows}}
     scenes = sorted({d.scene for d in rows} - {"hdr"})
     cleans = [Disturbance("clean", "clean camera", {})] + [

@@ -16,7 +16,7 @@ The paper gives no accuracy for the LUT (its time only, 0.13 s).
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §5.4, §6.1
+.. [PQ] The photoquantity paper: §5.4, §6.1
    "Sensor spatial non-uniformity", Fig. 3 (middle).
 """
 

@@ -37,7 +37,7 @@ photoquantity after one global scale fit.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §6.3
+.. [PQ] The photoquantity paper: §6.3
    "Linearization and colour-correction", §6.4, Table 1.
 """
 

@@ -11,7 +11,7 @@ vignetting fit from 10 correspondences. ``--check`` ignores timings.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``, §6.1.
+.. [PQ] The photoquantity paper, §6.1.
 """
 
 from __future__ import annotations

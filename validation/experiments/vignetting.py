@@ -19,7 +19,7 @@
    of them. Two views pan along one line only and leave the vignetting
    across it unconstrained.
 
-4. **Models × truths** (issue 11): every registered vignetting model
+4. **Models × truths**: every registered vignetting model
    (extended Goldman–Chen, Goldman–Chen 2005, the radial polynomial, the
    flat field, peers such as Hugin; plug-ins included) fitted on captures
    whose truth is the preset's extended Goldman–Chen, a ``cos⁴`` natural
@@ -37,7 +37,7 @@ default); they reuse its calibrated response and LUT.
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: §5.5,
+.. [PQ] The photoquantity paper: §5.5,
    §6.1 "Vignetting" (10 reference points, 40 s), §6.3 "Vignetting", Fig. 9.
 .. [GC05] D. B. Goldman, J.-H. Chen, "Vignette and exposure calibration and
    compensation", ICCV 2005, doi:10.1109/ICCV.2005.249.

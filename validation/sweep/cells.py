@@ -37,7 +37,7 @@ sets), and the times ``time_simulate_s``, ``time_calibrate_s``,
 
 References
 ----------
-.. [PQ] The photoquantity paper, ``shared/reference/paper.txt``: eq. 8, §6.
+.. [PQ] The photoquantity paper: eq. 8, §6.
 """
 
 from __future__ import annotations
