@@ -85,6 +85,17 @@ class ModelAdequacy:
         """``departure <= ADEQUACY_WARN · code_range`` (NaN, nothing measured: adequate)."""
         return not self.departure > ADEQUACY_WARN * self.code_range
 
+    @classmethod
+    def from_dict(cls, record: Any) -> ModelAdequacy | None:
+        """The adequacy of a report's record (:meth:`as_dict`); ``None`` if it is not one."""
+        fields = ("departure", "noise", "block_px", "n_blocks", "code_range")
+        if not isinstance(record, dict) or not all(
+            isinstance(record.get(k), int | float) and not isinstance(record.get(k), bool)
+            for k in fields
+        ):
+            return None
+        return cls(**{k: record[k] for k in fields})
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready summary (for a calibration report)."""
         return {

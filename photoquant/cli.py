@@ -194,15 +194,11 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
             f"glare: fraction {_fmt(model.glare.fraction)}, width {_fmt(model.glare.width_px)} px"
             f" (Moffat beta {model.glare.beta:g}), fit rms (ln) {_fmt(fit.get('rms_log_residual'))}"
         )
-    adequacy = _section(rep, "model_adequacy")
-    if isinstance(adequacy.get("departure"), int | float):
-        from photoquant.adequacy import ModelAdequacy
+    from photoquant.adequacy import ModelAdequacy
 
-        fields = ("departure", "noise", "block_px", "n_blocks", "code_range")
-        if all(isinstance(adequacy.get(k), int | float) for k in fields):
-            lines.append(
-                "model adequacy: " + ModelAdequacy(**{k: adequacy[k] for k in fields}).describe()
-            )
+    adequacy = ModelAdequacy.from_dict(rep.get("model_adequacy"))
+    if adequacy is not None:
+        lines.append(f"model adequacy: {adequacy.describe()}")
     exposures = _section(rep, "exposures")
     stacks = [("view " + str(i), e) for i, e in enumerate(exposures.get("views") or [])]
     if isinstance(exposures.get("irradiance"), dict):

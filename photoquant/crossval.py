@@ -245,11 +245,10 @@ class CrossvalResult:
             f"values; mean over held-out frames: {self.mean_of_frames_mae_dn:.3f} DN; "
             f"fallback-predicted values: {self.n_fallback}"
         )
-        if self.model_adequacy is not None:
-            from photoquant.adequacy import ModelAdequacy
+        from photoquant.adequacy import ModelAdequacy
 
-            fields = ("departure", "noise", "block_px", "n_blocks", "code_range")
-            adequacy = ModelAdequacy(**{k: self.model_adequacy[k] for k in fields})
+        adequacy = ModelAdequacy.from_dict(self.model_adequacy)
+        if adequacy is not None:
             lines.append(f"model adequacy: {adequacy.describe()}")
         return "\n".join(lines)
 
