@@ -539,8 +539,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``photoquant`` command; returns the exit status."""
-    from photoquant._checks import safe_stdio
     from photoquant._signals import Terminated, handle_signals
+    from photoquant._stdio import safe_stdio
     from photoquant.io.atomic import remove_live_temporaries
 
     safe_stdio()  # a strict locale must not turn a file name into a traceback

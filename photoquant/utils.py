@@ -52,12 +52,12 @@ from photoquant._checks import (
     check_positive,
     check_workers,
     default_workers,
-    safe_stdio,
     validate_method,
 )
 from photoquant._emor_data import emor_basis
 from photoquant._json import load_json, to_json_value
 from photoquant._signals import Terminated, handle_signals
+from photoquant._stdio import safe_stdio
 from photoquant._threads import thread_map
 
 __all__ = [
