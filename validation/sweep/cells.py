@@ -48,7 +48,6 @@ import json
 import os
 import platform
 import socket
-import tempfile
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -61,6 +60,10 @@ CELL_FORMAT = 1
 
 #: Metrics that are wall times (they differ between runs; never compared for determinism).
 TIME_METRICS = ("time_",)
+
+SCRATCH_PREFIX = "photoquant-sweep-"
+"""Prefix of a cell's scratch folder (:func:`photoquant.io.atomic.scratch_directory`): one left
+by a worker that was killed is removed by the next cell or sweep on that machine."""
 
 _TRACE_ENV = "PHOTOQUANT_SWEEP_TRACE"
 """If set, every cell a worker starts appends its id to this file (to count computations)."""
@@ -210,6 +213,7 @@ def _compute(config: Mapping[str, Any]) -> list[tuple[str, float]]:
     import numpy as np
 
     from photoquant.calibration import calibrate_manifest
+    from photoquant.io.atomic import scratch_directory
     from validation.compare import compare_with_truth
     from validation.sweep.spec import build_camera, method_specs
 
@@ -219,8 +223,8 @@ def _compute(config: Mapping[str, Any]) -> list[tuple[str, float]]:
     w, h = s["resolution"]
     exposure_s = np.geomspace(s["exposure_range"][0], s["exposure_range"][1], s["n_exposures"])
     times: dict[str, float] = {}
-    with tempfile.TemporaryDirectory(prefix="photoquant-sweep-") as tmp:
-        folder = Path(tmp) / "capture"
+    with scratch_directory(SCRATCH_PREFIX) as tmp:
+        folder = tmp / "capture"
         t = time.perf_counter()
         if s["renderer"] == "mitsuba":
             from pqsim.render import default_cache_dir

@@ -53,6 +53,7 @@ import copy
 import hashlib
 import itertools
 import json
+import math
 import tomllib
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -136,6 +137,31 @@ def method_label(spec: Mapping[str, Any]) -> str:
 
 
 # ------------------------------------------------------------------ value checks
+
+
+def _first_non_finite(value: Any, where: str) -> tuple[str, float] | None:
+    """The path and value of the first number in ``value`` that is not finite (TOML's inf, nan)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return where, value
+    if isinstance(value, Mapping):
+        items: list[tuple[str, Any]] = [(f"{where}.{k}", v) for k, v in value.items()]
+    elif isinstance(value, list):
+        items = [(f"{where}[{i}]", v) for i, v in enumerate(value)]
+    else:
+        return None
+    for path, item in items:
+        found = _first_non_finite(item, path)
+        if found is not None:
+            return found
+    return None
+
+
+def _check_finite(table: Mapping[str, Any]) -> None:
+    """Refuse a spec value that is not a finite number anywhere in ``table`` (one line)."""
+    for key, value in table.items():
+        found = _first_non_finite(value, str(key))
+        if found is not None:
+            raise _fail(f"`{found[0]}` must be a finite number, got {found[1]}")
 
 
 def _check_int_value(key: str, v: Any, lo: int, hi: int | None = None) -> int:
@@ -453,6 +479,8 @@ def parse_spec(doc: Mapping[str, Any], *, base_dir: str | Path = ".") -> SweepSp
     axes_doc = doc.get("axes", {})
     if not isinstance(sweep, Mapping) or not isinstance(axes_doc, Mapping):
         raise _fail("`sweep` and `axes` must be tables")
+    _check_finite(sweep)
+    _check_finite(axes_doc)
 
     def check_key(key: str, table: str) -> None:
         if key in SETTINGS or (table == "sweep" and key in _SWEEP_ONLY):
