@@ -48,6 +48,7 @@ import json
 import os
 import platform
 import socket
+import threading
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -167,6 +168,21 @@ def _trace(cid: str) -> None:
             os.close(fd)
 
 
+@functools.lru_cache(maxsize=1)
+def _worker_process_setup() -> None:
+    """Once per process that runs cells: tqdm's lock a thread lock, not a named semaphore.
+
+    A cell's progress bars are off and its process shares no terminal with
+    other cells. tqdm's default multiprocessing lock is a named semaphore: a
+    worker killed in the middle of a cell (a sweep stopped by Ctrl-C closes
+    its cluster) leaves it to the resource tracker, which warns about it on
+    the terminal after the sweep's one line.
+    """
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
+
+
 def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     """Run one cell: simulate → calibrate → correct → compare. Never raises for a failed cell.
 
@@ -186,6 +202,7 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
 
     import photoquant
 
+    _worker_process_setup()
     cid = str(config["cell_id"])
     _trace(cid)
     t0 = time.perf_counter()

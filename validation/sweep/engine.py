@@ -16,7 +16,7 @@ workers, writes the output, so workers need no access to it::
 A part is named by the cell's hash (:func:`validation.sweep.cells.cell_id`:
 its full configuration and the code version) and proves which cell it holds:
 the hash is in its Parquet metadata and in every row, under the sweep's
-columns (:func:`read_part`). Run again on the same ``DIR``, the cells with a
+columns, beside a digest of its rows (:func:`read_part`). Run again on the same ``DIR``, the cells with a
 part that proves them done (status ``ok``) are skipped, so a killed sweep
 loses at most the cells that were running; failed cells are run again, and
 so is the cell of a part that proves nothing (damaged, foreign, another
@@ -40,6 +40,7 @@ References
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import io
 import json
 import logging
@@ -65,6 +66,7 @@ __all__ = [
     "sweep_inputs",
     "read_results",
     "read_part",
+    "rows_digest",
     "probe_scheduler",
     "NETWORK_TIMEOUT_S",
     "cell_columns",
@@ -76,6 +78,8 @@ _SPEC_FILE = "sweep.json"
 _PARTS = "parts"
 #: Key of a part's Parquet metadata holding the hash of the cell it holds.
 _CELL_KEY = b"photoquant.sweep.cell"
+#: Key of a part's Parquet metadata holding the digest of its rows (:func:`rows_digest`).
+_DIGEST_KEY = b"photoquant.sweep.rows-sha256"
 #: Longest wait for a Dask scheduler to answer (connect, handshake, first reply) and to close.
 NETWORK_TIMEOUT_S = 10.0
 
@@ -287,7 +291,19 @@ def _part_table(result: Mapping[str, Any], cell: Mapping[str, Any], index: int, 
     }
     rows = [common | {"metric": m, "value": v} for m, v in metrics]
     table = pa.Table.from_pylist(rows, schema=schema)
-    return table.replace_schema_metadata({_CELL_KEY: str(result["cell_id"]).encode()})
+    return table.replace_schema_metadata(
+        {_CELL_KEY: str(result["cell_id"]).encode(), _DIGEST_KEY: rows_digest(table).encode()}
+    )
+
+
+def rows_digest(table: Any) -> str:
+    """SHA-256 of a table's columns, types and values (exact: floats by their repr)."""
+    content = {
+        "columns": [[f.name, str(f.type)] for f in table.schema],
+        "rows": table.to_pylist(),
+    }
+    text = json.dumps(content, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _table_bytes(table: Any) -> bytes:
@@ -315,8 +331,9 @@ def read_part(path: Path, cell_id: str, schema: Any) -> tuple[Any | None, str | 
     """The rows of a part if it proves to hold cell ``cell_id``: ``(table, None)``, else ``(None, why)``.
 
     A part proves it by the cell's hash in its metadata (``photoquant.sweep.cell``),
-    the sweep's columns and types, and that hash in every row's ``cell_id``,
-    under one status (``ok`` or ``failed``). A missing part gives
+    the sweep's columns and types, that hash in every row's ``cell_id``,
+    under one status (``ok`` or ``failed``), and the digest of its rows
+    (:func:`rows_digest`), also in its metadata. A missing part gives
     ``(None, None)``; any other file — damaged, foreign, another cell's,
     written by another version — gives the reason, and its cell is run again.
     """
@@ -326,22 +343,33 @@ def read_part(path: Path, cell_id: str, schema: Any) -> tuple[Any | None, str | 
         return None, None
     try:
         table = _read_table(path)
-    except (OSError, ValueError, pa.ArrowException) as exc:
+        why = _part_problem(table, cell_id, schema)
+    except (OSError, ValueError, pa.ArrowException) as exc:  # damaged: bad bytes, bad text
         return None, f"cannot be read as Parquet ({_one_line(exc)})"
-    claimed = (table.schema.metadata or {}).get(_CELL_KEY)
+    if why is not None:
+        return None, why
+    return table.replace_schema_metadata(None), None
+
+
+def _part_problem(table: Any, cell_id: str, schema: Any) -> str | None:
+    """Why ``table`` (a part as read) does not prove that it holds cell ``cell_id``, or None."""
+    metadata = table.schema.metadata or {}
+    claimed = metadata.get(_CELL_KEY)
     if claimed is None:
-        return None, "does not say which cell it holds"
+        return "does not say which cell it holds"
     if claimed != cell_id.encode():
-        return None, f"says it holds cell {claimed.decode('ascii', 'replace')[:40]}"
+        return f"says it holds cell {claimed.decode('ascii', 'replace')[:40]}"
     if not table.schema.remove_metadata().equals(schema.remove_metadata()):
-        return None, "has other columns than this sweep's table"
+        return "has other columns than this sweep's table"
     ids = set(table.column("cell_id").to_pylist())
     statuses = set(table.column("status").to_pylist())
     if table.num_rows == 0 or ids != {cell_id}:
-        return None, "holds rows of another cell"
+        return "holds rows of another cell"
     if len(statuses) != 1 or not statuses <= {"ok", "failed"}:
-        return None, "has no single status ok or failed"
-    return table.replace_schema_metadata(None), None
+        return "has no single status ok or failed"
+    if metadata.get(_DIGEST_KEY) != rows_digest(table.replace_schema_metadata(None)).encode():
+        return "was changed after it was written (its rows do not match their digest)"
+    return None
 
 
 def _part_status(path: Path, cell_id: str, schema: Any) -> tuple[str | None, str | None]:
@@ -421,6 +449,11 @@ def _sigint_blocked() -> Iterator[None]:
     if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - not POSIX
         yield
         return
+    from multiprocessing import resource_tracker
+
+    # the tracker unblocks SIGINT in the thread that starts it (a cluster's event loop
+    # would, and pass that on to the workers): started here, before the block
+    resource_tracker.ensure_running()
     old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
