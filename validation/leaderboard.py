@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 
 from photoquant.io.atomic import make_scratch_directory, remove_scratch_directory
+from photoquant.io.outputs import real_path
 from validation.config import QUICK, ValidationConfig
 
 __all__ = [
@@ -485,7 +486,7 @@ def _capture_from_manifest(
 
 def _labels(paths: Sequence[str | Path]) -> list[str]:
     """A short unique column label per manifest: its folder's name (numbered when repeated)."""
-    names = [Path(p).resolve().parent.name or Path(p).stem for p in paths]
+    names = [real_path(p).parent.name or Path(p).stem for p in paths]
     return [n if names.count(n) == 1 else f"{n}#{i + 1}" for i, n in enumerate(names)]
 
 

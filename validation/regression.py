@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from photoquant.io.outputs import Output, OutputKind, check_outputs, file_of_kind
+from photoquant.io.outputs import Output, OutputKind, check_outputs, file_of_kind, real_path
 from photoquant.profiles import DEFAULT_PROFILE
 from validation.baseline import (
     BASELINE_FORMAT,
@@ -247,7 +247,7 @@ def _presets(presets: Sequence[str]) -> tuple[tuple[str, ...], tuple[tuple[str, 
         if p.lower() in CAMERA_PRESETS:
             label = p.lower()
         else:
-            path = Path(p).expanduser().resolve()
+            path = real_path(Path(p).expanduser())
             label = re.sub(r"[^A-Za-z0-9_-]+", "_", path.stem) or "preset"
             if label.lower() in CAMERA_PRESETS:
                 raise ValidationError(

@@ -61,6 +61,7 @@ from pathlib import Path
 from typing import Any
 
 from photoquant.errors import InputError, PhotoquantError
+from photoquant.io.outputs import real_path
 
 __all__ = [
     "CAPTURE_SETTINGS",
@@ -440,7 +441,7 @@ def load_spec(path: str | Path) -> SweepSpec:
     except tomllib.TOMLDecodeError as exc:
         raise _fail(f"sweep spec {path} is not valid TOML: {exc}") from None
     try:
-        return parse_spec(doc, base_dir=path.resolve().parent)
+        return parse_spec(doc, base_dir=real_path(path).parent)
     except SweepSpecError as exc:
         raise _fail(f"sweep spec {path}: {exc}") from None
 
