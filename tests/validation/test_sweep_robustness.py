@@ -136,7 +136,9 @@ def one_part() -> tuple[bytes, str, object]:
 
 def test_an_intact_part_proves_its_cell(one_part, tmp_path):
     data, cid, schema = one_part
-    path = tmp_path / "part.parquet"
+    folder = Path(os.fsdecode(os.fsencode(tmp_path) + b"/parts\xff"))  # not valid UTF-8
+    folder.mkdir()
+    path = folder / "part.parquet"
     path.write_bytes(data)
     table, why = read_part(path, cid, schema)
     assert why is None and table.num_rows == 2
