@@ -214,7 +214,7 @@ def validate_inputs(args: argparse.Namespace) -> list[Any]:
 
 
 def check_validate_outputs(args: argparse.Namespace) -> None:
-    """Refuse any of ``validate``'s outputs before it runs (:func:`photoquant.io.outputs.check_outputs`).
+    """Refuse any of ``validate``'s outputs before it runs (:mod:`photoquant.io.outputs`).
 
     The report folder (``-o``), the JUnit report (``--junit``) and the
     baseline (``--write-baseline``): none may be, hold or lie inside an input

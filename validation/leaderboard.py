@@ -1294,7 +1294,7 @@ def check_report_folder(
     real: bool = False,
     allow_outside: bool = False,
 ) -> None:
-    """Refuse a report folder before the board runs (one line; :func:`photoquant.io.outputs.check_outputs`).
+    """Refuse a report folder before the board runs (one line; :mod:`photoquant.io.outputs`).
 
     The folder must not be, hold or lie inside what the board reads (the
     ``manifests`` and their frames and truth, the real brackets of ``real``),

@@ -150,7 +150,7 @@ def sweep_inputs(spec: SweepSpec, spec_path: str | Path | None = None) -> list[A
     folder may lie inside it, not be or hold it).
     """
     base = Path(spec.base_dir)
-    presets = [p if (p := Path(name)).is_absolute() else base / p for name in spec.preset_files]
+    presets = [base / name for name in spec.preset_files]  # an absolute name stays as it is
     cache = [Holder(Path(spec.cache_dir))] if spec.cache_dir else []
     return [spec_path, *presets, *cache]
 
@@ -328,7 +328,7 @@ def _one_line(exc: BaseException) -> str:
 
 
 def read_part(path: Path, cell_id: str, schema: Any) -> tuple[Any | None, str | None]:
-    """The rows of a part if it proves to hold cell ``cell_id``: ``(table, None)``, else ``(None, why)``.
+    """``(rows, None)`` of a part that proves it holds cell ``cell_id``, else ``(None, why)``.
 
     A part proves it by the cell's hash in its metadata (``photoquant.sweep.cell``),
     the sweep's columns and types, that hash in every row's ``cell_id``,
