@@ -378,9 +378,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``pqsim`` command; returns the exit status."""
-    from photoquant._environ import check_environment
     from photoquant.io.atomic import remove_live_temporaries
-    from photoquant.utils import Terminated, handle_signals, safe_stdio
+    from photoquant.utils import Terminated, check_environment, handle_signals, safe_stdio
 
     safe_stdio()  # a strict locale must not turn a file name into a traceback
     args = build_parser().parse_args(argv)
