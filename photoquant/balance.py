@@ -98,7 +98,9 @@ def colour_balance_WhiteChart(
     mask : ndarray, shape (H, W, C) of bool, optional
         Pixels to ignore (no valid exposure).
     reference_channel : int
-        The channel whose factor is 1 (green, index 1, in the paper).
+        The channel whose factor is 1 (green, index 1, in the paper). A
+        monochrome image (one channel) is its own reference: its factor is 1
+        whatever this says.
 
     Returns
     -------
@@ -106,9 +108,13 @@ def colour_balance_WhiteChart(
         ``a_λ = W_ref / W_λ``.
     """
     colour = white_chart_colour(linear, roi, mask)
+    if colour.size == 1:
+        return np.ones(1)  # a monochrome camera: its one channel is its own reference
     if not 0 <= reference_channel < colour.size:
         raise InputError(
-            f"`reference_channel` must be in [0, {colour.size - 1}], got {reference_channel}"
+            f"the white chart's reference channel {reference_channel} is not one of the "
+            f"camera's {colour.size} channels; give --option "
+            f"balance.reference_channel=0..{colour.size - 1}"
         )
     return colour[reference_channel] / colour
 

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from photoquant import __version__
-from photoquant.errors import InputError, OutputExistsError, PhotoquantError
+from photoquant.errors import InputError, PhotoquantError
 
 __all__ = ["main", "build_parser"]
 
@@ -116,12 +116,14 @@ def step_specs(args: argparse.Namespace) -> dict[str, Any]:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from photoquant.calibration import calibrate_manifest
-    from photoquant.io.outputs import check_output_not_input, manifest_inputs
+    from photoquant.io.outputs import CAMERA, Output, check_outputs, manifest_inputs
 
     out = Path(args.output)
-    check_output_not_input(out, manifest_inputs(args.manifest, allow_outside=args.allow_outside))
-    if out.exists() and not args.overwrite:
-        raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
+    check_outputs(
+        [Output(out, CAMERA)],
+        manifest_inputs(args.manifest, allow_outside=args.allow_outside),
+        overwrite=args.overwrite,
+    )
     specs = step_specs(args)
     step, done = _step_logger(args)
     step("loading frames")
@@ -243,19 +245,24 @@ def _cmd_correct(args: argparse.Namespace) -> int:
     from photoquant.correction import correct_manifest
     from photoquant.io.atomic import atomic_output_file
     from photoquant.io.images import write_exr
-    from photoquant.io.outputs import camera_inputs, check_output_not_input, manifest_inputs
+    from photoquant.io.outputs import (
+        EXR_IMAGE,
+        Output,
+        camera_inputs,
+        check_outputs,
+        manifest_inputs,
+    )
     from photoquant.model import load_camera
 
     out = Path(args.output)
-    if out.suffix.lower() != ".exr":
-        raise PhotoquantError(f"the output must be an OpenEXR file (.exr), got {out}")
-    check_output_not_input(
-        out,
+    check_outputs(
+        [Output(out, EXR_IMAGE)],
         manifest_inputs(args.manifest, allow_outside=args.allow_outside)
         + camera_inputs(args.camera),
+        overwrite=args.overwrite,
     )
-    if out.exists() and not args.overwrite:
-        raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
+    if out.suffix.lower() != ".exr":
+        raise PhotoquantError(f"the output must be an OpenEXR file (.exr), got {out}")
     t0 = time.perf_counter()
     model = load_camera(args.camera)
     result = correct_manifest(
@@ -267,7 +274,8 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         dark_subtraction=args.dark_subtraction,
     )
     out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_output_file(out, overwrite=args.overwrite) as tmp:  # no replace without the flag
+    # no replace without the flag, and only of an OpenEXR image
+    with atomic_output_file(out, overwrite=args.overwrite, replaceable=EXR_IMAGE.problem) as tmp:
         write_exr(
             tmp,
             result.photoquantity,
@@ -553,14 +561,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``photoquant`` command; returns the exit status."""
-    from photoquant._checks import safe_stdio
+    from photoquant._environ import check_environment
     from photoquant._signals import Terminated, handle_signals
+    from photoquant._stdio import safe_stdio
     from photoquant.io.atomic import remove_live_temporaries
 
     safe_stdio()  # a strict locale must not turn a file name into a traceback
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
+        check_environment()  # a bad variable is one line now, not a failure per frame or cell
         with handle_signals():  # SIGTERM / Ctrl-C: clean exit, temporaries removed
             return int(args.func(args) or 0)
     except PhotoquantError as exc:

@@ -62,6 +62,7 @@ from photoquant.flatfield import SensorLUTModel
 from photoquant.glare import GlareModel
 from photoquant.io.atomic import atomic_directory, write_text_atomic
 from photoquant.io.images import read_exr, write_exr
+from photoquant.io.outputs import real_path
 from photoquant.merge import MergeModel, MergeResult
 from photoquant.methods import MODEL_STEPS, OPTIONAL_MODEL_STEPS, registry
 from photoquant.response.model import ResponseModel
@@ -363,7 +364,7 @@ def _read_image(folder: Path, file: Any, channels: tuple[str, ...], where: str) 
     if not isinstance(file, str) or not file or "/" in file or "\\" in file or file in (".", ".."):
         raise CameraModelError(f"{where}: image file {file!r} must be a plain file name")
     path = folder / file
-    if path.resolve().parent != folder.resolve():
+    if real_path(path).parent != real_path(folder):
         raise CameraModelError(f"{where}: {file} must lie in the camera folder")
     image, names = read_exr(path)  # in the order the camera wrote them
     if tuple(names) != channels:

@@ -44,6 +44,7 @@ import numpy as np
 from tqdm import tqdm
 
 from photoquant.errors import InputError
+from photoquant.io.outputs import OutputKind
 from photoquant.utils import check_exposure_times, check_int, check_positive, thread_map
 from pqsim.analytic import (
     pan_shifts,
@@ -63,6 +64,7 @@ __all__ = [
     "DEFAULT_GLARE_EXPOSURES_S",
     "DEFAULT_SCENE_EXPOSURES_S",
     "MANIFEST_NAME",
+    "CAPTURE_SET",
     "capture_set_problem",
     "check_output_folder",
     "frame_extension",
@@ -279,6 +281,12 @@ def capture_set_problem(folder: str | Path) -> str | None:
             f"it holds files that are not part of its capture set ({shown}); move them away first"
         )
     return None
+
+
+#: A capture set as a command's output (:func:`photoquant.io.outputs.check_outputs`).
+CAPTURE_SET = OutputKind(
+    "pqsim capture set", folder=True, problem=capture_set_problem, empty_ok=True
+)
 
 
 def _resolve(source: CaptureSource) -> Capture:

@@ -71,34 +71,23 @@ def _check_capture_output(args: argparse.Namespace) -> None:
 
     Without ``--overwrite`` the folder must be missing or empty; with it, it
     may also hold a previous capture set of pqsim and nothing else
-    (:func:`pqsim.capture_set.capture_set_problem`). The writer checks again
-    at its final rename.
+    (:func:`pqsim.capture_set.capture_set_problem`); it must not be, hold or
+    lie inside the preset file, the sensitivities or the render cache, and
+    must be writable (:func:`photoquant.io.outputs.check_outputs`). The
+    writer checks again at its final rename.
     """
-    from photoquant.io.outputs import check_output_not_input
-    from pqsim.capture_set import capture_set_problem
+    from photoquant.io.outputs import Output, check_outputs
+    from pqsim.capture_set import CAPTURE_SET
+    from pqsim.synth_camera.presets import _is_preset_file
 
-    out = Path(args.output)
-    preset = Path(args.preset)
-    check_output_not_input(
-        out,
-        [
-            preset if preset.suffix.lower() == ".json" else None,
-            Path(args.cache_dir).expanduser() if getattr(args, "cache_dir", None) else None,
-        ],
-    )
-    if out.is_symlink() or (out.exists() and not out.is_dir()):
-        raise PhotoquantError(f"{out} exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()):
-        if not args.overwrite:
-            raise PhotoquantError(
-                f"{out} is not empty (use --overwrite to replace its capture set)"
-            )
-        problem = capture_set_problem(out)
-        if problem:
-            raise PhotoquantError(
-                f"{out} is not replaced: {problem} (--overwrite replaces only a capture set "
-                "written by pqsim)"
-            )
+    inputs = [
+        Path(args.preset) if _is_preset_file(args.preset) else None,
+        Path(args.cache_dir).expanduser() if getattr(args, "cache_dir", None) else None,
+    ]
+    sens = getattr(args, "sensitivities", None)
+    if sens and _is_preset_file(sens):
+        inputs.append(Path(sens))
+    check_outputs([Output(Path(args.output), CAPTURE_SET)], inputs, overwrite=args.overwrite)
 
 
 def _cmd_capture(args: argparse.Namespace) -> int:
@@ -224,7 +213,13 @@ def _capture_rendered(
 
 def _cmd_preset(args: argparse.Namespace) -> int:
     from photoquant.io import write_text_atomic
-    from pqsim.synth_camera.presets import camera_from_preset, preset_json
+    from photoquant.io.outputs import Output, check_outputs
+    from pqsim.synth_camera.presets import (
+        PRESET_FILE,
+        _is_preset_file,
+        camera_from_preset,
+        preset_json,
+    )
 
     text = preset_json(args.name)
     camera_from_preset(args.name)  # the preset must build a camera
@@ -232,9 +227,10 @@ def _cmd_preset(args: argparse.Namespace) -> int:
         sys.stdout.write(text)
         return 0
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        raise PhotoquantError(f"{out} already exists (use --overwrite to replace it)")
-    write_text_atomic(out, text, overwrite=args.overwrite)  # refuses one that appeared meanwhile
+    inputs = [Path(args.name) if _is_preset_file(args.name) else None]
+    check_outputs([Output(out, PRESET_FILE)], inputs, overwrite=args.overwrite)
+    # refuses one that appeared meanwhile, or one that became another kind of file
+    write_text_atomic(out, text, overwrite=args.overwrite, replaceable=PRESET_FILE.problem)
     print(f"preset written: {out} (edit it, then: pqsim capture --preset {out} ...)")
     return 0
 
@@ -383,11 +379,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``pqsim`` command; returns the exit status."""
     from photoquant.io.atomic import remove_live_temporaries
-    from photoquant.utils import Terminated, handle_signals, safe_stdio
+    from photoquant.utils import Terminated, check_environment, handle_signals, safe_stdio
 
     safe_stdio()  # a strict locale must not turn a file name into a traceback
     args = build_parser().parse_args(argv)
     try:
+        check_environment()  # a bad variable is one line now, not a failure per frame
         with handle_signals():  # SIGTERM / Ctrl-C: clean exit, temporaries removed
             return int(args.func(args) or 0)
     except PhotoquantError as exc:

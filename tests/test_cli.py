@@ -290,3 +290,29 @@ def test_exposure_refinement_flags_and_summary(capture, tmp_path, capsys):
     args = ["correct", str(capture), "--camera", str(cam), "-o", str(exr2), "-q"]
     assert main([*args, "--no-refine-exposures"]) == 0
     assert "scene exposures" not in capsys.readouterr().out
+
+
+def test_a_monochrome_camera_with_a_white_chart_calibrates_and_corrects(tmp_path, capsys):
+    """A legal one-channel manifest (``"channels": ["Y"]``, machine vision) end to end."""
+    from PIL import Image
+
+    manifest = write_capture_set(
+        tmp_path / "set", camera_from_preset("ccd"), shape=(96, 128), n_repeats=2, seed=5
+    )
+    for frame in manifest.parent.rglob("*.png"):  # keep the green channel: a mono sensor
+        rgb = np.asarray(Image.open(frame))
+        Image.fromarray(np.ascontiguousarray(rgb[..., 1])).save(frame)
+    doc = json.loads(manifest.read_text())
+    doc["channels"] = ["Y"]
+    doc.pop("truth", None)
+    manifest.write_text(json.dumps(doc))
+    assert "white_roi" in doc
+    cam = tmp_path / "cam"
+    assert main(["calibrate", str(manifest), "-o", str(cam), "-q"]) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert "channels Y" in out and "balance: [1]" in out
+    scene = tmp_path / "scene.exr"
+    assert main(["correct", str(manifest), "--camera", str(cam), "-o", str(scene), "-q"]) == 0
+    image, names = read_exr(scene)
+    assert tuple(names) == ("Y",) and image.shape[-1] == 1
+    assert np.isfinite(image).any()

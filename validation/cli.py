@@ -195,6 +195,43 @@ def run_configuration(args: argparse.Namespace) -> Any:
     )
 
 
+def validate_inputs(args: argparse.Namespace) -> list[Any]:
+    """What ``photoquant validate`` reads: the baseline, preset files, cache and work folders.
+
+    The cache and work folders are :class:`~photoquant.io.outputs.Holder`\\ s:
+    an output may lie inside them, not be or hold them.
+    """
+    from photoquant.io.outputs import Holder
+    from pqsim.synth_camera.presets import _is_preset_file
+    from validation.regression import STORED_BASELINES
+
+    check = args.check
+    if check == "default":
+        check = STORED_BASELINES.get(args.mode)
+    presets = [p for p in args.preset or [] if _is_preset_file(p)]
+    kept = [Holder(Path(p).expanduser()) for p in (args.cache_dir, args.workdir) if p is not None]
+    return [check, *presets, *kept]
+
+
+def check_validate_outputs(args: argparse.Namespace) -> None:
+    """Refuse any of ``validate``'s outputs before it runs (:mod:`photoquant.io.outputs`).
+
+    The report folder (``-o``), the JUnit report (``--junit``) and the
+    baseline (``--write-baseline``): none may be, hold or lie inside an input
+    or another of them, each must be writable, and an existing one is
+    replaced only with ``--overwrite`` and only if it is of its kind.
+    """
+    from photoquant.io.outputs import VALIDATION_REPORT, Output, check_outputs
+    from validation.regression import BASELINE_FILE, JUNIT_REPORT
+
+    outputs = [Output(Path(args.output), VALIDATION_REPORT)]
+    if args.junit:
+        outputs.append(Output(Path(args.junit), JUNIT_REPORT, "--junit"))
+    if args.write_baseline:
+        outputs.append(Output(Path(args.write_baseline), BASELINE_FILE, "--write-baseline"))
+    check_outputs(outputs, validate_inputs(args), overwrite=args.overwrite)
+
+
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``photoquant validate``; returns the exit status (0, or 1 for a regression)."""
     from photoquant.errors import OutputExistsError
@@ -226,17 +263,7 @@ def run_validate(args: argparse.Namespace) -> int:
             "installed: pip install 'photoquant[render]', or add --chart analytic"
         )
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        raise OutputExistsError(f"{out} already exists (use --overwrite to replace it)")
-    for flag, target in (("--write-baseline", args.write_baseline), ("--junit", args.junit)):
-        if target and out.resolve() in Path(target).resolve().parents:
-            raise ValidationError(
-                f"{flag} {target} lies inside the report folder {out}, which is replaced whole"
-            )
-        if target and Path(target).exists() and not args.overwrite:
-            raise OutputExistsError(
-                f"{target} ({flag}) already exists (use --overwrite to replace it)"
-            )
+    check_validate_outputs(args)
     prepared = None
     if args.check:
         # before the run: a tampered, foreign or mismatched baseline fails now, with one line

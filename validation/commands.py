@@ -16,8 +16,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from photoquant.errors import OutputExistsError
-
 __all__ = [
     "register_validate",
     "register_demo",
@@ -45,16 +43,21 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     )
 
     if args.figures is not None:
-        from photoquant.io.outputs import camera_inputs, check_output_not_input, manifest_inputs
+        from photoquant.io.outputs import (
+            COMPARISON_FIGURES,
+            Output,
+            camera_inputs,
+            check_outputs,
+            manifest_inputs,
+        )
 
-        check_output_not_input(
-            args.figures,
+        check_outputs(
+            [Output(Path(args.figures), COMPARISON_FIGURES, "--figures")],
             manifest_inputs(args.manifest, allow_outside=args.allow_outside)
             + camera_inputs(args.camera),
+            overwrite=args.overwrite,
         )
     model = load_camera(args.camera)
-    if args.figures is not None and Path(args.figures).exists() and not args.overwrite:
-        raise OutputExistsError(f"{args.figures} already exists (use --overwrite to replace it)")
     rep = compare_with_truth(args.manifest, model, allow_outside=args.allow_outside)
     if args.figures is not None:
         paths = write_comparison_figures(
@@ -73,18 +76,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from photoquant.io.outputs import Holder, check_output_not_input
     from validation.cli import run_validate
 
-    check = getattr(args, "check", None)
-    kept = [getattr(args, "cache_dir", None), getattr(args, "workdir", None)]
-    presets = [p for p in getattr(args, "preset", None) or [] if p.lower().endswith(".json")]
-    check_output_not_input(
-        args.output,
-        [check if check not in (None, "default") else None]
-        + presets
-        + [Holder(Path(p).expanduser()) for p in kept if p is not None],
-    )
     return run_validate(args)
 
 
@@ -141,18 +134,14 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
     )
 
     if args.output is not None:
-        from photoquant.io.outputs import check_output_not_input
-        from validation.leaderboard import default_real_dir
-
-        real_dir = args.real_dir or (default_real_dir() if args.real else None)
-        inputs: list[Any] = [real_dir]
-        if args.manifests:
-            from photoquant.io.outputs import manifest_inputs
-
-            for m in args.manifests:
-                inputs += manifest_inputs(m, allow_outside=args.allow_outside)
-        check_output_not_input(args.output, inputs)
-        check_report_folder(args.output, overwrite=args.overwrite)
+        check_report_folder(
+            args.output,
+            overwrite=args.overwrite,
+            manifests=args.manifests,
+            real_dir=args.real_dir,
+            real=args.real,
+            allow_outside=args.allow_outside,
+        )
     config = BOARD_QUICK if args.quick else None
     kwargs: dict[str, Any] = {} if config is None else {"config": config, "repeats": 1}
     lb = run_leaderboard(
@@ -233,9 +222,16 @@ def register_leaderboard(sub: Any) -> None:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
+    from photoquant.io.outputs import Output, check_outputs
     from validation.sweep import load_spec, run_sweep
+    from validation.sweep.engine import SWEEP_FOLDER, sweep_inputs
 
     spec = load_spec(args.spec)
+    check_outputs(
+        [Output(Path(args.output), SWEEP_FOLDER)],
+        sweep_inputs(spec, args.spec),
+        overwrite=args.overwrite,
+    )
     outcome = run_sweep(
         spec,
         args.output,

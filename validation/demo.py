@@ -10,15 +10,19 @@ truth the simulator wrote.
 
 from __future__ import annotations
 
-import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 from photoquant.calibration import calibrate_manifest
 from photoquant.errors import OutputExistsError
 from photoquant.io import write_exr
+from photoquant.io.atomic import (
+    atomic_output_file,
+    make_scratch_directory,
+    remove_scratch_directory,
+)
+from photoquant.io.outputs import EXR_IMAGE
 from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera.presets import camera_from_preset
 from pqsim.synth_camera.truth import load_truth
@@ -32,6 +36,27 @@ FULL_SHAPE = (768, 1024)
 
 def _say(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
+
+
+def _check_demo_outputs(root: Path, overwrite: bool) -> None:
+    """Refuse the demo's outputs in ``root`` before anything runs (one line).
+
+    ``root`` itself is kept (only its ``capture/``, ``camera/`` and
+    ``scene.exr`` are written, each replaced only with ``overwrite`` and
+    only if it is of its kind: :func:`photoquant.io.outputs.check_outputs`);
+    a non-empty ``root`` needs ``overwrite``.
+    """
+    from photoquant.io.outputs import CAMERA, Output, check_outputs
+    from pqsim.capture_set import CAPTURE_SET
+
+    if root.is_dir() and any(root.iterdir()) and not overwrite:
+        raise OutputExistsError(f"{root} is not empty (use --overwrite to replace its contents)")
+    outputs = [
+        Output(root / "capture", CAPTURE_SET),
+        Output(root / "camera", CAMERA),
+        Output(root / "scene.exr", EXR_IMAGE),
+    ]
+    check_outputs(outputs, [], overwrite=overwrite)
 
 
 def run_demo(
@@ -49,9 +74,9 @@ def run_demo(
     """
     shape = QUICK_SHAPE if quick else FULL_SHAPE
     keep = output is not None
-    root = Path(output) if keep else Path(tempfile.mkdtemp(prefix="photoquant-demo-"))
-    if keep and root.exists() and any(root.iterdir()) and not overwrite:
-        raise OutputExistsError(f"{root} is not empty (use --overwrite to replace its contents)")
+    if keep:
+        _check_demo_outputs(Path(output), overwrite)
+    root = Path(output) if keep else make_scratch_directory("photoquant-demo-")
     timings: dict[str, float] = {}
     try:
         root.mkdir(parents=True, exist_ok=True)
@@ -76,7 +101,10 @@ def run_demo(
         truth = load_truth(root / "capture" / "truth")
         rep = compare_with_truth(manifest, model, truth)
         timings["correct + compare"] = time.perf_counter() - t0
-        write_exr(root / "scene.exr", rep["scene"]["photoquantity"], channels=model.channels)
+        with atomic_output_file(
+            root / "scene.exr", overwrite=overwrite, replaceable=EXR_IMAGE.problem
+        ) as tmp:
+            write_exr(tmp, rep["scene"]["photoquantity"], channels=model.channels)
         title = (
             f"photoquant demo — synthetic '{preset}' camera, {shape[1]}x{shape[0]}, "
             "K = 8 (1–200 ms), N = 10, V = 3"
@@ -88,5 +116,5 @@ def run_demo(
             print(f"\ncapture set, camera and scene.exr kept in {root}")
     finally:
         if not keep:
-            shutil.rmtree(root, ignore_errors=True)
+            remove_scratch_directory(root)
     return 0

@@ -65,7 +65,6 @@ import math
 import os
 import statistics
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -74,6 +73,8 @@ from typing import Any
 
 import numpy as np
 
+from photoquant.io.atomic import make_scratch_directory, remove_scratch_directory
+from photoquant.io.outputs import real_path
 from validation.config import QUICK, ValidationConfig
 
 __all__ = [
@@ -503,7 +504,7 @@ def _capture_from_manifest(
 
 def _labels(paths: Sequence[str | Path]) -> list[str]:
     """A short unique column label per manifest: its folder's name (numbered when repeated)."""
-    names = [Path(p).resolve().parent.name or Path(p).stem for p in paths]
+    names = [real_path(p).parent.name or Path(p).stem for p in paths]
     return [n if names.count(n) == 1 else f"{n}#{i + 1}" for i, n in enumerate(names)]
 
 
@@ -887,8 +888,6 @@ def run_leaderboard(
     -------
     Leaderboard
     """
-    import shutil
-
     from photoquant.errors import InputError
     from photoquant.utils import check_int
     from validation.experiments.shared import Shared
@@ -928,7 +927,7 @@ def run_leaderboard(
         if shared is not None
         else Path(workdir)
         if workdir is not None
-        else Path(tempfile.mkdtemp(prefix="photoquant-leaderboard-"))
+        else make_scratch_directory("photoquant-leaderboard-")
     )
     try:
         if given:
@@ -967,7 +966,7 @@ def run_leaderboard(
             )
     finally:
         if not keep:
-            shutil.rmtree(root, ignore_errors=True)
+            remove_scratch_directory(root)
     lb.elapsed_s = time.perf_counter() - t_start
     return lb
 
@@ -1270,17 +1269,33 @@ def _extra_figures(lb: Leaderboard, folder: Path) -> dict[str, str]:
     return out
 
 
+def _report_kind() -> Any:
+    """The leaderboard report folder as an output kind (:mod:`photoquant.io.outputs`)."""
+    from photoquant.io.outputs import OutputKind, folder_of_kind
+
+    return OutputKind(
+        "leaderboard report",
+        folder=True,
+        problem=folder_of_kind(
+            "leaderboard report",
+            ("leaderboard.md", "leaderboard.json", "*.png"),
+            ("leaderboard.json", "leaderboard.md"),
+        ),
+    )
+
+
 def write_report(lb: Leaderboard, folder: str | Path, *, overwrite: bool = False) -> Path:
     """Write ``leaderboard.md``, ``leaderboard.json``, ``<step>.png``, ``response_curves.png``,
     ``error_vs_time.png`` and ``colorchecker.png`` into ``folder``.
 
     Written atomically (:func:`photoquant.io.atomic.atomic_directory`): an
     existing folder is refused without ``overwrite`` (before anything runs,
-    see :func:`check_report_folder`).
+    see :func:`check_report_folder`), and with it unless it is a leaderboard
+    report (it holds nothing but a report's files).
     """
     from photoquant.io.atomic import atomic_directory
 
-    with atomic_directory(folder, overwrite=overwrite) as tmp:
+    with atomic_directory(folder, overwrite=overwrite, replaceable=_report_kind().problem) as tmp:
         figures: dict[str, str] = {}
         for board in lb.boards:
             name = f"{board.step}.png"
@@ -1292,10 +1307,25 @@ def write_report(lb: Leaderboard, folder: str | Path, *, overwrite: bool = False
     return Path(folder)
 
 
-def check_report_folder(folder: str | Path, *, overwrite: bool = False) -> None:
-    """Refuse an existing report folder before the board runs (one-line error)."""
-    from photoquant.errors import OutputExistsError
+def check_report_folder(
+    folder: str | Path,
+    *,
+    overwrite: bool = False,
+    manifests: Sequence[str | Path] | None = None,
+    real_dir: str | Path | None = None,
+    real: bool = False,
+    allow_outside: bool = False,
+) -> None:
+    """Refuse a report folder before the board runs (one line; :mod:`photoquant.io.outputs`).
 
-    path = Path(folder)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path} already exists (use --overwrite to replace it)")
+    The folder must not be, hold or lie inside what the board reads (the
+    ``manifests`` and their frames and truth, the real brackets of ``real``),
+    must be writable, and an existing one is replaced only with ``overwrite``
+    and only if it is a leaderboard report.
+    """
+    from photoquant.io.outputs import Output, check_outputs, manifest_inputs
+
+    inputs: list[Any] = [real_dir or (default_real_dir() if real else None)]
+    for m in manifests or ():
+        inputs += manifest_inputs(m, allow_outside=allow_outside)
+    check_outputs([Output(Path(folder), _report_kind())], inputs, overwrite=overwrite)

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from photoquant.io.outputs import Output, OutputKind, check_outputs, file_of_kind, real_path
 from photoquant.profiles import DEFAULT_PROFILE
 from validation.baseline import (
     BASELINE_FORMAT,
@@ -77,6 +78,8 @@ __all__ = [
     "check_against_baseline",
     "junit_xml",
     "write_junit",
+    "BASELINE_FILE",
+    "JUNIT_REPORT",
 ]
 
 DEFAULT_SEEDS: tuple[int, ...] = tuple(range(8))
@@ -90,6 +93,34 @@ VERSIONED = ("photoquant", "numpy", "scipy", "opencv-python-headless", "python")
 
 _CALIBRATE_KEY = {"correspondences": "correspondence_finder"}
 """Step → keyword of :func:`photoquant.calibrate` where they differ."""
+
+
+def _baseline_file_problem(path: Path) -> str | None:
+    """Why the existing file ``path`` is not a validation baseline (None: it is one)."""
+    from photoquant.errors import PhotoquantError
+    from photoquant.utils import load_json
+
+    try:
+        doc = load_json(Path(path), f"{path}")
+    except (PhotoquantError, OSError):
+        return "it is not a validation baseline (not a JSON file photoquant can read)"
+    fmt = doc.get("format") if isinstance(doc, dict) else None
+    if not isinstance(fmt, str) or fmt.split("/")[0] != BASELINE_FORMAT.split("/")[0]:
+        return "it is not a validation baseline"
+    return None
+
+
+#: A baseline file (``validate --write-baseline``): replaced only if it is a baseline.
+BASELINE_FILE = OutputKind("validation baseline", folder=False, problem=_baseline_file_problem)
+#: A JUnit XML report (``validate --junit``): replaced only if it is a JUnit report.
+JUNIT_REPORT = OutputKind(
+    "JUnit XML report",
+    folder=False,
+    problem=file_of_kind(
+        "JUnit XML report",
+        lambda head: head.lstrip().startswith(b"<?xml") and b"<testsuite" in head,
+    ),
+)
 
 
 def _json(value: Any) -> Any:
@@ -216,7 +247,7 @@ def _presets(presets: Sequence[str]) -> tuple[tuple[str, ...], tuple[tuple[str, 
         if p.lower() in CAMERA_PRESETS:
             label = p.lower()
         else:
-            path = Path(p).expanduser().resolve()
+            path = real_path(Path(p).expanduser())
             label = re.sub(r"[^A-Za-z0-9_-]+", "_", path.stem) or "preset"
             if label.lower() in CAMERA_PRESETS:
                 raise ValidationError(
@@ -497,7 +528,6 @@ def record_baseline(
     runs : list, optional
         Receives each seed's :class:`~validation.experiments.ValidationRun`.
     """
-    from photoquant.errors import OutputExistsError
     from photoquant.io import write_text_atomic
     from validation.experiments import run_validation
     from validation.report import results_json
@@ -508,8 +538,8 @@ def record_baseline(
         raise ValidationError(
             f"a baseline needs at least two distinct non-negative seeds, got {seeds}"
         )
-    if output is not None and Path(output).exists() and not overwrite:
-        raise OutputExistsError(f"{output} already exists (use --overwrite to replace it)")
+    if output is not None:
+        check_outputs([Output(Path(output), BASELINE_FILE, "output")], [], overwrite=overwrite)
     config = configuration.validation_config()
     say = progress or _quiet
     results = []
@@ -522,8 +552,12 @@ def record_baseline(
         say(f"baseline: seed {s} done in {time.perf_counter() - t0:.0f} s")
     doc = baseline_from_results(results, config, configuration.experiments)
     if output is not None:
+        Path(output).parent.mkdir(parents=True, exist_ok=True)
         write_text_atomic(
-            output, json.dumps(doc, indent=1, allow_nan=False) + "\n", overwrite=overwrite
+            output,
+            json.dumps(doc, indent=1, allow_nan=False) + "\n",
+            overwrite=overwrite,
+            replaceable=BASELINE_FILE.problem,
         )
     return doc
 
@@ -755,9 +789,19 @@ def write_junit(
     *,
     overwrite: bool = False,
 ) -> Path:
-    """Write :func:`junit_xml` to ``path`` atomically (an existing file only with ``overwrite``)."""
+    """Write :func:`junit_xml` to ``path`` atomically.
+
+    An existing file is replaced only with ``overwrite``, and only if it is a
+    JUnit XML report (:data:`JUNIT_REPORT`); missing folders are created.
+    """
     from photoquant.io import write_text_atomic
 
     p = Path(path)
-    write_text_atomic(p, junit_xml(results, check, baseline), overwrite=overwrite)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(
+        p,
+        junit_xml(results, check, baseline),
+        overwrite=overwrite,
+        replaceable=JUNIT_REPORT.problem,
+    )
     return p

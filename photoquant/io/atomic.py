@@ -48,6 +48,15 @@ them (:func:`clean_stale_temporaries`) — an ``.old`` folder of an interrupted
 overwrite is moved back when its target is missing, and otherwise named,
 never deleted. Temporaries of another shape (from older versions) are only
 named, in a warning of the ``photoquant`` logger.
+
+Scratch folders — the capture sets a sweep cell, a validation run or a
+leaderboard simulates and reads back, a peer's files — are made by
+:func:`scratch_directory` (or :func:`make_scratch_directory`) in the system's
+temporary folder under the name ``<prefix><pid>-<start>-<random>``: removed
+when their block ends, at exit, and on SIGTERM and Ctrl-C like the
+temporaries above, and — after a SIGKILL, or in a worker process that was
+terminated — recognised by the next one made with the same prefix once their
+process is gone, and removed (:func:`clean_stale_scratch`).
 """
 
 from __future__ import annotations
@@ -63,6 +72,7 @@ import secrets
 import shutil
 import stat
 import sys
+import tempfile
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -80,6 +90,10 @@ __all__ = [
     "clean_stale_temporaries",
     "remove_live_temporaries",
     "live_temporaries",
+    "scratch_directory",
+    "make_scratch_directory",
+    "remove_scratch_directory",
+    "clean_stale_scratch",
 ]
 
 _MODES = {"w": "w", "wt": "w", "wb": "wb"}
@@ -520,13 +534,26 @@ def _new_temp_file(target: Path) -> tuple[int, Path]:
     raise FileExistsError(errno.EEXIST, "no free temporary name", str(target))
 
 
-def _commit_file(tmp: Path, target: Path, *, overwrite: bool) -> None:
+def _check_replaceable_file(target: Path, replaceable: Replaceable | None) -> None:
+    """Refuse to replace an existing ``target`` that ``replaceable`` says is not of its kind."""
+    if replaceable is None or not os.path.lexists(target):
+        return
+    reason = replaceable(target)
+    if reason:
+        raise OutputExistsError(f"{target} is not replaced: {reason}")
+
+
+def _commit_file(
+    tmp: Path, target: Path, *, overwrite: bool, replaceable: Replaceable | None = None
+) -> None:
     try:
         file_mode = os.stat(target).st_mode
     except OSError:
         file_mode = None
     if file_mode is not None and stat.S_ISDIR(file_mode):
         raise OutputExistsError(f"{target} is a folder; it is not replaced by a file")
+    if overwrite:
+        _check_replaceable_file(target, replaceable)
     os.chmod(tmp, (file_mode & 0o7777) if file_mode is not None and overwrite else _NEW_FILE_MODE)
     if overwrite:
         os.replace(tmp, target)
@@ -541,6 +568,7 @@ def atomic_write(
     *,
     encoding: str = "utf-8",
     overwrite: bool = True,
+    replaceable: Replaceable | None = None,
 ) -> Iterator[IO[Any]]:
     """Open a temporary file that becomes ``path`` when the block exits without error.
 
@@ -559,6 +587,11 @@ def atomic_write(
         existing ``path`` — also one that appears while the file is written —
         raises :class:`OutputExistsError` and is left as it is; commands pass
         their ``--overwrite`` flag here.
+    replaceable : callable, optional
+        ``replaceable(path) -> reason or None``: why an existing ``path``
+        must not be replaced even with ``overwrite`` (it is not an output of
+        the writer's kind, :func:`photoquant.io.outputs.file_of_kind`); asked
+        before the block runs and again just before the final rename.
 
     Yields
     ------
@@ -588,6 +621,8 @@ def atomic_write(
     target = _target(path)
     if not overwrite and os.path.lexists(target):
         raise _exists_error(target)
+    if overwrite:
+        _check_replaceable_file(target, replaceable)
     _clean_stale(target)
     fd, tmp = _new_temp_file(target)
     try:
@@ -599,7 +634,7 @@ def atomic_write(
             os.fsync(f.fileno())
         with deferred_signals():
             _hook("committing", tmp)
-            _commit_file(tmp, target, overwrite=overwrite)
+            _commit_file(tmp, target, overwrite=overwrite, replaceable=replaceable)
             _unregister(tmp)
     except BaseException:
         _discard(tmp)
@@ -609,7 +644,12 @@ def atomic_write(
 
 
 def write_text_atomic(
-    path: str | os.PathLike[str], text: str, *, encoding: str = "utf-8", overwrite: bool = True
+    path: str | os.PathLike[str],
+    text: str,
+    *,
+    encoding: str = "utf-8",
+    overwrite: bool = True,
+    replaceable: Replaceable | None = None,
 ) -> None:
     """Write ``text`` to ``path`` atomically (see :func:`atomic_write` for ``overwrite``).
 
@@ -623,13 +663,17 @@ def write_text_atomic(
         Text encoding.
     overwrite : bool
         Replace an existing file (default) or raise :class:`OutputExistsError`.
+    replaceable : callable, optional
+        Why an existing file must not be replaced (see :func:`atomic_write`).
 
     Raises
     ------
     OSError
         If writing fails; ``path`` is then left unchanged.
     """
-    with atomic_write(path, "w", encoding=encoding, overwrite=overwrite) as f:
+    with atomic_write(
+        path, "w", encoding=encoding, overwrite=overwrite, replaceable=replaceable
+    ) as f:
         f.write(text)
 
 
@@ -657,14 +701,20 @@ def write_bytes_atomic(
 
 
 @contextlib.contextmanager
-def atomic_output_file(path: str | os.PathLike[str], *, overwrite: bool = False) -> Iterator[Path]:
+def atomic_output_file(
+    path: str | os.PathLike[str],
+    *,
+    overwrite: bool = False,
+    replaceable: Replaceable | None = None,
+) -> Iterator[Path]:
     """Yield a path to write a file to (by any writer); it becomes ``path`` when the block succeeds.
 
     For writers that take a file name (OpenEXR, PNG, matplotlib): the yielded
     path lies in a new temporary folder beside ``path`` and has the same name.
     ``overwrite`` is false by default: an existing ``path`` — also one that
     appears meanwhile — raises :class:`OutputExistsError`; with true, it is
-    replaced atomically once the new file is complete. On any error the
+    replaced atomically once the new file is complete — unless ``replaceable``
+    gives a reason not to (see :func:`atomic_write`). On any error the
     temporary folder is removed and ``path`` is untouched.
 
     Raises
@@ -679,6 +729,8 @@ def atomic_output_file(path: str | os.PathLike[str], *, overwrite: bool = False)
         raise _exists_error(target)
     if target.is_dir() and not target.is_symlink():
         raise OutputExistsError(f"{target} is a folder; it is not replaced by a file")
+    if overwrite:
+        _check_replaceable_file(target, replaceable)
     _clean_stale(target)
     tmp_dir = _new_temp_dir(target)
     try:
@@ -690,7 +742,7 @@ def atomic_output_file(path: str | os.PathLike[str], *, overwrite: bool = False)
             os.fsync(f.fileno())
         with deferred_signals():
             _hook("committing", tmp_dir)
-            _commit_file(inner, target, overwrite=overwrite)
+            _commit_file(inner, target, overwrite=overwrite, replaceable=replaceable)
     finally:
         _discard(tmp_dir)
     _hook("committed", target)
@@ -774,3 +826,88 @@ def atomic_directory(
         _discard(tmp)
     _hook("committed", target)
     _fsync_dir(target.parent)
+
+
+# ------------------------------------------------------------------------ scratch folders
+
+
+def _scratch_re(prefix: str) -> re.Pattern[str]:
+    return re.compile(re.escape(prefix) + r"(?P<pid>\d+)-(?P<start>\d+)-[0-9a-f]+")
+
+
+def _scratch_root(parent: str | os.PathLike[str] | None) -> Path:
+    return Path(parent) if parent is not None else Path(tempfile.gettempdir())
+
+
+def clean_stale_scratch(prefix: str, parent: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Remove the scratch folders ``<prefix><pid>-<start>-<random>`` whose process is gone.
+
+    Parameters
+    ----------
+    prefix : str
+        The prefix they were made with (``"photoquant-sweep-"``).
+    parent : path-like, optional
+        Where they were made (the system's temporary folder by default).
+
+    Returns
+    -------
+    list of Path
+        The folders removed. Those of running processes, and names of any
+        other shape, are left alone; one that cannot be removed is named in a
+        warning of the ``photoquant`` logger.
+    """
+    pattern = _scratch_re(prefix)
+    root = _scratch_root(parent)
+    removed: list[Path] = []
+    try:
+        names = [e.name for e in os.scandir(root) if e.name.startswith(prefix)]
+    except OSError:
+        return removed
+    for name in names:
+        m = pattern.fullmatch(name)
+        if m is None or _process_alive(int(m["pid"]), int(m["start"])):
+            continue
+        path = root / name
+        try:
+            _remove_path(path)
+        except OSError as exc:
+            _log.warning("photoquant: could not remove the stale scratch folder %s: %s", path, exc)
+            continue
+        removed.append(path)
+    return removed
+
+
+def make_scratch_directory(prefix: str, parent: str | os.PathLike[str] | None = None) -> Path:
+    """Make a scratch folder ``<prefix><pid>-<start>-<random>`` (module notes); returns it.
+
+    Stale ones of the same prefix are removed first. The caller removes it
+    with :func:`remove_scratch_directory` (or uses :func:`scratch_directory`);
+    it is also removed at exit and on SIGTERM and Ctrl-C.
+    """
+    root = _scratch_root(parent)
+    clean_stale_scratch(prefix, root)
+    with deferred_signals():
+        for _ in range(100):
+            path = root / f"{prefix}{_owner_tag()}-{secrets.token_hex(4)}"
+            try:
+                os.mkdir(path, 0o700)
+            except FileExistsError:
+                continue
+            _register(path, "scratch")
+            return path
+    raise FileExistsError(errno.EEXIST, "no free scratch folder name", str(root))
+
+
+def remove_scratch_directory(path: str | os.PathLike[str]) -> None:
+    """Remove a folder of :func:`make_scratch_directory` and all it holds."""
+    _discard(Path(path))
+
+
+@contextlib.contextmanager
+def scratch_directory(prefix: str, parent: str | os.PathLike[str] | None = None) -> Iterator[Path]:
+    """A scratch folder (:func:`make_scratch_directory`) removed when the block ends."""
+    path = make_scratch_directory(prefix, parent)
+    try:
+        yield path
+    finally:
+        remove_scratch_directory(path)

@@ -16,7 +16,10 @@ Tags (Exif 2.32, CIPA DC-008 [EXIF]_): ExposureTime 33434 (seconds), FNumber
 33437, PhotographicSensitivity 34855 (ISOSpeedRatings in Exif < 2.3; the first
 value when a writer stored several). A tag that is absent, not a positive finite
 number, or unreadable gives ``None``: metadata is advisory, and the caller
-decides whether its absence is an error.
+decides whether its absence is an error. A tag that is *present* but holds no
+usable number (``1/0``, zero, negative, text) is also named in
+:attr:`ExposureMetadata.unusable`: the file records a corrupt value, which no
+other reading of the same file (LibRaw's) may replace by a guess.
 
 References
 ----------
@@ -62,11 +65,23 @@ class ExposureMetadata:
         FNumber ``N`` (focal length over aperture diameter).
     iso : float or None
         ISO speed ``S`` (PhotographicSensitivity).
+    unusable : tuple of (str, str)
+        Tags present with a value that is no usable number (see the module notes).
     """
 
     exposure_time_s: float | None = None
     f_number: float | None = None
     iso: float | None = None
+    unusable: tuple[tuple[str, str], ...] = ()
+    """``(tag name, value as written)`` of each tag present in the header with no usable number."""
+
+    def is_unusable(self, tag: str) -> bool:
+        """Whether the header holds tag ``tag`` (``"ExposureTime"``...) with no usable number."""
+        return any(name == tag for name, _ in self.unusable)
+
+    def unusable_value(self, tag: str) -> str | None:
+        """The value of an unusable tag as the header writes it, or None."""
+        return next((text for name, text in self.unusable if name == tag), None)
 
 
 def _positive(value: Any, rational: bool) -> float | None:
@@ -93,20 +108,42 @@ def _positive(value: Any, rational: bool) -> float | None:
     return out if math.isfinite(out) and out > 0 else None
 
 
+def _written(value: Any, rational: bool) -> str:
+    """A tag's value as the header writes it (``1/0`` for a rational), for messages."""
+    pair = isinstance(value, list | tuple) and len(value) == 2
+    if rational and pair and all(isinstance(v, int) for v in value):
+        return f"{value[0]}/{value[1]}"
+    numerator = getattr(value, "numerator", None)
+    denominator = getattr(value, "denominator", None)
+    fraction = isinstance(numerator, int) and isinstance(denominator, int)
+    if rational and fraction and not isinstance(value, int):  # Pillow's IFDRational
+        return f"{numerator}/{denominator}"
+    return repr(value)[:40]
+
+
 def _from_mapping(main: Any, exif: Any) -> ExposureMetadata:
+    unusable: list[tuple[str, str]] = []
+
     def get(tag: int) -> float | None:
+        bad = None
         for source in (exif, main):
             if source is None:
                 continue
             value = source.get(tag)
             if value is None:
                 value = source.get(_TAG_NAMES[tag])
-            got = _positive(value, rational=tag != ISO_SPEED) if value is not None else None
+            if value is None:
+                continue
+            got = _positive(value, rational=tag != ISO_SPEED)
             if got is not None:
                 return got
+            bad = value if bad is None else bad
+        if bad is not None:
+            unusable.append((_TAG_NAMES[tag], _written(bad, rational=tag != ISO_SPEED)))
         return None
 
-    return ExposureMetadata(get(EXPOSURE_TIME), get(F_NUMBER), get(ISO_SPEED))
+    t, f, iso = get(EXPOSURE_TIME), get(F_NUMBER), get(ISO_SPEED)
+    return ExposureMetadata(t, f, iso, tuple(unusable))
 
 
 def _read_pillow(path: Path, png: bool) -> ExposureMetadata:
@@ -153,7 +190,8 @@ def read_exposure_metadata(path: PathLike) -> ExposureMetadata:
     Returns
     -------
     ExposureMetadata
-        Each field ``None`` when absent or not a positive finite number.
+        Each field ``None`` when absent or not a positive finite number; a
+        tag present with no usable number is also named in ``unusable``.
 
     Raises
     ------

@@ -146,19 +146,37 @@ def _frameset_name(frameset: FrameSetRef, manifest: CaptureManifest) -> str:
 def _metadata(frame: FrameRef, need_optics: bool) -> ExposureMetadata:
     """The frame's exposure time, f-number and ISO: manifest first, then the file's header."""
     t, f, iso = frame.exposure_s, frame.f_number, frame.iso
+    unusable: tuple[tuple[str, str], ...] = ()
     if t is None or (need_optics and (f is None or iso is None)):
         meta = read_exposure_metadata(frame.file)
         if is_raw_file(frame.file) and None in (meta.exposure_time_s, meta.f_number, meta.iso):
-            lib = read_raw_metadata(frame.file)
-            meta = ExposureMetadata(
-                meta.exposure_time_s or lib.exposure_time_s,
-                meta.f_number or lib.f_number,
-                meta.iso or lib.iso,
-            )
+            meta = _with_libraw_fallback(meta, read_raw_metadata(frame.file))
+        unusable = meta.unusable
         t = meta.exposure_time_s if t is None else t
         f = meta.f_number if f is None else f
         iso = meta.iso if iso is None else iso
-    return ExposureMetadata(t, f, iso)
+    return ExposureMetadata(t, f, iso, unusable)
+
+
+def _with_libraw_fallback(meta: ExposureMetadata, lib: ExposureMetadata) -> ExposureMetadata:
+    """The header's values, LibRaw's where the header has no such tag.
+
+    A tag the header holds with no usable number (``ExposureTime`` ``1/0``) is
+    not replaced: LibRaw reads the same corrupt tag and reports a made-up
+    value (1 s for ``1/0``), which would be taken for the frame's time.
+    """
+
+    def pick(mine: float | None, theirs: float | None, tag: str) -> float | None:
+        if mine is not None or meta.is_unusable(tag):
+            return mine
+        return theirs
+
+    return ExposureMetadata(
+        pick(meta.exposure_time_s, lib.exposure_time_s, "ExposureTime"),
+        pick(meta.f_number, lib.f_number, "FNumber"),
+        pick(meta.iso, lib.iso, "ISOSpeedRatings"),
+        meta.unusable,
+    )
 
 
 def _exposures(
@@ -170,6 +188,12 @@ def _exposures(
     basis = manifest.exposure_basis
     metas = [_metadata(frame, need_optics=basis != "time") for frame in frameset.frames]
     for frame, meta in zip(frameset.frames, metas, strict=True):
+        if meta.exposure_time_s is None and meta.is_unusable("ExposureTime"):
+            raise error(
+                f"frame {frame.file} has no `exposure_s` in the manifest, and its EXIF "
+                f"ExposureTime {meta.unusable_value('ExposureTime')} is no usable exposure "
+                "time (a corrupt tag); give `exposure_s` in the manifest"
+            )
         if meta.exposure_time_s is None:
             raise error(
                 f"frame {frame.file} has no `exposure_s` in the manifest and no EXIF "

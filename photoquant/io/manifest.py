@@ -100,6 +100,7 @@ from photoquant._json import to_json_value
 from photoquant.errors import ManifestError
 from photoquant.io.atomic import write_text_atomic
 from photoquant.io.frames import _group_by_exposure, load_stack
+from photoquant.io.outputs import real_path
 
 __all__ = [
     "CAPTURE_FORMAT",
@@ -263,7 +264,7 @@ class _Parser:
     ) -> None:
         self.manifest_path = manifest_path
         self.root = root
-        self.resolved_root = root.resolve()
+        self.resolved_root = real_path(root)
         self.check_files = check_files
         self.allow_outside = allow_outside
 
@@ -447,8 +448,8 @@ class _Parser:
                 f"manifest's folder {self.resolved_root} (pass allow_outside=True to permit it)"
             )
         try:
-            resolved = (self.root / rel).resolve()
-        except (OSError, RuntimeError) as exc:  # symlink loops
+            resolved = real_path(self.root / rel)
+        except OSError as exc:
             raise self.error(f"`{where}.file` {name!r} cannot be resolved: {exc}") from None
         if not self.allow_outside and not resolved.is_relative_to(self.resolved_root):
             raise self.error(
@@ -619,7 +620,7 @@ def load_manifest(path: PathLike, *, allow_outside: bool = False) -> CaptureMani
         ) from None
     except RecursionError:
         raise ManifestError(f"manifest {path}: not valid JSON (nested too deeply)") from None
-    resolved = path.resolve()
+    resolved = real_path(path)
     parser = _Parser(resolved, resolved.parent, check_files=True, allow_outside=allow_outside)
     return parser.parse(data)
 
@@ -683,7 +684,7 @@ def write_manifest(path: PathLike, data: Mapping[str, Any], *, allow_outside: bo
     """
     path = Path(path)
     plain = to_json_value(data)
-    resolved = path.resolve()
+    resolved = real_path(path)
     parser = _Parser(resolved, resolved.parent, check_files=False, allow_outside=allow_outside)
     parser.parse(plain)
     try:

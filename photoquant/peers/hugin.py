@@ -60,7 +60,6 @@ References
 from __future__ import annotations
 
 import re
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -71,6 +70,7 @@ from typing import Any
 import numpy as np
 
 from photoquant.errors import CalibrationError, InputError
+from photoquant.io.atomic import scratch_directory
 from photoquant.methods import StepFit
 from photoquant.peers._common import (
     check_channels,
@@ -299,7 +299,7 @@ def run_vig_optimize(
     optimiser's last RMS error, ×255 as Hugin prints it, iterations, time).
     """
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="photoquant-hugin-") as tmp:
+    with scratch_directory("photoquant-hugin-") as tmp:
         folder = Path(tmp)
         write_project(
             folder / "project.pto",

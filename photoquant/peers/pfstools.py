@@ -49,7 +49,6 @@ References
 from __future__ import annotations
 
 import re
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,6 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from photoquant.errors import CalibrationError, InputError
+from photoquant.io.atomic import scratch_directory
 from photoquant.merge._base import MergeResult
 from photoquant.methods import StepFit
 from photoquant.peers._common import (
@@ -211,7 +211,7 @@ def _run(
     require(available, name, REQUIREMENT)
     check_channels(stack, name)
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="photoquant-pfstools-") as tmp:
+    with scratch_directory("photoquant-pfstools-") as tmp:
         folder = Path(tmp)
         _write_bracket(folder, stack, name)
         cmd = (
@@ -332,7 +332,7 @@ def merge_stack_PfstoolsRobertson(
     require(available, MERGE_NAME, REQUIREMENT)
     require(lambda: have_executables("pfsout"), MERGE_NAME, REQUIREMENT)
     check_channels(stack, MERGE_NAME)
-    with tempfile.TemporaryDirectory(prefix="photoquant-pfstools-") as tmp:
+    with scratch_directory("photoquant-pfstools-") as tmp:
         folder = Path(tmp)
         _write_bracket(folder, stack, MERGE_NAME)
         # pfstools' own weighting for these frames, from a calibration run (module notes)

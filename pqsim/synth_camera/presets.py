@@ -79,6 +79,7 @@ from types import MappingProxyType
 from typing import Any
 
 from photoquant.errors import InputError
+from photoquant.io.outputs import OutputKind
 from photoquant.utils import load_json, to_json_value, validate_method
 from pqsim.synth_camera.camera import SyntheticCamera
 from pqsim.synth_camera.responses import ResponseCurve
@@ -88,6 +89,7 @@ __all__ = [
     "CAMERA_PRESETS",
     "DEFAULT_SENSITIVITIES",
     "PRESET_FORMAT",
+    "PRESET_FILE",
     "camera_from_preset",
     "preset_fields",
     "preset_json",
@@ -264,6 +266,21 @@ def _emor_draw(seed: int) -> dict[str, Any]:
         {"kind": "emor", "params": {"seed": 3 * seed + ch, "n_components": 5}} for ch in range(3)
     ]
     return fields
+
+
+def _preset_file_problem(path: Path) -> str | None:
+    """Why the existing file ``path`` is not a preset file (None: it is one)."""
+    try:
+        doc = load_json(Path(path), f"{path}")
+    except (InputError, OSError):
+        return "it is not a pqsim preset file (not a JSON file pqsim can read)"
+    if not isinstance(doc, dict) or doc.get("format") != PRESET_FORMAT:
+        return "it is not a pqsim preset file"
+    return None
+
+
+#: A preset file as a command's output (``pqsim preset -o``; :mod:`photoquant.io.outputs`).
+PRESET_FILE = OutputKind("pqsim preset file", folder=False, problem=_preset_file_problem)
 
 
 def _is_preset_file(name: str) -> bool:

@@ -44,7 +44,7 @@ def write_dng(
     black=(64, 64, 64, 64),
     white: int = 4095,
     pattern: str = "RGGB",
-    exposure_s: float | None = None,
+    exposure_s: float | tuple[int, int] | None = None,
     f_number: float | None = None,
     iso: int | None = None,
 ) -> None:
@@ -70,8 +70,9 @@ def write_dng(
         (50778, "H", 1, 21, False),
         (50728, "2I", 3, (1, 1, 1, 1, 1, 1), False),
     ]
-    if exposure_s is not None:
-        tags.append((33434, "2I", 1, _rational(exposure_s), False))
+    if exposure_s is not None:  # seconds, or a (numerator, denominator) written as it is
+        rational = exposure_s if isinstance(exposure_s, tuple) else _rational(exposure_s)
+        tags.append((33434, "2I", 1, rational, False))
     if f_number is not None:
         tags.append((33437, "2I", 1, _rational(f_number, 100), False))
     if iso is not None:

@@ -236,6 +236,29 @@ def test_replaceable_refuses_a_foreign_folder_even_if_it_changes_meanwhile(tmp_p
         (tmp / "camera.json").write_text("x")
 
 
+def test_replaceable_refuses_a_foreign_file_even_if_it_changes_meanwhile(tmp_path, renames):
+    def only_reports(path: Path) -> str | None:
+        return None if path.read_text().startswith("<report") else "it is not a report"
+
+    notes = tmp_path / "notes.xml"
+    notes.write_text("my notes")
+    with pytest.raises(OutputExistsError, match="not a report"):
+        with atomic_write(notes, "w", replaceable=only_reports):
+            pytest.fail("refused before the block")  # pragma: no cover
+    # a report that a user's file replaces while the new one is written
+    report = tmp_path / "report.xml"
+    report.write_text("<report old/>")
+    with pytest.raises(OutputExistsError, match="not a report"):
+        with atomic_write(report, "w", replaceable=only_reports) as f:
+            f.write("<report new/>")
+            report.write_text("mine now")
+    assert report.read_text() == "mine now" and notes.read_text() == "my notes"
+    assert siblings(report) == [] and siblings(notes) == []
+    # a report is replaced
+    write_text_atomic(report, "<report/>", replaceable=lambda _: None)
+    assert report.read_text() == "<report/>"
+
+
 def test_a_file_is_never_replaced_by_a_folder(tmp_path, renames):
     target = tmp_path / "cam"
     target.write_text("a file")

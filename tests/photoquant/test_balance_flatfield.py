@@ -17,6 +17,20 @@ def test_white_chart_factors_are_green_referenced():
     np.testing.assert_allclose((img * a)[5, 5], [4.0, 4.0, 4.0])
 
 
+@pytest.mark.parametrize("reference_channel", [0, 1, 5])
+def test_a_monochrome_white_chart_is_its_own_reference(reference_channel):
+    img = np.full((10, 12, 1), 3.0)
+    a = colour_balance_WhiteChart(img, [2, 3, 6, 8], reference_channel=reference_channel)
+    np.testing.assert_array_equal(a, [1.0])
+
+
+def test_a_reference_channel_the_camera_lacks_is_refused_in_the_users_terms():
+    img = np.ones((10, 12, 2))
+    with pytest.raises(InputError, match="not one of the camera's 2 channels") as info:
+        colour_balance_WhiteChart(img, [2, 3, 6, 8], reference_channel=2)
+    assert "--option balance.reference_channel=0..1" in str(info.value)
+
+
 def test_white_chart_ignores_flagged_pixels_and_outliers():
     img = np.ones((10, 10, 3)) * np.array([2.0, 4.0, 8.0])
     img[3, 3] = [100.0, 1.0, 1.0]  # a specular glint

@@ -81,9 +81,13 @@ def test_the_header_only_is_read(tmp_path):
     ("exif", "expected"),
     [
         ({}, ExposureMetadata()),
-        ({"t": IFDRational(0, 1)}, ExposureMetadata()),  # zero is not a time
-        ({"t": IFDRational(1, 0)}, ExposureMetadata()),  # nor is 1/0
-        ({"t": IFDRational(1, 4), "iso": 0}, ExposureMetadata(0.25)),
+        # zero is not a time, nor is 1/0: present, but unusable
+        ({"t": IFDRational(0, 1)}, ExposureMetadata(unusable=(("ExposureTime", "0/1"),))),
+        ({"t": IFDRational(1, 0)}, ExposureMetadata(unusable=(("ExposureTime", "1/0"),))),
+        (
+            {"t": IFDRational(1, 4), "iso": 0},
+            ExposureMetadata(0.25, unusable=(("ISOSpeedRatings", "0"),)),
+        ),
     ],
 )
 def test_absent_or_meaningless_tags_read_as_none(tmp_path, exif, expected):

@@ -233,3 +233,46 @@ def test_a_scene_on_another_black_level_is_refused(raw_linear_capture):
     )
     with pytest.raises(InputError, match="black level .* differs from the camera's"):
         pq.correct(other, model)
+
+
+@pytest.mark.parametrize("rational", [(1, 0), (0, 1), (0, 0)], ids=["1/0", "0/1", "0/0"])
+def test_a_corrupt_exposure_tag_is_no_exposure_not_libraws_guess(tmp_path, rng, rational):
+    """LibRaw reads ExposureTime 1/0 as 1 s; the frame has no usable exposure time instead."""
+    l = np.exp(rng.uniform(np.log(2e3), np.log(2e5), (12, 16, 3)))  # DN/s
+    times = [0.001, 0.004, 0.016]
+    path, _ = raw_bracket(tmp_path, l, times, rng=rng)
+    bad = tmp_path / f"raw_t{times[1]:g}_n0.dng"
+    cfa = read_raw(bad)  # rewrite the middle exposure with a corrupt ExposureTime
+    write_dng(
+        bad,
+        mosaic(cfa.image),
+        black=[64, 60, 60, 66],
+        exposure_s=rational,
+        f_number=8.0,
+        iso=100,
+    )
+    from photoquant.io.exif import read_exposure_metadata
+    from photoquant.io.raw import read_raw_metadata
+
+    meta = read_exposure_metadata(bad)
+    assert meta.exposure_time_s is None and meta.is_unusable("ExposureTime")
+    libraw = read_raw_metadata(bad).exposure_time_s  # what LibRaw makes of it (1/0: 1 s)
+    m = load_manifest(path)
+    with pytest.raises(ManifestError) as info:
+        load_stack(m.views[0], m)
+    text = str(info.value)
+    assert "no usable exposure time" in text and bad.name in text and "\n" not in text
+    assert f"ExposureTime {rational[0]}/{rational[1]}" in text
+    assert libraw is None or libraw > 0  # whatever LibRaw reports, it was not used
+
+
+def test_a_corrupt_exposure_tag_on_the_command_line_is_one_line(tmp_path, rng, capsys):
+    from photoquant.cli import main
+
+    l = np.exp(rng.uniform(np.log(2e3), np.log(2e5), (12, 16, 3)))
+    path, _ = raw_bracket(tmp_path, l, [0.001, 0.004, 0.016], rng=rng)
+    bad = tmp_path / "raw_t0.004_n0.dng"
+    write_dng(bad, mosaic(read_raw(bad).image), black=[64, 60, 60, 66], exposure_s=(1, 0))
+    assert main(["crossval", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "no usable exposure time" in err

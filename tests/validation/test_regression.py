@@ -393,7 +393,7 @@ def test_the_format_1_baseline_describes_the_default_pipeline_only(
         (["--seeds", "0", "1"], "--write-baseline"),
         (["--write-baseline", "b.json", "--seeds", "3"], "two distinct"),
         (["--write-baseline", "b.json", "--check"], "exclude each other"),
-        (["--write-baseline", "r/b.json"], "inside the report folder"),
+        (["--write-baseline", "r/b.json"], "lies inside the output"),
         (["--write-baseline", "b.json", "--seed", "3"], "not --seed"),
     ],
 )

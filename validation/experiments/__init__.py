@@ -30,9 +30,7 @@ flag is on (``robustness``: :attr:`ValidationConfig.robustness`, set by
 from __future__ import annotations
 
 import platform
-import shutil
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -176,11 +174,12 @@ def run_validation(
     ValidationRun
     """
     from photoquant.errors import PhotoquantError
+    from photoquant.io.atomic import make_scratch_directory, remove_scratch_directory
     from validation.experiments.shared import Shared
 
     names = _select(experiments, config)
     keep = workdir is not None
-    root = Path(workdir) if keep else Path(tempfile.mkdtemp(prefix="photoquant-validate-"))
+    root = Path(workdir) if keep else make_scratch_directory("photoquant-validate-")
     shared = Shared(config, seed, root, progress)
     t_start = time.perf_counter()
     results: dict[str, ExperimentResult] = {}
@@ -199,7 +198,7 @@ def run_validation(
             results[name] = res
     finally:
         if not keep:
-            shutil.rmtree(root, ignore_errors=True)
+            remove_scratch_directory(root)
     return ValidationRun(
         config=config,
         seed=int(seed),

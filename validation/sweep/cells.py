@@ -48,7 +48,7 @@ import json
 import os
 import platform
 import socket
-import tempfile
+import threading
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -61,6 +61,10 @@ CELL_FORMAT = 1
 
 #: Metrics that are wall times (they differ between runs; never compared for determinism).
 TIME_METRICS = ("time_",)
+
+SCRATCH_PREFIX = "photoquant-sweep-"
+"""Prefix of a cell's scratch folder (:func:`photoquant.io.atomic.scratch_directory`): one left
+by a worker that was killed is removed by the next cell or sweep on that machine."""
 
 _TRACE_ENV = "PHOTOQUANT_SWEEP_TRACE"
 """If set, every cell a worker starts appends its id to this file (to count computations)."""
@@ -164,6 +168,21 @@ def _trace(cid: str) -> None:
             os.close(fd)
 
 
+@functools.lru_cache(maxsize=1)
+def _worker_process_setup() -> None:
+    """Once per process that runs cells: tqdm's lock a thread lock, not a named semaphore.
+
+    A cell's progress bars are off and its process shares no terminal with
+    other cells. tqdm's default multiprocessing lock is a named semaphore: a
+    worker killed in the middle of a cell (a sweep stopped by Ctrl-C closes
+    its cluster) leaves it to the resource tracker, which warns about it on
+    the terminal after the sweep's one line.
+    """
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
+
+
 def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
     """Run one cell: simulate → calibrate → correct → compare. Never raises for a failed cell.
 
@@ -183,6 +202,7 @@ def run_cell(config: Mapping[str, Any]) -> dict[str, Any]:
 
     import photoquant
 
+    _worker_process_setup()
     cid = str(config["cell_id"])
     _trace(cid)
     t0 = time.perf_counter()
@@ -210,6 +230,7 @@ def _compute(config: Mapping[str, Any]) -> list[tuple[str, float]]:
     import numpy as np
 
     from photoquant.calibration import calibrate_manifest
+    from photoquant.io.atomic import scratch_directory
     from validation.compare import compare_with_truth
     from validation.sweep.spec import build_camera, method_specs
 
@@ -219,8 +240,8 @@ def _compute(config: Mapping[str, Any]) -> list[tuple[str, float]]:
     w, h = s["resolution"]
     exposure_s = np.geomspace(s["exposure_range"][0], s["exposure_range"][1], s["n_exposures"])
     times: dict[str, float] = {}
-    with tempfile.TemporaryDirectory(prefix="photoquant-sweep-") as tmp:
-        folder = Path(tmp) / "capture"
+    with scratch_directory(SCRATCH_PREFIX) as tmp:
+        folder = tmp / "capture"
         t = time.perf_counter()
         if s["renderer"] == "mitsuba":
             from pqsim.render import default_cache_dir

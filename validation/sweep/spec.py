@@ -53,6 +53,7 @@ import copy
 import hashlib
 import itertools
 import json
+import math
 import tomllib
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -60,6 +61,7 @@ from pathlib import Path
 from typing import Any
 
 from photoquant.errors import InputError, PhotoquantError
+from photoquant.io.outputs import real_path
 
 __all__ = [
     "CAPTURE_SETTINGS",
@@ -136,6 +138,31 @@ def method_label(spec: Mapping[str, Any]) -> str:
 
 
 # ------------------------------------------------------------------ value checks
+
+
+def _first_non_finite(value: Any, where: str) -> tuple[str, float] | None:
+    """The path and value of the first number in ``value`` that is not finite (TOML's inf, nan)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return where, value
+    if isinstance(value, Mapping):
+        items: list[tuple[str, Any]] = [(f"{where}.{k}", v) for k, v in value.items()]
+    elif isinstance(value, list):
+        items = [(f"{where}[{i}]", v) for i, v in enumerate(value)]
+    else:
+        return None
+    for path, item in items:
+        found = _first_non_finite(item, path)
+        if found is not None:
+            return found
+    return None
+
+
+def _check_finite(table: Mapping[str, Any]) -> None:
+    """Refuse a spec value that is not a finite number anywhere in ``table`` (one line)."""
+    for key, value in table.items():
+        found = _first_non_finite(value, str(key))
+        if found is not None:
+            raise _fail(f"`{found[0]}` must be a finite number, got {found[1]}")
 
 
 def _check_int_value(key: str, v: Any, lo: int, hi: int | None = None) -> int:
@@ -414,7 +441,7 @@ def load_spec(path: str | Path) -> SweepSpec:
     except tomllib.TOMLDecodeError as exc:
         raise _fail(f"sweep spec {path} is not valid TOML: {exc}") from None
     try:
-        return parse_spec(doc, base_dir=path.resolve().parent)
+        return parse_spec(doc, base_dir=real_path(path).parent)
     except SweepSpecError as exc:
         raise _fail(f"sweep spec {path}: {exc}") from None
 
@@ -453,6 +480,8 @@ def parse_spec(doc: Mapping[str, Any], *, base_dir: str | Path = ".") -> SweepSp
     axes_doc = doc.get("axes", {})
     if not isinstance(sweep, Mapping) or not isinstance(axes_doc, Mapping):
         raise _fail("`sweep` and `axes` must be tables")
+    _check_finite(sweep)
+    _check_finite(axes_doc)
 
     def check_key(key: str, table: str) -> None:
         if key in SETTINGS or (table == "sweep" and key in _SWEEP_ONLY):
