@@ -97,10 +97,14 @@ class ModelAdequacy:
         return cls(**{k: record[k] for k in fields})
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (for a calibration report)."""
+        """JSON-ready summary (for a calibration report; ``None`` where nothing was measured)."""
+
+        def number(value: float) -> float | None:
+            return float(value) if np.isfinite(value) else None
+
         return {
-            "departure": float(self.departure),
-            "noise": float(self.noise),
+            "departure": number(self.departure),
+            "noise": number(self.noise),
             "block_px": int(self.block_px),
             "n_blocks": int(self.n_blocks),
             "code_range": float(self.code_range),

@@ -584,19 +584,19 @@ def crossval_stack(
 
 def _mean_adequacy(records: Sequence[Any]) -> dict[str, Any] | None:
     """The folds' model-adequacy records averaged (``None`` without any)."""
-    from photoquant.adequacy import ADEQUACY_WARN
+    from photoquant.adequacy import ModelAdequacy
 
-    found = [
-        r for r in records if isinstance(r, Mapping) and np.isfinite(r.get("departure", np.nan))
-    ]
+    found = [a for a in (ModelAdequacy.from_dict(r) for r in records) if a is not None]
     if not found:
         return None
-    out = dict(found[0])
-    for key in ("departure", "noise"):
-        out[key] = float(np.mean([r[key] for r in found]))
-    out["n_folds"] = len(found)
-    out["adequate"] = not out["departure"] > ADEQUACY_WARN * float(out.get("code_range", 255.0))
-    return out
+    mean = ModelAdequacy(
+        float(np.mean([a.departure for a in found])),
+        float(np.mean([a.noise for a in found])),
+        found[0].block_px,
+        found[0].n_blocks,
+        found[0].code_range,
+    )
+    return {**mean.as_dict(), "n_folds": len(found)}
 
 
 def crossval_manifest(

@@ -9,6 +9,8 @@ level, and ``calibrate`` says so in its notes, ``crossval`` in its table.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -85,7 +87,11 @@ def test_a_scene_that_moved_is_not_static(rng):
 
 @pytest.mark.parametrize("departure", [float("nan"), 0.0])
 def test_nothing_measured_or_nothing_left_is_adequate(departure):
-    assert ModelAdequacy(departure, 0.1, 16, 0).adequate
+    adequacy = ModelAdequacy(departure, 0.1, 16, 0)
+    assert adequacy.adequate
+    # a report holds strict JSON: nothing measured is null, and reads back as no adequacy
+    record = json.loads(json.dumps(adequacy.as_dict(), allow_nan=False))
+    assert (ModelAdequacy.from_dict(record) is None) == (not np.isfinite(departure))
 
 
 @pytest.mark.parametrize("record", [None, {}, {"departure": "x"}, [1, 2]])
