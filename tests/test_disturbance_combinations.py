@@ -10,10 +10,13 @@ elsewhere (the robustness table); here they meet: a dark capture judged by
 a check meant for lit frames, a stuck pixel taken for the glare source, a
 lag fitted from a glare capture's noise.
 
-JPEG (quality 90) is apart: at these small frames its 8×8 blocks leave a
-tenth of the calibration world's pixels dark-clipped in every exposure and
-the vignetting fit refuses for too few valid correspondences, alone as in
-any pair (an expected failure, strict: it is reported when it passes).
+JPEG (quality 90) is apart: at these small frames a tenth of the
+calibration world's values jump from 0 straight to saturation between
+neighbouring exposures (JPEG's 4:2:0 chroma across the world's dense
+coloured edges), so those pixels have no valid exposure, and the vignetting
+fit refuses for too few valid correspondences, alone as in any pair (found
+before these tests; an expected failure, strict: it is reported when it
+passes).
 """
 
 from __future__ import annotations
@@ -108,8 +111,9 @@ def test_a_black_level_above_a_frame_set_names_it(tmp_path):
 @pytest.mark.xfail(
     strict=True,
     raises=PhotoquantError,
-    reason="JPEG at 48x64: a tenth of the calibration world's pixels dark-clipped in every "
-    "exposure, the vignetting fit refuses for too few valid correspondences (module notes)",
+    reason="JPEG at 48x64: a tenth of the calibration world's values jump from 0 to "
+    "saturation between neighbouring exposures (4:2:0 chroma at coloured edges), the "
+    "vignetting fit refuses for too few valid correspondences (module notes)",
 )
 def test_jpeg_calibrates_at_small_frames(tmp_path):
     _calibrates(_capture(tmp_path, {**_JPEG, **_BLACK}))
