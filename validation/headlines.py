@@ -171,6 +171,7 @@ SHORT = {
     "ablation": "ablation",
     "leaderboard": "leaderboard",
     "robustness": "robustness",
+    "robustness_pairs": "robustness (pairs)",
 }
 """The experiments' short names in the summary (the report has their titles)."""
 

@@ -59,3 +59,32 @@ def test_run_reports_each_quantity_against_the_clean_camera(tmp_path) -> None:
     assert m["robustness.ccd.typical.scene"] > 1.2 * m["robustness.ccd.clean.scene"]
     assert len(res.rows) == 3
     assert not any((tmp_path / "robustness" / "ccd").iterdir())  # capture sets removed
+
+
+def test_the_pairs_experiment_has_every_pair_once_and_runs_only_when_named(monkeypatch):
+    import itertools
+
+    import validation.experiments.robustness_pairs as pairs_exp
+    from validation.experiments.robustness import PAIRS, SENSOR_GROUPS
+
+    expected = {f"{a}+{b}" for a, b in itertools.combinations(SENSOR_GROUPS, 2)}
+    assert {d.key for d in PAIRS} == expected and len(PAIRS) == len(expected)
+    for dist in PAIRS:
+        a, b = dist.key.split("+")
+        assert dist.overrides["disturbances"] == {**SENSOR_GROUPS[a][1], **SENSOR_GROUPS[b][1]}
+    # each group is one of the single rows' disturbances at the same level
+    singles = {k: v for d in DISTURBANCES for k, v in d.overrides.get("disturbances", {}).items()}
+    for _, fields in SENSOR_GROUPS.values():
+        assert all(singles[k] == v for k, v in fields.items())
+    assert "robustness_pairs" not in _select(None, QUICK) + _select(None, FULL)
+    assert _select(["robustness_pairs"], QUICK) == ["robustness_pairs"]
+    assert "robustness_pairs" in _select(None, QUICK.replace(robustness_pairs=True))
+    seen = {}
+
+    def fake(config, seed, workdir, **kwargs):
+        seen.update(kwargs)
+        return "result"
+
+    monkeypatch.setattr(pairs_exp, "run_rows", fake)
+    assert pairs_exp.run(TINY, 0, "unused") == "result"
+    assert seen["disturbances"] == PAIRS and seen["key"] == "robustness_pairs"

@@ -21,6 +21,7 @@ preset is simulated and calibrated once) and gathers every metric.
 | ``ablation`` | the paper's profile, photoquant's, each deviation alone | §5, §6 |
 | ``leaderboard`` | every registered method ranked against the truth | §6 (beyond) |
 | ``robustness`` | each real-camera disturbance alone and all together (``--full``) | §3.2 (beyond) |
+| ``robustness_pairs`` | every pair of the sensor and output disturbances (when named) | §3.2 (beyond) |
 
 Experiments in :data:`OPT_IN` run by default only when their configuration
 flag is on (``robustness``: :attr:`ValidationConfig.robustness`, set by
@@ -58,10 +59,11 @@ EXPERIMENTS: dict[str, str] = {
     "ablation": "validation.experiments.ablation",
     "leaderboard": "validation.experiments.leaderboard",
     "robustness": "validation.experiments.robustness",
+    "robustness_pairs": "validation.experiments.robustness_pairs",
 }
 """Experiment key → module, in the order of the report (the paper's §6)."""
 
-OPT_IN: dict[str, str] = {"robustness": "robustness"}
+OPT_IN: dict[str, str] = {"robustness": "robustness", "robustness_pairs": "robustness_pairs"}
 """Experiment key → the :class:`ValidationConfig` flag that includes it in a default run."""
 
 

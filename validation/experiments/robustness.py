@@ -43,6 +43,7 @@ References
 
 from __future__ import annotations
 
+import itertools
 import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -60,7 +61,7 @@ from validation.experiments.shared import (
     pipeline_scores,
 )
 
-__all__ = ["DISTURBANCES", "Disturbance", "TITLE", "QUANTITIES", "run"]
+__all__ = ["DISTURBANCES", "PAIRS", "SENSOR_GROUPS", "Disturbance", "TITLE", "QUANTITIES", "run"]
 
 TITLE = "Robustness to real-camera disturbances"
 
@@ -227,6 +228,27 @@ set, that set with its glare and a glare capture (the target:
 within 1.3× of the clean camera on the lamp scene), and ``"all"``: every
 sensor and output disturbance above (glare, optics and responses apart)."""
 
+SENSOR_GROUPS: dict[str, tuple[str, Mapping[str, Any]]] = {
+    "exposure": ("exposure error", _EXPOSURE),
+    "black": ("black level", _BLACK),
+    "white": ("white level", _WHITE),
+    "tails": ("heavy-tailed read noise", _TAILS),
+    "banding": ("row / column noise", _BANDING),
+    "dsnu": ("readout DSNU", _DSNU_READOUT),
+    "defects": ("hot + stuck pixels", _DEFECTS),
+    "bayer": ("Bayer RGGB (linear photosites)", _BAYER_RAW),
+    "jpeg": ("JPEG 90", _JPEG),
+}
+"""The sensor and output disturbances of :data:`DISTURBANCES`, at their levels there, as
+groups whose pairs :data:`PAIRS` combines."""
+
+PAIRS: tuple[Disturbance, ...] = tuple(
+    Disturbance(f"{a}+{b}", f"{SENSOR_GROUPS[a][0]} + {SENSOR_GROUPS[b][0]}",
+                _sensor(**SENSOR_GROUPS[a][1], **SENSOR_GROUPS[b][1]))
+    for a, b in itertools.combinations(SENSOR_GROUPS, 2)
+)  # fmt: skip
+"""Every pair of :data:`SENSOR_GROUPS`: the rows of the ``robustness_pairs`` experiment."""
+
 QUANTITIES = PIPELINE_QUANTITIES
 """Metric key, column label and unit of each quantity compared with the truth."""
 
@@ -304,17 +326,20 @@ def run(
     *,
     shared: Shared | None = None,
     disturbances: Sequence[Disturbance] | None = None,
+    key: str = "robustness",
+    title: str = TITLE,
 ) -> ExperimentResult:
     """Calibrate each preset clean, with each disturbance alone and with all together.
 
     ``disturbances`` (default :data:`DISTURBANCES`) chooses the rows (tests
-    run a few).
+    run a few); ``key`` and ``title`` name the experiment (its metrics are
+    ``<key>.<preset>.<row>.<quantity>``).
     """
     from photoquant.errors import PhotoquantError
 
     shared = shared or Shared(config, seed, workdir)
     rows = list(DISTURBANCES if disturbances is None else disturbances)
-    res = ExperimentResult("robustness", TITLE, "McCann & Rizzi 2007")
+    res = ExperimentResult(key, title, "McCann & Rizzi 2007")
     res.paper = {"levels": {d.key: d.label for d in rows}}
     scenes = sorted({d.scene for d in rows} - {"hdr"})
     cleans = [Disturbance("clean", "clean camera", {})] + [
