@@ -361,9 +361,8 @@ def calibrate(
     :func:`photoquant.exposure.judge_exposure_times` rejects the labels at
     the 1 % level, allowing a systematic error per exposure of at least
     0.3 % (:data:`photoquant.exposure.MIN_FLOOR_LOG`); where the views keep
-    their labels the response is the joint fit's first round, recovered
-    from every view at the labels (without refinement it is recovered from
-    the first view). The decision and its statistic are in the report
+    their labels the calibration is, to the bit, the one without
+    refinement. The decision and its statistic are in the report
     (``report["exposures"]["decision"]``) and the notes. The response's own
     views, refined against it, measure the systematic error it leaves
     (``parameters["exposure_floor_log"]``,
@@ -421,7 +420,6 @@ def calibrate(
     response_spec = steps["response"]
     exposures: dict[str, Any] = {"refined": False}
     refs: list[ExposureRefinement] | None = None
-    kept_fit: StepFit[Any] | None = None
     if refine_exposures and len(views) >= 2:
         say("response and exposure refinement")
         fits: list[StepFit[Any]] = []
@@ -456,8 +454,6 @@ def calibrate(
             notes.append(f"views' exposure times: {decision.describe()}")
             if not decision.refine:
                 refs = None
-                # the labels kept: the first round's response, every view's pixels at them
-                kept_fit = fits[0]
     if refs is not None:
         resp_fit = fits[-1]
         views = [r.apply(v) for r, v in zip(refs, views, strict=True)]
@@ -477,8 +473,6 @@ def calibrate(
             },
             "view_scale_std": float(scale_std),
         }
-    elif kept_fit is not None:
-        resp_fit = kept_fit
     else:
         if refine_exposures and len(views) < 2:
             notes.append(
