@@ -149,10 +149,6 @@ class ValidationConfig:
         Include the ``robustness`` experiment in a default run (each real-camera
         disturbance alone and all together; :mod:`validation.experiments.robustness`).
         Left out of :meth:`conditions`: its metrics are reported, never checked.
-    robustness_pairs : bool
-        Include the ``robustness_pairs`` experiment in a default run (every
-        pair of the sensor and output disturbances;
-        :mod:`validation.experiments.robustness_pairs`). Reported, never checked.
     """
 
     name: str = "quick"
@@ -180,7 +176,6 @@ class ValidationConfig:
     rendered_capture: bool = False
     preset_files: tuple[tuple[str, str], ...] = ()
     robustness: bool = False
-    robustness_pairs: bool = False
 
     def __post_init__(self) -> None:
         h, w = (int(v) for v in self.shape)
@@ -259,7 +254,6 @@ class ValidationConfig:
             "rendered_capture",
             "preset_files",
             "robustness",
-            "robustness_pairs",
         ):
             d.pop(key)
         return d

@@ -64,7 +64,8 @@ EXPERIMENTS: dict[str, str] = {
 """Experiment key → module, in the order of the report (the paper's §6)."""
 
 OPT_IN: dict[str, str] = {"robustness": "robustness", "robustness_pairs": "robustness_pairs"}
-"""Experiment key → the :class:`ValidationConfig` flag that includes it in a default run."""
+"""Experiment key → the :class:`ValidationConfig` flag that includes it in a default run
+(a flag the configuration does not have: only when named)."""
 
 
 @dataclass
@@ -139,7 +140,7 @@ def _select(names: Sequence[str] | None, config: ValidationConfig | None = None)
         return [
             n
             for n in EXPERIMENTS
-            if n not in OPT_IN or (config is not None and getattr(config, OPT_IN[n]))
+            if n not in OPT_IN or (config is not None and getattr(config, OPT_IN[n], False))
         ]
     unknown = [n for n in names if n not in EXPERIMENTS]
     if unknown:

@@ -8,8 +8,8 @@ reading the other's data). This experiment runs every pair of
 (:data:`~validation.experiments.robustness.PAIRS`: 36 rows per preset) through
 the default pipeline, and reports each recovered quantity against the truth
 as the robustness table does, a refusal as a row. It runs only when named
-(``photoquant validate --experiments robustness_pairs``, or
-``ValidationConfig.robustness_pairs``): about 36 calibrations per preset.
+(``photoquant validate --experiments robustness_pairs``): 36 calibrations
+per preset.
 
 References
 ----------
