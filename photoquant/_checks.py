@@ -15,6 +15,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from photoquant._stdio import safe_stdio  # one implementation (re-exported)
 from photoquant.errors import InputError
 
 __all__ = [
@@ -451,23 +452,3 @@ def escape_controls(text: str) -> str:
                 else f"\\u{ord(ch):04x}"
             )
     return "".join(out)
-
-
-def safe_stdio() -> None:
-    """Make standard output and error print any text instead of raising ``UnicodeEncodeError``.
-
-    Under ``LC_ALL=C`` with ``PYTHONIOENCODING=ascii:strict`` (or any strict
-    encoding), printing a file name that is not valid UTF-8 (surrogate
-    escapes) or a message with ``—`` or ``×`` raises. This switches both
-    streams' error handler to ``backslashreplace`` (those characters are
-    printed as ``\\udcff``, ``\\u2014``), keeping their encoding. Streams
-    that are not :class:`io.TextIOWrapper` (a test's capture) are left alone.
-    Call it first in a command's ``main``.
-    """
-    for stream in (sys.stdout, sys.stderr):
-        reconfigure = getattr(stream, "reconfigure", None)
-        if reconfigure is not None and getattr(stream, "errors", None) == "strict":
-            try:
-                reconfigure(errors="backslashreplace")
-            except (ValueError, OSError):  # pragma: no cover - a closed or detached stream
-                pass
