@@ -752,17 +752,22 @@ def atomic_output_file(
 # ------------------------------------------------------------------------ folders
 
 
-def _new_temp_dir(target: Path) -> Path:
+def _mkdir_unique(name: Callable[[], Path], kind: str, what: str, where: Path) -> Path:
+    """A new private folder at the first free ``name()`` of 100 draws, registered for removal."""
     with deferred_signals():
         for _ in range(100):
-            tmp = _temp_path(target)
+            path = name()
             try:
-                os.mkdir(tmp, 0o700)
+                os.mkdir(path, 0o700)
             except FileExistsError:
                 continue
-            _register(tmp, "dir")
-            return tmp
-    raise FileExistsError(errno.EEXIST, "no free temporary name", str(target))
+            _register(path, kind)
+            return path
+    raise FileExistsError(errno.EEXIST, f"no free {what}", str(where))
+
+
+def _new_temp_dir(target: Path) -> Path:
+    return _mkdir_unique(lambda: _temp_path(target), "dir", "temporary name", target)
 
 
 @contextlib.contextmanager
@@ -886,16 +891,12 @@ def make_scratch_directory(prefix: str, parent: str | os.PathLike[str] | None = 
     """
     root = _scratch_root(parent)
     clean_stale_scratch(prefix, root)
-    with deferred_signals():
-        for _ in range(100):
-            path = root / f"{prefix}{_owner_tag()}-{secrets.token_hex(4)}"
-            try:
-                os.mkdir(path, 0o700)
-            except FileExistsError:
-                continue
-            _register(path, "scratch")
-            return path
-    raise FileExistsError(errno.EEXIST, "no free scratch folder name", str(root))
+    return _mkdir_unique(
+        lambda: root / f"{prefix}{_owner_tag()}-{secrets.token_hex(4)}",
+        "scratch",
+        "scratch folder name",
+        root,
+    )
 
 
 def remove_scratch_directory(path: str | os.PathLike[str]) -> None:
