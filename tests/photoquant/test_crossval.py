@@ -264,3 +264,22 @@ def test_the_default_predicts_through_the_users_path(tmp_path, gamma_stack, monk
     assert crossval_stack(gamma_stack, "opencv").pipeline == "peer"
     with pytest.raises(InputError, match="calibration_only is for photoquant"):
         crossval_stack(gamma_stack, "opencv", calibration_only=True)
+
+
+def test_a_given_response_that_does_not_fit_the_bracket_is_named(gamma_stack):
+    from photoquant.response.model import ResponseModel
+
+    levels = np.arange(256.0)
+    g = np.log(np.maximum(levels, 0.5) / 255.0)
+    one = ResponseModel("mine", levels, g[None], np.array([255.0]))
+    with pytest.raises(InputError, match="given response has 1 channel.*bracket 3"):
+        crossval_stack(gamma_stack, one)
+    wide = ResponseModel(
+        "mine", np.arange(512.0), np.tile(np.log(np.arange(1.0, 513.0)), (3, 1)), np.full(3, 511.0)
+    )
+    with pytest.raises(InputError, match=r"levels span \[0, 511\].*8 bits"):
+        crossval_stack(gamma_stack, wide)
+    # the bracket's own response, given: scored by name through the same pipeline
+    true = ResponseModel("the truth", levels, np.tile(g, (3, 1)), np.full(3, 255.0))
+    res = crossval_stack(gamma_stack, true)
+    assert res.method == "the truth" and res.pipeline == "calibrate + correct"
