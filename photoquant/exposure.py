@@ -263,13 +263,12 @@ def _shift_and_covariance(
     under the nominal times: the statistical one plus ``floor_log²`` per exposure."""
     sel = refinement.refined
     shift = np.log(refinement.exposure_s[sel]) - np.log(refinement.nominal_s[sel])
+    proj = _gauge_projector(refinement)
     if refinement.log_cov is not None:
         cov = np.asarray(refinement.log_cov, dtype=np.float64)[np.ix_(sel, sel)]
     else:  # the marginal errors only: taken as independent before the gauge
-        proj = _gauge_projector(refinement)
         scale = np.nan_to_num(refinement.log_std[sel] ** 2) / np.maximum(np.diag(proj), 1e-12)
         cov = proj @ np.diag(scale) @ proj.T
-    proj = _gauge_projector(refinement)
     cov = np.nan_to_num(cov) + floor_log**2 * (proj @ proj.T)
     return shift, cov
 
