@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from photoquant.crossval import predict_values
+from photoquant.holdout import predict_values
 from photoquant.stack import ExposureStack
 
 __all__ = ["ADEQUACY_WARN", "ModelAdequacy", "global_response_departure"]

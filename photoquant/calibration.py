@@ -73,6 +73,7 @@ from photoquant.model import CameraModel
 from photoquant.profiles import DEFAULT_PROFILE, profile_setting, profile_steps
 from photoquant.response import fit_response
 from photoquant.response.model import ResponseModel
+from photoquant.response_selection import SELECTION_METHOD, select_response
 from photoquant.stack import ExposureStack
 from photoquant.vignetting import VignettingData, VignettingModel
 
@@ -418,6 +419,13 @@ def calibrate(
     say("response")
     t0 = time.perf_counter()
     response_spec = steps["response"]
+    selection = None
+    if response_spec[0].name == SELECTION_METHOD:
+        # the model chosen once, on view 0 as labelled; the rounds below refit it
+        say("response model selection")
+        selection = select_response(hide_defects(ref, defects), response_spec[1], seed=seed)
+        response_spec = _step("response", selection.chosen, profile)
+        notes.append(f"response model: {selection.describe()}")
     exposures: dict[str, Any] = {"refined": False}
     refs: list[ExposureRefinement] | None = None
     if refine_exposures and len(views) >= 2:
@@ -520,6 +528,8 @@ def calibrate(
             exposures["glare"] = {**glare_ref.as_dict(), **lag_info}
     timings["response"] = time.perf_counter() - t0
     report["response"] = {"method": response_spec[0].name, **resp_fit.report}
+    if selection is not None:
+        report["response"]["selection"] = selection.as_dict()
     report["exposures"] = exposures
 
     # 2. merge the views ------------------------------------------------------
@@ -673,7 +683,7 @@ def calibrate(
     report["balance"] = {"method": bal_model.method, **bal_report}
     timings["balance"] = time.perf_counter() - t0
 
-    used = dict(steps)
+    used = {**steps, "response": response_spec}
     used.update(
         {"sensor_lut": lut_spec, "vignetting": vig_spec, "balance": bal_spec, "glare": glare_spec}
     )

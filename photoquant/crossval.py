@@ -70,6 +70,7 @@ from typing import Any
 import numpy as np
 
 from photoquant.errors import InputError
+from photoquant.holdout import SCORE_RANGE_8BIT, predict_held_out, predict_values, score_range
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
@@ -83,9 +84,6 @@ __all__ = [
     "crossval_manifest",
     "parse_roi",
 ]
-
-SCORE_RANGE_8BIT = (10.0, 245.0)
-"""Scored code values at 8 bits (inclusive); scaled to other bit depths."""
 
 
 @dataclass(frozen=True)
@@ -257,12 +255,6 @@ def _json_float(value: float) -> float | None:
     return float(value) if np.isfinite(value) else None
 
 
-def score_range(bit_depth: int) -> tuple[float, float]:
-    """The scored range ``[10, 245]`` at 8 bits, scaled to ``2**bit_depth − 1``."""
-    scale = (2**bit_depth - 1) / 255.0
-    return SCORE_RANGE_8BIT[0] * scale, SCORE_RANGE_8BIT[1] * scale
-
-
 def parse_roi(
     value: Any, image_shape: tuple[int, int], where: str = "roi"
 ) -> tuple[int, int, int, int]:
@@ -289,46 +281,6 @@ def parse_roi(
             f"0 <= y0 < y1 <= {height} (the {width}x{height} frames, end exclusive)"
         )
     return (x0, y0, x1, y1)
-
-
-def predict_values(
-    levels: np.ndarray,
-    log_inverse_response: np.ndarray,
-    saturation_level: np.ndarray,
-    log_exposure: np.ndarray,
-) -> np.ndarray:
-    """Pixel values ``ẑ`` with ``g(ẑ) = ln X`` (the forward response ``f``), per channel.
-
-    Parameters
-    ----------
-    levels : ndarray, shape (L,)
-        Levels at which ``g`` is tabulated.
-    log_inverse_response : ndarray, shape (C, L)
-        ``g`` per channel, non-decreasing up to the saturation level.
-    saturation_level : ndarray, shape (C,)
-        Top of each channel's range; ``g`` above it is not used.
-    log_exposure : ndarray, shape (..., C)
-        ``ln X = ln E + ln t``, finite.
-
-    Returns
-    -------
-    ndarray, shape (..., C)
-        ``f(X)`` by linear interpolation of the inverse table, clamped to
-        ``[levels[0], saturation level]``. A flat stretch of ``g`` (no rise
-        between two levels) is crossed linearly from its first level to the
-        next level where ``g`` rises.
-    """
-    out = np.empty(log_exposure.shape, dtype=np.float64)
-    for ch in range(log_exposure.shape[-1]):
-        top = int(np.searchsorted(levels, saturation_level[ch], side="right"))
-        g = np.asarray(log_inverse_response[ch, : max(top, 2)], dtype=np.float64)
-        lv = levels[: g.size]
-        run_max = np.maximum.accumulate(g)
-        keep = np.concatenate([[True], g[1:] > run_max[:-1]])
-        xp, fp = run_max[keep], lv[keep]
-        hi = min(float(saturation_level[ch]), float(lv[-1]))
-        out[..., ch] = np.clip(np.interp(log_exposure[..., ch], xp, fp), lv[0], hi)
-    return out
 
 
 def _is_peer(method: str) -> bool:
@@ -539,15 +491,7 @@ def crossval_stack(
             flagged = ~np.isfinite(log_e)
         z = observed_all[k]
         scored = (z >= lo) & (z <= hi) & region[..., None]
-        log_x = log_e + np.log(stack.exposure_s[k])
-        bound = ~np.isfinite(log_x)
-        pred = predict_values(levels, g, sat, np.where(bound, 0.0, log_x))
-        if np.any(bound):
-            # nothing to merge from: every other exposure clipped at one end
-            frames = sub.frames
-            all_sat = np.all(frames.max(axis=0) >= np.asarray(sat)[None, None, None, :], axis=0)
-            top = np.broadcast_to(np.asarray(sat, dtype=np.float64), pred.shape)
-            pred = np.where(bound, np.where(all_sat, top, float(levels[0])), pred)
+        pred, bound = predict_held_out(levels, g, sat, log_e, stack.exposure_s[k], sub.frames)
         err = pred - z
         e = err[scored]
         per_channel = tuple(

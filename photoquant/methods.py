@@ -314,6 +314,7 @@ def register_method(
 _BUILTIN_MODULES = (
     "photoquant.response",
     "photoquant.merge",
+    "photoquant.response_selection",
     "photoquant.balance",
     "photoquant.flatfield",
     "photoquant.vignetting",

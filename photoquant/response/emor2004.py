@@ -120,6 +120,9 @@ References
    CVPR 2010, 215-222. doi:10.1109/CVPR.2010.5540208
 .. [Debevec1997] P. E. Debevec, J. Malik, "Recovering high dynamic range radiance
    maps from photographs", SIGGRAPH 1997, 369-378. doi:10.1145/258734.258884
+.. [dAngelo2007] P. d'Angelo, "Radiometric alignment and vignetting
+   calibration", ICVS 2007 Workshop on Camera Calibration Methods for
+   Computer Vision Systems.
 """
 
 from __future__ import annotations
@@ -152,6 +155,7 @@ __all__ = [
     "emor_basis",
     "emor_response",
     "OBJECTIVES",
+    "CHANNEL_MODES",
     "fit_emor_coefficients",
     "fit_emor_values",
     "value_variance",
@@ -162,6 +166,9 @@ EMOR_N_COMPONENTS = 25
 
 OBJECTIVES = ("values", "log-ratio")
 """The fits of the ``"EMoR 2004"`` method (option ``objective``)."""
+
+CHANNEL_MODES = ("separate", "shared")
+"""One EMoR curve per channel, or one for every channel (option ``channels``)."""
 
 _QUANTISATION = 1.0 / 12.0
 """Variance of a uniform quantiser's error, DN²."""
@@ -229,6 +236,12 @@ class EMoRResponseOptions:
         fit of the pairs' log ratios (see the module notes).
     rounds : int
         Most rounds of the values fit (two alternating, then joint Gauss–Newton).
+    channels : {"separate", "shared"}
+        One curve per channel (default), or one curve for every channel, the
+        channels then differing only by a scale of their exposure (a white
+        balance applied before the camera's tone curve, as in Hugin's
+        photometric model [dAngelo2007]_): fewer parameters, fitted from every
+        channel's samples at once.
     """
 
     n_components: int = 8
@@ -238,6 +251,7 @@ class EMoRResponseOptions:
     min_support: float = 10.0
     objective: str = "values"
     rounds: int = 10
+    channels: str = "separate"
 
     def __post_init__(self) -> None:
         check_int(self.n_components, "n_components", 1, EMOR_N_COMPONENTS)
@@ -250,6 +264,10 @@ class EMoRResponseOptions:
                 f"unknown EMoR objective {self.objective!r}; valid: {', '.join(OBJECTIVES)}"
             )
         check_int(self.rounds, "rounds", 1, 100)
+        if self.channels not in CHANNEL_MODES:
+            raise InputError(
+                f"unknown EMoR channels {self.channels!r}; valid: {', '.join(CHANNEL_MODES)}"
+            )
 
 
 def fit_emor_coefficients(
@@ -623,47 +641,56 @@ def characterise_response_EMoR2004(
         variance = value_variance(stack)
         starts = _debevec_start(stack, samples, opts.n_components, gen)
     e, _, _ = emor_basis()
-    coefficients: list[np.ndarray] = []
-    rms, n_pairs, nit, converged, vmin = [], [], [], [], []
-    for ch, s in enumerate(samples):
-        k_a, k_b, p = exposure_pairs(s.valid)
-        w_val = wfun(s.values, s.black, s.saturation)
-        weights = w_val[k_a, p] * w_val[k_b, p]
-        m = s.normalised
-        log_t = np.log(s.exposure_s)
-        if values_fit:
-            span = s.saturation - s.black
-            if variance is None:  # N = 1: every value weighs the same
-                w_m = np.where(s.valid, 1.0, 0.0)
-            else:
+    shared = opts.channels == "shared" and len(samples) > 1
+    groups = [list(range(len(samples)))] if shared else [[ch] for ch in range(len(samples))]
+    coefficients: list[np.ndarray] = [np.zeros(0)] * len(samples)
+    rms, n_pairs, nit, converged = [], [], [], []
+    vmin = [0.0] * len(samples)
+    for group in groups:
+        parts = []
+        for ch in group:
+            s = samples[ch]
+            k_a, k_b, p = exposure_pairs(s.valid)
+            w_val = wfun(s.values, s.black, s.saturation)
+            w_m = np.where(s.valid, 1.0, 0.0)
+            if values_fit and variance is not None:
+                span = s.saturation - s.black
                 levels = np.arange(variance[ch].size)
                 w_m = np.where(s.valid, span**2 / np.interp(s.values, levels, variance[ch]), 0.0)
+            parts.append((s, k_a, k_b, p, w_val[k_a, p] * w_val[k_b, p], w_m))
+        if values_fit:
+            # the group's pixels side by side: one curve, a log exposure per pixel and channel
+            start = np.mean([starts[ch] for ch in group], axis=0)
             c, r, n = fit_emor_values(
-                m,
-                w_m,
-                s.exposure_s,
-                starts[ch],
+                np.concatenate([s.normalised for s, *_ in parts], axis=1),
+                np.concatenate([w_m for *_, w_m in parts], axis=1),
+                samples[group[0]].exposure_s,
+                start,
                 rounds=opts.rounds,
                 max_iterations=opts.max_iterations,
             )
             ok = True
-            used = s.values[w_m > 0]
         else:
+            log_t = np.log(samples[group[0]].exposure_s)
             c, r, n, ok = fit_emor_coefficients(
-                m[k_a, p],
-                m[k_b, p],
-                log_t[k_b] - log_t[k_a],
-                weights,
+                np.concatenate([s.normalised[k_a, p] for s, k_a, _, p, _, _ in parts]),
+                np.concatenate([s.normalised[k_b, p] for s, _, k_b, p, _, _ in parts]),
+                np.concatenate([log_t[k_b] - log_t[k_a] for _, k_a, k_b, _, _, _ in parts]),
+                np.concatenate([wp for *_, wp, _ in parts]),
                 opts.n_components,
                 max_iterations=opts.max_iterations,
             )
-            used = np.concatenate([s.values[k_a, p][weights > 0], s.values[k_b, p][weights > 0]])
-        coefficients.append(c)
-        rms.append(r)
-        n_pairs.append(int(np.count_nonzero(weights > 0)))
-        nit.append(n)
-        converged.append(ok)
-        vmin.append(lowest_supported(used, opts.min_support))
+        for ch, (s, k_a, k_b, p, wp, w_m) in zip(group, parts, strict=True):
+            coefficients[ch] = c
+            rms.append(r)
+            n_pairs.append(int(np.count_nonzero(wp > 0)))
+            nit.append(n)
+            converged.append(ok)
+            if values_fit:
+                used = s.values[w_m > 0]
+            else:
+                used = np.concatenate([s.values[k_a, p][wp > 0], s.values[k_b, p][wp > 0]])
+            vmin[ch] = lowest_supported(used, opts.min_support)
     curves = [np.maximum.accumulate(emor_response(c)) for c in coefficients]
     model = response_model(
         "EMoR 2004",
@@ -674,6 +701,7 @@ def characterise_response_EMoR2004(
         params={
             "n_components": opts.n_components,
             "objective": opts.objective,
+            "channels": opts.channels,
             "coefficients": [c.tolist() for c in coefficients],
             "basis": "EMoR (Grossberg & Nayar 2004), emor.txt of the CAVE DoRF/EMoR database",
         },
