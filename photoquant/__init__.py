@@ -25,7 +25,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.2.0"
+from photoquant._version import __version__
 
 _EXPORTS: dict[str, str] = {
     # pipeline

@@ -48,8 +48,8 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
-from photoquant import __version__
 from photoquant._threads import thread_map
+from photoquant._version import __version__
 from photoquant.adequacy import global_response_departure
 from photoquant.balance import BalanceData, BalanceModel, check_roi
 from photoquant.correspondences import float_tracks
