@@ -69,6 +69,7 @@ from typing import Any
 
 import numpy as np
 
+from photoquant.adequacy import predict_values
 from photoquant.errors import InputError
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
@@ -289,46 +290,6 @@ def parse_roi(
             f"0 <= y0 < y1 <= {height} (the {width}x{height} frames, end exclusive)"
         )
     return (x0, y0, x1, y1)
-
-
-def predict_values(
-    levels: np.ndarray,
-    log_inverse_response: np.ndarray,
-    saturation_level: np.ndarray,
-    log_exposure: np.ndarray,
-) -> np.ndarray:
-    """Pixel values ``ẑ`` with ``g(ẑ) = ln X`` (the forward response ``f``), per channel.
-
-    Parameters
-    ----------
-    levels : ndarray, shape (L,)
-        Levels at which ``g`` is tabulated.
-    log_inverse_response : ndarray, shape (C, L)
-        ``g`` per channel, non-decreasing up to the saturation level.
-    saturation_level : ndarray, shape (C,)
-        Top of each channel's range; ``g`` above it is not used.
-    log_exposure : ndarray, shape (..., C)
-        ``ln X = ln E + ln t``, finite.
-
-    Returns
-    -------
-    ndarray, shape (..., C)
-        ``f(X)`` by linear interpolation of the inverse table, clamped to
-        ``[levels[0], saturation level]``. A flat stretch of ``g`` (no rise
-        between two levels) is crossed linearly from its first level to the
-        next level where ``g`` rises.
-    """
-    out = np.empty(log_exposure.shape, dtype=np.float64)
-    for ch in range(log_exposure.shape[-1]):
-        top = int(np.searchsorted(levels, saturation_level[ch], side="right"))
-        g = np.asarray(log_inverse_response[ch, : max(top, 2)], dtype=np.float64)
-        lv = levels[: g.size]
-        run_max = np.maximum.accumulate(g)
-        keep = np.concatenate([[True], g[1:] > run_max[:-1]])
-        xp, fp = run_max[keep], lv[keep]
-        hi = min(float(saturation_level[ch]), float(lv[-1]))
-        out[..., ch] = np.clip(np.interp(log_exposure[..., ch], xp, fp), lv[0], hi)
-    return out
 
 
 def _is_peer(method: str) -> bool:
