@@ -962,8 +962,8 @@ def calibrate_manifest(
     ``dark_subtraction`` says so: ``None`` follows the manifest); ``kwargs``
     go to :func:`calibrate`.
     """
+    from photoquant.io import CaptureManifest, load_manifest, load_stack
     from photoquant.io.frames import black_level_from_dark, dark_frame_model
-    from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
 
     if not isinstance(manifest, CaptureManifest):
         manifest = load_manifest(manifest, allow_outside=allow_outside)
