@@ -65,7 +65,6 @@ from photoquant.exposure import (
     refine_jointly,
     self_consistency_floor,
 )
-from photoquant.flatfield import SensorLUTModel
 from photoquant.glare import GlareData, GlareModel, best_exposed_level
 from photoquant.merge import MergeModel, MergeResult
 from photoquant.methods import STEPS, Method, StepFit, options_to_dict, resolve_method
@@ -73,6 +72,7 @@ from photoquant.model import CameraModel
 from photoquant.profiles import DEFAULT_PROFILE, profile_setting, profile_steps
 from photoquant.response import fit_response
 from photoquant.response.model import ResponseModel
+from photoquant.sensor_lut import SensorLUTModel
 from photoquant.stack import ExposureStack
 from photoquant.vignetting import VignettingData, VignettingModel
 

@@ -315,7 +315,7 @@ _BUILTIN_MODULES = (
     "photoquant.response",
     "photoquant.merge",
     "photoquant.balance",
-    "photoquant.flatfield",
+    "photoquant.sensor_lut",
     "photoquant.vignetting",
     "photoquant.correspondences",
     "photoquant.glare",
