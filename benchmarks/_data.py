@@ -93,10 +93,10 @@ def camera_model(data: HDRStack, saturation: np.ndarray, *, valid_min: float = 2
     """
     from photoquant.balance import BalanceModel
     from photoquant.defects import DefectMap
-    from photoquant.flatfield import SensorLUTModel
     from photoquant.merge import MergeModel
     from photoquant.model import CameraModel
     from photoquant.response.model import ResponseModel
+    from photoquant.sensor_lut import SensorLUTModel
     from photoquant.vignetting import ExtendedGoldmanChenVignetting
 
     levels, g = true_log_inverse_response(data)

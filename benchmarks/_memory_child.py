@@ -109,7 +109,7 @@ def _full_model(model, shape):
     import dataclasses
 
     from photoquant.defects import DefectMap
-    from photoquant.flatfield import SensorLUTModel
+    from photoquant.sensor_lut import SensorLUTModel
 
     u = np.tile(model.sensor_lut.lut, (10, 10, 1))
     defects = DefectMap(

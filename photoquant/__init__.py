@@ -25,7 +25,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.2.0"
+from photoquant._version import __version__
 
 _EXPORTS: dict[str, str] = {
     # pipeline
@@ -54,7 +54,7 @@ _EXPORTS: dict[str, str] = {
     "MergeResult": "photoquant.merge",
     "BalanceModel": "photoquant.balance",
     "BalanceData": "photoquant.balance",
-    "SensorLUTModel": "photoquant.flatfield",
+    "SensorLUTModel": "photoquant.sensor_lut",
     "VignettingModel": "photoquant.vignetting",
     "VignettingData": "photoquant.vignetting",
     "ExtendedGoldmanChenVignetting": "photoquant.vignetting",
@@ -75,7 +75,7 @@ _EXPORTS: dict[str, str] = {
     "RESPONSE_METHODS": "photoquant.response",
     "MERGE_METHODS": "photoquant.merge",
     "BALANCE_METHODS": "photoquant.balance",
-    "SENSOR_LUT_METHODS": "photoquant.flatfield",
+    "SENSOR_LUT_METHODS": "photoquant.sensor_lut",
     "VIGNETTING_METHODS": "photoquant.vignetting",
     "CORRESPONDENCE_METHODS": "photoquant.correspondences",
     "GLARE_METHODS": "photoquant.glare",
@@ -124,7 +124,7 @@ if TYPE_CHECKING:
     from photoquant.errors import (
         PhotoquantError as PhotoquantError,
     )
-    from photoquant.flatfield import (
+    from photoquant.sensor_lut import (
         SensorLUTModel as SensorLUTModel,
         SENSOR_LUT_METHODS as SENSOR_LUT_METHODS,
     )

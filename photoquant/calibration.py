@@ -9,7 +9,7 @@
    of every view's exposure times (:func:`photoquant.exposure.refine_jointly`),
    and the irradiance scene's times refined against it,
 2. HDR merge of every view and of the irradiance scene (:mod:`photoquant.merge`),
-3. sensor LUT ``u`` from the irradiance scene (:mod:`photoquant.flatfield`),
+3. sensor LUT ``u`` from the irradiance scene (:mod:`photoquant.sensor_lut`),
 4. correspondences across the views, when not given
    (:mod:`photoquant.correspondences`), and vignetting ``v``
    (:mod:`photoquant.vignetting`),
@@ -48,8 +48,8 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
-from photoquant import __version__
 from photoquant._threads import thread_map
+from photoquant._version import __version__
 from photoquant.adequacy import global_response_departure
 from photoquant.balance import BalanceData, BalanceModel, check_roi
 from photoquant.correspondences import float_tracks
@@ -65,7 +65,6 @@ from photoquant.exposure import (
     refine_jointly,
     self_consistency_floor,
 )
-from photoquant.flatfield import SensorLUTModel
 from photoquant.glare import GlareData, GlareModel, best_exposed_level
 from photoquant.merge import MergeModel, MergeResult
 from photoquant.methods import STEPS, Method, StepFit, options_to_dict, resolve_method
@@ -74,6 +73,7 @@ from photoquant.profiles import DEFAULT_PROFILE, profile_setting, profile_steps
 from photoquant.response import fit_response
 from photoquant.response.model import ResponseModel
 from photoquant.response_selection import SELECTION_METHOD, select_response
+from photoquant.sensor_lut import SensorLUTModel
 from photoquant.stack import ExposureStack
 from photoquant.vignetting import VignettingData, VignettingModel
 
@@ -972,8 +972,8 @@ def calibrate_manifest(
     ``dark_subtraction`` says so: ``None`` follows the manifest); ``kwargs``
     go to :func:`calibrate`.
     """
+    from photoquant.io import CaptureManifest, load_manifest, load_stack
     from photoquant.io.frames import black_level_from_dark, dark_frame_model
-    from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
 
     if not isinstance(manifest, CaptureManifest):
         manifest = load_manifest(manifest, allow_outside=allow_outside)

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from photoquant import __version__
+from photoquant._version import __version__
 from photoquant.errors import InputError, PhotoquantError
 
 __all__ = ["main", "build_parser"]

@@ -300,7 +300,7 @@ def correct_manifest(
     ``dark_subtraction`` overrides the manifest's (``None``: the manifest's;
     :mod:`photoquant.darkframe`).
     """
-    from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
+    from photoquant.io import CaptureManifest, load_manifest, load_stack
 
     if not isinstance(manifest, CaptureManifest):
         manifest = load_manifest(manifest, allow_outside=allow_outside)

@@ -560,7 +560,7 @@ def crossval_manifest(
     ``crossval_roi`` key (``[x0, y0, x1, y1]``, end exclusive), else the whole
     frame. See :func:`crossval_stack`.
     """
-    from photoquant.io.manifest import CaptureManifest, load_manifest, load_stack
+    from photoquant.io import CaptureManifest, load_manifest, load_stack
 
     if not isinstance(manifest, CaptureManifest):
         manifest = load_manifest(manifest, allow_outside=allow_outside)

@@ -316,7 +316,7 @@ _BUILTIN_MODULES = (
     "photoquant.merge",
     "photoquant.response_selection",
     "photoquant.balance",
-    "photoquant.flatfield",
+    "photoquant.sensor_lut",
     "photoquant.vignetting",
     "photoquant.correspondences",
     "photoquant.glare",

@@ -9,7 +9,7 @@ step           model                                                 applies as
 response       :class:`~photoquant.response.ResponseModel`           ``g_λ = ln f_λ⁻¹``
 merge          :class:`~photoquant.merge.MergeModel`                 eq. 6 (method, weighting)
 balance        :class:`~photoquant.balance.BalanceModel`             ``× a_λ``
-sensor_lut     :class:`~photoquant.flatfield.SensorLUTModel`         ``÷ u``
+sensor_lut     :class:`~photoquant.sensor_lut.SensorLUTModel`         ``÷ u``
 vignetting     a :class:`~photoquant.vignetting.VignettingModel`     ``÷ v`` (``.map(shape)``)
 glare          :class:`~photoquant.glare.GlareModel`                 ``G⁻¹`` between ``÷ u`` and ``÷ v``
 =============  ====================================================  =======================
@@ -58,7 +58,6 @@ from photoquant._json import load_json, to_json_value
 from photoquant.balance import BalanceModel
 from photoquant.defects import DefectMap
 from photoquant.errors import CameraModelError, InputError
-from photoquant.flatfield import SensorLUTModel
 from photoquant.glare import GlareModel
 from photoquant.io.atomic import atomic_directory, write_text_atomic
 from photoquant.io.images import read_exr, write_exr
@@ -66,6 +65,7 @@ from photoquant.io.outputs import real_path
 from photoquant.merge import MergeModel, MergeResult
 from photoquant.methods import MODEL_STEPS, OPTIONAL_MODEL_STEPS, registry
 from photoquant.response.model import ResponseModel
+from photoquant.sensor_lut import SensorLUTModel
 from photoquant.stack import ExposureStack
 from photoquant.vignetting import ExtendedGoldmanChenVignetting, VignettingModel
 

@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 
 from photoquant.balance import BalanceModel
-from photoquant.flatfield import SensorLUTModel
 from photoquant.glare import GlareModel
 from photoquant.merge import MergeModel
 from photoquant.model import CameraModel
 from photoquant.response import ResponseModel, response_levels
+from photoquant.sensor_lut import SensorLUTModel
 from photoquant.vignetting import (
     IDENTITY_VIGNETTING,
     ExtendedGoldmanChenVignetting,

@@ -94,6 +94,7 @@ __all__ = [
     "make_scratch_directory",
     "remove_scratch_directory",
     "clean_stale_scratch",
+    "real_path",
 ]
 
 _MODES = {"w": "w", "wt": "w", "wb": "wb"}
@@ -149,6 +150,16 @@ def _owner_tag() -> str:
 def _stem(name: str) -> str:
     """The target's name cut to ``_STEM_MAX`` bytes (a temporary's name stays under NAME_MAX)."""
     return os.fsdecode(os.fsencode(name)[:_STEM_MAX])
+
+
+def real_path(path: str | os.PathLike[str]) -> Path:
+    """``path`` absolute, with every symbolic link resolved; never raises for a link loop.
+
+    :meth:`pathlib.Path.resolve` raises :class:`RuntimeError` on a loop
+    (Python 3.11); :func:`os.path.realpath` returns the looping part as it
+    is, so that opening it gives the ordinary :class:`OSError` (``ELOOP``).
+    """
+    return Path(os.path.realpath(os.path.abspath(os.fspath(path))))
 
 
 def _target(path: str | os.PathLike[str]) -> Path:

@@ -25,7 +25,6 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from tqdm import tqdm
@@ -35,11 +34,9 @@ from photoquant.darkframe import DarkFrameModel, characterise_dark_frames, subtr
 from photoquant.errors import InputError, ManifestError
 from photoquant.io.exif import ExposureMetadata, read_exposure_metadata
 from photoquant.io.images import read_image
+from photoquant.io.manifest import CaptureManifest, FrameRef, FrameSetRef, _group_by_exposure
 from photoquant.io.raw import RawFrame, is_raw_file, read_raw, read_raw_metadata
 from photoquant.stack import ExposureStack
-
-if TYPE_CHECKING:
-    from photoquant.io.manifest import CaptureManifest, FrameRef, FrameSetRef
 
 __all__ = [
     "load_stack",
@@ -73,61 +70,6 @@ def exposure_value(t: float, f_number: float, iso: float) -> float:
        *Applied Photographic Optics*, 3rd ed., §22 (exposure ∝ t/N²).
     """
     return t * (iso / _EV_ISO) * (_EV_F_NUMBER / f_number) ** 2
-
-
-def _group_by_exposure(
-    frames: Sequence[FrameRef],
-    exposures: Sequence[float],
-    where: str,
-    error: Callable[[str], ManifestError],
-) -> dict[float, list[FrameRef]]:
-    """Group frames by exposure time and order each group by repeat index.
-
-    Frames with an explicit ``repeat`` take that slot; the others fill the free
-    slots in order of appearance. Every exposure must then have the same number
-    ``N`` of repeats, with indices ``0 .. N-1``.
-
-    Returns
-    -------
-    dict
-        Exposure time -> its frames in repeat order, by increasing exposure.
-    """
-    groups: dict[float, list[int]] = {}
-    for i, t in enumerate(exposures):
-        groups.setdefault(float(t), []).append(i)
-    counts = {t: len(idx) for t, idx in groups.items()}
-    if len(set(counts.values())) > 1:
-        detail = ", ".join(f"{t:g} s: {n}" for t, n in sorted(counts.items()))
-        raise error(
-            f"`{where}` must have the same number of repeats for every exposure, "
-            f"got frames per exposure {detail}"
-        )
-    ordered: dict[float, list[FrameRef]] = {}
-    for t in sorted(groups):
-        idx = groups[t]
-        n = len(idx)
-        slots: dict[int, int] = {}
-        for i in idx:
-            r = frames[i].repeat
-            if r is None:
-                continue
-            if r in slots:
-                raise error(
-                    f"`{where}` has two frames with exposure {t:g} s and repeat {r}: "
-                    f"{frames[slots[r]].file} and {frames[i].file}"
-                )
-            slots[r] = i
-        free = iter(r for r in range(n) if r not in slots)
-        for i in idx:
-            if frames[i].repeat is None:
-                slots[next(free)] = i
-        if sorted(slots) != list(range(n)):
-            raise error(
-                f"`{where}` repeat indices for exposure {t:g} s must be 0 to {n - 1}, "
-                f"got {sorted(slots)}"
-            )
-        ordered[t] = [frames[slots[r]] for r in range(n)]
-    return ordered
 
 
 def _frameset_name(frameset: FrameSetRef, manifest: CaptureManifest) -> str:

@@ -80,8 +80,9 @@ followed) inside the manifest's folder unless ``allow_outside=True``, and
 nothing is ever unpickled.
 
 Reading the frames themselves is :mod:`photoquant.io.frames`
-(:func:`~photoquant.io.frames.load_stack`, re-exported here so that
-``from photoquant.io.manifest import load_stack`` keeps working).
+(:func:`~photoquant.io.frames.load_stack`, also :func:`photoquant.io.load_stack`),
+which imports this module. ``photoquant.io.manifest.load_stack`` still
+gives it, with a :class:`DeprecationWarning`.
 """
 
 from __future__ import annotations
@@ -89,7 +90,8 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Mapping
+import warnings
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 from typing import Any
@@ -98,9 +100,7 @@ import numpy as np
 
 from photoquant._json import to_json_value
 from photoquant.errors import ManifestError
-from photoquant.io.atomic import write_text_atomic
-from photoquant.io.frames import _group_by_exposure, load_stack
-from photoquant.io.outputs import real_path
+from photoquant.io.atomic import real_path, write_text_atomic
 
 __all__ = [
     "CAPTURE_FORMAT",
@@ -108,7 +108,6 @@ __all__ = [
     "FrameSetRef",
     "CaptureManifest",
     "load_manifest",
-    "load_stack",
     "write_manifest",
     "extra_frameset",
     "extra_path",
@@ -246,6 +245,61 @@ class CaptureManifest:
 
 
 # --------------------------------------------------------------------------- parsing
+
+
+def _group_by_exposure(
+    frames: Sequence[FrameRef],
+    exposures: Sequence[float],
+    where: str,
+    error: Callable[[str], ManifestError],
+) -> dict[float, list[FrameRef]]:
+    """Group frames by exposure time and order each group by repeat index.
+
+    Frames with an explicit ``repeat`` take that slot; the others fill the free
+    slots in order of appearance. Every exposure must then have the same number
+    ``N`` of repeats, with indices ``0 .. N-1``.
+
+    Returns
+    -------
+    dict
+        Exposure time -> its frames in repeat order, by increasing exposure.
+    """
+    groups: dict[float, list[int]] = {}
+    for i, t in enumerate(exposures):
+        groups.setdefault(float(t), []).append(i)
+    counts = {t: len(idx) for t, idx in groups.items()}
+    if len(set(counts.values())) > 1:
+        detail = ", ".join(f"{t:g} s: {n}" for t, n in sorted(counts.items()))
+        raise error(
+            f"`{where}` must have the same number of repeats for every exposure, "
+            f"got frames per exposure {detail}"
+        )
+    ordered: dict[float, list[FrameRef]] = {}
+    for t in sorted(groups):
+        idx = groups[t]
+        n = len(idx)
+        slots: dict[int, int] = {}
+        for i in idx:
+            r = frames[i].repeat
+            if r is None:
+                continue
+            if r in slots:
+                raise error(
+                    f"`{where}` has two frames with exposure {t:g} s and repeat {r}: "
+                    f"{frames[slots[r]].file} and {frames[i].file}"
+                )
+            slots[r] = i
+        free = iter(r for r in range(n) if r not in slots)
+        for i in idx:
+            if frames[i].repeat is None:
+                slots[next(free)] = i
+        if sorted(slots) != list(range(n)):
+            raise error(
+                f"`{where}` repeat indices for exposure {t:g} s must be 0 to {n - 1}, "
+                f"got {sorted(slots)}"
+            )
+        ordered[t] = [frames[slots[r]] for r in range(n)]
+    return ordered
 
 
 def _is_int(value: Any) -> bool:
@@ -692,3 +746,18 @@ def write_manifest(path: PathLike, data: Mapping[str, Any], *, allow_outside: bo
     except (TypeError, ValueError) as exc:
         raise parser.error(f"cannot be written as JSON: {exc}") from None
     write_text_atomic(path, text + "\n")
+
+
+def __getattr__(name: str) -> Any:
+    """``load_stack``, deprecated here: :func:`photoquant.io.load_stack` (or ``photoquant.io.frames``)."""
+    if name == "load_stack":
+        warnings.warn(
+            "photoquant.io.manifest.load_stack is deprecated; import load_stack from "
+            "photoquant.io (or photoquant.io.frames)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        from photoquant.io.frames import load_stack
+
+        return load_stack
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

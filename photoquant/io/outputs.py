@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from photoquant.errors import InputError, OutputExistsError, PhotoquantError
+from photoquant.io.atomic import real_path
 
 __all__ = [
     "Holder",
@@ -77,16 +78,6 @@ class Holder:
 
     def __repr__(self) -> str:
         return f"Holder({os.fspath(self.path)!r})"
-
-
-def real_path(path: PathLike) -> Path:
-    """``path`` absolute, with every symbolic link resolved; never raises for a link loop.
-
-    :meth:`pathlib.Path.resolve` raises :class:`RuntimeError` on a loop
-    (Python 3.11); :func:`os.path.realpath` returns the looping part as it
-    is, so that opening it gives the ordinary :class:`OSError` (``ELOOP``).
-    """
-    return Path(os.path.realpath(os.path.abspath(os.fspath(path))))
 
 
 def check_output_not_input(

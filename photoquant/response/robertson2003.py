@@ -58,6 +58,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import isotonic_regression
 
 from photoquant._checks import check_int, check_positive
 from photoquant.errors import CalibrationError
@@ -98,12 +99,13 @@ def isotonic_increasing(y: np.ndarray, w: np.ndarray) -> np.ndarray:
     y : ndarray, shape (n,)
         Values.
     w : ndarray, shape (n,)
-        Positive weights.
+        Strictly positive weights.
 
     Returns
     -------
     ndarray, shape (n,)
-        The non-decreasing ``z`` minimising ``Σ w (z − y)²``.
+        The non-decreasing ``z`` minimising ``Σ w (z − y)²``
+        (:func:`scipy.optimize.isotonic_regression`).
 
     Examples
     --------
@@ -112,22 +114,7 @@ def isotonic_increasing(y: np.ndarray, w: np.ndarray) -> np.ndarray:
     """
     y = np.asarray(y, dtype=np.float64)
     w = np.asarray(w, dtype=np.float64)
-    if y.size < 2 or np.all(np.diff(y) >= 0):
-        return y.copy()
-    means: list[float] = []
-    weights: list[float] = []
-    sizes: list[int] = []
-    for v, wt in zip(y.tolist(), w.tolist(), strict=True):
-        means.append(v)
-        weights.append(wt)
-        sizes.append(1)
-        while len(means) > 1 and means[-2] > means[-1]:
-            w2 = weights[-2] + weights[-1]
-            means[-2] = (means[-2] * weights[-2] + means[-1] * weights[-1]) / w2
-            weights[-2] = w2
-            sizes[-2] += sizes[-1]
-            del means[-1], weights[-1], sizes[-1]
-    return np.repeat(np.asarray(means), sizes)
+    return np.asarray(isotonic_regression(y, weights=w, increasing=True).x)
 
 
 @dataclass(frozen=True)

@@ -62,16 +62,15 @@ import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from photoquant.errors import InputError
 from photoquant.utils import check_positive
 from pqsim.synth_camera import cfa as _cfa
-
-if TYPE_CHECKING:
-    from pqsim.synth_camera.camera import SyntheticCamera
+from pqsim.synth_camera.responses import ResponseCurve
+from pqsim.synth_camera.sensor import SensorNoise
 
 __all__ = [
     "DEFECT_HOT",
@@ -86,6 +85,39 @@ DEFECT_HOT = 1
 """Code of a hot pixel in :attr:`FixedPattern.defects`."""
 DEFECT_STUCK = 2
 """Code of a stuck (dead) pixel in :attr:`FixedPattern.defects`."""
+
+
+class _Camera(Protocol):
+    """What the disturbances read of the camera they disturb
+    (:class:`~pqsim.synth_camera.camera.SyntheticCamera`, which imports this module)."""
+
+    @property
+    def bit_depth(self) -> int: ...
+
+    @property
+    def noise(self) -> SensorNoise: ...
+
+    @property
+    def responses(self) -> Sequence[ResponseCurve]: ...
+
+    @property
+    def balance(self) -> Sequence[float]: ...
+
+    @property
+    def prnu_seed(self) -> int: ...
+
+    @property
+    def disturbances(self) -> SensorDisturbances | None: ...
+
+    @property
+    def n_channels(self) -> int: ...
+
+    @property
+    def c_max(self) -> int: ...
+
+    @property
+    def dtype(self) -> np.dtype: ...
+
 
 # stream tags of the per-frame draws (any distinct constants)
 _TAG_EXPOSURE = 0x45585054  # "EXPT"
@@ -335,7 +367,7 @@ class SensorDisturbances:
 
     # -- simulation -----------------------------------------------------------------
 
-    def check_camera(self, camera: SyntheticCamera) -> None:
+    def check_camera(self, camera: _Camera) -> None:
         """Refuse settings that the camera cannot have (channel counts, bit depth)."""
         c = camera.n_channels
         self.per_channel(self.black_level_dn, "black_level_dn", c)
@@ -350,7 +382,7 @@ class SensorDisturbances:
 
     def simulate_frame(
         self,
-        camera: SyntheticCamera,
+        camera: _Camera,
         rate: np.ndarray,
         exposure_s: float,
         frame_seed: int,
@@ -476,7 +508,7 @@ class FixedPattern:
     stuck_dn: np.ndarray | None
 
 
-def fixed_pattern(camera: SyntheticCamera, shape: tuple[int, int]) -> FixedPattern | None:
+def fixed_pattern(camera: _Camera, shape: tuple[int, int]) -> FixedPattern | None:
     """The fixed pattern of ``camera``'s sensor for images of ``shape`` (None without one).
 
     Deterministic from the camera's ``prnu_seed``, the shape and the

@@ -9,11 +9,11 @@ import pytest
 
 from photoquant.balance import BalanceModel
 from photoquant.errors import CameraModelError, InputError, OutputExistsError
-from photoquant.flatfield import SensorLUTModel
 from photoquant.io.images import write_exr
 from photoquant.merge import MergeModel
 from photoquant.model import CAMERA_FORMAT, CameraModel, load_camera
 from photoquant.response import ResponseModel
+from photoquant.sensor_lut import SensorLUTModel
 from photoquant.vignetting import ExtendedGoldmanChenVignetting
 
 VIG = np.array([[-0.3, 0.05, -0.02, 1.2, 0.5, 0.5]] * 3)

@@ -14,10 +14,10 @@ import pytest
 
 from photoquant.balance import BalanceModel
 from photoquant.correction import correct
-from photoquant.flatfield import SensorLUTModel
 from photoquant.merge import MergeModel, merge_Debevec1997
 from photoquant.model import CameraModel, load_camera
 from photoquant.response.model import ResponseModel
+from photoquant.sensor_lut import SensorLUTModel
 from photoquant.stack import ExposureStack
 from photoquant.vignetting import ExtendedGoldmanChenVignetting
 from pqsim.synth_camera.presets import camera_from_preset

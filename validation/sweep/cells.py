@@ -1,9 +1,10 @@
-"""One cell of a sweep: its configuration, its hash, and its run → rows of metrics.
+"""One cell of a sweep: its run → rows of metrics.
 
-A cell is one point of the grid and one seed. :func:`cell_config` gives its
-full configuration as plain data (every setting, the camera's preset fields
-after the dotted settings, the seed, the code version), :func:`cell_id` a
-hash of it, and :func:`run_cell` — the function the Dask workers run —
+A cell is one point of the grid and one seed. Its full configuration as
+plain data (every setting, the camera's preset fields after the dotted
+settings, the seed, the code version) and its hash come with the spec
+(:func:`~validation.sweep.spec.cell_config`, :func:`~validation.sweep.spec.cell_id`,
+re-exported here); :func:`run_cell` — the function the Dask workers run —
 simulates it, calibrates, corrects and compares with the truth, exactly as
 ``photoquant demo`` does:
 
@@ -43,21 +44,33 @@ References
 from __future__ import annotations
 
 import functools
-import hashlib
-import json
 import os
 import platform
 import socket
 import threading
 import time
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
-__all__ = ["CELL_FORMAT", "cell_config", "cell_id", "run_cell", "TIME_METRICS"]
+from validation.sweep.spec import (  # the cell configuration, re-exported
+    CELL_FORMAT,
+    build_camera,
+    cell_config,
+    cell_id,
+    code_version,
+    method_specs,
+    source_digest,
+)
 
-CELL_FORMAT = 1
-"""Version of a cell's computation and rows; part of every cell's hash."""
+__all__ = [
+    "CELL_FORMAT",
+    "cell_config",
+    "cell_id",
+    "code_version",
+    "source_digest",
+    "run_cell",
+    "TIME_METRICS",
+]
 
 #: Metrics that are wall times (they differ between runs; never compared for determinism).
 TIME_METRICS = ("time_",)
@@ -68,88 +81,6 @@ by a worker that was killed is removed by the next cell or sweep on that machine
 
 _TRACE_ENV = "PHOTOQUANT_SWEEP_TRACE"
 """If set, every cell a worker starts appends its id to this file (to count computations)."""
-
-
-def code_version() -> dict[str, str]:
-    """The code version a cell's hash includes.
-
-    photoquant's version, the cell format, the versions of numpy and scipy
-    (the numbers depend on them) and a digest of the source of the three
-    packages (:func:`source_digest`): a cell computed by other code is
-    computed again, never reused, even when the version number did not move.
-    """
-    import numpy as np
-    import scipy
-
-    import photoquant
-
-    return {
-        "photoquant": photoquant.__version__,
-        "cell_format": str(CELL_FORMAT),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "source": source_digest(),
-    }
-
-
-@functools.lru_cache(maxsize=1)
-def source_digest() -> str:
-    """SHA-256 (16 hex digits) of the files of ``photoquant``, ``pqsim`` and ``validation``.
-
-    Every file under the packages (code and shipped data, caches excluded),
-    by path relative to its package and content, in sorted order.
-    """
-    import importlib
-
-    digest = hashlib.sha256()
-    for name in ("photoquant", "pqsim", "validation"):
-        root = Path(importlib.import_module(name).__file__ or "").parent
-        for path in sorted(root.rglob("*")):
-            if not path.is_file() or "__pycache__" in path.parts or path.suffix == ".pyc":
-                continue
-            digest.update(f"{name}/{path.relative_to(root).as_posix()}\0".encode())
-            digest.update(path.read_bytes())
-            digest.update(b"\0")
-    return digest.hexdigest()[:16]
-
-
-def cell_config(spec: Any, settings: Mapping[str, Any], seed: int) -> dict[str, Any]:
-    """A cell's full configuration as plain data (what it computes depends on nothing else).
-
-    Parameters
-    ----------
-    spec : SweepSpec
-        The sweep (for the preset files, the spec's folder and the render cache).
-    settings : mapping
-        The cell's settings (:meth:`SweepSpec.settings`).
-    seed : int
-        The cell's seed.
-    """
-    from validation.sweep.spec import camera_fields
-
-    files = dict(spec.preset_files)
-    camera = camera_fields(settings, Path(spec.base_dir), files)
-    config: dict[str, Any] = {
-        "settings": json.loads(json.dumps(dict(settings), sort_keys=True)),
-        "camera": camera,
-        "seed": int(seed),
-        "code": code_version(),
-    }
-    if settings["renderer"] == "mitsuba":
-        config["cache_dir"] = spec.cache_dir
-    config["cell_id"] = cell_id(config)
-    return config
-
-
-def cell_id(config: Mapping[str, Any]) -> str:
-    """The hash of a cell's configuration and the code version (24 hex digits).
-
-    The render cache folder is left out (it changes where renders are kept, not
-    what they are).
-    """
-    content = {k: v for k, v in config.items() if k not in ("cell_id", "cache_dir")}
-    text = json.dumps(content, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
 def _one_line(exc: BaseException) -> str:
@@ -232,7 +163,6 @@ def _compute(config: Mapping[str, Any]) -> list[tuple[str, float]]:
     from photoquant.calibration import calibrate_manifest
     from photoquant.io.atomic import scratch_directory
     from validation.compare import compare_with_truth
-    from validation.sweep.spec import build_camera, method_specs
 
     s = config["settings"]
     seed = int(config["seed"])

@@ -54,7 +54,7 @@ from typing import Any
 
 from photoquant.errors import InputError, PhotoquantError
 from photoquant.io.outputs import Holder, OutputKind, folder_of_kind
-from validation.sweep.spec import SweepSpec, method_label
+from validation.sweep.spec import SweepSpec, column_value
 
 __all__ = [
     "SWEEP_FORMAT",
@@ -107,8 +107,6 @@ SWEEP_FOLDER = OutputKind(
     empty_ok=True,
     resumable=True,
 )
-#: The summary folder inside a sweep folder.
-summary_folder_problem = folder_of_kind("sweep summary", ("*.png", "index.html"), ("index.html",))
 
 
 class SweepError(PhotoquantError):
@@ -208,17 +206,6 @@ def _create_output(output: Path, spec: SweepSpec, replace: bool) -> None:
 
 
 # ------------------------------------------------------------------ table
-
-
-def column_value(key: str, value: Any) -> Any:
-    """A setting's value as its table column holds it (``"160x120"``, a method's label, JSON)."""
-    if key == "resolution":
-        return f"{value[0]}x{value[1]}"
-    if key == "method":
-        return method_label(value) or "default"
-    if isinstance(value, list | dict):
-        return json.dumps(value, sort_keys=True)
-    return value
 
 
 def cell_columns(spec: SweepSpec) -> list[str]:

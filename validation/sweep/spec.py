@@ -3,7 +3,8 @@
 :func:`load_spec` reads and checks a spec (``photoquant sweep SPEC.toml``)
 and :func:`parse_spec` checks an already-parsed mapping; both return a frozen
 :class:`SweepSpec` whose :meth:`SweepSpec.cells` is the cartesian product of
-the axes times the seeds. Every value is checked before anything runs: an
+the axes times the seeds, each cell's configuration as plain data
+(:func:`cell_config`) with its hash (:func:`cell_id`). Every value is checked before anything runs: an
 unknown table, key or axis, a value of the wrong type, a method or profile
 that is not registered, a camera that cannot be built, an empty grid — each
 is one :class:`SweepSpecError` naming the key.
@@ -50,6 +51,7 @@ References
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import itertools
 import json
@@ -72,6 +74,12 @@ __all__ = [
     "load_spec",
     "parse_spec",
     "method_label",
+    "column_value",
+    "CELL_FORMAT",
+    "cell_config",
+    "cell_id",
+    "code_version",
+    "source_digest",
 ]
 
 
@@ -138,6 +146,17 @@ def method_label(spec: Mapping[str, Any]) -> str:
 
 
 # ------------------------------------------------------------------ value checks
+
+
+def column_value(key: str, value: Any) -> Any:
+    """A setting's value as its table column holds it (``"160x120"``, a method's label, JSON)."""
+    if key == "resolution":
+        return f"{value[0]}x{value[1]}"
+    if key == "method":
+        return method_label(value) or "default"
+    if isinstance(value, list | dict):
+        return json.dumps(value, sort_keys=True)
+    return value
 
 
 def _first_non_finite(value: Any, where: str) -> tuple[str, float] | None:
@@ -396,9 +415,7 @@ class SweepSpec:
             yield dict(self.fixed) | dict(zip(names, combo, strict=True))
 
     def cells(self) -> Iterator[dict[str, Any]]:
-        """Every cell's full configuration (:func:`validation.sweep.cells.cell_config`)."""
-        from validation.sweep.cells import cell_config
-
+        """Every cell's full configuration (:func:`cell_config`)."""
         for settings in self.settings():
             for seed in self.seeds:
                 yield cell_config(self, settings, seed)
@@ -649,3 +666,89 @@ def method_specs(method: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
         options = {k: v for k, v in entry.items() if k != "name"}
         out[step] = (entry["name"], options) if options else entry["name"]
     return out
+
+
+# ------------------------------------------------------------------ cells
+
+CELL_FORMAT = 1
+"""Version of a cell's computation and rows; part of every cell's hash."""
+
+
+def code_version() -> dict[str, str]:
+    """The code version a cell's hash includes.
+
+    photoquant's version, the cell format, the versions of numpy and scipy
+    (the numbers depend on them) and a digest of the source of the three
+    packages (:func:`source_digest`): a cell computed by other code is
+    computed again, never reused, even when the version number did not move.
+    """
+    import numpy as np
+    import scipy
+
+    import photoquant
+
+    return {
+        "photoquant": photoquant.__version__,
+        "cell_format": str(CELL_FORMAT),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "source": source_digest(),
+    }
+
+
+@functools.lru_cache(maxsize=1)
+def source_digest() -> str:
+    """SHA-256 (16 hex digits) of the files of ``photoquant``, ``pqsim`` and ``validation``.
+
+    Every file under the packages (code and shipped data, caches excluded),
+    by path relative to its package and content, in sorted order.
+    """
+    import importlib
+
+    digest = hashlib.sha256()
+    for name in ("photoquant", "pqsim", "validation"):
+        root = Path(importlib.import_module(name).__file__ or "").parent
+        for path in sorted(root.rglob("*")):
+            if not path.is_file() or "__pycache__" in path.parts or path.suffix == ".pyc":
+                continue
+            digest.update(f"{name}/{path.relative_to(root).as_posix()}\0".encode())
+            digest.update(path.read_bytes())
+            digest.update(b"\0")
+    return digest.hexdigest()[:16]
+
+
+def cell_config(spec: Any, settings: Mapping[str, Any], seed: int) -> dict[str, Any]:
+    """A cell's full configuration as plain data (what it computes depends on nothing else).
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep (for the preset files, the spec's folder and the render cache).
+    settings : mapping
+        The cell's settings (:meth:`SweepSpec.settings`).
+    seed : int
+        The cell's seed.
+    """
+    files = dict(spec.preset_files)
+    camera = camera_fields(settings, Path(spec.base_dir), files)
+    config: dict[str, Any] = {
+        "settings": json.loads(json.dumps(dict(settings), sort_keys=True)),
+        "camera": camera,
+        "seed": int(seed),
+        "code": code_version(),
+    }
+    if settings["renderer"] == "mitsuba":
+        config["cache_dir"] = spec.cache_dir
+    config["cell_id"] = cell_id(config)
+    return config
+
+
+def cell_id(config: Mapping[str, Any]) -> str:
+    """The hash of a cell's configuration and the code version (24 hex digits).
+
+    The render cache folder is left out (it changes where renders are kept, not
+    what they are).
+    """
+    content = {k: v for k, v in config.items() if k not in ("cell_id", "cache_dir")}
+    text = json.dumps(content, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:24]

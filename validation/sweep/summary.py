@@ -25,6 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from photoquant.io.outputs import folder_of_kind
+from validation.sweep.spec import column_value
+
 __all__ = ["HEADLINE", "MAX_SERIES", "write_summary", "summary_rows", "axis_series"]
 
 #: Metrics plotted and tabulated: name → (label, scale to the unit shown).
@@ -38,6 +41,9 @@ HEADLINE: Mapping[str, tuple[str, float]] = {
 }
 MAX_SERIES = 8
 _METHOD_AXES = ("method", "pipeline", "preset")
+
+#: The summary folder inside a sweep folder (what ``write_summary`` may replace).
+summary_folder_problem = folder_of_kind("sweep summary", ("*.png", "index.html"), ("index.html",))
 
 
 def _values(table: Any, column: str) -> list[Any]:
@@ -172,8 +178,6 @@ def _html(
     images: Mapping[str, bytes],
     columns: Sequence[str],
 ) -> str:
-    from validation.sweep.engine import column_value
-
     axes = list(spec.axes)
     status = _values(table, "status")
     cells = {}
@@ -246,7 +250,6 @@ def write_summary(spec: Any, output: str | Path, table: Any, columns: Sequence[s
         The parameter columns (:func:`validation.sweep.engine.cell_columns`).
     """
     from photoquant.io.atomic import atomic_directory
-    from validation.sweep.engine import summary_folder_problem
 
     rows = _ok_metric_rows(table)
     axes = list(spec.axes)

@@ -7,7 +7,7 @@ import pytest
 
 from photoquant.balance import colour_balance, colour_balance_WhiteChart, fold_balance
 from photoquant.errors import CalibrationError, InputError
-from photoquant.flatfield import sensor_lut_IrradianceScene
+from photoquant.sensor_lut import sensor_lut_IrradianceScene
 
 
 def test_white_chart_factors_are_green_referenced():
