@@ -29,9 +29,11 @@ Rules
   candidates' mean errors over blocks of 8 × 8 grid pixels (blocks, not
   values, because the errors of neighbouring pixels are correlated).
 * **Brackets too short to hold out** (``K < 3``: no inner exposure; inside
-  an outer cross-validation fold of a 3-frame bracket, too): nothing in the
-  data can compare the candidates, and the ``short_bracket`` model is fitted
-  (the photoquant profile's Debevec response by default). The report says so.
+  an outer cross-validation fold of a 3-frame bracket, too), and brackets
+  whose steps are so wide that no candidate can be fitted once an exposure
+  is held out (the others no longer overlap): nothing in the data can
+  compare the candidates, and the ``short_bracket`` model is fitted (the
+  photoquant profile's Debevec response by default). The report says so.
 
 The default candidates are Debevec 1997 [Debevec1997]_ responses from the
 smoothest to the least smooth (β = 10⁵, 10⁴, 10³, the profile's default, and
@@ -239,10 +241,13 @@ class ResponseSelection:
         """One line: the choice and the scores."""
         chosen = CandidateScore(self.chosen[0], self.chosen[1], math.nan, math.nan, 0).label
         if self.rule == "short bracket":
-            return (
-                f"{chosen}: the bracket has no inner exposure to hold out, so no candidate "
-                "could be scored (the short-bracket model)"
+            why = (
+                "no candidate could be fitted with an exposure held out (the other "
+                "exposures do not overlap)"
+                if self.candidates
+                else "the bracket has no inner exposure to hold out"
             )
+            return f"{chosen}: {why}, so no candidate could be scored (the short-bracket model)"
         scores = "; ".join(
             f"{c.label} {c.score_dn:.3g} DN" if c.error is None else f"{c.label} failed"
             for c in self.candidates
@@ -383,10 +388,13 @@ def select_response(
         errors.append(None)
         counts = np.concatenate(part_counts)
     if counts is None:
-        raise CalibrationError(
-            "no candidate response could be fitted with an exposure held out: "
-            + "; ".join(f"{n}: {e}" for (n, _), e in zip(opts.candidates, errors, strict=True))
+        # the exposures left after holding one out do not overlap (wide steps): the data
+        # cannot compare the candidates, as for a bracket with nothing to hold out
+        failed = tuple(
+            CandidateScore(name, dict(o), math.nan, math.nan, 0, errors[i])
+            for i, (name, o) in enumerate(opts.candidates)
         )
+        return ResponseSelection("short bracket", opts.short_bracket, failed, folds, stride)
     n = int(counts.sum())
     scores = [math.nan if s is None else float(s.sum() / max(n, 1)) for s in sums]
     best = int(np.nanargmin(scores))

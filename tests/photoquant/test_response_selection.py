@@ -127,6 +127,17 @@ def test_a_failing_candidate_is_recorded_and_left_out(rng, monkeypatch):
     assert result.as_dict()["candidates"][0]["score_dn"] is None
 
 
+def test_steps_too_wide_to_hold_out_take_the_short_bracket_model(rng):
+    # ratio 64 between exposures: with one held out, the others share no value
+    times = np.array([1.0, 64.0, 4096.0])
+    scene = log_uniform_scene(rng, (24, 32, 3), decades=4.0)
+    stack = ExposureStack(capture(scene / 64.0, times, gamma=1.0), times)  # 8 stops each
+    result = select_response(stack, SelectionOptions(candidates=GAMMA_FIRST[1:]))
+    assert result.rule == "short bracket" and result.chosen == ("Debevec 1997", {})
+    assert result.candidates[0].error is not None
+    assert "do not overlap" in result.describe()
+
+
 @pytest.mark.parametrize(
     "options, message",
     [
