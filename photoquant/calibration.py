@@ -67,6 +67,8 @@ from photoquant.exposure import (
 )
 from photoquant.glare import GlareData, GlareModel, best_exposed_level
 from photoquant.merge import MergeModel, MergeResult
+from photoquant.merge.noise_aware import estimate_noise_parameters
+from photoquant.merge.uncertainty import noise_record
 from photoquant.methods import STEPS, Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
 from photoquant.profiles import DEFAULT_PROFILE, profile_setting, profile_steps
@@ -698,6 +700,7 @@ def calibrate(
         "exposure_floor_log": float(floor),
         "n_views": len(views),
         "white_roi": None if white_roi is None else [int(v) for v in white_roi],
+        "noise": _noise_record(views[0], resp),
     }
     model = CameraModel(
         image_shape=(height, width),
@@ -725,6 +728,16 @@ def calibrate(
             correspondence_source=source,
         ),
     )
+
+
+def _noise_record(view: ExposureStack, response: ResponseModel) -> dict[str, Any] | None:
+    """The camera's gain and read noise from a photon-transfer fit of a view's repeats
+    (``None`` with one frame per exposure): what :func:`photoquant.correct` propagates
+    into a scene's uncertainty when the scene has no repeats of its own."""
+    if view.n_repeats < 2:
+        return None
+    fitted = estimate_noise_parameters(view, response)
+    return None if fitted is None else noise_record(fitted)
 
 
 def _fill_by_shutter(ref: ExposureRefinement, lag_s: float) -> ExposureRefinement:

@@ -28,6 +28,8 @@ __all__ = ["main", "build_parser"]
 
 EXIT_INPUT = 2
 EXIT_IO = 1
+UNCERTAINTY_LAYER = "sigma_ln"
+"""EXR layer of ``photoquant correct --uncertainty``: the standard uncertainty of ``ln l``."""
 
 
 def _log(args: argparse.Namespace, message: str) -> None:
@@ -272,18 +274,20 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         progress_bars=not args.quiet,
         refine_exposures=args.refine_exposures,
         dark_subtraction=args.dark_subtraction,
+        uncertainty=args.uncertainty,
     )
+    image, names = result.photoquantity, list(model.channels)
+    description = f"photoquantity l = exp(merge)/(u*v), v{__version__}; NaN = no valid exposure"
+    if result.log_sigma_noise is not None:
+        image = np.concatenate([image, result.log_sigma_noise], axis=-1)
+        names += [f"{UNCERTAINTY_LAYER}.{c}" for c in model.channels]
+        description += (
+            f"; {UNCERTAINTY_LAYER}.*: standard uncertainty of ln l from the frames' noise"
+        )
     out.parent.mkdir(parents=True, exist_ok=True)
     # no replace without the flag, and only of an OpenEXR image
     with atomic_output_file(out, overwrite=args.overwrite, replaceable=EXR_IMAGE.problem) as tmp:
-        write_exr(
-            tmp,
-            result.photoquantity,
-            channels=model.channels,
-            metadata={
-                "photoquant": f"photoquantity l = exp(merge)/(u*v), v{__version__}; NaN = no valid exposure",
-            },
-        )
+        write_exr(tmp, image, channels=names, metadata={"photoquant": description})
     finite = result.photoquantity[~result.mask]
     print(
         f"photoquantity written to {out}: {result.photoquantity.shape[1]}x"
@@ -294,6 +298,14 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         f"{finite.max() if finite.size else float('nan'):.4g}], "
         f"{time.perf_counter() - t0:.2f} s"
     )
+    if result.log_sigma_noise is not None and result.noise is not None:
+        sigma = result.log_sigma_noise[np.isfinite(result.log_sigma_noise)]
+        print(
+            f"uncertainty of ln l from noise ({result.noise.source} gain and read noise): "
+            f"median {np.median(sigma) if sigma.size else float('nan'):.3g}, "
+            f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g}, "
+            f"channels {UNCERTAINTY_LAYER}.* in {out.name}"
+        )
     if result.exposures is not None:
         print(f"scene exposures: {_exposure_line(result.exposures.as_dict())}")
     for note in result.notes:
@@ -461,6 +473,12 @@ def build_parser() -> argparse.ArgumentParser:
     cor.add_argument("manifest", help="capture manifest with `scene` frames")
     cor.add_argument("--camera", required=True, help="camera folder from `photoquant calibrate`")
     cor.add_argument("-o", "--output", required=True, help="OpenEXR file to write (R, G, B)")
+    cor.add_argument(
+        "--uncertainty",
+        action="store_true",
+        help=f"also write the standard uncertainty of ln l from the frames' noise "
+        f"(channels {UNCERTAINTY_LAYER}.R, ...)",
+    )
     cor.set_defaults(func=_cmd_correct)
 
     for p in (cal, cor):

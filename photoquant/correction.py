@@ -32,6 +32,8 @@ from photoquant.exposure import (
 )
 from photoquant.merge import MergeModel
 from photoquant.merge._tiled import merge_tiles
+from photoquant.merge.noise_aware import NoiseParameters, estimate_noise_parameters
+from photoquant.merge.uncertainty import log_variance_Debevec1997, noise_parameters_from_record
 from photoquant.methods import resolve_method
 from photoquant.model import CameraModel
 from photoquant.stack import ExposureStack
@@ -60,6 +62,14 @@ class Correction:
     exposure_decision : ExposureDecision, optional
         The test of the refined against the nominal times, when the scene's
         times were refined (:func:`photoquant.exposure.judge_exposure_times`).
+    log_sigma_noise : ndarray, shape (H, W, C), float32, optional
+        With ``uncertainty=True``: the standard uncertainty of ``ln l`` from
+        the frames' noise (:mod:`photoquant.merge.uncertainty`), NaN where
+        ``mask`` is set. The calibration's own errors, common to every scene,
+        are not in it.
+    noise : NoiseParameters, optional
+        The gain and read noise it was computed with (``source`` says whether
+        from the scene's repeats or the camera's calibration).
     """
 
     photoquantity: np.ndarray
@@ -69,6 +79,8 @@ class Correction:
     exposures: ExposureRefinement | None = None
     notes: tuple[str, ...] = ()
     exposure_decision: ExposureDecision | None = None
+    log_sigma_noise: np.ndarray | None = None
+    noise: NoiseParameters | None = None
 
 
 def _camera_refines(model: CameraModel) -> bool:
@@ -112,6 +124,7 @@ def correct(
     refine_exposures: bool | None = None,
     tile_rows: int | None = None,
     workers: int | None = None,
+    uncertainty: bool = False,
 ) -> Correction:
     """Measure the photoquantity of a scene with a calibrated camera (§4 of the paper).
 
@@ -150,6 +163,12 @@ def correct(
         result does not depend on it, nor on ``workers`` (threads over tiles).
     workers : int, optional
         Threads (every CPU by default).
+    uncertainty : bool
+        Also return the standard uncertainty of ``ln l`` from the frames'
+        noise (:attr:`Correction.log_sigma_noise`), with the gain and read
+        noise of a photon-transfer fit of the scene's repeats (``N ≥ 2``),
+        else of the camera's calibration captures. For the ``"Debevec
+        1997"`` merge; before any glare removal.
 
     Returns
     -------
@@ -188,6 +207,12 @@ def correct(
     if refine_exposures is not None and not isinstance(refine_exposures, bool):
         raise InputError(
             f"`refine_exposures` must be true, false or None, got {refine_exposures!r}"
+        )
+    if not isinstance(uncertainty, bool):
+        raise InputError(f"`uncertainty` must be true or false, got {uncertainty!r}")
+    if uncertainty and merger.method != "Debevec 1997":
+        raise InputError(
+            f"the uncertainty is propagated through the 'Debevec 1997' merge, not {merger.method!r}"
         )
     refinement, decision, notes = _scene_exposures(stack, model, refine_exposures)
     if refinement is not None:
@@ -233,6 +258,14 @@ def correct(
     if defects is not None and defects.mask.any():
         photoquantity[defects.mask] = np.nan
         mask |= defects.mask
+    sigma, noise = None, None
+    if uncertainty:
+        noise = _noise_parameters(stack, model)
+        variance = log_variance_Debevec1997(stack, model.balanced_response(), noise, merger.options)
+        sigma = np.sqrt(variance).astype(np.float32)
+        sigma[mask] = np.nan
+        if not model.glare.is_identity:
+            notes.append("uncertainty: the merge's noise before glare removal")
     return Correction(
         photoquantity=photoquantity,
         mask=mask,
@@ -241,7 +274,25 @@ def correct(
         exposures=refinement,
         notes=tuple(notes),
         exposure_decision=decision,
+        log_sigma_noise=sigma,
+        noise=noise,
     )
+
+
+def _noise_parameters(stack: ExposureStack, model: CameraModel) -> NoiseParameters:
+    """Gain and read noise: the scene's photon-transfer fit (``N ≥ 2``), else the camera's."""
+    if stack.n_repeats >= 2:
+        fitted = estimate_noise_parameters(stack, model.balanced_response())
+        if fitted is not None:
+            return fitted
+    stored = noise_parameters_from_record(model.parameters.get("noise"), stack.n_channels)
+    if stored is None:
+        raise InputError(
+            "no noise information for the uncertainty: the scene's repeats do not fix a "
+            "photon-transfer fit and the camera stores none (calibrate from captures with "
+            "N >= 2 repeats per exposure)"
+        )
+    return stored
 
 
 def camera_floor_log(model: CameraModel) -> float:
@@ -294,11 +345,12 @@ def correct_manifest(
     progress_bars: bool = False,
     refine_exposures: bool | None = None,
     dark_subtraction: bool | None = None,
+    uncertainty: bool = False,
 ) -> Correction:
     """Correct the ``scene`` of a capture manifest (a path or ``CaptureManifest``).
 
     ``dark_subtraction`` overrides the manifest's (``None``: the manifest's;
-    :mod:`photoquant.darkframe`).
+    :mod:`photoquant.darkframe`); ``uncertainty`` as in :func:`correct`.
     """
     from photoquant.io import CaptureManifest, load_manifest, load_stack
 
@@ -312,4 +364,5 @@ def correct_manifest(
         ),
         model,
         refine_exposures=refine_exposures,
+        uncertainty=uncertainty,
     )

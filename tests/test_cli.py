@@ -35,6 +35,16 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     img, channels = read_exr(exr)
     assert channels == ("R", "G", "B") and img.dtype == np.float32 and img.shape == (48, 64, 3)
     assert "photoquantity written" in capsys.readouterr().out
+    # with its uncertainty: three more channels, the layer named in the header and output
+    exr2 = tmp_path / "scene-sigma.exr"
+    args = ["correct", str(capture), "--camera", str(cam), "-o", str(exr2), "-q", "--uncertainty"]
+    assert main(args) == 0
+    both, names = read_exr(exr2)
+    assert names == ("R", "G", "B", "sigma_ln.R", "sigma_ln.G", "sigma_ln.B")
+    np.testing.assert_array_equal(both[..., :3], img)
+    sigma = both[..., 3:]
+    assert np.all(np.isfinite(sigma) == np.isfinite(img)) and np.nanmin(sigma) > 0
+    assert "uncertainty of ln l from noise" in capsys.readouterr().out
 
     assert main(["info", str(cam)]) == 0
     text = capsys.readouterr().out

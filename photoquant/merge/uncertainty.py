@@ -1,0 +1,145 @@
+"""The noise part of a merged photoquantity's uncertainty, pixel by pixel.
+
+Eq. 6 merges each pixel's exposures into a weighted mean of their estimates
+``ln E_k = g(c̄_k) − ln t_k``. With independent noise in the exposures, the
+variance of the merged ``ln Ê`` is that of a weighted mean with the merge's
+*actual* weights [JCGM100]_ (§5.1.2, the law of propagation of uncertainty):
+
+    Var(ln Ê) = Σ_k w_k² Var(ln E_k) / (Σ_k w_k)²,
+
+whatever the weights are (the hat of Debevec & Malik is not an inverse
+variance; with the noise-aware merge's weights ``w_k = 1 / Var(ln E_k)`` it
+reduces to ``1 / Σ_k w_k``). ``Var(ln E_k)`` is the noise model of
+:mod:`photoquant.merge.noise_aware`: shot noise ``K·y`` and read noise
+``σ_r²`` on the camera's linear DN scale, passed through the slope of ``g``,
+quantisation after the response, the mean of ``N`` repeats; evaluated at the
+observed mean value (first order). The gain ``K`` and read noise ``σ_r`` come
+from a photon-transfer fit (:func:`~photoquant.merge.noise_aware.estimate_noise_parameters`):
+of the scene's own repeats where it has ``N ≥ 2``, else of the camera's
+calibration captures (stored in the camera).
+
+This is the *noise* component: it varies from pixel to pixel and averages
+down with more repeats. The calibration's own errors (the response, the
+sensor LUT, the vignetting, the balance, refined exposure times) are common
+to every scene corrected with the camera and are not in it. The division by
+``u·v`` adds nothing to it (``ln l = ln Ê − ln(u·v)``).
+
+References
+----------
+.. [JCGM100] JCGM 100:2008, Evaluation of measurement data — Guide to the
+   expression of uncertainty in measurement (GUM), §5.1.2.
+.. [Granados2010] Granados, M., Ajdin, B., Wand, M., Theobalt, C., Seidel,
+   H.-P., & Lensch, H. P. A. (2010). Optimal HDR reconstruction with linear
+   digital cameras. CVPR 2010, 215-222. doi:10.1109/CVPR.2010.5540208
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from photoquant.errors import InputError
+from photoquant.merge.debevec1997 import DebevecMergeOptions, _check_inputs
+from photoquant.merge.noise_aware import NoiseParameters, _log_variance, _Scale
+from photoquant.response.model import ResponseModel
+from photoquant.stack import ExposureStack
+
+__all__ = ["log_variance_Debevec1997", "noise_parameters_from_record", "noise_record"]
+
+
+def noise_record(params: NoiseParameters) -> dict[str, Any]:
+    """The JSON record of noise parameters stored in a camera (``parameters["noise"]``)."""
+    return {
+        "gain_dn_per_e": [float(v) for v in params.gain],
+        "read_noise_dn": [float(v) for v in params.read_noise],
+        "source": params.source,
+    }
+
+
+def noise_parameters_from_record(record: Any, n_channels: int) -> NoiseParameters | None:
+    """The noise parameters of a camera's record (``None``: none stored, or unreadable)."""
+    if not isinstance(record, dict):
+        return None
+    try:
+        gain = np.asarray(record["gain_dn_per_e"], dtype=np.float64)
+        read = np.asarray(record["read_noise_dn"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        return None
+    if gain.shape != (n_channels,) or read.shape != (n_channels,):
+        return None
+    if not (np.all(np.isfinite(gain)) and np.all(gain > 0) and np.all(np.isfinite(read))):
+        return None
+    source = f"camera's calibration ({record.get('source', 'estimated')})"
+    return NoiseParameters(gain, np.maximum(read, 0.0), source)
+
+
+def log_variance_Debevec1997(
+    stack: ExposureStack,
+    response: ResponseModel,
+    noise: NoiseParameters,
+    options: DebevecMergeOptions | None = None,
+) -> np.ndarray:
+    """``Var(ln Ê)`` of :func:`~photoquant.merge.debevec1997.merge_stack_Debevec1997` per pixel.
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        The merged frames (``N`` repeats are averaged, as the merge does).
+    response : ResponseModel
+        The response the merge used (an additive constant, such as a folded
+        balance, does not change the variance).
+    noise : NoiseParameters
+        Gain and read noise per channel, on the response's linear DN scale.
+    options : DebevecMergeOptions, optional
+        The merge's weighting and ``valid_min`` rule (the defaults when not given).
+
+    Returns
+    -------
+    ndarray, shape (H, W, C), float64
+        The variance in ``ln`` units; NaN where no exposure has weight (the
+        merge's mask).
+    """
+    opts = options or DebevecMergeOptions()
+    if not isinstance(noise, NoiseParameters):
+        raise InputError(f"`noise` must be NoiseParameters, got {type(noise).__name__}")
+    n = stack.n_repeats
+    values = stack.frames[0] if n == 1 else stack.repeat_sum()
+    inp = _check_inputs(
+        values,
+        stack.exposure_s,
+        response.levels,
+        response.log_inverse_response,
+        response.saturation_level,
+        stack.saturated(response.saturation_level),
+        stack.dark_clipped(),
+        response.valid_min if opts.exclude_below_valid_min else None,
+        opts.weighting,
+        np.asarray(response.black_level, dtype=np.float64),
+        n,
+    )
+    scale = _Scale(response)
+    means = inp.values / n if n > 1 else inp.values
+    shape = means.shape[1:]
+    num = np.zeros(shape, dtype=np.float64)
+    den = np.zeros(shape, dtype=np.float64)
+    read2 = np.asarray(noise.read_noise, dtype=np.float64) ** 2
+    for k in range(means.shape[0]):
+        v = np.asarray(means[k], dtype=np.float64)
+        w = inp.weights(v, slice(None))
+        excluded = np.zeros(shape, dtype=bool)
+        for mask in (inp.saturated, inp.dark_clipped):
+            if mask is not None:
+                excluded |= mask[k]
+        w = np.where(excluded, 0.0, w)
+        var = np.empty(shape, dtype=np.float64)
+        for ch in range(shape[-1]):
+            vc = v[..., ch]
+            y = scale.linear(scale.log_inverse(vc, ch), ch)
+            var[..., ch] = _log_variance(
+                y, scale.slope(vc, ch), float(noise.gain[ch]), float(read2[ch]), n
+            )
+        num += np.where(w > 0, w * w * var, 0.0)
+        den += w
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / np.where(den > 0, den * den, 1.0), np.nan)

@@ -1,0 +1,152 @@
+"""The noise part of the photoquantity's uncertainty (photoquant.merge.uncertainty, correct)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import photoquant as pq
+from photoquant.errors import InputError
+from photoquant.merge.noise_aware import NoiseParameters
+from photoquant.merge.uncertainty import (
+    log_variance_Debevec1997,
+    noise_parameters_from_record,
+    noise_record,
+)
+from photoquant.response.model import ResponseModel
+from photoquant.weighting import weighting_function
+from pqsim.analytic import scene_test_hdr
+from pqsim.synth_camera.presets import camera_from_preset
+
+LEVELS = np.arange(256, dtype=np.float64)
+GAIN, READ = 0.05, 0.8  # DN per e⁻, DN
+
+
+def _linear_response() -> ResponseModel:
+    """A linear camera, ``g(c) = ln c`` (black 0, clipping at 255): ``y = c`` on its linear scale."""
+    g = np.log(np.maximum(LEVELS, 0.5))
+    return ResponseModel(
+        "linear",
+        LEVELS,
+        np.stack([g, g, g]),
+        np.full(3, 255.0),
+        valid_min=np.ones(3),
+        black_level=np.zeros(3),
+    )
+
+
+def _stack(values_per_exposure, times) -> pq.ExposureStack:
+    frames = np.array(values_per_exposure, dtype=np.uint8)[None, :, None, None, None]
+    return pq.ExposureStack(np.repeat(frames, 3, axis=-1), np.asarray(times, dtype=float))
+
+
+def _one_value_variance(c: float) -> float:
+    """``Var(ln E)`` of one frame's value ``c`` of the linear camera: shot and read noise
+    over ``y² = c²``, and quantisation ``g'²/12`` with ``g'`` the larger one-sided slope of
+    the table at the level, ``ln(c/(c − 1))`` (module notes of ``noise_aware``)."""
+    slope = np.log(c / (c - 1.0))
+    return (GAIN * c + READ**2) / c**2 + slope**2 / 12.0
+
+
+def test_one_usable_exposure_gives_its_own_variance():
+    # the second exposure is clipped: the merge is the first value alone
+    stack = _stack([200, 255], [1.0, 4.0])
+    var = log_variance_Debevec1997(
+        stack, _linear_response(), NoiseParameters(np.full(3, GAIN), np.full(3, READ), "given")
+    )
+    np.testing.assert_allclose(var[0, 0], _one_value_variance(200.0), rtol=1e-12)
+
+
+def test_two_exposures_combine_with_the_merges_own_weights():
+    stack = _stack([60, 180], [1.0, 3.0])
+    noise = NoiseParameters(np.full(3, GAIN), np.full(3, READ), "given")
+    var = log_variance_Debevec1997(stack, _linear_response(), noise)
+    weight = weighting_function("hat-quantisation")
+    w = np.array([weight(np.array([c]), 0.0, 255.0)[0] for c in (60.0, 180.0)])
+    v = np.array([_one_value_variance(c) for c in (60.0, 180.0)])
+    expected = np.sum(w**2 * v) / np.sum(w) ** 2
+    np.testing.assert_allclose(var[0, 0], expected, rtol=1e-12)
+    # the weighted mean of two estimates is more certain than either alone
+    assert var[0, 0, 0] < v.min()
+
+
+def test_no_usable_exposure_has_no_variance():
+    stack = _stack([255, 255], [1.0, 4.0])
+    noise = NoiseParameters(np.full(3, GAIN), np.full(3, READ), "given")
+    assert np.all(np.isnan(log_variance_Debevec1997(stack, _linear_response(), noise)))
+
+
+def test_the_camera_record_round_trips():
+    params = NoiseParameters(np.array([0.1, 0.2, 0.3]), np.array([1.0, 0.0, 2.0]), "estimated")
+    back = noise_parameters_from_record(noise_record(params), 3)
+    np.testing.assert_array_equal(back.gain, params.gain)
+    np.testing.assert_array_equal(back.read_noise, params.read_noise)
+    assert back.source == "camera's calibration (estimated)"
+    for bad in (
+        None,
+        {},
+        {"gain_dn_per_e": [0.1], "read_noise_dn": [1.0]},
+        {"gain_dn_per_e": [-1, 1, 1], "read_noise_dn": [0, 0, 0]},
+    ):
+        assert noise_parameters_from_record(bad, 3) is None
+
+
+@pytest.fixture(scope="module")
+def noisy_camera():
+    """A cmos-preset camera calibrated from one view with 4 repeats, and its scene.
+
+    The cmos preset's read noise (0.5 DN) dithers the quantiser: two captures of
+    a scene then have independent quantisation errors. Below it (the ccd's
+    0.2 DN) a value's quantisation error mostly repeats between captures (the
+    same code twice): the stated uncertainty includes it, as an error against
+    the truth, but a difference of two captures cannot see it.
+    """
+    cam = camera_from_preset("cmos")
+    times = np.geomspace(2.5e-4, 0.64, 6)
+    scene = scene_test_hdr((96, 128))
+    view = cam.capture(scene, times, 4, rng=100)
+    camera = pq.calibrate([pq.ExposureStack(view.frames, view.exposure_s)])
+    return cam, camera, scene, times
+
+
+@pytest.mark.parametrize("repeats", [1, 4])
+def test_the_stated_uncertainty_matches_the_scatter_of_independent_captures(noisy_camera, repeats):
+    """Two captures of one scene corrected with one camera differ by their noise alone
+    (the calibration's errors are common to both): ``z = Δ ln l / √(σ₁² + σ₂²)`` must be
+    a standard normal variate: its spread is held to 1 ± 0.05 and its 68 % and 95 %
+    intervals to 68 ± 2 % and 95 ± 1 % (12 288 × 3 independent values: binomial
+    standard errors of 0.2 % and 0.1 %)."""
+    cam, camera, scene, times = noisy_camera
+    results = []
+    for seed in (1, 2):
+        capture = cam.capture(scene, times, repeats, rng=seed)
+        stack = pq.ExposureStack(capture.frames, capture.exposure_s)
+        results.append(pq.correct(stack, camera, uncertainty=True, refine_exposures=False))
+    a, b = results
+    expected = "estimated" if repeats > 1 else "camera's calibration (estimated)"
+    assert a.noise.source == expected
+    d = np.log(a.photoquantity.astype(float)) - np.log(b.photoquantity.astype(float))
+    s = np.hypot(a.log_sigma_noise.astype(float), b.log_sigma_noise.astype(float))
+    ok = np.isfinite(d) & np.isfinite(s)
+    assert np.count_nonzero(ok) > 0.95 * ok.size
+    z = d[ok] / s[ok]
+    assert abs(z.std() - 1.0) < 0.05
+    assert abs(np.mean(np.abs(z) < 1.959964) - 0.95) < 0.01
+    assert abs(np.mean(np.abs(z) < 1.0) - 0.6827) < 0.02
+    assert np.all(np.isnan(a.log_sigma_noise[a.mask]))
+
+
+def test_bad_requests_are_named(noisy_camera):
+    cam, camera, scene, times = noisy_camera
+    capture = cam.capture(scene, times, 1, rng=5)
+    stack = pq.ExposureStack(capture.frames, capture.exposure_s)
+    with pytest.raises(InputError, match="'Debevec 1997' merge"):
+        pq.correct(stack, camera, uncertainty=True, merge="Robertson 2003")
+    with pytest.raises(InputError, match="`uncertainty` must be true or false"):
+        pq.correct(stack, camera, uncertainty="yes")
+    bare = dataclasses.replace(camera, parameters={**camera.parameters, "noise": None})
+    with pytest.raises(InputError, match="no noise information"):
+        pq.correct(stack, bare, uncertainty=True)
+    assert pq.correct(stack, camera).log_sigma_noise is None
