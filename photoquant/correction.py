@@ -29,6 +29,7 @@ from photoquant.exposure import (
     ExposureRefinement,
     judge_exposure_times,
     refine_against_response,
+    refine_by_pairs,
 )
 from photoquant.merge import MergeModel
 from photoquant.merge._tiled import merge_tiles
@@ -269,8 +270,7 @@ def _scene_exposures(
     if not (refine_exposures or (refine_exposures is None and _camera_refines(model))):
         return None, None, notes
     try:
-        # the sample's answer, as the camera's floor was measured (exhaustive=False)
-        refinement = refine_against_response(stack, model.response, exhaustive=False)
+        refinement = _scene_refinement(stack, model)
     except CalibrationError as exc:
         if refine_exposures:
             raise CalibrationError(
@@ -284,6 +284,17 @@ def _scene_exposures(
         return refinement, decision, notes
     notes.append(f"scene's exposure times: {decision.describe()}")
     return (refinement if decision.refine else None), decision, notes
+
+
+def _scene_refinement(stack: ExposureStack, model: CameraModel) -> ExposureRefinement:
+    """The scene's times refined against the camera's response: from neighbouring exposure
+    pairs of a pixel draw (:func:`photoquant.exposure.refine_by_pairs`, a few ms), else, where
+    the draw relates no two exposures, by :func:`photoquant.exposure.refine_against_response`
+    (the sample's answer, as the camera's floor was measured, then every pixel)."""
+    try:
+        return refine_by_pairs(stack, model.response)
+    except CalibrationError:
+        return refine_against_response(stack, model.response, exhaustive=False)
 
 
 def correct_manifest(
