@@ -269,8 +269,19 @@ def _scene_exposures(
     notes: list[str] = []
     if not (refine_exposures or (refine_exposures is None and _camera_refines(model))):
         return None, None, notes
+    floor = camera_floor_log(model)
+    if refine_exposures is None:
+        # the cheap test first: where the neighbouring pairs keep the labels, so does the scene
+        try:
+            screen = judge_exposure_times(refine_by_pairs(stack, model.response), floor_log=floor)
+        except CalibrationError:
+            screen = None
+        if screen is not None and not screen.refine:
+            notes.append(f"scene's exposure times: {screen.describe()}")
+            return None, screen, notes
     try:
-        refinement = _scene_refinement(stack, model)
+        # the sample's answer, as the camera's floor was measured (exhaustive=False)
+        refinement = refine_against_response(stack, model.response, exhaustive=False)
     except CalibrationError as exc:
         if refine_exposures:
             raise CalibrationError(
@@ -279,22 +290,11 @@ def _scene_exposures(
             ) from None
         notes.append(f"scene exposures not refined, nominal times kept: {exc}")
         return None, None, notes
-    decision = judge_exposure_times(refinement, floor_log=camera_floor_log(model))
+    decision = judge_exposure_times(refinement, floor_log=floor)
     if refine_exposures:
         return refinement, decision, notes
     notes.append(f"scene's exposure times: {decision.describe()}")
     return (refinement if decision.refine else None), decision, notes
-
-
-def _scene_refinement(stack: ExposureStack, model: CameraModel) -> ExposureRefinement:
-    """The scene's times refined against the camera's response: from neighbouring exposure
-    pairs of a pixel draw (:func:`photoquant.exposure.refine_by_pairs`, a few ms), else, where
-    the draw relates no two exposures, by :func:`photoquant.exposure.refine_against_response`
-    (the sample's answer, as the camera's floor was measured, then every pixel)."""
-    try:
-        return refine_by_pairs(stack, model.response)
-    except CalibrationError:
-        return refine_against_response(stack, model.response, exhaustive=False)
 
 
 def correct_manifest(

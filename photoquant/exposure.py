@@ -1107,13 +1107,16 @@ def refine_by_pairs(
 
     # the pairs: (row, step) where both exposures of the step are valid, a quota per step
     quota = max(pair_rows // n_ch, 1)
+    z_perm = z_all[:, order].transpose(2, 1, 0)  # (C, P, K), random order
+    chan_all = np.arange(n_ch)[:, None, None]
+    y_all, seg_ok = _Tables(levels, np.stack([g, np.c_[step_slope, step_slope[:, -1:]]])).at(
+        z_perm, chan_all
+    )
+    ok_all = ~clipped[:, order].transpose(2, 1, 0) & np.isfinite(y_all) & (seg_ok > 0)
     z_rows, y_rows, entries, pixels = [], [], [], []
     n_rows = 0
     for ch in range(n_ch):
-        z = z_all[:, order, ch].T  # (P, K), random order
-        y = np.interp(z, levels, g[ch])
-        seg = np.clip(np.searchsorted(levels, z, side="right") - 1, 0, levels.size - 2)
-        ok = ~clipped[:, order, ch].T & np.isfinite(y) & (step_slope[ch][seg] > 0)
+        z, y, ok = z_perm[ch], y_all[ch], ok_all[ch]
         pair = ok[:, :-1] & ok[:, 1:]
         pair &= np.cumsum(pair, axis=0) <= quota
         keep = np.flatnonzero(pair.any(axis=1))
@@ -1174,30 +1177,43 @@ def refine_by_pairs(
     bottom = floor_level[chan]
     s2_lo = tables.at(z_lo, chan)[1]
     s2_hi = tables.at(z_hi, chan)[1]
+    compiled = _pair_pass_nb is not None and tables.even
+    rtable = _rounding_table()[1]
     for _ in range(max(int(passes), 1)):
-        # g(z̄) less its bias at the current levels, then each end predicted from the other
-        dx = np.diff(x)[step]
-        c_lo = y_lo - 0.5 * s2_lo * mean_variance(one_repeat(z_lo))
-        c_hi = y_hi - 0.5 * s2_hi * mean_variance(one_repeat(z_hi))
-        z_lo, z_hi = inverse_g(c_hi - dx), inverse_g(c_lo + dx)
-        use = np.ones(row.size, dtype=bool)
-        ends = []
-        for zz, yy in ((z_lo, y_lo), (z_hi, y_hi)):
-            s1, s2 = tables.at(zz, chan)
-            v_one = one_repeat(zz)
-            v_mean = mean_variance(v_one)
-            sigma = np.sqrt(v_one + rounding_variance(np.sqrt(np.maximum(v_one - 1 / 12, 0.0))))
+        dx = np.diff(x)
+        if compiled:  # the same arithmetic, one loop over the pairs (no temporaries)
+            use = np.empty(row.size, dtype=bool)
+            w, resid, g2_lo, g2_hi = (np.empty(row.size) for _ in range(4))
+            _pair_pass_nb(
+                y_lo, y_hi, z_lo, z_hi, s2_lo, s2_hi, chan, step, dx, np.diff(x_nom),
+                line, n_rep, levels, tables.flat[0].reshape(n_ch, -1),
+                tables.flat[1].reshape(n_ch, -1), g_mono, floor_level, sat,
+                float(margin_sigma), float(max_bend), rtable, use, w, resid, g2_lo, g2_hi,
+            )  # fmt: skip
+        else:
+            # g(z̄) less its bias at the current levels, then each end predicted from the other
+            dxe = dx[step]
+            c_lo = y_lo - 0.5 * s2_lo * mean_variance(one_repeat(z_lo))
+            c_hi = y_hi - 0.5 * s2_hi * mean_variance(one_repeat(z_hi))
+            z_lo, z_hi = inverse_g(c_hi - dxe), inverse_g(c_lo + dxe)
+            use = np.ones(row.size, dtype=bool)
+            ends = []
+            for zz, yy in ((z_lo, y_lo), (z_hi, y_hi)):
+                s1, s2 = tables.at(zz, chan)
+                v_one = one_repeat(zz)
+                v_mean = mean_variance(v_one)
+                sigma = np.sqrt(v_one + rounding_variance(np.sqrt(np.maximum(v_one - 1 / 12, 0.0))))
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    bend = np.abs(s2) * sigma / s1
+                use &= (zz >= bottom + margin_sigma * sigma) & (zz <= top - margin_sigma * sigma)
+                use &= (s1 > 0) & (bend <= max_bend)
+                ends.append((yy - 0.5 * s2 * v_mean, s1 * s1, s2, v_mean))
+            (c_lo, g2_lo, s2_lo, v_lo), (c_hi, g2_hi, s2_hi, v_hi) = ends
             with np.errstate(invalid="ignore", divide="ignore"):
-                bend = np.abs(s2) * sigma / s1
-            use &= (zz >= bottom + margin_sigma * sigma) & (zz <= top - margin_sigma * sigma)
-            use &= (s1 > 0) & (bend <= max_bend)
-            ends.append((yy - 0.5 * s2 * v_mean, s1 * s1, s2, v_mean))
-        (c_lo, g2_lo, s2_lo, v_lo), (c_hi, g2_hi, s2_hi, v_hi) = ends
-        with np.errstate(invalid="ignore", divide="ignore"):
-            w = 1.0 / (g2_lo * v_lo + g2_hi * v_hi)
-        use &= np.isfinite(w) & (w > 0)
-        w = np.where(use, w, 0.0)
-        resid = np.where(use, c_hi - c_lo - np.diff(x_nom)[step], 0.0)
+                w = 1.0 / (g2_lo * v_lo + g2_hi * v_hi)
+            use &= np.isfinite(w) & (w > 0)
+            w = np.where(use, w, 0.0)
+            resid = np.where(use, c_hi - c_lo - np.diff(x_nom)[step], 0.0)
         theta, cov, h, scale, iterations = _pair_offsets(
             resid, w, use, step, row, n_rows, n_steps, huber_k, max_iterations
         )
@@ -1219,8 +1235,8 @@ def refine_by_pairs(
                     design = np.stack(
                         [(g2_lo + g2_hi)[m], (g2_lo * z_lo + g2_hi * z_hi)[m]], axis=1
                     )
-                    coef = np.linalg.lstsq(design, r2[m], rcond=None)[0]
-                    if np.all(np.isfinite(coef)):
+                    coef = _solve2(design, r2[m])
+                    if coef is not None:
                         line[ch] = coef
     steps = np.arange(run.start, run.stop)
     sel = np.zeros(n_k, dtype=bool)
@@ -1252,6 +1268,109 @@ def refine_by_pairs(
     )
 
 
+def _pair_pass_py(  # pragma: no cover - compiled by numba
+    y_lo: Any, y_hi: Any, z_lo: Any, z_hi: Any, s2_lo: Any, s2_hi: Any, chan: Any, step: Any,
+    dx: Any, dx_nom: Any, line: Any, n_rep: int, levels: Any, d1: Any, d2: Any, g_mono: Any,
+    bottom: Any, top: Any, margin: float, max_bend: float, rtable: Any,
+    use: Any, w: Any, resid: Any, g2_lo: Any, g2_hi: Any,
+) -> None:  # fmt: skip
+    """numba body of one pass of :func:`refine_by_pairs` (its numpy branch, value by value, the
+    same operations in the same order): updates ``z_lo, z_hi, s2_lo, s2_hi`` (the ends'
+    levels and ``g''`` there), writes ``use, w, resid`` and ``g'²`` at both ends."""
+    n_lv = levels.size
+    lv0 = levels[0]
+    lv_last = levels[n_lv - 1]
+    n_tab = rtable.size - 1
+    inv_step = 1.0 / ((lv_last - lv0) / (n_lv - 1))
+    for e in range(y_lo.size):
+        c = chan[e]
+        s = step[e]
+        cy_lo = 0.0
+        cy_hi = 0.0
+        for end in range(2):
+            zz = z_lo[e] if end == 0 else z_hi[e]
+            v = max(line[c, 0] + line[c, 1] * zz, 1.0 / 12.0)
+            if n_rep != 1:
+                v = v / n_rep + _rounding_at(np.sqrt(max(v - 1.0 / 12.0, 0.0)), rtable, n_tab)
+            if end == 0:
+                cy_lo = y_lo[e] - 0.5 * s2_lo[e] * v
+            else:
+                cy_hi = y_hi[e] - 0.5 * s2_hi[e] * v
+        zl = _interp_one(cy_hi - dx[s], g_mono[c], levels)
+        zh = _interp_one(cy_lo + dx[s], g_mono[c], levels)
+        z_lo[e] = zl
+        z_hi[e] = zh
+        ok = True
+        var_sum = 0.0
+        for end in range(2):
+            zz = zl if end == 0 else zh
+            zc = lv0 if np.isnan(zz) else min(max(zz, lv0), lv_last)
+            i = min(int((zc - lv0) * inv_step), n_lv - 2)
+            frac = (zc - levels[i]) / (levels[i + 1] - levels[i])
+            s1 = d1[c, i] + frac * (d1[c, i + 1] - d1[c, i])
+            s2 = d2[c, i] + frac * (d2[c, i + 1] - d2[c, i])
+            v_one = max(line[c, 0] + line[c, 1] * zz, 1.0 / 12.0)
+            r_one = _rounding_at(np.sqrt(max(v_one - 1.0 / 12.0, 0.0)), rtable, n_tab)
+            v_mean = v_one if n_rep == 1 else v_one / n_rep + r_one
+            sigma = np.sqrt(v_one + r_one)
+            bend = np.abs(s2) * sigma / s1
+            inside = zz >= bottom[c] + margin * sigma and zz <= top[c] - margin * sigma
+            ok = ok and inside and s1 > 0 and bend <= max_bend
+            var_sum += s1 * s1 * v_mean
+            if end == 0:
+                cy_lo = y_lo[e] - 0.5 * s2 * v_mean
+                s2_lo[e] = s2
+                g2_lo[e] = s1 * s1
+            else:
+                cy_hi = y_hi[e] - 0.5 * s2 * v_mean
+                s2_hi[e] = s2
+                g2_hi[e] = s1 * s1
+        weight = 1.0 / var_sum
+        ok = ok and np.isfinite(weight) and weight > 0
+        use[e] = ok
+        w[e] = weight if ok else 0.0
+        resid[e] = cy_hi - cy_lo - dx_nom[s] if ok else 0.0
+
+
+def _rounding_at(sigma: float, table: Any, n: int) -> float:  # pragma: no cover - numba
+    """:func:`rounding_variance` of one value (the table's linear interpolation)."""
+    u = sigma * float(n)
+    if np.isnan(sigma):
+        return np.nan
+    if not u <= n:
+        return 0.0
+    i = min(int(u), n - 1)
+    return table[i] + (u - i) * (table[i + 1] - table[i])
+
+
+def _interp_one(x: float, xp: Any, fp: Any) -> float:  # pragma: no cover - numba
+    """``np.interp`` of one value (``xp`` non-decreasing): the interval ``xp[j] <= x < xp[j+1]``."""
+    n = xp.size
+    if np.isnan(x):
+        return x
+    if x >= xp[n - 1]:
+        return fp[n - 1]
+    if x < xp[0]:
+        return fp[0]
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if xp[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
+    return slope * (x - xp[lo]) + fp[lo]
+
+
+if HAVE_NUMBA:  # pragma: no cover - depends on the environment
+    _rounding_at = compile_kernel(_rounding_at)
+    _interp_one = compile_kernel(_interp_one)
+    _pair_pass_nb: Any = compile_kernel(_pair_pass_py, error_model="numpy")
+else:  # pragma: no cover
+    _pair_pass_nb = None
+
+
 class _Tables:
     """Per-channel tables on ``levels`` looked up together: one interval search, linear
     interpolation (ends held, as ``np.interp``)."""
@@ -1281,9 +1400,22 @@ class _Tables:
 
 def _line_fit(level: np.ndarray, var: np.ndarray) -> np.ndarray:
     """Least-squares ``(a, b)`` of ``var ≈ a + b·level``."""
-    design = np.stack([np.ones_like(level), level], axis=1)
-    coef = np.linalg.lstsq(design, var, rcond=None)[0]
-    return coef if np.all(np.isfinite(coef)) else np.array([1.0, 0.0])
+    coef = _solve2(np.stack([np.ones_like(level), level], axis=1), var)
+    return np.array([1.0, 0.0]) if coef is None else coef
+
+
+def _solve2(design: np.ndarray, target: np.ndarray) -> np.ndarray | None:
+    """Least squares of two unknowns by their normal equations (``None``: singular)."""
+    mat = design.T @ design
+    det = mat[0, 0] * mat[1, 1] - mat[0, 1] * mat[1, 0]
+    if not (np.isfinite(det) and abs(det) > 1e-12 * abs(mat[0, 0] * mat[1, 1])):
+        return None
+    rhs = design.T @ target
+    coef = np.array(
+        [mat[1, 1] * rhs[0] - mat[0, 1] * rhs[1], mat[0, 0] * rhs[1] - mat[1, 0] * rhs[0]]
+    )
+    coef /= det
+    return coef if np.all(np.isfinite(coef)) else None
 
 
 def _pair_offsets(
