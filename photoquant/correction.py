@@ -12,6 +12,10 @@ camera's response (:func:`photoquant.exposure.refine_exposure_times`) when the
 camera was calibrated with exposure refinement (the photoquant profile's
 default) or when asked, and the refined times replace the labels only where
 the data contradict them (:func:`photoquant.exposure.judge_exposure_times`).
+By default the labels are first tested from neighbouring exposure pairs of a
+pixel draw (:func:`photoquant.exposure.refine_by_pairs`, a fraction of the
+full refinement's cost); labels that test keeps are kept, and only labels it
+rejects are refined in full and judged again.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
-"""The correction's exposure refinement from neighbouring pairs (:func:`refine_by_pairs`).
+"""The correction's exposure screen from neighbouring pairs (:func:`refine_by_pairs`).
 
-It replaces :func:`photoquant.exposure.refine_against_response` at correction
-for speed; these tests hold it to the full refinement's answers:
+``correct`` tests a scene's labels with it before the full refinement
+(:func:`photoquant.exposure.refine_against_response`); these tests hold it to
+the full refinement's answers:
 
 * on a pqsim capture with exact labels and on one with 3 % jitter, the test
   of :func:`judge_exposure_times` decides alike from both, and the refined
