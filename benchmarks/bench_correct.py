@@ -131,10 +131,12 @@ def _defaults_cases() -> list[Case]:
                 "photoquant, nominal times (breakdown)": _ours,
                 "OpenCV merge + multiply + divide": _opencv,
             },
+            accuracy=_accuracy,
             unit="per_s",
             per_s_label="stacks/s",
-            notes="a camera that refines scene times (photoquant profile): the exposure test "
+            notes="accuracy against the true l; a camera that refines scene times (photoquant profile): the exposure test "
             "runs; jittered: 3 % per exposure, labelled with the nominal times",
+            user_path=True,
         )
         for kind in ("exact", "jittered")
     ]
