@@ -118,7 +118,13 @@ def main(argv: list[str] | None = None) -> int:
         epilog="The user's-path rows only: python -m benchmarks.run --user-path. "
         "Every row: python -m benchmarks.run. A smoke run: --quick.",
     )
-    parser.add_argument("-o", "--output", type=Path, default=Path("benchmarks/results"))
+    parser.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=Path("benchmarks/results"),
+        help="folder of results.json and results.md (benchmarks/results)",
+    )
     parser.add_argument(
         "--only", nargs="+", default=None, metavar="NAME", help="case names (prefixes)"
     )
