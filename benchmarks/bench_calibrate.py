@@ -1,7 +1,27 @@
-"""Benchmark rows of the calibration (issue 14): response, ``calibrate`` at the paper's settings, exposure refinement.
+"""Benchmark rows of the calibration: the user's path, then the breakdown.
 
 Rows (``cases``, on the case API of :mod:`benchmarks.harness`; run with
-``python -m benchmarks.run --only response calibrate-paper exposure-refinement``):
+``python -m benchmarks.run --only calibrate response exposure-refinement``).
+
+On the user's path (``user_path=True``; ``python -m benchmarks.run --user-path``):
+
+* ``calibrate-view-K8``, ``calibrate-view-K4`` — :func:`photoquant.calibrate`
+  with its defaults on one view (``pq.calibrate([stack])``, the stack built
+  from the uint8 frames inside the timing) of the HDR test scene,
+  1024×768×3, N = 1, beside OpenCV's ``createCalibrateDebevec()`` with its
+  default 70 samples, alone and followed by its ``MergeDebevec`` (what an
+  OpenCV user runs for a response and an HDR image). Accuracy: ``g`` rms as
+  in ``response``.
+* ``calibrate-files`` — calibration at the paper's settings (V = 3, K = 8,
+  N = 10, 1024×768) from files: a capture set written once in the setup as
+  ``pqsim capture`` writes it (PNG frames, a ``capture.json`` manifest with
+  the correspondences), then timed: ``pq.calibrate_manifest(path)`` with its
+  defaults (loading included), and ``photoquant calibrate MANIFEST -o CAM``
+  as a subprocess, from process start to the camera folder written (a fresh
+  folder each repeat). Accuracy: as ``calibrate-paper``, of the returned
+  model and of the camera folder read back.
+
+The breakdown:
 
 * ``response`` — recovery of ``g`` from one 1024×768×3, K = 8, N = 1 uint8
   stack of the HDR test scene (:func:`benchmarks._data.hdr_stack`):
@@ -26,12 +46,23 @@ Rows (``cases``, on the case API of :mod:`benchmarks.harness`; run with
   0.1 ms lag per exposure): ``calibrate`` with and without refinement;
   accuracy: the test scene's eq. 8 e_mean after ``correct``.
 
-No peer calibrates a whole camera, so the last two rows have no ratio; they
-are the issue's "< 2 s" and "≥ 20× faster" targets.
+No peer calibrates a whole camera, so ``calibrate-files``,
+``calibrate-paper`` and ``exposure-refinement`` compare photoquant with
+itself (the command with the library call, the default profile with the
+nominal times).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import importlib.util
+import itertools
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -211,6 +242,137 @@ def _camera_accuracy(ctx: dict[str, Any], name: str, model: Any) -> dict[str, fl
 
 
 # ---------------------------------------------------------------------------
+# the user's path: pq.calibrate of one view, pq.calibrate_manifest, the CLI
+# ---------------------------------------------------------------------------
+
+
+def _view_setup(exposures: int) -> Any:
+    def setup(config: Config) -> dict[str, Any]:
+        import cv2
+
+        ctx = _response_setup(dataclasses.replace(config, exposures=exposures))
+        ctx["cv_merge"] = cv2.createMergeDebevec()
+        return ctx
+
+    return setup
+
+
+def _calibrate_view(ctx: dict[str, Any]) -> np.ndarray:
+    import photoquant as pq
+
+    data = ctx["data"]
+    stack = pq.ExposureStack(data.frames, data.exposure_s, bit_depth=data.bit_depth)
+    return pq.calibrate([stack]).response.log_inverse_response
+
+
+def _opencv_calibrate_merge(ctx: dict[str, Any]) -> np.ndarray:
+    import cv2
+
+    crf = cv2.createCalibrateDebevec().process(ctx["cv_images"], ctx["cv_times"])
+    ctx["cv_merge"].process(ctx["cv_images"], ctx["cv_times"], crf)
+    with np.errstate(divide="ignore"):
+        return np.log(crf[:, 0, ::-1].T.astype(np.float64))
+
+
+@functools.lru_cache(maxsize=1)
+def _written_capture_set(
+    shape: tuple[int, int], n_repeats: int, seed: int
+) -> tuple[tempfile.TemporaryDirectory, Path]:
+    """The paper's settings written once as ``pqsim capture`` writes them (PNG frames)."""
+    from pqsim.capture_set import write_capture_set
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    tmp = tempfile.TemporaryDirectory(prefix="pq-bench-")
+    manifest = write_capture_set(
+        Path(tmp.name) / "capture",
+        camera_from_preset("ccd"),
+        shape=shape,
+        n_repeats=n_repeats,
+        n_views=3,
+        seed=seed,
+    )
+    return tmp, manifest
+
+
+def _files_setup(config: Config) -> dict[str, Any]:
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    tmp, manifest = _written_capture_set(config.shape, 2 if config.quick else 10, config.seed)
+    photoquant_root = Path(importlib.util.find_spec("photoquant").origin).parents[1]
+    env = dict(os.environ)
+    # the command imports the photoquant this process benchmarks
+    env["PYTHONPATH"] = os.pathsep.join(
+        [str(photoquant_root), *filter(None, [env.get("PYTHONPATH")])]
+    )
+    return {
+        "tmp": tmp,
+        "manifest": manifest,
+        "env": env,
+        "outputs": itertools.count(),
+        "truth": camera_from_preset("ccd").truth(config.shape),
+    }
+
+
+def _calibrate_manifest(ctx: dict[str, Any]) -> Any:
+    import photoquant as pq
+
+    return pq.calibrate_manifest(ctx["manifest"])
+
+
+def _cli_calibrate(ctx: dict[str, Any]) -> Any:
+    out = Path(ctx["tmp"].name) / f"camera-{next(ctx['outputs'])}"  # fresh each repeat
+    cmd = [sys.executable, "-m", "photoquant", "calibrate", str(ctx["manifest"]), "-o", str(out)]
+    proc = subprocess.run(cmd, env=ctx["env"], capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise RuntimeError(f"photoquant calibrate exited {proc.returncode}:\n{proc.stderr}")
+    return out
+
+
+def _files_accuracy(ctx: dict[str, Any], name: str, out: Any) -> dict[str, float]:
+    import photoquant as pq
+
+    model = pq.load_camera(out) if isinstance(out, Path) else out
+    return _camera_accuracy(ctx, name, model)
+
+
+def _user_path_cases() -> list[Case]:
+    view = [
+        Case(
+            name=f"calibrate-view-K{k}",
+            title=f"pq.calibrate([stack]) defaults, one view, K = {k}, N = 1",
+            setup=_view_setup(k),
+            implementations={
+                "photoquant, defaults": _calibrate_view,
+                "OpenCV CalibrateDebevec (70)": _response_opencv(None),
+                "OpenCV CalibrateDebevec (70) + MergeDebevec": _opencv_calibrate_merge,
+            },
+            accuracy=_response_accuracy,
+            notes="the HDR test scene, uint8 frames (ours builds its ExposureStack in the "
+            "timing: saturation detection); OpenCV's defaults (70 samples); g rms: "
+            "hat-weighted, ln, gauge removed, worst channel and G",
+            user_path=True,
+        )
+        for k in (8, 4)
+    ]
+    files = Case(
+        name="calibrate-files",
+        title="calibrate from files at the paper's settings (V = 3, K = 8, N = 10), "
+        "loading included",
+        setup=_files_setup,
+        implementations={
+            "pq.calibrate_manifest(path), defaults": _calibrate_manifest,
+            "photoquant calibrate MANIFEST -o CAM (subprocess)": _cli_calibrate,
+        },
+        accuracy=_files_accuracy,
+        notes="a pqsim capture set (PNG frames, 97 798 correspondences in the manifest) "
+        "written once before the timing; the command: process start to camera folder "
+        "written, a fresh folder each repeat",
+        user_path=True,
+    )
+    return [*view, files]
+
+
+# ---------------------------------------------------------------------------
 # exposure refinement
 # ---------------------------------------------------------------------------
 
@@ -252,12 +414,12 @@ def _scene_accuracy(ctx: dict[str, Any], name: str, model: Any) -> dict[str, flo
 
 
 def cases(config: Config) -> list[Case]:
-    """The calibration rows of issue 14 (module docstring)."""
+    """The calibration rows (module docstring): the user's path, then the breakdown."""
     del config
-    return [
+    return _user_path_cases() + [
         Case(
             name="response",
-            title="response (ours 2000 samples / OpenCV 70 default / 500)",
+            title="response alone (ours 2000 samples / OpenCV 70 default / 500) (breakdown)",
             setup=_response_setup,
             implementations={
                 "photoquant": _response_ours,
@@ -271,7 +433,8 @@ def cases(config: Config) -> list[Case]:
         ),
         Case(
             name="calibrate-paper",
-            title="calibrate at the paper's settings (V = 3, K = 8, N = 10), frames in memory",
+            title="calibrate at the paper's settings (V = 3, K = 8, N = 10), frames in memory "
+            "(breakdown: no loading)",
             setup=_paper_setup,
             implementations={
                 "photoquant (default profile)": _calibrate_paper(None),
@@ -283,7 +446,7 @@ def cases(config: Config) -> list[Case]:
         ),
         Case(
             name="exposure-refinement",
-            title="calibrate 320×240 with exposure refinement (3 % jitter, 0.1 ms lag)",
+            title="calibrate 320×240 with exposure refinement (3 % jitter, 0.1 ms lag) (breakdown)",
             setup=_refinement_setup,
             implementations={
                 "photoquant, refined": _calibrate_jittered(True),

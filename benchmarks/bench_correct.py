@@ -63,12 +63,12 @@ def _accuracy(ctx: dict[str, Any], name: str, out: Any) -> dict[str, float]:
 
 
 def cases(config: Config) -> list[Case]:
-    """The correction row (issue 14): K = 4, N = 1, stacks per second."""
+    """The correction rows: the user's path (defaults) first, then the merge alone."""
     del config
-    return [
+    return _defaults_cases() + [
         Case(
             name="correct",
-            title="correction, K = 4, N = 1",
+            title="correction, K = 4, N = 1, nominal times (kernel breakdown)",
             setup=_setup,
             implementations={
                 "photoquant": _ours,
@@ -80,4 +80,63 @@ def cases(config: Config) -> list[Case]:
             notes="the same true response, balance and u·v map for both; photoquant builds "
             "a fresh ExposureStack per run (levels given); accuracy against the true l",
         )
+    ]
+
+
+# ---------------------------------------------------------------------------
+# the user's path: pq.correct with its defaults (exposure test included)
+# ---------------------------------------------------------------------------
+
+
+def _defaults_setup(config: Config) -> dict[str, Any]:
+    import dataclasses
+
+    from pqsim.analytic import scene_test_hdr
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    ctx = _setup(config)
+    data = ctx["data"]
+    # a camera calibrated with the photoquant profile refines a scene's times by default
+    ctx["model"] = dataclasses.replace(
+        ctx["model"], parameters={**ctx["model"].parameters, "refine_exposures": True}
+    )
+    actual = data.exposure_s * np.exp(0.03 * np.random.default_rng(config.seed + 1).normal(size=4))
+    cam = camera_from_preset("ccd", bit_depth=8)
+    ctx["jittered"] = cam.capture(
+        scene_test_hdr(config.shape), actual, 1, rng=config.seed + 2
+    ).frames
+    return ctx
+
+
+def _ours_defaults(jittered: bool) -> Any:
+    def run(ctx: dict[str, Any]) -> np.ndarray:
+        data = ctx["data"]
+        frames = ctx["jittered"] if jittered else data.frames
+        stack = ExposureStack(
+            frames, data.exposure_s, bit_depth=data.bit_depth, saturation_level=ctx["saturation"]
+        )
+        return correct(stack, ctx["model"]).photoquantity
+
+    return run
+
+
+def _defaults_cases() -> list[Case]:
+    return [
+        Case(
+            name=f"correct-defaults-{kind}",
+            title=f"pq.correct(stack, camera) defaults, K = 4, N = 1, {kind} times",
+            setup=_defaults_setup,
+            implementations={
+                "photoquant, defaults": _ours_defaults(kind == "jittered"),
+                "photoquant, nominal times (breakdown)": _ours,
+                "OpenCV merge + multiply + divide": _opencv,
+            },
+            accuracy=_accuracy,
+            unit="per_s",
+            per_s_label="stacks/s",
+            notes="accuracy against the true l; a camera that refines scene times (photoquant profile): the exposure test "
+            "runs; jittered: 3 % per exposure, labelled with the nominal times",
+            user_path=True,
+        )
+        for kind in ("exact", "jittered")
     ]

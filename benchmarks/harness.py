@@ -35,6 +35,13 @@ Example::
             )
         ]
 
+A case on the *user's path* (``user_path=True``) times what a user runs:
+the public API with its defaults (``pq.calibrate``, ``pq.calibrate_manifest``,
+``pq.correct``) or a whole command as a subprocess, from the inputs a user
+has (frames, files). Those are the headline rows; the other cases (kernels,
+single steps, data already in memory) are the breakdown beside them, and
+the runner writes the two tables in that order.
+
 An implementation may return :class:`Measured` to report metrics measured
 by itself (e.g. peak memory from a subprocess) beside its output; a case
 with ``timed=False`` is run once per implementation and reports only those
@@ -129,6 +136,10 @@ class Case:
         False: run each implementation once and report its metrics only.
     notes : str
         A line printed under the row (what the row compares).
+    user_path : bool
+        A headline row: the public API with its defaults, or a command as a
+        subprocess, timed from what a user has (module docstring). False: a
+        breakdown row (a kernel, a step, data already in memory).
     """
 
     name: str
@@ -141,6 +152,7 @@ class Case:
     per_s_label: str = "runs/s"
     timed: bool = True
     notes: str = ""
+    user_path: bool = False
 
     @property
     def ours_name(self) -> str:
@@ -213,6 +225,7 @@ class CaseResult:
             "ours": self.case.ours_name,
             "unit": self.case.unit,
             "notes": self.case.notes,
+            "user_path": self.case.user_path,
             "setup_s": self.setup_s,
             "implementations": [r.to_dict() for r in self.results.values()],
             "ratios_ours_over_peer": self.ratios(),

@@ -12,6 +12,10 @@ camera's response (:func:`photoquant.exposure.refine_exposure_times`) when the
 camera was calibrated with exposure refinement (the photoquant profile's
 default) or when asked, and the refined times replace the labels only where
 the data contradict them (:func:`photoquant.exposure.judge_exposure_times`).
+By default the labels are first tested from neighbouring exposure pairs of a
+pixel draw (:func:`photoquant.exposure.refine_by_pairs`, a fraction of the
+full refinement's cost); labels that test keeps are kept, and only labels it
+rejects are refined in full and judged again.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from photoquant.exposure import (
     ExposureRefinement,
     judge_exposure_times,
     refine_against_response,
+    refine_by_pairs,
 )
 from photoquant.merge import MergeModel
 from photoquant.merge._tiled import merge_tiles
@@ -319,6 +324,16 @@ def _scene_exposures(
     notes: list[str] = []
     if not (refine_exposures or (refine_exposures is None and _camera_refines(model))):
         return None, None, notes
+    floor = camera_floor_log(model)
+    if refine_exposures is None:
+        # the cheap test first: where the neighbouring pairs keep the labels, so does the scene
+        try:
+            screen = judge_exposure_times(refine_by_pairs(stack, model.response), floor_log=floor)
+        except CalibrationError:
+            screen = None
+        if screen is not None and not screen.refine:
+            notes.append(f"scene's exposure times: {screen.describe()}")
+            return None, screen, notes
     try:
         # the sample's answer, as the camera's floor was measured (exhaustive=False)
         refinement = refine_against_response(stack, model.response, exhaustive=False)
@@ -330,7 +345,7 @@ def _scene_exposures(
             ) from None
         notes.append(f"scene exposures not refined, nominal times kept: {exc}")
         return None, None, notes
-    decision = judge_exposure_times(refinement, floor_log=camera_floor_log(model))
+    decision = judge_exposure_times(refinement, floor_log=floor)
     if refine_exposures:
         return refinement, decision, notes
     notes.append(f"scene's exposure times: {decision.describe()}")

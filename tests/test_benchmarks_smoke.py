@@ -80,3 +80,41 @@ def test_runner_writes_json_and_markdown(tmp_path) -> None:
     # quantisation and shot noise of one frame per exposure), far from a broken merge
     assert impls["photoquant"]["accuracy"]["median_err_pct"] < 5.0
     assert "| HDR merge (hat) | photoquant |" in (out / "results.md").read_text()
+
+
+def test_user_path_rows_are_listed_apart() -> None:
+    from benchmarks.harness import discover
+
+    cases = discover(Config(quick=True))
+    user = [c.name for c in cases if c.user_path]
+    assert {
+        "calibrate-view-K8",
+        "calibrate-view-K4",
+        "calibrate-files",
+        "correct-defaults-exact",
+        "correct-defaults-jittered",
+    } <= set(user)
+    assert {"response", "calibrate-paper", "merge-hat", "correct"}.isdisjoint(user)
+
+
+def test_user_path_rows_run_and_come_first(tmp_path) -> None:
+    """The public API with its defaults and the CLI as a subprocess, at a tiny size."""
+    out = tmp_path / "results"
+    only = ["merge-hat", "calibrate-view-K4", "calibrate-files", "correct-defaults-exact"]
+    rc = main(["--quick", "--size", "64x48", "--repeats", "1", "--only", *only, "-o", str(out)])
+    assert rc == 0
+    data = json.loads((out / "results.json").read_text())
+    names = [c["name"] for c in data["cases"]]
+    assert names == ["calibrate-view-K4", "calibrate-files", "correct-defaults-exact", "merge-hat"]
+    for case in data["cases"]:
+        for impl in case["implementations"]:
+            assert impl["error"] is None, (case["name"], impl)
+            assert len(impl["times_s"]) == 1
+    files = next(c for c in data["cases"] if c["name"] == "calibrate-files")
+    lib, cli = files["implementations"]
+    assert "subprocess" in cli["name"]
+    # the command wrote the camera the library call returns
+    assert cli["accuracy"] == pytest.approx(lib["accuracy"])
+    md = (out / "results.md").read_text()
+    assert md.index("## On the user's path") < md.index("## Breakdown")
+    assert md.index("| pq.calibrate([stack])") < md.index("## Breakdown") < md.index("| HDR merge")

@@ -297,25 +297,41 @@ def generate_changelog() -> None:
 
 
 def generate_benchmarks() -> None:
-    """The stored run's table (``results.md``, written by ``python -m benchmarks.run``)."""
+    """The stored run's tables (``results.md``, written by ``python -m benchmarks.run``).
+
+    Each ``## heading`` of the file (the user's path, then the breakdown)
+    becomes a section with its introduction and its table; the notes on the
+    rows follow the last one.
+    """
     md = (ROOT / "benchmarks" / "results" / "results.md").read_text(encoding="utf-8")
-    facts, header, rows, notes = "", None, [], []
+    facts, notes = "", []
+    sections: list[dict[str, Any]] = [{"heading": None, "intro": [], "header": None, "rows": []}]
     for line in md.splitlines():
         if line.startswith("date:"):
             facts = line
+        elif line.startswith("## "):
+            sections.append({"heading": line[3:].strip(), "intro": [], "header": None, "rows": []})
         elif line.startswith("|"):
             cells = [c.strip() for c in line.strip().strip("|").split("|")]
             if all(set(c) <= set("-: ") for c in cells):
                 continue
-            if header is None:
-                header = cells
+            if sections[-1]["header"] is None:
+                sections[-1]["header"] = cells
             else:
-                rows.append([_md_inline(c) for c in cells])
+                sections[-1]["rows"].append([_md_inline(c) for c in cells])
         elif line.startswith("* "):
             notes.append("* " + _md_inline(line[2:]))
+        elif line.strip() and not line.startswith("#") and sections[-1]["heading"] is not None:
+            sections[-1]["intro"].append(_md_inline(line.strip()))
     text = [f"The stored run: {_md_inline(facts)}.", ""]
-    if header:
-        text.append(_list_table(header, rows))
+    for sec in sections:
+        if sec["header"] is None:
+            continue
+        if sec["heading"]:
+            text.append(_heading(sec["heading"], "-"))
+        if sec["intro"]:
+            text += [" ".join(sec["intro"]), ""]
+        text.append(_list_table(sec["header"], sec["rows"]))
     if notes:
         text += ["", "Notes on the rows:", "", *notes, ""]
     _write_if_changed(GENERATED / "benchmarks.rst.inc", "\n".join(text))
