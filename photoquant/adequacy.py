@@ -171,20 +171,23 @@ def global_response_departure(
     -------
     ModelAdequacy
     """
-    z = stack.mean()  # (K, H, W, C)
+    # at most ~2 million values: every s-th row and column (blocks keep their size in
+    # pixels), taken before any per-value test (the same values, a fraction of the passes)
+    n_k = stack.n_exposures
+    height, width = stack.image_shape
+    n_ch = stack.n_channels
+    step = max(1, int(np.ceil(np.sqrt(n_k * height * width * n_ch / 2e6))))
+    z = stack.mean()[:, ::step, ::step]  # (K, H', W', C)
     if valid is None:
         valid = ~(stack.saturated() | stack.dark_clipped())
+    valid = valid[:, ::step, ::step]
     # the well-exposed values only (crossval's scored range): in the toe and the shoulder
     # g is steep and a value's noise, not the model, dominates its residual
     top = 2.0**stack.bit_depth - 1
     valid = valid & (z >= 10 / 255 * top) & (z <= 245 / 255 * top)
     if valid_min is not None:
         valid = valid & (z >= np.asarray(valid_min, dtype=np.float64))
-    # at most ~2 million values: every s-th row and column (blocks keep their size in pixels)
-    n_k, height, width, n_ch = z.shape
     top_level = np.asarray(stack.saturation_level, dtype=np.float64)
-    step = max(1, int(np.ceil(np.sqrt(n_k * height * width * n_ch / 2e6))))
-    z, valid = z[:, ::step, ::step], valid[:, ::step, ::step]
     log_photoquantity = log_photoquantity[::step, ::step]
     height, width = z.shape[1:3]
     side = max(block_px // step, 4)  # in the subsample's pixels
