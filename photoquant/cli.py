@@ -1,4 +1,4 @@
-"""Command line interface: ``photoquant calibrate | correct | info | methods`` (+ plug-in commands).
+"""Command line interface: ``photoquant calibrate | correct | characterise | info | methods`` (+ plug-ins).
 
 ``validate``, ``demo`` and ``compare`` are added by the ``validation`` package
 through the entry-point group ``photoquant.commands``: photoquant itself
@@ -396,6 +396,29 @@ def _cmd_crossval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_characterise(args: argparse.Namespace) -> int:
+    from photoquant.characterise import CHARACTERISATION_REPORT, characterise_manifest
+    from photoquant.io.outputs import Output, camera_inputs, check_outputs, manifest_inputs
+    from photoquant.model import load_camera
+
+    out = Path(args.output)
+    inputs = manifest_inputs(args.manifest, allow_outside=args.allow_outside)
+    check_outputs(
+        [Output(out, CHARACTERISATION_REPORT)],
+        [*inputs, *camera_inputs(args.camera)],
+        overwrite=args.overwrite,
+    )
+    camera = load_camera(args.camera)
+    char = characterise_manifest(args.manifest, camera, allow_outside=args.allow_outside)
+    char.save(out, overwrite=args.overwrite, camera=camera)
+    for key in ("gain", "read_noise_e", "full_well_e", "dsnu_e", "prnu"):
+        q = char.quantities.get(key)
+        if q is not None:
+            _log(args, f"  {key}: {_fmt(q.value)} ± {_fmt(q.uncertainty)} {q.unit}")
+    _log(args, f"photoquant: characterisation written to {out}")
+    return 0
+
+
 COMMAND_ENTRY_POINTS = "photoquant.commands"
 """Entry-point group of sub-commands other distributions add (``validate``,
 ``demo`` and ``compare`` come from the ``validation`` package this way):
@@ -572,6 +595,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"
     )
     xval.set_defaults(func=_cmd_crossval)
+
+    char = sub.add_parser(
+        "characterise",
+        help="EMVA-1288-style noise report of a calibrated camera (gain, read noise, full "
+        "well, DSNU, PRNU) from its capture manifest, through its recovered response",
+    )
+    char.add_argument("manifest", help="the capture manifest the camera was calibrated from")
+    char.add_argument("--camera", required=True, help="camera folder from `photoquant calibrate`")
+    char.add_argument("-o", "--output", required=True, help="report folder to write")
+    char.add_argument("--overwrite", action="store_true", help="replace an existing report")
+    char.add_argument(
+        "--allow-outside", action="store_true", help="allow paths outside the manifest's folder"
+    )
+    char.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    char.set_defaults(func=_cmd_characterise)
 
     _add_plugin_commands(sub)
     return parser

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from photoquant.errors import PhotoquantError
+from photoquant.errors import InputError, PhotoquantError
 
 __all__ = ["main", "build_parser"]
 
@@ -221,13 +221,26 @@ def _cmd_preset(args: argparse.Namespace) -> int:
         preset_json,
     )
 
-    text = preset_json(args.name)
-    camera_from_preset(args.name)  # the preset must build a camera
+    if args.from_camera is not None:  # a twin: every field from the measurement
+        from pqsim.twin import twin_preset_json
+
+        if args.name is not None:
+            raise InputError("give a preset name or --from-camera, not both")
+        text = twin_preset_json(args.from_camera, args.characterisation)
+    elif args.name is None:
+        raise InputError("give a preset name (ccd, cmos, ... or a file) or --from-camera CAM")
+    else:
+        text = preset_json(args.name)
+    if args.name is not None:
+        camera_from_preset(args.name)  # the preset must build a camera
     if args.output is None:
         sys.stdout.write(text)
         return 0
     out = Path(args.output)
-    inputs = [Path(args.name) if _is_preset_file(args.name) else None]
+    inputs: list[Path | None] = [
+        Path(args.name) if args.name is not None and _is_preset_file(args.name) else None
+    ]
+    inputs += [Path(p) for p in (args.from_camera, args.characterisation) if p is not None]
     check_outputs([Output(out, PRESET_FILE)], inputs, overwrite=args.overwrite)
     # refuses one that appeared meanwhile, or one that became another kind of file
     write_text_atomic(out, text, overwrite=args.overwrite, replaceable=PRESET_FILE.problem)
@@ -369,7 +382,19 @@ def build_parser() -> argparse.ArgumentParser:
     pre = sub.add_parser(
         "preset", help="print a camera preset as a preset file (JSON) to edit and reuse"
     )
-    pre.add_argument("name", help="ccd, cmos, or a preset file to check and normalise")
+    pre.add_argument("name", nargs="?", help="ccd, cmos, or a preset file to check and normalise")
+    pre.add_argument(
+        "--from-camera",
+        default=None,
+        metavar="CAM",
+        help="write the simulator twin of a photoquant camera folder instead",
+    )
+    pre.add_argument(
+        "--characterisation",
+        default=None,
+        metavar="REPORT",
+        help="with --from-camera: its `photoquant characterise` report (noise, DSNU, PRNU)",
+    )
     pre.add_argument("-o", "--output", default=None, help="write it here instead of stdout")
     pre.add_argument("--overwrite", action="store_true", help="replace an existing file")
     pre.set_defaults(func=_cmd_preset)

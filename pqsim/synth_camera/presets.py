@@ -103,8 +103,9 @@ PRESET_FORMAT = "pqsim.preset/1"
 DEFAULT_SENSITIVITIES = "nikon_d5100"
 #: Preset keys that are not :class:`SyntheticCamera` fields.
 _NON_CAMERA_KEYS = ("sensitivities",)
-#: Keys of a preset file that are not preset fields.
-_FILE_KEYS = ("format", "base", "description")
+#: Keys of a preset file that are not preset fields (a twin's ``assumed`` fields and
+#: ``measurement`` record, :mod:`pqsim.twin`, are documentation for the reader).
+_FILE_KEYS = ("format", "base", "description", "assumed", "measurement")
 
 _CCD: dict[str, Any] = {
     "responses": [{"kind": "linear", "params": {}}] * 3,

@@ -1,0 +1,279 @@
+"""A simulator twin of a calibrated camera: a pqsim preset whose fields come from measurement.
+
+:func:`twin_preset` reads a camera calibrated by photoquant (and, when given,
+its characterisation report, :mod:`photoquant.characterise`) and writes a
+preset (format ``pqsim.preset/1``) for :func:`~pqsim.synth_camera.presets.camera_from_preset`:
+
+- ``responses``: the recovered response as a ``"table"`` per channel. The
+  table maps the twin's normalised charge ``n / full_well`` to
+  ``(c − black) / c_max``; the charge of a value is its linear-DN-scale value
+  over the channel's gain, ``n = y(c) / K``, so that the twin's photon
+  transfer is the measured one.
+- ``exposure_scale``: electrons per unit of the camera's photoquantity·s
+  (the camera's photoquantity unit: relative), the geometric mean over the
+  channels; the tables carry each channel's own sensitivity.
+- ``noise``: one full well, read noise and dark current (the means over the
+  channels of the measured ones; pqsim's sensor has one of each).
+- ``vignetting_params``: the camera's extended Goldman–Chen parameters.
+- ``prnu_sigma_pixel``, ``prnu_sigma_lowfreq``: the measured PRNU's per-pixel
+  and smooth parts (the twin's pattern is drawn from ``prnu_seed`` with these
+  statistics: the measured map itself is not carried).
+- ``disturbances``: black and white levels, DSNU (at the readout), hot and
+  stuck pixel fractions from the defect map, the exposure-time error.
+- ``glare``: the camera's measured veiling glare, when it has one.
+
+Every field the measurement did not give is named in the preset's
+``"assumed"`` list with the value taken; none is silently defaulted.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from typing import Any
+
+import numpy as np
+
+from photoquant.characterise import Characterisation, load_characterisation
+from photoquant.errors import InputError
+from photoquant.model import CameraModel, load_camera
+from photoquant.utils import to_json_value
+from pqsim.synth_camera.presets import PRESET_FORMAT
+
+__all__ = ["MAX_TABLE_POINTS", "twin_preset", "twin_preset_json"]
+
+MAX_TABLE_POINTS = 1024
+"""Most points of a response table (a 16-bit response is subsampled evenly)."""
+
+_DEFAULT_FULL_WELL_E = 20000.0
+"""The full well taken when the camera's gain was never measured (named as assumed)."""
+
+
+def _mean(values: Any) -> float:
+    return float(np.mean(np.asarray(values, dtype=np.float64)))
+
+
+def _table(camera: CameraModel, ch: int, gain: float, full_well: float) -> dict[str, Any]:
+    """The response of channel ``ch`` as a pqsim ``"table"`` record (see the module notes)."""
+    resp = camera.response
+    levels = np.asarray(resp.levels, dtype=np.float64)
+    g = np.asarray(resp.log_inverse_response[ch], dtype=np.float64)
+    black = float(np.asarray(resp.black_level, dtype=np.float64)[ch])
+    sat = float(np.asarray(resp.saturation_level, dtype=np.float64)[ch])
+    c_max = 2**camera.bit_depth - 1
+    g_sat = float(np.interp(sat, levels, g))
+    c = levels[(levels > black) & (levels <= sat)]
+    if c.size > MAX_TABLE_POINTS:
+        c = c[np.unique(np.linspace(0, c.size - 1, MAX_TABLE_POINTS).round().astype(int))]
+    if c.size == 0 or c[-1] != sat:
+        c = np.append(c, sat)
+    y_lin = (sat - black) * np.exp(np.interp(c, levels, g) - g_sat)
+    x = y_lin / gain / full_well
+    y = (c - black) / c_max
+    keep = np.concatenate([[True], np.diff(x) > 0])  # strictly increasing (a flat g is cut)
+    x, y = x[keep], y[keep]
+    keep = np.concatenate([[True], np.diff(y) > 0])
+    x, y = x[keep], y[keep]
+    return {"kind": "table", "params": {"x": x.tolist(), "y": y.tolist()}}
+
+
+def twin_preset(
+    camera: str | os.PathLike[str] | CameraModel,
+    characterisation: str | os.PathLike[str] | Characterisation | None = None,
+) -> dict[str, Any]:
+    """The preset document of a camera's simulator twin (module notes).
+
+    Parameters
+    ----------
+    camera : path or CameraModel
+        A camera calibrated by photoquant.
+    characterisation : path or Characterisation, optional
+        Its characterisation (``photoquant characterise``). Without it the
+        gain and read noise are the camera's own (``parameters["noise"]``,
+        from its calibration's repeats) and the PRNU the LUT's spread; DSNU,
+        dark current and the exposure error are then assumed.
+
+    Returns
+    -------
+    dict
+        A ``pqsim.preset/1`` document, with ``"assumed"`` naming every field
+        not measured and ``"measurement"`` the measured values' uncertainties.
+    """
+    cam = camera if isinstance(camera, CameraModel) else load_camera(camera)
+    char = (
+        characterisation
+        if isinstance(characterisation, Characterisation) or characterisation is None
+        else load_characterisation(characterisation)
+    )
+    n_ch = len(cam.channels)
+    if char is not None and (char.channels != cam.channels or char.image_shape != cam.image_shape):
+        raise InputError(
+            "the characterisation is of another camera: channels "
+            f"{char.channels} and image {char.image_shape}, the camera {cam.channels} and "
+            f"{cam.image_shape}"
+        )
+    assumed: list[str] = []
+    notes: list[str] = []
+    uncertainties: dict[str, Any] = {}
+    black = np.asarray(cam.response.black_level, dtype=np.float64)
+    sat = np.asarray(cam.response.saturation_level, dtype=np.float64)
+
+    def quantity(name: str) -> Any:
+        q = None if char is None else char.quantities.get(name)
+        if q is not None:
+            uncertainties[name] = {"value": q.value.tolist(), "uncertainty": q.uncertainty.tolist()}
+        return q
+
+    gain_q, read_q = quantity("gain"), quantity("read_noise_e")
+    noise_record = cam.parameters.get("noise")
+    if gain_q is not None:
+        gain = np.asarray(gain_q.value, dtype=np.float64)
+    elif isinstance(noise_record, dict) and "gain_dn_per_e" in noise_record:
+        gain = np.asarray(noise_record["gain_dn_per_e"], dtype=np.float64)
+        notes.append("gain and read noise: the camera's calibration fit (no uncertainty)")
+    else:
+        gain = (sat - black) / _DEFAULT_FULL_WELL_E
+        assumed.append(f"noise.full_well_e ({_DEFAULT_FULL_WELL_E:g}: the gain was not measured)")
+    if gain.shape != (n_ch,) or not np.all(np.isfinite(gain) & (gain > 0)):
+        raise InputError(f"the camera's gain {gain.tolist()} is not one positive value a channel")
+    full_wells = (sat - black) / gain
+    full_well = _mean(full_wells)
+    if read_q is not None:
+        read_e = _mean(read_q.value)
+    elif isinstance(noise_record, dict) and "read_noise_dn" in noise_record:
+        read_e = _mean(np.asarray(noise_record["read_noise_dn"], dtype=np.float64) / gain)
+    else:
+        read_e = 0.0
+        assumed.append("noise.read_noise_e (0: not measured)")
+    dark_q = quantity("dark_current_e_per_s")
+    if dark_q is not None:
+        dark_current = max(_mean(dark_q.value), 0.0)
+    else:
+        dark_current = 0.0
+        assumed.append("noise.dark_current_e_per_s (0: no dark frames at two exposure times)")
+    quantity("full_well_e")
+    quantity("read_noise_dn")
+
+    # the channels' sensitivities: electrons per unit photoquantity·s, s_λ = FW_λ e^{−g_sat} / a_λ
+    resp = cam.response
+    g_sat = np.array(
+        [np.interp(sat[ch], resp.levels, resp.log_inverse_response[ch]) for ch in range(n_ch)]
+    )
+    balance = np.asarray(cam.balance.factors, dtype=np.float64)
+    per_channel = full_wells * np.exp(-g_sat) / balance
+    scale = float(np.exp(np.mean(np.log(per_channel))))
+    spread = per_channel / scale
+    if np.any(np.abs(spread - 1) > 0.01):
+        notes.append(
+            "one exposure scale for every channel (pqsim's sensor): the channels' own "
+            f"scales differ from it by factors {np.round(spread, 4).tolist()}; the response "
+            "tables keep each channel's sensitivity, its photon transfer then differs by the "
+            "same factors"
+        )
+    responses = []
+    for ch in range(n_ch):
+        # x = n / FW with n = s · (u v l t) = s · a_λ e^{g(c)}: the table keeps the mean mapping
+        g_ch = float(gain[ch]) * per_channel[ch] / scale
+        responses.append(_table(cam, ch, g_ch, full_well))
+    assumed.append("response uncertainty (the camera stores none: the table is the estimate)")
+
+    vig = cam.vignetting
+    params, _ = vig.to_params()
+    vignetting_params = None
+    if vig.method == "Extended Goldman-Chen" and "params" in params:
+        vignetting_params = np.asarray(params["params"], dtype=np.float64).tolist()
+    else:
+        assumed.append(f"vignetting_params (none: the camera's vignetting is {vig.method!r})")
+
+    prnu = {k: quantity(k) for k in ("prnu_pixel", "prnu_lowfreq")}
+    quantity("prnu")
+    if all(q is not None for q in prnu.values()):
+        sigma_pixel = _mean(prnu["prnu_pixel"].value)  # type: ignore[union-attr]
+        sigma_low = _mean(prnu["prnu_lowfreq"].value)  # type: ignore[union-attr]
+    else:
+        lut = cam.sensor_lut.lut.astype(np.float64)
+        lut = lut / lut.mean(axis=(0, 1))
+        dx = np.diff(lut, axis=1)
+        sigma_pixel = math.sqrt(float(np.mean(dx * dx)) / 2.0)
+        sigma_low = math.sqrt(max(float(lut.var()) - sigma_pixel**2, 0.0))
+        notes.append("PRNU: the sensor LUT's spread, its own noise not subtracted")
+    assumed.append(
+        "prnu pattern (drawn from prnu_seed 0 with the measured per-pixel and smooth "
+        "standard deviations; prnu_lowfreq_scale 0.15 of the image's smaller side)"
+    )
+
+    disturbances: dict[str, Any] = {
+        "black_level_dn": black.tolist(),
+        "white_level_dn": sat.tolist(),
+    }
+    dsnu_q = quantity("dsnu_e")
+    quantity("dsnu_dn")
+    if dsnu_q is not None:
+        # pqsim's readout DSNU is in electrons at the gain c_max / full_well: the same DN
+        c_max = 2**cam.bit_depth - 1
+        dsnu_dn = np.maximum(np.asarray(dsnu_q.value) * gain, 0.0)
+        disturbances["dsnu_e"] = _mean(dsnu_dn) * full_well / c_max
+        disturbances["dsnu_stage"] = "readout"
+    else:
+        assumed.append("disturbances.dsnu_e (0: no dark frames)")
+    if cam.defects is not None:
+        size = float(cam.defects.hot.size)
+        disturbances["hot_pixel_fraction"] = float(cam.defects.hot.sum()) / size
+        disturbances["stuck_pixel_fraction"] = float(cam.defects.stuck.sum()) / size
+        if cam.defects.hot.any():
+            assumed.append("disturbances.hot_pixel_level (0.5 of the full well)")
+    else:
+        assumed.append("disturbances.hot_pixel_fraction, stuck_pixel_fraction (0: no defect map)")
+    exposure = None if char is None else char.exposure_error
+    if exposure and exposure.get("refined") and exposure.get("log_rms") is not None:
+        disturbances["exposure_jitter"] = min(float(exposure["log_rms"]), 0.2)
+    elif exposure and exposure.get("refined") is False:
+        notes.append("exposure times: the refinement found the nominal times consistent (jitter 0)")
+    else:
+        assumed.append("disturbances.exposure_jitter (0: not measured)")
+    assumed.append("disturbances: banding, heavy-tailed read noise, CFA, JPEG (off)")
+
+    glare = None
+    if not cam.glare.is_identity:
+        glare = {
+            "fraction": np.asarray(cam.glare.fraction).tolist(),
+            "width_px": np.asarray(cam.glare.width_px).tolist(),
+            "beta": float(cam.glare.beta),
+        }
+    else:
+        assumed.append("glare (none: not calibrated)")
+    assumed.append("sensitivities (nikon_d5100: spectral sensitivities are not measured)")
+
+    doc: dict[str, Any] = {
+        "format": PRESET_FORMAT,
+        "description": "simulator twin of a calibrated camera: every field measured except "
+        "those named in `assumed`",
+        "assumed": assumed,
+        "measurement": {"uncertainties": uncertainties, "notes": notes},
+        "responses": responses,
+        "balance": [1.0] * n_ch,
+        "noise": {
+            "full_well_e": full_well,
+            "read_noise_e": read_e,
+            "dark_current_e_per_s": dark_current,
+        },
+        "vignetting_params": vignetting_params,
+        "prnu_sigma_pixel": min(sigma_pixel, 0.25),
+        "prnu_sigma_lowfreq": min(sigma_low, 0.25),
+        "prnu_seed": 0,
+        "bit_depth": int(cam.bit_depth),
+        "exposure_scale": scale,
+        "channels": list(cam.channels),
+        "glare": glare,
+        "disturbances": disturbances,
+    }
+    return to_json_value(doc)
+
+
+def twin_preset_json(
+    camera: str | os.PathLike[str] | CameraModel,
+    characterisation: str | os.PathLike[str] | Characterisation | None = None,
+) -> str:
+    """:func:`twin_preset` as the text of a preset file."""
+    return json.dumps(twin_preset(camera, characterisation), indent=1) + "\n"

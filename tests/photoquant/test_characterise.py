@@ -1,0 +1,137 @@
+"""photoquant.characterise: a pqsim camera's noise recovered within its stated uncertainties."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from photoquant.calibration import calibrate_manifest
+from photoquant.characterise import characterise_manifest, load_characterisation
+from photoquant.cli import main
+from photoquant.errors import InputError
+from pqsim.capture_set import write_capture_set
+from pqsim.synth_camera import camera_from_preset
+
+SHAPE = (96, 128)
+DISTURBANCES = {"black_level_dn": 64.0, "dsnu_e": 20.0, "dsnu_stage": "readout"}
+
+
+def known_camera():
+    """A linear 12-bit camera: read noise 8 e⁻ (1.6 DN), 20 000 e⁻ well, 20 e⁻ readout DSNU."""
+    return camera_from_preset("ccd", bit_depth=12, disturbances=DISTURBANCES)
+
+
+def capture_and_calibrate(folder, camera, seed):
+    manifest = write_capture_set(
+        folder,
+        camera,
+        shape=SHAPE,
+        n_repeats=4,
+        n_views=3,
+        seed=seed,
+        dark_frames=4,
+        dark_subtraction=True,
+    )
+    return manifest, calibrate_manifest(manifest)
+
+
+def true_values(camera):
+    """The preset's truth on the linear DN scale: ``K = a c_max / full_well`` per channel."""
+    truth = camera.truth(SHAPE)
+    a = np.asarray(camera.balance)
+    gain = a * camera.c_max / camera.noise.full_well_e
+    span = camera.saturation_dn - DISTURBANCES["black_level_dn"]
+    return {
+        "gain": gain,
+        "read_noise_e": np.full(3, camera.noise.read_noise_e),
+        "full_well_e": span / gain,
+        "dsnu_e": np.full(3, truth.fixed_pattern.dsnu_e.std()),
+        "prnu": truth.sensor_lut.reshape(-1, 3).std(axis=0),
+        "prnu_pixel": np.full(3, camera.prnu_sigma_pixel),
+        "prnu_lowfreq": np.full(3, camera.prnu_sigma_lowfreq),
+    }
+
+
+def coverage_factor(dof):
+    """3 standard uncertainties, widened to the Student-t factor of the same 99.73 % coverage
+    for the stated degrees of freedom (GUM G.3): a standard error from a few frame sets is
+    itself uncertain."""
+    return 3.0 if np.isinf(dof) else float(stats.t.ppf(0.99865, dof))
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_closed_loop_recovers_the_presets_noise(tmp_path, seed):
+    camera = known_camera()
+    manifest, model = capture_and_calibrate(tmp_path / "set", camera, seed)
+    char = characterise_manifest(manifest, model)
+    for name, truth in true_values(camera).items():
+        q = char.quantities[name]
+        k = coverage_factor(q.dof)
+        assert np.all(np.abs(q.value - truth) <= k * q.uncertainty), (
+            name,
+            q.value,
+            q.uncertainty,
+            truth,
+            k,
+        )
+        # and informative: the read noise (an extrapolated intercept through a recovered
+        # response) to within its own size, the rest to within a quarter
+        limit = 1.0 if name == "read_noise_e" else 0.25
+        assert np.all(q.uncertainty < limit * np.abs(truth)), (name, q.uncertainty)
+    assert char.not_measured == []
+    assert char.exposure_error["refined"] is False
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    root = tmp_path_factory.mktemp("char")
+    camera = known_camera()
+    manifest, model = capture_and_calibrate(root / "set", camera, 3)
+    model.save(root / "cam")
+    return root, manifest
+
+
+def test_cli_writes_a_versioned_report_and_never_overwrites(report, capsys):
+    root, manifest = report
+    out = root / "report"
+    argv = ["characterise", str(manifest), "--camera", str(root / "cam"), "-o", str(out), "-q"]
+    assert main(argv) == 0
+    doc = json.loads((out / "characterisation.json").read_text())
+    assert doc["format"] == "photoquant.characterisation/1"
+    assert set(doc["quantities"]["gain"]) >= {"value", "uncertainty", "unit", "method"}
+    assert (out / "characterisation.png").stat().st_size > 10_000
+    back = load_characterisation(out)
+    assert back.quantities["gain"].value.shape == (3,)
+    capsys.readouterr()
+    assert main(argv) == 2  # exists: refused without --overwrite
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "already exists" in err
+    assert main([*argv, "--overwrite"]) == 0
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--camera", "nope"], "is not a photoquant camera"),
+        (["--camera", "MANIFEST"], "is not a photoquant camera"),
+    ],
+)
+def test_bad_input_is_one_line(report, capsys, extra, message):
+    root, manifest = report
+    extra = [
+        str(manifest) if e == "MANIFEST" else str(root / e) if e == "nope" else e for e in extra
+    ]
+    assert main(["characterise", str(manifest), *extra, "-o", str(root / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and message in err
+
+
+def test_bad_report_files_are_refused(tmp_path):
+    (tmp_path / "characterisation.json").write_text('{"format": "other/1"}')
+    with pytest.raises(InputError, match="`format` must be"):
+        load_characterisation(tmp_path)
+    with pytest.raises(InputError, match="is missing"):
+        load_characterisation(tmp_path / "none")

@@ -1,0 +1,74 @@
+"""pqsim.twin: a calibrated camera's twin loads as a preset, captures, and says what it assumed."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from photoquant.characterise import characterise_manifest
+from photoquant.errors import InputError, PhotoquantError
+from pqsim.cli import main
+from pqsim.synth_camera.presets import camera_from_preset
+from pqsim.twin import twin_preset
+from tests.photoquant.test_characterise import capture_and_calibrate, known_camera
+
+
+@pytest.fixture(scope="module")
+def measured(tmp_path_factory):
+    root = tmp_path_factory.mktemp("twin")
+    manifest, model = capture_and_calibrate(root / "set", known_camera(), 4)
+    model.save(root / "cam")
+    char = characterise_manifest(manifest, model)
+    char.save(root / "report", camera=model)
+    return root, model, char
+
+
+def test_twin_loads_captures_and_names_what_it_assumed(measured, tmp_path):
+    root, model, char = measured
+    out = tmp_path / "twin.json"
+    argv = [
+        "preset",
+        "--from-camera",
+        str(root / "cam"),
+        "--characterisation",
+        str(root / "report"),
+    ]
+    assert main([*argv, "-o", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["format"] == "pqsim.preset/1" and doc["responses"][0]["kind"] == "table"
+    assert any(a.startswith("glare") for a in doc["assumed"])
+    assert not any("read_noise" in a or "dsnu" in a for a in doc["assumed"])
+    twin = camera_from_preset(str(out))
+    assert twin.saturation_dn.tolist() == [int(v) for v in model.response.saturation_level]
+    # the twin's noise is the measured one
+    gain = char.quantities["gain"].value
+    np.testing.assert_allclose(
+        twin.noise.read_noise_e, char.quantities["read_noise_e"].value.mean()
+    )
+    np.testing.assert_allclose(
+        twin.noise.full_well_e, char.quantities["full_well_e"].value.mean(), rtol=1e-9
+    )
+    cap = twin.capture(np.full((24, 32, 3), 1.0), [1e-3, 4e-3], 2, rng=0)
+    assert cap.frames.dtype == np.uint16 and cap.frames.max() > 64
+    assert gain.shape == (3,)
+    assert main([*argv, "-o", str(out)]) == 2  # never overwritten without --overwrite
+
+
+def test_without_a_characterisation_the_unmeasured_are_assumed(measured):
+    root, _, _ = measured
+    doc = twin_preset(root / "cam")
+    assumed = " ".join(doc["assumed"])
+    for field in ("dsnu_e", "dark_current_e_per_s", "exposure_jitter"):
+        assert field in assumed
+
+
+def test_bad_inputs_are_refused(measured, tmp_path):
+    root, _, _ = measured
+    with pytest.raises(PhotoquantError, match="not a photoquant camera"):
+        twin_preset(tmp_path / "nope")
+    with pytest.raises(InputError, match="is missing"):
+        twin_preset(root / "cam", tmp_path / "nope")
+    assert main(["preset"]) == 2
+    assert main(["preset", "ccd", "--from-camera", str(root / "cam")]) == 2
