@@ -172,6 +172,13 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
         line += f", residual rms (ln) {_fmt(resp['residual_rms'])}"
     lines.append(line)
     lines.append(f"balance: {_fmt(model.balance.factors)}")
+    noise = model.parameters.get("noise")
+    if isinstance(noise, dict) and "gain_dn_per_e" in noise:
+        lines.append(
+            f"noise: gain {_fmt(noise.get('gain_dn_per_e'))} DN/e-, read noise "
+            f"{_fmt(noise.get('read_noise_dn'))} DN (photon transfer of view 0's repeats, "
+            "on the response's linear scale)"
+        )
     lut = _section(rep, "sensor_lut")
     if "prnu_std" in lut:
         lines.append(

@@ -50,6 +50,7 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     text = capsys.readouterr().out
     # the model's adequacy and the exposure-time decision, each with its statistic
     assert "model adequacy: the data depart from one global response" in text
+    assert "noise: gain [" in text and "DN/e-, read noise [" in text
     assert "views' exposure times: nominal times kept: likelihood ratio" in text
 
     assert main(["info", str(cam), "--json"]) == 0
