@@ -92,7 +92,6 @@ import gc
 import itertools
 import json
 import math
-import operator
 import os
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -653,12 +652,11 @@ def _tracks_if_valid(value: list[Any], n_views: int) -> tuple[np.ndarray, ...] |
     entries = list(itertools.chain.from_iterable(value))
     if set(map(type, entries)) != {list} or set(map(len, entries)) != {3}:
         return None
-    if set(map(type, map(operator.itemgetter(0), entries))) != {int}:
-        return None
-    if not set(map(type, itertools.chain.from_iterable(entries))) <= {int, float}:
+    numbers = list(itertools.chain.from_iterable(entries))  # view, x, y, view, x, y, ...
+    if set(map(type, numbers[::3])) != {int} or not set(map(type, numbers)) <= {int, float}:
         return None
     try:
-        flat = np.array(entries, dtype=np.float64)
+        flat = np.array(numbers, dtype=np.float64).reshape(-1, 3)
     except OverflowError:  # an integer beyond float64: the one by one check says which
         return None
     views = flat[:, 0]
@@ -671,8 +669,7 @@ def _tracks_if_valid(value: list[Any], n_views: int) -> tuple[np.ndarray, ...] |
         return None
     flat.setflags(write=False)
     ends = np.cumsum(lengths).tolist()
-    starts = [0, *ends[:-1]]
-    return tuple(flat[a:b] for a, b in zip(starts, ends, strict=True))
+    return tuple(map(flat.__getitem__, map(slice, [0, *ends[:-1]], ends)))
 
 
 def _json_type(value: Any) -> str:

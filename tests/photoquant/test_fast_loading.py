@@ -303,3 +303,43 @@ def test_manifest_leaves_the_garbage_collector_as_it_was(capture_path, enabled):
 @pytest.fixture
 def capture_path(tmp_path) -> Path:
     return _capture(tmp_path, _random_images(np.uint8, 3, n_repeats=1))
+
+
+# ------------------------------------------------------------------- the command
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_calibrate_command_reads_the_manifest_once(capture_path, tmp_path, monkeypatch):
+    """The outputs' check and the calibration share one reading (both used to read it)."""
+    import photoquant.calibration
+    import photoquant.io.manifest
+    from photoquant.cli import main
+
+    calls: list[Path] = []
+    real = photoquant.io.manifest.load_manifest
+
+    def counting(path, **kwargs):
+        calls.append(Path(path))
+        return real(path, **kwargs)
+
+    got: list[object] = []
+
+    def calibrate_manifest(manifest, **kwargs):
+        got.append(manifest)
+        raise _Stop
+
+    monkeypatch.setattr(photoquant.io.manifest, "load_manifest", counting)
+    monkeypatch.setattr(photoquant.calibration, "calibrate_manifest", calibrate_manifest)
+    with pytest.raises(_Stop):
+        main(["calibrate", str(capture_path), "-o", str(tmp_path / "cam"), "-q"])
+    assert calls == [capture_path]
+    assert isinstance(got[0], photoquant.io.manifest.CaptureManifest)
+    # an invalid manifest: passed on as a path, for the calibration to report
+    capture_path.write_text("{")
+    calls.clear()
+    with pytest.raises(_Stop):
+        main(["calibrate", str(capture_path), "-o", str(tmp_path / "cam"), "-q"])
+    assert got[1] == str(capture_path)
