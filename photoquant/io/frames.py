@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from photoquant._checks import check_workers
 from photoquant._threads import thread_map
 from photoquant.darkframe import DarkFrameModel, characterise_dark_frames, subtract_dark_frames
 from photoquant.errors import InputError, ManifestError
@@ -205,6 +206,7 @@ def _read_frames(
             f"`{where}` mixes raw files ({raw_file}) and other images ({other}); a frame set "
             "is one kind of data"
         )
+    check_workers(workers)  # refused before any file is read
     flat = n_repeats is None
     n_rep = 1 if n_repeats is None else n_repeats
     if len(jobs) % n_rep:  # pragma: no cover - the callers group whole repeats
