@@ -41,6 +41,13 @@ The breakdown:
   four ExposureStacks built inside the timing; default profile, and with the
   exposure refinement off. Accuracy: ``g`` rms (worst channel), the
   vignetting map's and the LUT's e_mean.
+* ``load-files`` — the loading of ``calibrate-files`` alone, on its capture
+  set: ``pq.load_manifest(path)`` (97 798 correspondences), and
+  ``pq.load_stack`` of the four frame sets :func:`photoquant.calibrate_manifest`
+  reads (the views and the irradiance scene: 320 PNG frames, with each
+  stack's saturation detection), beside two floors: ``json.loads`` of the
+  manifest's text, and ``cv2.imdecode`` of the 320 files' bytes (read in
+  the setup) on every CPU, the PNG decoding the loader cannot avoid.
 * ``exposure-refinement`` — the jittered capture set of
   ``bench_exposure_refinement.py`` (ccd, 320×240, N = 4, V = 3, 3 % jitter +
   0.1 ms lag per exposure): ``calibrate`` with and without refinement;
@@ -58,6 +65,7 @@ import dataclasses
 import functools
 import importlib.util
 import itertools
+import json
 import os
 import subprocess
 import sys
@@ -328,6 +336,45 @@ def _cli_calibrate(ctx: dict[str, Any]) -> Any:
     return out
 
 
+def _load_setup(config: Config) -> dict[str, Any]:
+    import photoquant as pq
+
+    ctx = _files_setup(config)
+    manifest = pq.load_manifest(ctx["manifest"])
+    ctx["loaded"] = manifest  # immutable: every repeat reads its frames anew
+    ctx["framesets"] = [*manifest.views, manifest.irradiance]
+    ctx["text"] = Path(ctx["manifest"]).read_text(encoding="utf-8")
+    ctx["bytes"] = [f.file.read_bytes() for fs in ctx["framesets"] for f in fs.frames]
+    return ctx
+
+
+def _load_manifest(ctx: dict[str, Any]) -> Any:
+    import photoquant as pq
+
+    return pq.load_manifest(ctx["manifest"])
+
+
+def _load_frames(ctx: dict[str, Any]) -> Any:
+    import photoquant as pq
+
+    return [pq.load_stack(fs, ctx["loaded"]).frames.shape for fs in ctx["framesets"]]
+
+
+def _floor_json(ctx: dict[str, Any]) -> Any:
+    return json.loads(ctx["text"])
+
+
+def _floor_decode(ctx: dict[str, Any]) -> Any:
+    import cv2
+
+    from photoquant._threads import thread_map
+
+    def decode(data: bytes) -> tuple[int, ...]:
+        return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED).shape
+
+    return thread_map(decode, ctx["bytes"])
+
+
 def _files_accuracy(ctx: dict[str, Any], name: str, out: Any) -> dict[str, float]:
     import photoquant as pq
 
@@ -443,6 +490,27 @@ def cases(config: Config) -> list[Case]:
             accuracy=_camera_accuracy,
             notes="the four ExposureStacks (saturation detection) built in the timing; "
             "97 798 correspondences given",
+        ),
+        Case(
+            name="load-manifest",
+            title="load the manifest of calibrate-files (97 798 correspondences) (breakdown)",
+            setup=_load_setup,
+            implementations={
+                "pq.load_manifest(path)": _load_manifest,
+                "floor: json.loads of its text": _floor_json,
+            },
+            notes="every rule of the format checked, every frame file resolved",
+        ),
+        Case(
+            name="load-frames",
+            title="load the 4 frame sets of calibrate-files (320 PNG frames) (breakdown)",
+            setup=_load_setup,
+            implementations={
+                "pq.load_stack × 4 (views, irradiance)": _load_frames,
+                "floor: cv2.imdecode of the 320 files' bytes, every CPU": _floor_decode,
+            },
+            notes="the stacks (N, K, H, W, C) with their saturation detection; the floor "
+            "decodes bytes already in memory and keeps nothing",
         ),
         Case(
             name="exposure-refinement",

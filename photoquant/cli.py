@@ -118,19 +118,24 @@ def step_specs(args: argparse.Namespace) -> dict[str, Any]:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from photoquant.calibration import calibrate_manifest
+    from photoquant.io.manifest import load_manifest
     from photoquant.io.outputs import CAMERA, Output, check_outputs, manifest_inputs
 
     out = Path(args.output)
+    try:  # read once, for the outputs' check and the calibration
+        manifest = load_manifest(args.manifest, allow_outside=args.allow_outside)
+    except (PhotoquantError, OSError, RecursionError):
+        manifest = None  # reported by calibrate_manifest, after the outputs' check
     check_outputs(
         [Output(out, CAMERA)],
-        manifest_inputs(args.manifest, allow_outside=args.allow_outside),
+        manifest_inputs(args.manifest, allow_outside=args.allow_outside, loaded=manifest),
         overwrite=args.overwrite,
     )
     specs = step_specs(args)
     step, done = _step_logger(args)
     step("loading frames")
     model = calibrate_manifest(
-        args.manifest,
+        args.manifest if manifest is None else manifest,
         allow_outside=args.allow_outside,
         progress_bars=not args.quiet,
         profile=args.profile,

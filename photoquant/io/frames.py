@@ -3,9 +3,11 @@
 :func:`load_stack` reads the image files of one frame set of a
 :class:`~photoquant.io.manifest.CaptureManifest`, checks each against the
 manifest (bit depth, channel count, shape) and returns an
-:class:`~photoquant.stack.ExposureStack`. Decoding runs on a thread pool, a
-bounded window ahead of the checks, which run in manifest order so that the
-first error reported does not depend on the number of threads.
+:class:`~photoquant.stack.ExposureStack`. Decoding runs on threads
+(:func:`photoquant._threads.thread_map`), each frame checked and copied
+straight into its place in the stack by the thread that decoded it; the first
+error reported is the first in order, whatever the number of threads, and the
+result does not depend on it either.
 
 Files with a raw extension (:data:`photoquant.io.raw.RAW_EXTENSIONS`) are
 read through LibRaw as linear half-size R, G, B data
@@ -20,20 +22,21 @@ manifest says ``"dark_subtraction": true`` (:mod:`photoquant.darkframe`).
 
 from __future__ import annotations
 
+import dataclasses
+import threading
 import zlib
-from collections import deque
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from photoquant._checks import check_workers
+from photoquant._threads import thread_map
 from photoquant.darkframe import DarkFrameModel, characterise_dark_frames, subtract_dark_frames
 from photoquant.errors import InputError, ManifestError
 from photoquant.io.exif import ExposureMetadata, read_exposure_metadata
-from photoquant.io.images import read_image
+from photoquant.io.images import _copy_pixels, _read_pixels
 from photoquant.io.manifest import CaptureManifest, FrameRef, FrameSetRef, _group_by_exposure
 from photoquant.io.raw import RawFrame, is_raw_file, read_raw, read_raw_metadata
 from photoquant.stack import ExposureStack
@@ -176,11 +179,24 @@ def _read_frames(
     *,
     progress: bool,
     workers: int | None,
+    n_repeats: int | None = None,
 ) -> tuple[np.ndarray, list[RawFrame | None]]:
-    """Decode frames in parallel and check them in order: ``(M, H, W, C)`` and raw levels."""
+    """Decode frames in parallel straight into one array, and their raw levels.
+
+    Job ``i`` lands at ``[i % n_repeats, i // n_repeats]`` of an
+    ``(n_repeats, M / n_repeats, H, W, C)`` array (without ``n_repeats``: at
+    ``[i]`` of ``(M, H, W, C)``). The first frame is read first and sets the
+    shape; the others are decoded on ``workers`` threads
+    (:func:`photoquant._threads.thread_map`: the first error in job order is
+    raised, whatever the number of threads), each checked and copied into its
+    place by the thread that decoded it, so that no more than one decoded
+    frame per thread is held beside the array.
+    """
     bit_depth = manifest.bit_depth
     want_dtype = np.dtype(np.uint8 if bit_depth == 8 else np.uint16)
     c_max = 2**bit_depth - 1
+    # a value above 2**bit_depth - 1 needs a check only where the type can hold one
+    check_top = c_max < 2 ** (8 * want_dtype.itemsize) - 1
     n_channels = len(manifest.channels)
     raws = [is_raw_file(f.file) for f in jobs]
     if any(raws) and not all(raws):
@@ -190,61 +206,64 @@ def _read_frames(
             f"`{where}` mixes raw files ({raw_file}) and other images ({other}); a frame set "
             "is one kind of data"
         )
-    out: np.ndarray | None = None
-    first: Path | None = None
-    levels: list[RawFrame | None] = []
+    check_workers(workers)  # refused before any file is read
+    flat = n_repeats is None
+    n_rep = 1 if n_repeats is None else n_repeats
+    if len(jobs) % n_rep:  # pragma: no cover - the callers group whole repeats
+        raise ValueError(f"{len(jobs)} frames are no whole number of {n_rep} repeats")
+    first = jobs[0].file
+    shape: tuple[int, ...] | None = None  # the first frame's
 
-    def decode(frame: FrameRef) -> np.ndarray | RawFrame:
-        return read_raw(frame.file) if is_raw_file(frame.file) else read_image(frame.file)
+    def decode(i: int) -> tuple[np.ndarray, RawFrame | None]:
+        """Frame ``i`` read and checked against the manifest and the first frame."""
+        frame = jobs[i]
+        got = read_raw(frame.file) if raws[i] else _read_pixels(frame.file, None)
+        raw = got if isinstance(got, RawFrame) else None
+        img = raw.image if raw is not None else got
+        assert isinstance(img, np.ndarray)
+        if img.dtype != want_dtype:
+            raise error(_dtype_message(frame.file, img.dtype, bit_depth, raw))
+        if img.shape[2] != n_channels:
+            raise error(
+                f"{frame.file} has {img.shape[2]} channel(s) (shape {img.shape}) but the "
+                f"manifest names {n_channels} channels {list(manifest.channels)}"
+            )
+        if shape is not None and img.shape != shape:
+            raise error(f"{frame.file} has shape {img.shape} but {first} has shape {shape}")
+        if check_top:
+            top = int(img.max())
+            if top > c_max:
+                hint = (
+                    f"its white level is {int(raw.white_level.max())}"
+                    if raw is not None
+                    else f"is `bit_depth` {bit_depth} mislabelled?"
+                )
+                raise error(
+                    f"{frame.file} holds values up to {top}, above {c_max} = 2**{bit_depth} - 1; "
+                    f"{hint}"
+                )
+        return img, raw
 
-    n_workers = min(check_workers(workers), len(jobs))
-    with (
-        ThreadPoolExecutor(max_workers=n_workers) as pool,
-        tqdm(total=len(jobs), desc=f"reading {where}", unit="frame", disable=not progress) as bar,
-    ):
-        # decoded in parallel, a bounded window ahead; checked in manifest order
-        window = 4 * n_workers
-        pending = deque(pool.submit(decode, frame) for frame in jobs[:window])
-        try:
-            for i, frame in enumerate(jobs):
-                got = pending.popleft().result()  # the first error in manifest order wins
-                if i + window < len(jobs):
-                    pending.append(pool.submit(decode, jobs[i + window]))
+    n_exposures = len(jobs) // n_rep
+    lock = threading.Lock()
+    with tqdm(total=len(jobs), desc=f"reading {where}", unit="frame", disable=not progress) as bar:
+
+        def place(i: int, img: np.ndarray, raw: RawFrame | None) -> RawFrame | None:
+            dst = out[i % n_rep, i // n_rep]
+            _copy_pixels(dst, img)
+            with lock:
                 bar.update()
-                raw = got if isinstance(got, RawFrame) else None
-                img = raw.image if raw is not None else got
-                assert isinstance(img, np.ndarray)
-                levels.append(raw)
-                if img.dtype != want_dtype:
-                    raise error(_dtype_message(frame.file, img.dtype, bit_depth, raw))
-                if img.shape[2] != n_channels:
-                    raise error(
-                        f"{frame.file} has {img.shape[2]} channel(s) (shape {img.shape}) but the "
-                        f"manifest names {n_channels} channels {list(manifest.channels)}"
-                    )
-                if out is None:
-                    out = np.empty((len(jobs), *img.shape), dtype=want_dtype)
-                    first = frame.file
-                elif img.shape != out.shape[1:]:
-                    raise error(
-                        f"{frame.file} has shape {img.shape} but {first} has shape {out.shape[1:]}"
-                    )
-                top = int(img.max())
-                if top > c_max:
-                    hint = (
-                        f"its white level is {int(raw.white_level.max())}"
-                        if raw is not None
-                        else f"is `bit_depth` {bit_depth} mislabelled?"
-                    )
-                    raise error(
-                        f"{frame.file} holds values up to {top}, above {c_max} = 2**{bit_depth} - 1; "
-                        f"{hint}"
-                    )
-                out[i] = img
-        finally:
-            for future in pending:  # nothing left to read after an error
-                future.cancel()
-    assert out is not None  # frame sets are never empty
+            # the levels, without a reference to the decoded copy
+            return None if raw is None else dataclasses.replace(raw, image=dst)
+
+        img0, raw0 = decode(0)
+        shape = img0.shape
+        out = np.empty((n_rep, n_exposures, *shape), dtype=want_dtype)
+        levels = [place(0, img0, raw0)]
+        del img0, raw0
+        levels += thread_map(lambda i: place(i, *decode(i)), range(1, len(jobs)), workers)
+    if flat:
+        out = out[0]
     return out, levels
 
 
@@ -295,8 +314,9 @@ def _read_grouped(
     times = list(groups)
     n_rep = len(groups[times[0]])
     jobs = [groups[t][n] for t in times for n in range(n_rep)]
-    flat, levels = _read_frames(jobs, manifest, where, error, progress=progress, workers=workers)
-    stack = np.ascontiguousarray(flat.reshape(len(times), n_rep, *flat.shape[1:]).swapaxes(0, 1))
+    stack, levels = _read_frames(
+        jobs, manifest, where, error, progress=progress, workers=workers, n_repeats=n_rep
+    )
     return stack, times, levels, jobs
 
 

@@ -744,7 +744,16 @@ def read_image(path: PathLike, *, max_pixels: int | None = None) -> np.ndarray:
         the limits (see the module notes), or holds an unsupported pixel type
         (e.g. a float or signed TIFF).
     """
-    path = Path(path)
+    return np.ascontiguousarray(_read_pixels(Path(path), max_pixels))
+
+
+def _read_pixels(path: Path, max_pixels: int | None) -> np.ndarray:
+    """:func:`read_image`'s array, every check done, but not yet made contiguous.
+
+    A colour PNG or JPEG comes as a view of the decoder's B, G, R(, A) array
+    with its channels reversed; :func:`_copy_pixels` copies it into a
+    destination in one pass (the frame loader's way to skip a copy).
+    """
     f, size = _open(path)
     with f:
         try:
@@ -782,7 +791,32 @@ def read_image(path: PathLike, *, max_pixels: int | None = None) -> np.ndarray:
             f"the decoded image is {arr.shape[1]}x{arr.shape[0]}, its header says "
             f"{header.width}x{header.height}",
         )
-    return np.ascontiguousarray(arr)
+    return arr
+
+
+def _copy_pixels(dst: np.ndarray, src: np.ndarray) -> None:
+    """``dst[...] = src`` for an image, fast when ``src`` is a B, G, R array read as R, G, B.
+
+    Reversing the channels of a ``(H, W, 3)`` array element by element costs
+    numpy ten times what OpenCV's channel swap does (4 ms against 0.4 ms
+    for 1024×768×3, 2026-12-03); the swap is a permutation, so the values
+    are the same bits.
+    """
+    if (
+        src.ndim == 3
+        and src.shape[2] == 3
+        and src.strides[2] == -src.itemsize
+        and src.dtype in (np.uint8, np.uint16)
+        and dst.dtype == src.dtype
+        and dst.shape == src.shape
+        and dst.flags.c_contiguous
+    ):
+        bgr = src[..., ::-1]
+        if bgr.flags.c_contiguous:
+            out = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=dst)
+            if out is dst or np.shares_memory(out, dst):
+                return
+    np.copyto(dst, src)
 
 
 def write_image(path: PathLike, array: np.ndarray) -> None:

@@ -87,11 +87,14 @@ gives it, with a :class:`DeprecationWarning`.
 
 from __future__ import annotations
 
+import contextlib
+import gc
+import itertools
 import json
 import math
 import os
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 from typing import Any
@@ -310,6 +313,14 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
+def _finite(value: float) -> bool:
+    """Whether a number is finite; an integer too large for a float64 (JSON sets no limit) is not."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 class _Parser:
     """Validate a manifest's decoded JSON; every error names the manifest and the key."""
 
@@ -470,7 +481,7 @@ class _Parser:
         file = self.resolve_file(value.get("file"), where)
         exposure = value.get("exposure_s")
         if exposure is not None and (
-            not _is_number(exposure) or not math.isfinite(exposure) or exposure <= 0
+            not _is_number(exposure) or not _finite(exposure) or exposure <= 0
         ):
             raise self.error(
                 f"`{where}.exposure_s` must be a positive finite number of seconds, "
@@ -482,7 +493,7 @@ class _Parser:
         optics = {}
         for key in ("f_number", "iso"):
             v = value.get(key)
-            if v is not None and (not _is_number(v) or not math.isfinite(v) or v <= 0):
+            if v is not None and (not _is_number(v) or not _finite(v) or v <= 0):
                 raise self.error(f"`{where}.{key}` must be a positive finite number, got {v!r}")
             optics[key] = None if v is None else float(v)
         return FrameRef(
@@ -536,6 +547,13 @@ class _Parser:
             return ()
         if not isinstance(value, list):
             raise self.error(f"`correspondences` must be a list of tracks, got {_describe(value)}")
+        tracks = _tracks_if_valid(value, n_views)
+        if tracks is not None:
+            return tracks
+        # something is wrong: the entry by entry check names the first bad one
+        return self.parse_tracks_one_by_one(value, n_views)
+
+    def parse_tracks_one_by_one(self, value: list[Any], n_views: int) -> tuple[np.ndarray, ...]:
         tracks = []
         for t, track in enumerate(value):
             where = f"correspondences[{t}]"
@@ -550,7 +568,7 @@ class _Parser:
                     not isinstance(entry, list)
                     or len(entry) != 3
                     or not _is_int(entry[0])
-                    or not all(_is_number(v) and math.isfinite(v) for v in entry[1:])
+                    or not all(_is_number(v) and _finite(v) for v in entry[1:])
                 ):
                     raise self.error(
                         f"`{where}[{e}]` must be [view_index, x, y] with an integer view and "
@@ -601,7 +619,7 @@ class _Parser:
         if (
             not isinstance(values, list)
             or len(values) != len(channels)
-            or not all(_is_number(v) and math.isfinite(v) and 0 <= v <= c_max for v in values)
+            or not all(_is_number(v) and _finite(v) and 0 <= v <= c_max for v in values)
         ):
             raise self.error(
                 f"`black_level` must be a number or {len(channels)} numbers (one per channel "
@@ -615,6 +633,43 @@ class _Parser:
                         f"`saturation_level` {s}: no value could carry light"
                     )
         return tuple(float(v) for v in values)
+
+
+def _tracks_if_valid(value: list[Any], n_views: int) -> tuple[np.ndarray, ...] | None:
+    """The tracks as read-only ``(n_i, 3)`` float64 arrays, or None if any breaks a rule.
+
+    The rules of :meth:`_Parser.parse_tracks_one_by_one` (which names the
+    first entry that breaks one), checked over every entry at once: a
+    hundred thousand tracks take 0.1 s here against 1 s one by one. Only
+    ``int`` and ``float`` values (what JSON gives) pass; anything else (a
+    subclass, a numpy scalar) is left to the entry by entry check.
+    """
+    if set(map(type, value)) != {list}:
+        return None if value else ()
+    lengths = np.fromiter(map(len, value), dtype=np.intp, count=len(value))
+    if lengths.min() < 2:
+        return None
+    entries = list(itertools.chain.from_iterable(value))
+    if set(map(type, entries)) != {list} or set(map(len, entries)) != {3}:
+        return None
+    numbers = list(itertools.chain.from_iterable(entries))  # view, x, y, view, x, y, ...
+    if set(map(type, numbers[::3])) != {int} or not set(map(type, numbers)) <= {int, float}:
+        return None
+    try:
+        flat = np.array(numbers, dtype=np.float64).reshape(-1, 3)
+    except OverflowError:  # an integer beyond float64: the one by one check says which
+        return None
+    views = flat[:, 0]
+    if not (np.isfinite(flat[:, 1:]).all() and views.min() >= 0 and views.max() < n_views):
+        return None
+    # the views are exact below 2**53 (they are below n_views); no view twice in a track
+    track_of = np.repeat(np.arange(len(value)), lengths)
+    keys = np.sort(track_of * n_views + views.astype(np.intp))
+    if np.any(keys[1:] == keys[:-1]):
+        return None
+    flat.setflags(write=False)
+    ends = np.cumsum(lengths).tolist()
+    return tuple(map(flat.__getitem__, map(slice, [0, *ends[:-1]], ends)))
 
 
 def _json_type(value: Any) -> str:
@@ -666,17 +721,42 @@ def load_manifest(path: PathLike, *, allow_outside: bool = False) -> CaptureMani
         raise ManifestError(f"manifest {path}: not UTF-8 text ({exc.reason})") from None
     except OSError as exc:
         raise ManifestError(f"manifest {path}: cannot read it ({exc.strerror or exc})") from None
+    resolved = real_path(path)
+    parser = _Parser(resolved, resolved.parent, check_files=True, allow_outside=allow_outside)
+    # a million lists and numbers, none in a cycle, made and dropped with the collector paused
+    with _no_gc():
+        return parser.parse(_decode_json(text, path))
+
+
+def _decode_json(text: str, path: Path) -> Any:
     try:
-        data = json.loads(text)
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise ManifestError(
             f"manifest {path}: not valid JSON ({exc.msg} at line {exc.lineno}, column {exc.colno})"
         ) from None
     except RecursionError:
         raise ManifestError(f"manifest {path}: not valid JSON (nested too deeply)") from None
-    resolved = real_path(path)
-    parser = _Parser(resolved, resolved.parent, check_files=True, allow_outside=allow_outside)
-    return parser.parse(data)
+
+
+@contextlib.contextmanager
+def _no_gc() -> Iterator[None]:
+    """The cyclic garbage collector paused (as it was before, after).
+
+    Decoding JSON makes a container per array; the collector, run every 700
+    of them, walks those made so far: half of the time of :func:`json.loads`
+    on a manifest of a hundred thousand tracks (0.30 s against 0.15 s,
+    2026-12-03). Reference counting still frees everything that is not in a
+    cycle, which decoded JSON never is; dropped before the collector resumes,
+    it leaves it nothing to walk.
+    """
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
 
 
 def extra_frameset(

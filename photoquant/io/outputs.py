@@ -34,9 +34,13 @@ import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from photoquant.errors import InputError, OutputExistsError, PhotoquantError
 from photoquant.io.atomic import real_path
+
+if TYPE_CHECKING:
+    from photoquant.io.manifest import CaptureManifest
 
 __all__ = [
     "Holder",
@@ -281,23 +285,30 @@ def file_of_kind(
     return problem
 
 
-def manifest_inputs(manifest: PathLike, *, allow_outside: bool = False) -> list[Path | Holder]:
+def manifest_inputs(
+    manifest: PathLike, *, allow_outside: bool = False, loaded: CaptureManifest | None = None
+) -> list[Path | Holder]:
     """The paths a capture manifest makes a command read.
 
     The manifest file, its folder (as a :class:`Holder`), and — when the
     manifest is valid — every frame file (also of extra frame sets such as
     ``colorchecker``) and the folder of the ``truth`` file it names. An
     invalid or missing manifest gives just the first two: the command
-    reports it itself.
+    reports it itself. ``loaded``: the manifest, already loaded from
+    ``manifest`` by the command (not loaded again: a hundred thousand
+    correspondences take a quarter of a second to read).
     """
     path = Path(manifest)
     found: list[Path | Holder] = [path, Holder(path.parent)]
     from photoquant.io.manifest import load_manifest
 
-    try:
-        m = load_manifest(path, allow_outside=allow_outside)
-    except (PhotoquantError, OSError, RecursionError):
-        return found
+    if loaded is not None:
+        m = loaded
+    else:
+        try:
+            m = load_manifest(path, allow_outside=allow_outside)
+        except (PhotoquantError, OSError, RecursionError):
+            return found
     for frame_set in (*m.views, m.irradiance, m.scene, m.dark, m.flatfield, m.glare):
         if frame_set is not None:
             found.extend(frame.file for frame in frame_set.frames)
