@@ -8,6 +8,8 @@ leaderboard (:data:`JOB`).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 from pathlib import Path
 
@@ -23,6 +25,7 @@ from validation.baseline import (
 )
 from validation.config import QUICK, TINY, ValidationConfig, ValidationError, stream_seed
 from validation.experiments import EXPERIMENTS, OPT_IN, run_validation
+from validation.headlines import MAX_LINES
 from validation.report import results_json, write_report
 
 
@@ -48,12 +51,28 @@ def tiny_results():
     return _results(run_validation(TINY, 0, experiments=JOB, progress=_quiet))
 
 
+@pytest.fixture(scope="module")
+def cli_job(tmp_path_factory):
+    """:data:`JOB` run once more, through ``photoquant validate``: (report folder, stdout).
+
+    Shared by the summary test and the determinism test (the second run of the
+    same seed), which used to run the job each on their own (a tiny job's time).
+    """
+    out = tmp_path_factory.mktemp("cli-job") / "report"
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        status = main(["validate", "--tiny", "-q", "-o", str(out), "--experiments", *JOB])
+    assert status == 0
+    return out, printed.getvalue()
+
+
 # --------------------------------------------------------------------------- determinism, CLI
 
 
-def test_same_seed_same_metrics(tiny_results):
+def test_same_seed_same_metrics(tiny_results, cli_job):
     # every experiment of JOB run twice, in two runs with their own capture sets
-    again = _results(run_validation(TINY, 0, experiments=JOB, progress=_quiet))
+    # (the second through the command line: its results.json)
+    again = json.loads((cli_job[0] / "results.json").read_text(encoding="utf-8"))
     other = _results(run_validation(TINY, 1, experiments=["response"], progress=_quiet))
 
     def untimed(results):
@@ -63,6 +82,27 @@ def test_same_seed_same_metrics(tiny_results):
     assert again["seeds"] == tiny_results["seeds"]
     key = "response.ccd.g_rms.G"
     assert other["metrics"][key] != tiny_results["metrics"][key]
+
+
+def test_the_summary_is_short_and_names_the_report(cli_job):
+    """``photoquant validate`` prints a compact summary; the tables are in the report.
+
+    (Here rather than in ``test_validate_summary.py``: it shares :data:`JOB`'s
+    command-line run with :func:`test_same_seed_same_metrics`.)
+    """
+    out, printed = cli_job
+    lines = printed.rstrip("\n").splitlines()
+    assert len(lines) <= MAX_LINES, printed
+    assert str(out / "report.md") in printed
+    # each experiment's headline beside the paper's figure and the noise floor
+    header = next(line for line in lines if line.startswith("experiment"))
+    assert "paper" in header and "floor" in header
+    for name in ("response", "vignetting", "noise", "Table 1", "Fig. 7", "ablation"):
+        assert any(line.startswith(name) for line in lines), name
+    # the detail stays in the report
+    report = (out / "report.md").read_text(encoding="utf-8")
+    assert len(report.splitlines()) > len(lines)
+    assert "(issue" not in printed and "(issue" not in report
 
 
 def test_cli_check_names_a_regression_and_exits_1(tiny_results, tmp_path, capsys):

@@ -9,29 +9,9 @@ from validation.experiments import EXPERIMENTS
 from validation.experiments.base import ExperimentResult
 from validation.headlines import MAX_LINES, format_summary
 
-# the default job without its leaderboard (most of the tiny job's time; the
-# summary of a leaderboard is tested on its own below)
-JOB = ["response", "balance", "sensor_lut", "vignetting", "noise", "table1", "fig7", "ablation"]
-
-
-def test_the_summary_is_short_and_names_the_report(tmp_path, capsys):
-    from photoquant.cli import main
-
-    out = tmp_path / "report"
-    assert main(["validate", "--tiny", "-q", "-o", str(out), "--experiments", *JOB]) == 0
-    printed = capsys.readouterr().out
-    lines = printed.rstrip("\n").splitlines()
-    assert len(lines) <= MAX_LINES, printed
-    assert str(out / "report.md") in printed
-    # each experiment's headline beside the paper's figure and the noise floor
-    header = next(line for line in lines if line.startswith("experiment"))
-    assert "paper" in header and "floor" in header
-    for name in ("response", "vignetting", "noise", "Table 1", "Fig. 7", "ablation"):
-        assert any(line.startswith(name) for line in lines), name
-    # the detail stays in the report
-    report = (out / "report.md").read_text(encoding="utf-8")
-    assert len(report.splitlines()) > len(lines)
-    assert "(issue" not in printed and "(issue" not in report
+# The command's own summary of a tiny job (``photoquant validate --tiny``):
+# tests/validation/test_validate_job.py::test_the_summary_is_short_and_names_the_report,
+# which shares that job's run with the determinism test.
 
 
 def _result(name: str, rows: list[tuple[str, str]]) -> ExperimentResult:
