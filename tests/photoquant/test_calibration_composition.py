@@ -1,5 +1,9 @@
 """``calibrate`` is a composition of named steps, and composing them changes no bit.
 
+``calibrate``'s body stays within :data:`MAX_CALIBRATE_LINES` lines: it
+checks the inputs, composes the steps of :mod:`photoquant.calibration_steps`
+and returns the camera.
+
 The reference digests (``calibration_digests.json``) are the sha256 of every
 array of the camera model (and of the intermediates the steps pass each
 other), and of its parameters and report less the timings, for small pqsim
@@ -19,11 +23,14 @@ Record again (after a change meant to move the numbers)::
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import hashlib
+import inspect
 import json
 import platform
 import sys
+import textwrap
 from collections.abc import Callable
 from functools import cache
 from pathlib import Path
@@ -33,6 +40,7 @@ import numpy as np
 import pytest
 
 import photoquant as pq
+from photoquant import calibration
 
 DIGESTS = Path(__file__).with_name("calibration_digests.json")
 SHAPE = (48, 64)
@@ -196,6 +204,24 @@ def test_the_calibration_is_the_recorded_one_to_the_bit(name, tmp_path):
     assert digest(CASES[name](tmp_path)) == stored["digests"][name], (
         f"{name!r}: the calibration changed (a refactoring must keep every bit; a change meant "
         "to move the numbers records the digests again: see this module's docstring)"
+    )
+
+
+def _body_lines(function: Callable[..., Any]) -> int:
+    """Source lines of ``function``'s body, its docstring left out."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(function)))
+    body = tree.body[0].body  # type: ignore[attr-defined]
+    if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+        body = body[1:]
+    return body[-1].end_lineno - body[0].lineno + 1
+
+
+def test_calibrate_stays_a_composition_that_fits_on_a_screen():
+    lines = _body_lines(calibration.calibrate)
+    assert lines <= MAX_CALIBRATE_LINES, (
+        f"calibrate() has {lines} lines of body (at most {MAX_CALIBRATE_LINES}): it checks the "
+        "inputs and composes the named steps of photoquant.calibration_steps; put new work in "
+        "a step (or a new step there), not in calibrate()"
     )
 
 
