@@ -376,22 +376,23 @@ def response_step(
         selection = select_response(hide_defects(views[0], defects), spec[1], seed=seed)
         spec = _step("response", selection.chosen, profile)
         log.note(f"response model: {selection.describe()}")
-    fit, view_times, decision = None, None, None
+    joint = None
     if policy.refine and len(views) >= 2:
         log.say("response and exposure refinement")
         joint = _recover_with_view_times(views, defects, spec, seed, policy, log)
         if joint is None:  # failed, and not asked for: off
             policy = ExposurePolicy(False, policy.asked)
-        else:
-            fit, view_times, decision = joint
-    if view_times is None:
+    decision = None if joint is None else joint.decision
+    view_times = None if joint is None else joint.view_times
+    if joint is not None and view_times is not None:
+        fit = joint.fit
+    else:
         if policy.refine and len(views) < 2:
             log.note(
                 "one view only: its exposure times cannot be told from its response; "
                 "nominal times kept"
             )
         fit = fit_response(hide_defects(views[0], defects), spec, rng=seed)
-    assert fit is not None
     log.report["response"] = {"method": spec[0].name, **fit.report}
     if selection is not None:
         log.report["response"]["selection"] = selection.as_dict()
@@ -405,7 +406,7 @@ def _recover_with_view_times(
     seed: int,
     policy: ExposurePolicy,
     log: CalibrationLog,
-) -> tuple[StepFit[Any], list[ExposureRefinement] | None, dict[str, Any]] | None:
+) -> _JointFit | None:
     """The response recovered jointly with the views' times, the times to use, the decision.
 
     The times are ``None`` where the test keeps the labels (and refinement
@@ -442,7 +443,16 @@ def _recover_with_view_times(
     if not policy.asked:  # refine_exposures=True: the refined times whatever the test says
         log.note(f"views' exposure times: {decision.describe()}")
     use = policy.asked or decision.refine
-    return fits[-1], (refs if use else None), decision.as_dict()
+    return _JointFit(fits[-1], refs if use else None, decision.as_dict())
+
+
+@dataclass(frozen=True, eq=False)
+class _JointFit:
+    """The last round's response, the views' refined times to use (or ``None``), the test."""
+
+    fit: StepFit[Any]
+    view_times: list[ExposureRefinement] | None
+    decision: dict[str, Any]
 
 
 def refine_exposures_step(
