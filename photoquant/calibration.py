@@ -335,7 +335,9 @@ def calibrate(
     with log.timed("vignetting"):
         uniform = uniformise(merged.merged, lut.model, veil.model)
         given = vignetting is not None
-        vig = vignetting_step(uniform, correspondences, exposed, merged, lut, steps, given, log=log)
+        vig = vignetting_step(
+            uniform, correspondences, exposed, merged, lut, steps, requested=given, log=log
+        )
     with log.timed("balance"):
         bal = balance_step(merged, uniform[0], lut, vig, veil, white_roi, steps["balance"], log=log)
     model = assemble_camera(

@@ -714,8 +714,8 @@ def vignetting_step(
     merge: MergeStage,
     sensor_lut: SensorLUTStage,
     steps: Mapping[str, Spec],
-    requested: bool,
     *,
+    requested: bool,
     log: CalibrationLog,
 ) -> VignettingStage:
     """The vignetting ``v`` (§5.5 of the paper) from the uniform views.
