@@ -330,7 +330,8 @@ def _fit_photoquant(
     ``given``: a known response replaces the recovered one (the other steps
     and the camera's exposure floor are measured with it).
     """
-    from photoquant.calibration import _response_floor, calibrate
+    from photoquant.calibration import calibrate
+    from photoquant.calibration_steps import _response_floor
     from photoquant.correction import correct, gain_map_f32
     from photoquant.merge import MergeModel
 

@@ -164,12 +164,12 @@ def test_correct_refinement_choices(runs):
 
 def test_a_refinement_the_data_cannot_support_keeps_the_nominal_times_by_default(runs, monkeypatch):
     """The profile's default refines where the data determine the times; asked for, it must."""
-    import photoquant.calibration as calibration
+    import photoquant.calibration_steps as calibration_steps
 
     def fail(*args, **kwargs):
         raise CalibrationError("exposure refinement: the data do not determine the exposure times")
 
-    monkeypatch.setattr(calibration, "refine_jointly", fail)
+    monkeypatch.setattr(calibration_steps, "refine_jointly", fail)
     data = runs["data"]
     kwargs = {
         "irradiance": data.irradiance,

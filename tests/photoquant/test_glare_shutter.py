@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import photoquant as pq
-from photoquant.calibration import _fill_by_shutter, _lag_from_group
+from photoquant.calibration_steps import _fill_by_shutter, _lag_from_group
 from photoquant.exposure import ExposureRefinement
 from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera import camera_from_preset

@@ -178,7 +178,7 @@ def test_crossval_of_the_selection_is_nested(rng, monkeypatch):
         seen.append((tuple(sub.exposure_s), result.as_dict()))
         return result
 
-    monkeypatch.setattr("photoquant.calibration.select_response", spy)
+    monkeypatch.setattr("photoquant.calibration_steps.select_response", spy)
     options = {"candidates": GAMMA_FIRST}
     crossval_stack(stack, SELECTION_METHOD, options=options, calibration_only=True)
     first = list(seen)
