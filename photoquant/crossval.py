@@ -70,7 +70,13 @@ from typing import Any
 import numpy as np
 
 from photoquant.errors import InputError
-from photoquant.holdout import SCORE_RANGE_8BIT, predict_held_out, predict_values, score_range
+from photoquant.holdout import (
+    SCORE_RANGE_8BIT,
+    fill_unmerged,
+    predict_held_out,
+    predict_values,
+    score_range,
+)
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
@@ -333,7 +339,6 @@ def _fit_photoquant(
     from photoquant.calibration import calibrate
     from photoquant.calibration_steps import _response_floor
     from photoquant.correction import correct, gain_map_f32
-    from photoquant.merge import MergeModel
 
     spec: Any = method if not options else (method, dict(options))
     model = calibrate([stack], profile=profile, response=spec, seed=seed)
@@ -356,11 +361,7 @@ def _fit_photoquant(
                 gain_map_f32(model).astype(np.float64)
             )
         flagged = corrected.mask | ~np.isfinite(log_e)
-    if np.any(flagged):
-        fallback = MergeModel(
-            "Debevec 1997", {"weighting": "uniform", "exclude_below_valid_min": False}
-        ).merge(stack, resp)
-        log_e = np.where(flagged, fallback.log_photoquantity, log_e)
+    log_e = fill_unmerged(stack, resp, log_e, flagged)
     return resp.levels, resp.log_inverse_response, resp.saturation_level, log_e, flagged
 
 

@@ -22,7 +22,17 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SCORE_RANGE_8BIT", "predict_held_out", "predict_values", "score_range"]
+from photoquant.merge import MergeModel
+from photoquant.response.model import ResponseModel
+from photoquant.stack import ExposureStack
+
+__all__ = [
+    "SCORE_RANGE_8BIT",
+    "fill_unmerged",
+    "predict_held_out",
+    "predict_values",
+    "score_range",
+]
 
 SCORE_RANGE_8BIT = (10.0, 245.0)
 """Scored code values at 8 bits (inclusive); scaled to other bit depths."""
@@ -116,3 +126,18 @@ def predict_held_out(
         top = np.broadcast_to(sat, pred.shape)
         pred = np.where(bound, np.where(all_sat, top, float(levels[0])), pred)
     return pred, bound
+
+
+def fill_unmerged(
+    stack: ExposureStack, response: ResponseModel, log_exposure: np.ndarray, flagged: np.ndarray
+) -> np.ndarray:
+    """``log_exposure`` with its ``flagged`` values taken from the *fallback merge*: every
+    unclipped value of ``stack`` with equal weight (``weighting="uniform"``, no
+    ``valid_min``), so that a pixel the merge left without a valid exposure still gets a
+    prediction (NaN where even that has none)."""
+    if not np.any(flagged):
+        return log_exposure
+    fallback = MergeModel(
+        "Debevec 1997", {"weighting": "uniform", "exclude_below_valid_min": False}
+    ).merge(stack, response)
+    return np.where(flagged, fallback.log_photoquantity, log_exposure)

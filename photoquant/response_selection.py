@@ -79,7 +79,7 @@ import numpy as np
 
 from photoquant._checks import check_int
 from photoquant.errors import CalibrationError, InputError
-from photoquant.holdout import predict_held_out, score_range
+from photoquant.holdout import fill_unmerged, predict_held_out, score_range
 from photoquant.merge import MergeModel
 from photoquant.methods import Method, StepFit, resolve_method
 from photoquant.response import RESPONSE_METHODS, fit_response
@@ -307,12 +307,7 @@ def _held_out_errors(
     response = fit_response(sub, spec, rng=seed).model
     merged = MergeModel().merge(sub, response)
     log_e = merged.log_photoquantity
-    flagged = merged.mask | ~np.isfinite(log_e)
-    if np.any(flagged):
-        fallback = MergeModel(
-            "Debevec 1997", {"weighting": "uniform", "exclude_below_valid_min": False}
-        ).merge(sub, response)
-        log_e = np.where(flagged, fallback.log_photoquantity, log_e)
+    log_e = fill_unmerged(sub, response, log_e, merged.mask | ~np.isfinite(log_e))
     pred, _ = predict_held_out(
         response.levels,
         response.log_inverse_response,
