@@ -366,14 +366,7 @@ def _blocks(stack: ExposureStack, n: int) -> list[ExposureStack]:
     h = stack.image_shape[0]
     edges = np.linspace(0, h, n + 1).astype(int)
     return [
-        ExposureStack(
-            np.ascontiguousarray(stack.frames[:, :, a:b]),
-            stack.exposure_s,
-            bit_depth=stack.bit_depth,
-            saturation_level=stack.saturation_level,
-            channels=stack.channels,
-            black_level=stack.black_level,
-        )
+        stack.with_frames(np.ascontiguousarray(stack.frames[:, :, a:b]))
         for a, b in zip(edges[:-1], edges[1:], strict=True)
     ]
 
@@ -548,15 +541,7 @@ def _prnu(
         half = flat.n_repeats // 2
         halves = []
         for part in (flat.frames[:half], flat.frames[half : 2 * half]):
-            sub = ExposureStack(
-                np.ascontiguousarray(part),
-                flat.exposure_s,
-                bit_depth=flat.bit_depth,
-                saturation_level=flat.saturation_level,
-                channels=flat.channels,
-                black_level=flat.black_level,
-            )
-            merged = camera.merge_stack(sub)
+            merged = camera.merge_stack(flat.with_frames(np.ascontiguousarray(part)))
             lin = np.exp(merged.log_photoquantity)
             halves.append(lin)
         ua, ub = halves

@@ -651,11 +651,4 @@ def hide_defects(stack: ExposureStack, defects: DefectMap | None) -> ExposureSta
         )
     sat = np.asarray(stack.saturation_level)
     frames = np.where(bad[None, None], sat.astype(stack.frames.dtype), stack.frames)
-    return ExposureStack(
-        frames,
-        stack.exposure_s,
-        bit_depth=stack.bit_depth,
-        channels=stack.channels,
-        saturation_level=stack.saturation_level,
-        black_level=stack.black_level,
-    )
+    return stack.with_frames(frames)

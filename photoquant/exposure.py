@@ -597,15 +597,7 @@ def _stack_of_pixels(
     t = stack.exposure_s
     if exposures is not None:
         values, t = values[:, exposures], t[exposures]
-    return ExposureStack(
-        values[:, :, None],
-        t,
-        bit_depth=stack.bit_depth,
-        saturation_level=stack.saturation_level,
-        channels=stack.channels,
-        black_level=stack.black_level,
-        exposure_basis=stack.exposure_basis,
-    )
+    return stack.with_frames(values[:, :, None], t)
 
 
 def refine_against_response(

@@ -299,15 +299,8 @@ class ResponseSelection:
 
 def _grid_stack(stack: ExposureStack, exposures: Sequence[int], stride: int) -> ExposureStack:
     """``stack`` at ``exposures`` on every ``stride``-th pixel, its levels kept."""
-    return ExposureStack(
-        stack.frames[:, list(exposures), ::stride, ::stride],
-        stack.exposure_s[list(exposures)],
-        bit_depth=stack.bit_depth,
-        saturation_level=stack.saturation_level,
-        channels=stack.channels,
-        black_level=stack.black_level,
-        exposure_basis=stack.exposure_basis,
-    )
+    pick = list(exposures)
+    return stack.with_frames(stack.frames[:, pick, ::stride, ::stride], stack.exposure_s[pick])
 
 
 def _held_out_errors(

@@ -476,20 +476,28 @@ class ExposureStack:
             New times, in the order of this stack's exposures (increasing
             nominal time); the result is re-sorted if their order differs.
         """
-        out = ExposureStack(
-            self.frames,
-            np.asarray(exposure_s, dtype=np.float64),
+        out = self.with_frames(self.frames, exposure_s)
+        if out.frames is self.frames:  # same frames, same order: the cached statistics hold
+            for name in ("_mean", "_sum", "_extremes"):
+                getattr(out, name).extend(getattr(self, name))
+            out._masks.update(self._masks)
+        return out
+
+    def with_frames(
+        self, frames: np.ndarray, exposure_s: Sequence[float] | np.ndarray | None = None
+    ) -> ExposureStack:
+        """Other frames of the same camera: this stack's bit depth, saturation and black
+        levels, channels and exposure basis, with ``exposure_s`` (this stack's times by
+        default) for the ``K`` exposures of ``frames`` ``(N, K, H, W, C)``."""
+        return ExposureStack(
+            frames,
+            self.exposure_s if exposure_s is None else np.asarray(exposure_s, dtype=np.float64),
             bit_depth=self.bit_depth,
             saturation_level=self.saturation_level,
             channels=self.channels,
             black_level=self.black_level,
             exposure_basis=self.exposure_basis,
         )
-        if out.frames is self.frames:  # same frames, same order: the cached statistics hold
-            for name in ("_mean", "_sum", "_extremes"):
-                getattr(out, name).extend(getattr(self, name))
-            out._masks.update(self._masks)
-        return out
 
     @classmethod
     def from_frames(

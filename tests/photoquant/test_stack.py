@@ -248,3 +248,26 @@ def test_mean_at_pixels_refuses_bad_indices_in_one_line(index, message):
     stack = ExposureStack(frames, [0.01, 0.04], bit_depth=8)
     with pytest.raises(InputError, match=message):
         stack.mean_at_pixels(index)
+
+
+def test_with_frames_keeps_the_cameras_levels():
+    frames = np.full((1, 2, 4, 4, 3), 100, dtype=np.uint8)
+    frames[:, 1] = 200
+    stack = ExposureStack(
+        frames,
+        [0.01, 0.04],
+        saturation_level=np.array([250, 240, 230]),
+        black_level=[4.0, 5.0, 6.0],
+        exposure_basis="exposure value",
+    )
+    # a crop keeps everything but the pixels; another bracket, its own times
+    crop = stack.with_frames(frames[:, :, :2, :3])
+    assert crop.image_shape == (2, 3)
+    np.testing.assert_array_equal(crop.exposure_s, stack.exposure_s)
+    for name in ("bit_depth", "channels", "exposure_basis"):
+        assert getattr(crop, name) == getattr(stack, name)
+    np.testing.assert_array_equal(crop.saturation_level, stack.saturation_level)
+    np.testing.assert_array_equal(crop.black_level, stack.black_level)
+    one = stack.with_frames(frames[:, 1:], [0.04])
+    np.testing.assert_array_equal(one.exposure_s, [0.04])
+    np.testing.assert_array_equal(one.saturation_level, stack.saturation_level)
