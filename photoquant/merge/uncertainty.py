@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from photoquant.errors import InputError
+from photoquant.merge._tables import ValueTables
 from photoquant.merge.debevec1997 import DebevecMergeOptions, _check_inputs
 from photoquant.merge.noise_aware import NoiseParameters, _log_variance, _Scale
 from photoquant.response.model import ResponseModel
@@ -119,27 +120,26 @@ def log_variance_Debevec1997(
         n,
     )
     scale = _Scale(response)
-    means = inp.values / n if n > 1 else inp.values
-    shape = means.shape[1:]
+    read2 = np.asarray(noise.read_noise, dtype=np.float64) ** 2
+
+    def variance(v: np.ndarray, ch: int) -> np.ndarray:
+        y = scale.linear(scale.log_inverse(v, ch), ch)
+        return _log_variance(y, scale.slope(v, ch), float(noise.gain[ch]), float(read2[ch]), n)
+
+    # the weights and variances of every possible mean value, looked up per exposure (the
+    # noise-aware merge's tables): no interpolation per pixel
+    tables = ValueTables(stack)
+    weight_table = tables.table(inp.weights)
+    variance_table = tables.table(variance)
+    shape = (*stack.image_shape, stack.n_channels)
     num = np.zeros(shape, dtype=np.float64)
     den = np.zeros(shape, dtype=np.float64)
-    read2 = np.asarray(noise.read_noise, dtype=np.float64) ** 2
-    for k in range(means.shape[0]):
-        v = np.asarray(means[k], dtype=np.float64)
-        w = inp.weights(v, slice(None))
-        excluded = np.zeros(shape, dtype=bool)
+    for k in range(stack.n_exposures):
+        w = tables.take(weight_table, k)
         for mask in (inp.saturated, inp.dark_clipped):
             if mask is not None:
-                excluded |= mask[k]
-        w = np.where(excluded, 0.0, w)
-        var = np.empty(shape, dtype=np.float64)
-        for ch in range(shape[-1]):
-            vc = v[..., ch]
-            y = scale.linear(scale.log_inverse(vc, ch), ch)
-            var[..., ch] = _log_variance(
-                y, scale.slope(vc, ch), float(noise.gain[ch]), float(read2[ch]), n
-            )
-        num += np.where(w > 0, w * w * var, 0.0)
+                w = np.where(mask[k], 0.0, w)
+        num += np.where(w > 0, w * w * tables.take(variance_table, k), 0.0)
         den += w
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(den > 0, num / np.where(den > 0, den * den, 1.0), np.nan)
