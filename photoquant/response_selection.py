@@ -304,12 +304,14 @@ def _grid_stack(stack: ExposureStack, exposures: Sequence[int], stride: int) -> 
 
 
 def _held_out_errors(
-    stack: ExposureStack, k: int, spec: tuple[str, dict[str, Any]], seed: int
+    stack: ExposureStack,
+    sub: ExposureStack,
+    k: int,
+    spec: tuple[str, dict[str, Any]],
+    seed: int,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``ẑ − z`` of exposure ``k`` predicted by ``spec`` fitted on the others (NaN: not
-    scored), and the others' merged ``ln E`` the prediction came from."""
-    keep = [i for i in range(stack.n_exposures) if i != k]
-    sub = _grid_stack(stack, keep, 1)
+    """``ẑ − z`` of exposure ``k`` of ``stack`` predicted by ``spec`` fitted on ``sub``, the
+    other exposures (NaN: not scored), and their merged ``ln E`` the prediction came from."""
     response = fit_response(sub, spec, rng=seed).model
     merged = MergeModel().merge(sub, response)
     log_e = merged.log_photoquantity
@@ -424,11 +426,15 @@ def select_response(
     h, w = stack.image_shape
     stride = max(1, math.ceil(math.sqrt(h * w / opts.max_pixels)))
     grid = _grid_stack(stack, range(k_count), stride)
+    # each fold's other exposures, shared by every candidate (with their cached statistics)
+    others = {k: _grid_stack(grid, [i for i in range(k_count) if i != k], 1) for k in folds}
     tallies: list[tuple[np.ndarray, np.ndarray, float] | None] = []
     errors: list[str | None] = []
     for spec in opts.candidates:
         try:
-            folds_tally = [_fold_tallies(*_held_out_errors(grid, k, spec, seed)) for k in folds]
+            folds_tally = [
+                _fold_tallies(*_held_out_errors(grid, others[k], k, spec, seed)) for k in folds
+            ]
         except (CalibrationError, InputError) as exc:
             tallies.append(None)
             errors.append(str(exc))
