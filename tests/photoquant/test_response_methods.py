@@ -477,6 +477,22 @@ def test_emor_recovers_the_coefficients_of_an_emor_response(rng, bit_depth):
         assert np.all(np.abs(c - c_true) <= bound), (ch, c - c_true, bound)
 
 
+def test_emor_with_one_curve_for_every_channel(rng):
+    """The same EMoR camera (every channel the same ``f``, only their clipping levels
+    differ): ``channels="shared"`` fits one coefficient vector from all channels' samples,
+    within the rounding bound of the smallest channel's range (as above)."""
+    c_true = np.array([0.8, -0.5, 0.3])
+    stack = _emor_stack(rng, c_true, 8)
+    fit = fit_response(stack, ("EMoR 2004", {"n_components": 3, "channels": "shared"}))
+    coefficients = np.asarray(fit.model.params["coefficients"])
+    assert fit.model.params["channels"] == "shared"
+    assert np.all(coefficients == coefficients[0])  # one curve
+    bound = np.sqrt(1024) * 0.5 / float(np.min(stack.saturation_level))
+    assert np.all(np.abs(coefficients[0] - c_true) <= bound), (coefficients[0] - c_true, bound)
+    with pytest.raises(InputError, match="unknown EMoR channels 'per-pixel'"):
+        fit_response(stack, ("EMoR 2004", {"channels": "per-pixel"}))
+
+
 @pytest.mark.parametrize(
     ("truth", "bit_depth", "n_components"),
     [
