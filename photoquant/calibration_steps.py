@@ -521,11 +521,11 @@ def refine_exposures_step(
         exposures["floor_log"] = floor
     if policy.refine and irradiance is not None:
         irradiance, exposures["irradiance"] = _refine_stack(
-            irradiance, resp, seed, floor, "irradiance scene", log.notes, asked=policy.asked
+            irradiance, resp, seed, floor, "irradiance scene", log.notes, policy.asked, defects
         )
     if policy.refine and flat_field is not None:
         flat_field, exposures["flat_field"] = _refine_stack(
-            flat_field, resp, seed, floor, "flat field", log.notes, asked=policy.asked
+            flat_field, resp, seed, floor, "flat field", log.notes, policy.asked, defects
         )
     if policy.refine and glare is not None and glare_fitted:
         glare, entry = _refine_glare_capture(glare, resp, seed, floor, defects, lag, policy, log)
@@ -555,7 +555,7 @@ def _refine_glare_capture(
     """
     glare_ref: ExposureRefinement | None = None
     try:
-        glare_ref = _refine_against(glare, response, seed)
+        glare_ref = _refine_against(glare, response, seed, defects)
         decision = judge_exposure_times(glare_ref, floor_log=floor)
     except CalibrationError as exc:
         log.note(f"glare capture's exposures not refined, nominal times kept: {exc}")
@@ -1183,8 +1183,8 @@ def _refine_stack(
     floor: float,
     what: str,
     notes: list[str],
-    *,
     asked: bool,
+    defects: DefectMap | None = None,
 ) -> tuple[ExposureStack, dict[str, Any]]:
     """``stack`` with its times refined against ``response`` where the data contradict its
     labels (:func:`~photoquant.exposure.judge_exposure_times`) or where refinement was
@@ -1194,7 +1194,7 @@ def _refine_stack(
     error; the default keeps the labels, with a note.
     """
     try:
-        refinement = _refine_against(stack, response, seed)
+        refinement = _refine_against(stack, response, seed, defects)
     except CalibrationError as exc:
         if asked:
             raise
@@ -1207,8 +1207,20 @@ def _refine_stack(
     return (refinement.apply(stack) if decision.refine or asked else stack), entry
 
 
-def _refine_against(stack: ExposureStack, response: ResponseModel, seed: int) -> ExposureRefinement:
-    """``stack``'s exposure times re-estimated against a known response (one-line errors)."""
+def _refine_against(
+    stack: ExposureStack, response: ResponseModel, seed: int, defects: DefectMap | None = None
+) -> ExposureRefinement:
+    """``stack``'s exposure times re-estimated against a known response (one-line errors).
+
+    The views' hot and stuck pixels (``defects``) are left out
+    (:func:`photoquant.defects.hide_defects`): a stuck pixel's value is the
+    same at every exposure, a ratio of 1 between any two, and on a frame set
+    that is mostly dark (a glare capture) such pixels alone can link
+    exposures and pull their times together.
+    """
+    if defects is not None and defects.mask.shape == stack.frames.shape[2:]:
+        top = np.maximum(np.asarray(stack.saturation_level), response.saturation_level)
+        stack = hide_defects(stack, defects, np.minimum(top, stack.c_max))
     try:
         return refine_against_response(stack, response, seed=seed)
     except CalibrationError as exc:

@@ -633,14 +633,19 @@ def exclude_defects(merged: Any, defects: DefectMap | None) -> Any:
     )
 
 
-def hide_defects(stack: ExposureStack, defects: DefectMap | None) -> ExposureStack:
+def hide_defects(
+    stack: ExposureStack, defects: DefectMap | None, level: np.ndarray | None = None
+) -> ExposureStack:
     """``stack`` with its defects at the saturation level in every frame: no response sample.
 
     A pixel saturated in every frame carries no information to a response
     method (zero weight, never sampled), which is what a defect should be
     for the response fit; its histogram-based sampling would otherwise pick
     hot pixels first, as the rarest bright values. The saturation and black
-    levels are kept. Returns ``stack`` itself when there is nothing to hide.
+    levels are kept. ``level`` (per channel): the clipping level to hide
+    them at, where a step judges values against another one than the
+    stack's (a response's). Returns ``stack`` itself when there is nothing
+    to hide.
     """
     if defects is None or not defects.mask.any():
         return stack
@@ -649,6 +654,6 @@ def hide_defects(stack: ExposureStack, defects: DefectMap | None) -> ExposureSta
         raise InputError(
             f"the defect map has shape {bad.shape}, the stack {stack.frames.shape[2:]}"
         )
-    sat = np.asarray(stack.saturation_level)
+    sat = np.asarray(stack.saturation_level if level is None else level)
     frames = np.where(bad[None, None], sat.astype(stack.frames.dtype), stack.frames)
     return stack.with_frames(frames)

@@ -67,6 +67,7 @@ _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
             "toe": "solved",
             "censoring": "ignored",
             "wide_steps": "none",
+            "robust": "none",
         },
     ),
     # eq. 6: the hat over every value the camera gives
@@ -156,6 +157,14 @@ DEVIATIONS: tuple[Deviation, ...] = (
         "on brackets wider than 2.2x a step, the smoothness grows as the step's 4th power about "
         "the EMoR mean response, so the shape the data leave open follows a camera's, not a "
         "straight g (Grossberg & Nayar 2004)",
+    ),
+    Deviation(
+        "robust response fit",
+        "response",
+        {"robust": "huber"},
+        "eq. 7's data rows reweighted by Huber's loss against their level's noise, so values no "
+        "single response explains (a scene that moved between exposures, JPEG ringing) pull g "
+        "with a bounded weight (Huber 1964)",
     ),
     Deviation(
         "quantisation-aware weights",

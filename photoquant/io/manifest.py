@@ -93,6 +93,7 @@ import itertools
 import json
 import math
 import os
+import stat
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -714,6 +715,11 @@ def load_manifest(path: PathLike, *, allow_outside: bool = False) -> CaptureMani
     """
     path = Path(path)
     try:
+        mode = path.stat().st_mode
+        if stat.S_ISDIR(mode):
+            raise ManifestError(f"manifest {path}: it is a folder, not a file")
+        if not stat.S_ISREG(mode):  # a FIFO would block the read, a device never end it
+            raise ManifestError(f"manifest {path}: not a regular file (a device, FIFO or socket)")
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ManifestError(f"manifest {path}: no such file") from None

@@ -76,6 +76,23 @@ Implementation notes
   changes. ``toe="solved"`` keeps eq. 7's solution everywhere (the earlier
   behaviour: the prior's extrapolation, flattened by the monotonicity
   constraint).
+* **Robust fit** (``robust="huber"``, the default): eq. 7 is least squares,
+  so a value no response can explain — water or leaves that moved between
+  exposures, a JPEG's ringing — pulls ``g`` in proportion to its residual.
+  After the least-squares solution, each data row's weight is multiplied by
+  the square root of Huber's weight ``min(1, k s / |r|)`` of its residual
+  ``r``, ``k = 1.345``, ``s`` the robust noise scale of the row's band of
+  levels (16 bands), and eq. 7 solved again, ``robust_rounds`` times
+  (iteratively reweighted least squares; :mod:`photoquant.response.robust`).
+  Measured in leave-one-exposure-out prediction on the user's path
+  (``photoquant crossval``): the St. Louis Arch (moving water) 16.9 → 11.1
+  DN, Memorial 2.37 → 2.32, the 12-bit bracket 95.8 → 94.2, frobisher 6.30
+  → 6.62; on the pqsim presets (160×120, K = 4 and 8, two seeds) the
+  ``g`` error changes by a factor of 0.58–1.11, geometric mean 0.92.
+  ``robust="tukey"`` ends with Tukey's biweight, which removes gross
+  outliers (a quarter of one exposure from another scene: ``g`` within its
+  clean-data error, where Huber's stays 4–5× above), at some cost without
+  them. ``robust="none"`` is eq. 7's least squares (the paper's).
 
 References
 ----------
@@ -118,6 +135,7 @@ from photoquant.methods import StepFit
 from photoquant.response import _kernels
 from photoquant.response.censoring import CENSORING_MODES, trim_censored_partners
 from photoquant.response.model import ResponseModel
+from photoquant.response.robust import LEVEL_BANDS, check_robust, robust_weights
 from photoquant.response.wide_steps import (
     WIDE_STEP_MODES,
     emor_mean_log_inverse,
@@ -640,7 +658,7 @@ def _solve_channel(
     smoothness: float,
     gauge: int,
     prior: np.ndarray | None = None,
-) -> tuple[np.ndarray, float, bool, int, np.ndarray]:
+) -> tuple[np.ndarray, float, bool, int, np.ndarray, np.ndarray]:
     """Solve eq. 7 for one channel on ``P`` sampled pixels (arrays ``(K, P)``); ``prior``
     (``(top + 1, top + 1)``), when given, is a further quadratic penalty on ``g``."""
     n_g = top + 1
@@ -686,7 +704,7 @@ def _solve_channel(
     )
     resid = (fitted - eq["w"] * log_e - eq["wlt"])[valid]
     rms = float(np.sqrt(np.mean(resid**2))) if n_data else float("nan")
-    return g, rms, constrained, n_data, eq["support"]
+    return g, rms, constrained, n_data, eq["support"], log_e
 
 
 def camera_response_Debevec1997(
@@ -709,6 +727,8 @@ def camera_response_Debevec1997(
     censoring: str = "trimmed",
     wide_steps: str = "template",
     workers: int | None = None,
+    robust: str = "huber",
+    robust_rounds: int = 3,
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -772,6 +792,18 @@ def camera_response_Debevec1997(
         grows as ``(ρ/ρ₀)⁴`` (:mod:`photoquant.response.wide_steps`), so that
         the shape the data leave open follows a camera's, not a straight
         ``g``; ``"none"``: β as given (the paper's).
+    robust : {"huber", "tukey", "none"}
+        ``"huber"`` (default): eq. 7's data rows reweighted by Huber's loss
+        against the noise of their band of levels, ``robust_rounds`` times
+        (:mod:`photoquant.response.robust`, module notes, *Robust fit*), so
+        that values no response explains (a scene that moved between
+        exposures, a JPEG's ringing) pull ``g`` with a bounded weight;
+        ``"tukey"``: the first half of the rounds Huber's, the rest Tukey's
+        biweight, which gives gross outliers no weight (for captures with
+        much motion; less efficient without outliers); ``"none"``: least
+        squares (the paper's).
+    robust_rounds : int
+        Reweighting rounds after the least-squares solution (1 to 50).
     workers : int, optional
         Threads for the channels. By default one per channel wherever the
         process may run on two CPUs or more, and one thread otherwise: three
@@ -803,6 +835,8 @@ def camera_response_Debevec1997(
         raise InputError(f"`wide_steps` must be one of {list(WIDE_STEP_MODES)}, got {wide_steps!r}")
     if int(n_samples) < 2:
         raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
+    check_robust(robust, robust_rounds)
+    rounds = 1 + int(robust_rounds) if robust != "none" else 1
     if workers is None:  # one thread per channel wherever there is more than one CPU
         workers = n_ch if default_workers() > 1 else 1
     workers = check_workers(workers)
@@ -895,17 +929,22 @@ def camera_response_Debevec1997(
                 g0 = emor_mean_log_inverse(levels[: top + 1], c_lo, sat[ch])
                 rows = smooth_w[1:top] ** 2
                 prior = smoothness * template_penalty(rows, g0, factors[ch])
-        g, rms[ch], constrained[ch], n_eq[ch], support = _solve_channel(
-            valid_idx,
-            np.where(valid_idx, weights, 0.0),
-            log_t,
-            vals[:, idx] / spacing,
-            top,
-            smooth_w,
-            smoothness,
-            gauge,
-            prior,
-        )
+        row_w = np.where(valid_idx, weights, 0.0)
+        knots = vals[:, idx] / spacing
+        for n_round in range(rounds):
+            g, rms[ch], constrained[ch], n_eq[ch], support, log_e = _solve_channel(
+                valid_idx, row_w, log_t, knots, top, smooth_w, smoothness, gauge, prior
+            )
+            if n_round == rounds - 1:
+                break
+            # Huber's reweighting of eq. 7's data rows (photoquant.response.robust):
+            # the row is w·(g(z) − ln E − ln t), its squared weight scales by the
+            # Huber weight of that residual against its band of levels' noise
+            at = np.minimum(knots, top)
+            resid = weights * (np.interp(at, np.arange(top + 1), g) - log_e - log_t[:, None])
+            band = np.minimum((at * LEVEL_BANDS / (top + 1)).astype(np.int64), LEVEL_BANDS - 1)
+            loss = "tukey" if robust == "tukey" and n_round >= (rounds - 1) // 2 else "huber"
+            row_w = weights * np.sqrt(robust_weights(resid, valid_idx, band, loss=loss))
         # lowest measured level: below it g is extrapolated by the prior alone
         # (gaps between measured levels are interpolated, which is fine)
         measured = np.flatnonzero(support[: gauge + 1] >= min_support)
@@ -1001,6 +1040,8 @@ class DebevecResponseOptions:
     max_pixels: int | None = DEFAULT_MAX_PIXELS
     censoring: str = "trimmed"
     wide_steps: str = "template"
+    robust: str = "huber"
+    robust_rounds: int = 3
 
     def __post_init__(self) -> None:
         if self.toe not in TOE_MODES:
@@ -1021,6 +1062,7 @@ class DebevecResponseOptions:
         validate_method(self.sampling, SAMPLING_METHODS, "sampling")
         if self.max_pixels is not None:
             check_int(self.max_pixels, "max_pixels", 2)
+        check_robust(self.robust, self.robust_rounds)
 
 
 def characterise_response_Debevec1997(
@@ -1086,6 +1128,8 @@ def characterise_response_Debevec1997(
         wide_steps=opts.wide_steps,
         rng=rng,
         c_min=c_min,
+        robust=opts.robust,
+        robust_rounds=opts.robust_rounds,
     )
     model = ResponseModel(
         method="Debevec 1997",

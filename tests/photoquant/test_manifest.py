@@ -398,6 +398,17 @@ def test_manifest_missing_or_binary(tmp_path):
         load_manifest(tmp_path / "bin.json")
 
 
+def test_a_manifest_that_is_a_fifo_or_a_folder_is_refused_not_waited_on(tmp_path):
+    import os
+
+    os.mkfifo(tmp_path / "pipe.json")  # nobody writes to it: reading it would block
+    with pytest.raises(ManifestError, match=r"pipe\.json: not a regular file"):
+        load_manifest(tmp_path / "pipe.json")
+    (tmp_path / "dir.json").mkdir()
+    with pytest.raises(ManifestError, match=r"dir\.json: it is a folder"):
+        load_manifest(tmp_path / "dir.json")
+
+
 # ----------------------------------------------------------------------------- path safety
 
 
