@@ -1773,6 +1773,10 @@ def fit_affine_shutter(
         std = np.full(p_hat.size, np.inf)
     beta = gain - 1.0
     offsets = coef[1:]
+    # the exponent's error spread over each stack's exposures; where the fit's normal
+    # matrix is singular it is undetermined (reported as an infinite exponent_std) and
+    # adds nothing here rather than 0 × ∞ at the gauge's exposure
+    s0 = float(std[0]) / (1 + beta) if np.isfinite(std[0]) else 0.0
     out = []
     for v, r in enumerate(refs):
         x = np.log(r.exposure_s)
@@ -1784,11 +1788,11 @@ def fit_affine_shutter(
             new[sel] += x[sel].mean() - new[sel].mean()
         else:
             new[sel] += x[sel][-1] - new[sel][-1]
-        spread_std = np.abs(new - new[sel].mean()) * std[0] / (1 + beta)
+        spread_std = np.abs(new - new[sel].mean()) * s0
         log_std = np.where(sel, np.sqrt(r.log_std**2 + spread_std**2), r.log_std)
         log_cov = r.log_cov
         if log_cov is not None:  # the exponent's error is common to the stack's exposures
-            spread = np.where(sel, (new - new[sel].mean()) * std[0] / (1 + beta), 0.0)
+            spread = np.where(sel, (new - new[sel].mean()) * s0, 0.0)
             log_cov = log_cov + np.outer(spread, spread)
         out.append(dataclasses.replace(r, exposure_s=np.exp(new), log_std=log_std, log_cov=log_cov))
     info = ShutterFit(

@@ -201,3 +201,16 @@ def test_a_robust_emor_fit_resists_a_moved_scene():
     none, huber, tukey = error("none"), error("huber"), error("tukey")
     assert huber < 0.8 * none
     assert tukey < 0.5 * none
+
+
+def test_bands_are_even_in_log_level_above_black():
+    from photoquant.response.debevec1997 import _log_bands
+
+    knots = np.arange(256.0)
+    band = _log_bands(knots, 0.0, 255)
+    assert band[0] == 0 and band[255] == 15 and np.all(np.diff(band) >= 0)
+    # the darkest levels each in a band of their own; the top octave shares one or two
+    assert len(set(band[1:4].tolist())) == 3
+    assert band[128] >= 14
+    # below the black level: the first band
+    assert np.all(_log_bands(np.array([0.0, 5.0, 16.0]), 16.0, 255) == 0)
