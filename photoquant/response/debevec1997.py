@@ -141,7 +141,7 @@ from photoquant.methods import StepFit
 from photoquant.response import _kernels
 from photoquant.response.censoring import CENSORING_MODES, trim_censored_partners
 from photoquant.response.model import ResponseModel
-from photoquant.response.robust import LEVEL_BANDS, check_robust, robust_weights
+from photoquant.response.robust import LEVEL_BANDS, check_robust, robust_weights, round_loss
 from photoquant.response.wide_steps import (
     WIDE_STEP_MODES,
     emor_mean_log_inverse,
@@ -962,7 +962,7 @@ def camera_response_Debevec1997(
             at = np.minimum(knots, top)
             resid = weights * (np.interp(at, np.arange(top + 1), g) - log_e - log_t[:, None])
             band = _log_bands(at, c_lo / spacing, top)
-            loss = "tukey" if robust == "tukey" and n_round >= (rounds - 1) // 2 else "huber"
+            loss = round_loss(robust, n_round, rounds - 1)
             row_w = weights * np.sqrt(robust_weights(resid, valid_idx, band, loss=loss))
         # lowest measured level: below it g is extrapolated by the prior alone
         # (gaps between measured levels are interpolated, which is fine)

@@ -146,7 +146,7 @@ from photoquant.response._common import (
 )
 from photoquant.response.gamma import PAIR_WEIGHTINGS
 from photoquant.response.model import ResponseModel
-from photoquant.response.robust import LEVEL_BANDS, ROBUST_LOSSES, robust_weights
+from photoquant.response.robust import LEVEL_BANDS, ROBUST_LOSSES, robust_weights, round_loss
 from photoquant.stack import ExposureStack
 
 __all__ = [
@@ -498,6 +498,8 @@ def fit_emor_values(
     d_f0 = np.diff(f0)
     w_base = w
     used = w_base > 0
+    # each value's band of levels, for a robust loss's noise scales (the values are fixed)
+    band = np.minimum((np.clip(m, 0.0, 1.0) * LEVEL_BANDS).astype(np.int64), LEVEL_BANDS - 1)
 
     def at(x: np.ndarray, table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``table`` at exposures ``x ∈ [0, 1]`` (linear between grid points) and the segment."""
@@ -551,10 +553,7 @@ def fit_emor_values(
         if robust != "none":
             # IRLS (photoquant.response.robust): each value's weight scaled by
             # its loss's weight against its band of levels' noise
-            loss = "tukey" if robust == "tukey" and n_round > rounds // 2 else "huber"
-            band = np.minimum(
-                (np.clip(m, 0.0, 1.0) * LEVEL_BANDS).astype(np.int64), LEVEL_BANDS - 1
-            )
+            loss = round_loss(robust, n_round - 1, rounds)
             w = w_base * robust_weights(r * np.sqrt(w_base), used, band, loss=loss)
         if n_round <= 2:
             # alternation (robust far from the minimum): Gauss-Newton in x, then

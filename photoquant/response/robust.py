@@ -64,6 +64,7 @@ __all__ = [
     "ROBUST_LOSSES",
     "TUKEY_C",
     "check_robust",
+    "round_loss",
     "robust_weights",
 ]
 
@@ -96,6 +97,21 @@ def check_robust(robust: object, rounds: object) -> None:
         or not 1 <= rounds <= 50
     ):
         raise InputError(f"`robust_rounds` must be an integer from 1 to 50, got {rounds!r}")
+
+
+def round_loss(robust: str, index: int, n_rounds: int) -> str:
+    """The loss whose weights reweighting round ``index`` of ``n_rounds`` (from 0) takes.
+
+    ``"tukey"`` takes Huber's weights for the first half of the rounds and
+    the biweight's after them (started from Huber's solution, module notes);
+    ``"huber"`` takes Huber's throughout.
+
+    Examples
+    --------
+    >>> [round_loss("tukey", i, 3) for i in range(3)]
+    ['huber', 'tukey', 'tukey']
+    """
+    return "tukey" if robust == "tukey" and index >= n_rounds // 2 else "huber"
 
 
 def robust_weights(
