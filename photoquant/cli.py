@@ -29,7 +29,11 @@ __all__ = ["main", "build_parser"]
 EXIT_INPUT = 2
 EXIT_IO = 1
 UNCERTAINTY_LAYER = "sigma_ln"
-"""EXR layer of ``photoquant correct --uncertainty``: the standard uncertainty of ``ln l``."""
+"""EXR layer of ``photoquant correct --uncertainty``: the standard uncertainty of ``ln l``
+from the frames' noise."""
+RESPONSE_UNCERTAINTY_LAYER = "sigma_response_ln"
+"""EXR layer of ``photoquant correct --uncertainty``: the standard uncertainty of ``ln l``
+from the recovered response's statistical error (a calibration component)."""
 
 
 def _log(args: argparse.Namespace, message: str) -> None:
@@ -156,6 +160,22 @@ def _section(report: dict[str, Any], key: str) -> dict[str, Any]:
     return value if isinstance(value, dict) else {}
 
 
+def _response_std_summary(response: Any, std: np.ndarray) -> str:
+    """The statistical standard uncertainty of ``g`` per channel, median and largest
+    over the measured levels (``valid_min`` to saturation)."""
+    parts = []
+    for ch in range(std.shape[0]):
+        inside = (response.levels >= response.valid_min[ch]) & (
+            response.levels < response.saturation_level[ch]
+        )
+        s = std[ch][inside] if inside.any() else std[ch]
+        parts.append(f"{np.median(s):.2g}/{np.max(s):.2g}")
+    return (
+        "std of g (ln, median/largest over the measured levels, relative to mid-range) "
+        + " ".join(parts)
+    )
+
+
 def _print_summary(model: Any, where: Path | None = None) -> None:
     """What a camera holds, from its models and (defensively) its report."""
     rep = model.report if isinstance(model.report, dict) else {}
@@ -176,6 +196,9 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     if "residual_rms" in resp:
         line += f", residual rms (ln) {_fmt(resp['residual_rms'])}"
     lines.append(line)
+    std = model.response.log_inverse_std()
+    if std is not None:
+        lines.append("response uncertainty: " + _response_std_summary(model.response, std))
     lines.append(f"balance: {_fmt(model.balance.factors)}")
     noise = model.parameters.get("noise")
     if isinstance(noise, dict) and "gain_dn_per_e" in noise:
@@ -296,6 +319,13 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         description += (
             f"; {UNCERTAINTY_LAYER}.*: standard uncertainty of ln l from the frames' noise"
         )
+    if result.log_sigma_response is not None:
+        image = np.concatenate([image, result.log_sigma_response], axis=-1)
+        names += [f"{RESPONSE_UNCERTAINTY_LAYER}.{c}" for c in model.channels]
+        description += (
+            f"; {RESPONSE_UNCERTAINTY_LAYER}.*: standard uncertainty of ln l from the "
+            "recovered response's statistical error (common to every scene)"
+        )
     out.parent.mkdir(parents=True, exist_ok=True)
     # no replace without the flag, and only of an OpenEXR image
     with atomic_output_file(out, overwrite=args.overwrite, replaceable=EXR_IMAGE.problem) as tmp:
@@ -317,6 +347,14 @@ def _cmd_correct(args: argparse.Namespace) -> int:
             f"median {np.median(sigma) if sigma.size else float('nan'):.3g}, "
             f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g}, "
             f"channels {UNCERTAINTY_LAYER}.* in {out.name}"
+        )
+    if result.log_sigma_response is not None:
+        sigma = result.log_sigma_response[np.isfinite(result.log_sigma_response)]
+        print(
+            "uncertainty of ln l from the response's statistical error: "
+            f"median {np.median(sigma) if sigma.size else float('nan'):.3g}, "
+            f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g}, "
+            f"channels {RESPONSE_UNCERTAINTY_LAYER}.* in {out.name}"
         )
     if result.exposures is not None:
         print(f"scene exposures: {_exposure_line(result.exposures.as_dict())}")
@@ -512,7 +550,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--uncertainty",
         action="store_true",
         help=f"also write the standard uncertainty of ln l from the frames' noise "
-        f"(channels {UNCERTAINTY_LAYER}.R, ...)",
+        f"(channels {UNCERTAINTY_LAYER}.R, ...) and, where the camera's response states "
+        f"its covariance, from the response's statistical error "
+        f"({RESPONSE_UNCERTAINTY_LAYER}.R, ...)",
     )
     cor.set_defaults(func=_cmd_correct)
 

@@ -38,7 +38,11 @@ from photoquant.exposure import (
 from photoquant.merge import MergeModel
 from photoquant.merge._tiled import merge_tiles
 from photoquant.merge.noise_aware import NoiseParameters, estimate_noise_parameters
-from photoquant.merge.uncertainty import log_variance_Debevec1997, noise_parameters_from_record
+from photoquant.merge.uncertainty import (
+    log_variance_Debevec1997,
+    log_variance_response_Debevec1997,
+    noise_parameters_from_record,
+)
 from photoquant.methods import resolve_method
 from photoquant.model import CameraModel
 from photoquant.stack import ExposureStack
@@ -75,6 +79,13 @@ class Correction:
     noise : NoiseParameters, optional
         The gain and read noise it was computed with (``source`` says whether
         from the scene's repeats or the camera's calibration).
+    log_sigma_response : ndarray, shape (H, W, C), float32, optional
+        With ``uncertainty=True`` and a camera whose response carries its
+        covariance: the standard uncertainty of ``ln l`` from the recovered
+        response's own (statistical) error
+        (:func:`~photoquant.merge.uncertainty.log_variance_response_Debevec1997`),
+        a *calibration* component common to every scene corrected with the
+        camera; NaN where ``mask`` is set.
     """
 
     photoquantity: np.ndarray
@@ -86,6 +97,15 @@ class Correction:
     exposure_decision: ExposureDecision | None = None
     log_sigma_noise: np.ndarray | None = None
     noise: NoiseParameters | None = None
+    log_sigma_response: np.ndarray | None = None
+
+    @property
+    def log_sigma(self) -> np.ndarray | None:
+        """The components stated, combined (``√(σ_noise² + σ_response²)``; ``None``: none)."""
+        parts = [p for p in (self.log_sigma_noise, self.log_sigma_response) if p is not None]
+        if not parts:
+            return None
+        return np.sqrt(sum(p.astype(np.float64) ** 2 for p in parts)).astype(np.float32)
 
 
 def _camera_refines(model: CameraModel) -> bool:
@@ -263,7 +283,7 @@ def correct(
     if defects is not None and defects.mask.any():
         photoquantity[defects.mask] = np.nan
         mask |= defects.mask
-    sigma, noise = None, None
+    sigma, noise, sigma_response = None, None, None
     if uncertainty:
         noise = _noise_parameters(stack, model)
         variance = log_variance_Debevec1997(stack, model.balanced_response(), noise, merger.options)
@@ -271,6 +291,16 @@ def correct(
         sigma[mask] = np.nan
         if not model.glare.is_identity:
             notes.append("uncertainty: the merge's noise before glare removal")
+        if model.response.covariance_factor is not None:
+            sigma_response = np.sqrt(
+                log_variance_response_Debevec1997(stack, model.balanced_response(), merger.options)
+            ).astype(np.float32)
+            sigma_response[mask] = np.nan
+        else:
+            notes.append(
+                f"uncertainty: the response ({model.response.method}) states no covariance; "
+                "its part of the calibration uncertainty is not included"
+            )
     return Correction(
         photoquantity=photoquantity,
         mask=mask,
@@ -281,6 +311,7 @@ def correct(
         exposure_decision=decision,
         log_sigma_noise=sigma,
         noise=noise,
+        log_sigma_response=sigma_response,
     )
 
 

@@ -40,17 +40,23 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     args = ["correct", str(capture), "--camera", str(cam), "-o", str(exr2), "-q", "--uncertainty"]
     assert main(args) == 0
     both, names = read_exr(exr2)
-    assert names == ("R", "G", "B", "sigma_ln.R", "sigma_ln.G", "sigma_ln.B")
+    assert names == (
+        "R", "G", "B", "sigma_ln.R", "sigma_ln.G", "sigma_ln.B",
+        "sigma_response_ln.R", "sigma_response_ln.G", "sigma_response_ln.B",
+    )  # fmt: skip
     np.testing.assert_array_equal(both[..., :3], img)
-    sigma = both[..., 3:]
-    assert np.all(np.isfinite(sigma) == np.isfinite(img)) and np.nanmin(sigma) > 0
-    assert "uncertainty of ln l from noise" in capsys.readouterr().out
+    for sigma in (both[..., 3:6], both[..., 6:]):
+        assert np.all(np.isfinite(sigma) == np.isfinite(img)) and np.nanmin(sigma) > 0
+    text = capsys.readouterr().out
+    assert "uncertainty of ln l from noise" in text
+    assert "uncertainty of ln l from the response's statistical error" in text
 
     assert main(["info", str(cam)]) == 0
     text = capsys.readouterr().out
     # the model's adequacy and the exposure-time decision, each with its statistic
     assert "model adequacy: the data depart from one global response" in text
     assert "noise: gain [" in text and "DN/e-, read noise [" in text
+    assert "response uncertainty: std of g (ln, median/largest" in text
     assert "views' exposure times: nominal times kept: likelihood ratio" in text
 
     assert main(["info", str(cam), "--json"]) == 0

@@ -46,7 +46,12 @@ from photoquant.merge.noise_aware import NoiseParameters, _log_variance, _Scale
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
-__all__ = ["log_variance_Debevec1997", "noise_parameters_from_record", "noise_record"]
+__all__ = [
+    "log_variance_Debevec1997",
+    "log_variance_response_Debevec1997",
+    "noise_parameters_from_record",
+    "noise_record",
+]
 
 
 def noise_record(params: NoiseParameters) -> dict[str, Any]:
@@ -101,9 +106,31 @@ def log_variance_Debevec1997(
         The variance in ``ln`` units; NaN where no exposure has weight (the
         merge's mask).
     """
-    opts = options or DebevecMergeOptions()
     if not isinstance(noise, NoiseParameters):
         raise InputError(f"`noise` must be NoiseParameters, got {type(noise).__name__}")
+    n = stack.n_repeats
+    tables, weights, den = _merge_weights(stack, response, options)
+    scale = _Scale(response)
+    read2 = np.asarray(noise.read_noise, dtype=np.float64) ** 2
+
+    def variance(v: np.ndarray, ch: int) -> np.ndarray:
+        y = scale.linear(scale.log_inverse(v, ch), ch)
+        return _log_variance(y, scale.slope(v, ch), float(noise.gain[ch]), float(read2[ch]), n)
+
+    variance_table = tables.table(variance)
+    num = np.zeros_like(den)
+    for k, w in enumerate(weights):
+        num += np.where(w > 0, w * w * tables.take(variance_table, k), 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / np.where(den > 0, den * den, 1.0), np.nan)
+
+
+def _merge_weights(
+    stack: ExposureStack, response: ResponseModel, options: DebevecMergeOptions | None
+) -> tuple[ValueTables, list[np.ndarray], np.ndarray]:
+    """The merge's weight of every value, ``w_k`` ``(H, W, C)`` per exposure (0 where the
+    merge leaves the value out), the value tables, and ``Σ_k w_k``."""
+    opts = options or DebevecMergeOptions()
     n = stack.n_repeats
     values = stack.frames[0] if n == 1 else stack.repeat_sum()
     inp = _check_inputs(
@@ -119,27 +146,77 @@ def log_variance_Debevec1997(
         np.asarray(response.black_level, dtype=np.float64),
         n,
     )
-    scale = _Scale(response)
-    read2 = np.asarray(noise.read_noise, dtype=np.float64) ** 2
-
-    def variance(v: np.ndarray, ch: int) -> np.ndarray:
-        y = scale.linear(scale.log_inverse(v, ch), ch)
-        return _log_variance(y, scale.slope(v, ch), float(noise.gain[ch]), float(read2[ch]), n)
-
-    # the weights and variances of every possible mean value, looked up per exposure (the
-    # noise-aware merge's tables): no interpolation per pixel
+    # the weights of every possible mean value, looked up per exposure (the noise-aware
+    # merge's tables): no interpolation per pixel
     tables = ValueTables(stack)
     weight_table = tables.table(inp.weights)
-    variance_table = tables.table(variance)
-    shape = (*stack.image_shape, stack.n_channels)
-    num = np.zeros(shape, dtype=np.float64)
-    den = np.zeros(shape, dtype=np.float64)
+    weights = []
     for k in range(stack.n_exposures):
         w = tables.take(weight_table, k)
         for mask in (inp.saturated, inp.dark_clipped):
             if mask is not None:
                 w = np.where(mask[k], 0.0, w)
-        num += np.where(w > 0, w * w * tables.take(variance_table, k), 0.0)
-        den += w
+        weights.append(w)
+    return tables, weights, np.sum(weights, axis=0)
+
+
+def log_variance_response_Debevec1997(
+    stack: ExposureStack,
+    response: ResponseModel,
+    options: DebevecMergeOptions | None = None,
+) -> np.ndarray:
+    """The response's part of ``Var(ln Ê)`` after the ``"Debevec 1997"`` merge, per pixel.
+
+    ``ln Ê = Σ_k w_k (g(c̄_k) − ln t_k) / Σ_k w_k`` moves by ``Σ_k a_k δg(c̄_k)``
+    (``a_k = w_k / Σ_k w_k``) when ``g`` is off by ``δg``. With
+    ``Cov(g) = Fᵀ F + D`` (the response's low-rank factor and the rest of its
+    diagonal, :mod:`photoquant.response.covariance`)::
+
+        Var = Σ_r (Σ_k a_k F_r(c̄_k))² + Σ_k a_k² D(c̄_k),
+
+    the factor interpolated between levels as ``g`` is. The errors of ``g``
+    are common to every pixel and every scene corrected with the camera (a
+    *calibration* component): they do not average down over repeats.
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        The merged frames.
+    response : ResponseModel
+        The response the merge used, with its covariance (``covariance_factor``).
+    options : DebevecMergeOptions, optional
+        The merge's weighting and ``valid_min`` rule.
+
+    Returns
+    -------
+    ndarray, shape (H, W, C), float64
+        The variance in ``ln`` units; NaN where no exposure has weight.
+
+    Raises
+    ------
+    InputError
+        If the response carries no covariance.
+    """
+    factor, diagonal = response.covariance_factor, response.covariance_diagonal
+    if factor is None or diagonal is None:
+        raise InputError(
+            f"the response ({response.method!r}) carries no covariance: its method does not "
+            "estimate one"
+        )
+    tables, weights, den = _merge_weights(stack, response, options)
+    levels = response.levels
+    rest = np.clip(diagonal - np.sum(factor**2, axis=1), 0.0, None)
+
+    def tabulated(rows: np.ndarray) -> Any:
+        return tables.table(lambda v, ch: np.interp(v, levels, rows[ch]))
+
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, num / np.where(den > 0, den * den, 1.0), np.nan)
+        inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), np.nan)
+        total = np.zeros_like(den)
+        for r in range(factor.shape[1]):
+            table = tabulated(factor[:, r])
+            moved = sum(w * tables.take(table, k) for k, w in enumerate(weights))
+            total += (moved * inv) ** 2
+        table = tabulated(rest)
+        total += sum(w * w * tables.take(table, k) for k, w in enumerate(weights)) * inv**2
+    return np.where(den > 0, total, np.nan)

@@ -119,6 +119,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -140,6 +141,7 @@ from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import StepFit
 from photoquant.response import _kernels
 from photoquant.response.censoring import CENSORING_MODES, trim_censored_partners
+from photoquant.response.covariance import cluster_sandwich_covariance, low_rank_factor
 from photoquant.response.model import ResponseModel
 from photoquant.response.robust import LEVEL_BANDS, check_robust, robust_weights, round_loss
 from photoquant.response.wide_steps import (
@@ -274,6 +276,8 @@ class ResponseRecovery:
     smoothness: float
     valid_min: np.ndarray
     smoothness_factor: np.ndarray | None = None
+    log_inverse_response_factor: np.ndarray | None = None
+    log_inverse_response_variance: np.ndarray | None = None
 
 
 def response_levels(bit_depth: int, max_levels: int = 1024) -> np.ndarray:
@@ -677,9 +681,13 @@ def _solve_channel(
     smoothness: float,
     gauge: int,
     prior: np.ndarray | None = None,
-) -> tuple[np.ndarray, float, bool, int, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, float, bool, int, np.ndarray, np.ndarray, dict[str, Any]]:
     """Solve eq. 7 for one channel on ``P`` sampled pixels (arrays ``(K, P)``); ``prior``
-    (``(top + 1, top + 1)``), when given, is a further quadratic penalty on ``g``."""
+    (``(top + 1, top + 1)``), when given, is a further quadratic penalty on ``g``.
+
+    The last item is the system at the solution (the Cholesky factor of the reduced
+    normal matrix, each value's levels and coefficients, the data rows' residuals), for
+    :func:`photoquant.response.covariance.cluster_sandwich_covariance`."""
     n_g = top + 1
     eq = _normal_equations(valid, weights, log_t, knot_pos, top, smooth_w, smoothness, gauge)
     schur, r_red, d = eq["schur"], eq["r_red"], eq["d"]
@@ -721,9 +729,10 @@ def _solve_channel(
         eq["coef"][:k_count] * g[eq["idx"][:k_count]]
         + eq["coef"][k_count:] * g[eq["idx"][k_count:]]
     )
-    resid = (fitted - eq["w"] * log_e - eq["wlt"])[valid]
-    rms = float(np.sqrt(np.mean(resid**2))) if n_data else float("nan")
-    return g, rms, constrained, n_data, eq["support"], log_e
+    residual = np.where(valid, fitted - eq["w"] * log_e - eq["wlt"], 0.0)
+    rms = float(np.sqrt(np.mean(residual[valid] ** 2))) if n_data else float("nan")
+    system = {"cho": chol, "idx": eq["idx"], "coef": eq["coef"], "residual": residual}
+    return g, rms, constrained, n_data, eq["support"], log_e, system
 
 
 def camera_response_Debevec1997(
@@ -748,6 +757,7 @@ def camera_response_Debevec1997(
     workers: int | None = None,
     robust: str = "huber",
     robust_rounds: int = 3,
+    uncertainty: bool = False,
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -823,6 +833,10 @@ def camera_response_Debevec1997(
         squares (the paper's).
     robust_rounds : int
         Reweighting rounds after the least-squares solution (1 to 50).
+    uncertainty : bool
+        Also estimate the covariance of ``g`` (the pixel-clustered sandwich of
+        the final solve, :mod:`photoquant.response.covariance`), returned as a
+        low-rank factor.
     workers : int, optional
         Threads for the channels. By default one per channel wherever the
         process may run on two CPUs or more, and one thread otherwise: three
@@ -908,6 +922,8 @@ def camera_response_Debevec1997(
     valid_min = np.zeros(n_ch)
     factors = np.ones(n_ch)
     n_draw = int(n_samples)
+    factors_g: list[np.ndarray | None] = [None] * n_ch
+    variances_g = np.zeros((n_ch, n_levels))
 
     def usable_values(ch: int) -> tuple[np.ndarray, np.ndarray]:
         """Stage 1 of a channel: its valid values (trimmed) and usable pixels."""
@@ -951,7 +967,7 @@ def camera_response_Debevec1997(
         row_w = np.where(valid_idx, weights, 0.0)
         knots = vals[:, idx] / spacing
         for n_round in range(rounds):
-            g, rms[ch], constrained[ch], n_eq[ch], support, log_e = _solve_channel(
+            g, rms[ch], constrained[ch], n_eq[ch], support, log_e, system = _solve_channel(
                 valid_idx, row_w, log_t, knots, top, smooth_w, smoothness, gauge, prior
             )
             if n_round == rounds - 1:
@@ -974,6 +990,17 @@ def camera_response_Debevec1997(
         g_all[ch, : top + 1] = g
         g_all[ch, top + 1 :] = g[-1]
         n_used[ch] = idx.size
+        if uncertainty:
+            cov = cluster_sandwich_covariance(
+                system["cho"], system["idx"], system["coef"], system["residual"], top + 1
+            )
+            # relative to the gauge level, as g is; constant above the top level, as g is
+            cov = cov - cov[gauge][None, :] - cov[:, gauge][:, None] + cov[gauge, gauge]
+            above = n_levels - top - 1
+            f = low_rank_factor(cov)
+            factors_g[ch] = np.concatenate([f, np.repeat(f[:, -1:], above, axis=1)], axis=1)
+            var = np.clip(np.diag(cov), 0.0, None)
+            variances_g[ch] = np.concatenate([var, np.repeat(var[-1:], above)])
 
     # Channels are independent but for the sampler's random draws: those are made
     # in channel order (each channel's after the one before it), everything else
@@ -1008,7 +1035,19 @@ def camera_response_Debevec1997(
         smoothness=smoothness,
         valid_min=valid_min,
         smoothness_factor=factors,
+        log_inverse_response_factor=_stack_factors(factors_g) if uncertainty else None,
+        log_inverse_response_variance=variances_g if uncertainty else None,
     )
+
+
+def _stack_factors(factors: list[np.ndarray | None]) -> np.ndarray:
+    """The channels' covariance factors ``(R_c, L)`` as one ``(C, R, L)`` array (zero-padded)."""
+    rank = max(f.shape[0] for f in factors if f is not None)
+    out = np.zeros((len(factors), rank, next(f for f in factors if f is not None).shape[1]))
+    for ch, f in enumerate(factors):
+        if f is not None:
+            out[ch, : f.shape[0]] = f
+    return out
 
 
 # ---------------------------------------------------------------------------
@@ -1047,6 +1086,15 @@ class DebevecResponseOptions:
         Smoothness scaled with the bracket's step about the EMoR mean response
         (default) or β as given (the paper's); see
         :mod:`photoquant.response.wide_steps`.
+    robust : {"huber", "tukey", "none"}
+        Reweighting of eq. 7's data rows against outliers (motion, glare), or
+        plain least squares (the paper's); see :mod:`photoquant.response.robust`.
+    robust_rounds : int
+        Reweighting rounds after the least-squares solution.
+    uncertainty : bool
+        Estimate the covariance of ``g`` and keep it with the response
+        (:mod:`photoquant.response.covariance`; default), for the calibration
+        part of a photoquantity's uncertainty.
     """
 
     smoothness: float = DEFAULT_SMOOTHNESS
@@ -1061,6 +1109,7 @@ class DebevecResponseOptions:
     wide_steps: str = "template"
     robust: str = "huber"
     robust_rounds: int = 3
+    uncertainty: bool = True
 
     def __post_init__(self) -> None:
         if self.toe not in TOE_MODES:
@@ -1149,6 +1198,7 @@ def characterise_response_Debevec1997(
         c_min=c_min,
         robust=opts.robust,
         robust_rounds=opts.robust_rounds,
+        uncertainty=opts.uncertainty,
     )
     model = ResponseModel(
         method="Debevec 1997",
@@ -1158,6 +1208,8 @@ def characterise_response_Debevec1997(
         valid_min=rec.valid_min,
         black_level=None if black is None else black,
         params={"smoothness": rec.smoothness},
+        covariance_factor=rec.log_inverse_response_factor,
+        covariance_diagonal=rec.log_inverse_response_variance,
     )
     report = {
         "n_samples": rec.n_samples,

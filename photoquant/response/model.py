@@ -58,6 +58,15 @@ class ResponseModel:
     params : dict
         The method's own parameters (e.g. a gamma or EMoR coefficients), for
         the record; the table is what is applied.
+    covariance_factor : ndarray, shape (C, R, L), optional
+        The uncertainty of ``g``: per channel a factor ``F`` with
+        ``Cov(g) ≈ Fᵀ F`` at ``levels``, relative to the level where the fit
+        fixed its gauge (:mod:`photoquant.response.covariance`). ``None``: not
+        estimated.
+    covariance_diagonal : ndarray, shape (C, L), optional
+        ``Var(g)`` at each level in full (``Fᵀ F`` keeps the leading part of
+        the covariance; the rest of its diagonal is treated as uncorrelated
+        between levels). Given with ``covariance_factor``.
     """
 
     method: str
@@ -67,6 +76,8 @@ class ResponseModel:
     valid_min: np.ndarray | None = None
     black_level: np.ndarray | None = None
     params: dict[str, Any] = field(default_factory=dict)
+    covariance_factor: np.ndarray | None = None
+    covariance_diagonal: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         levels = check_array(self.levels, "levels", ndim=1, kind="iuf", finite=True).astype(
@@ -120,6 +131,29 @@ class ResponseModel:
             raise InputError(f"`method` must be a method name, got {self.method!r}")
         if not isinstance(self.params, dict):
             raise InputError(f"`params` must be a dict, got {type(self.params).__name__}")
+        if self.covariance_factor is not None:
+            factor = check_array(
+                self.covariance_factor, "covariance_factor", ndim=3, kind="iuf", finite=True
+            ).astype(np.float64)
+            if factor.shape[0] != n_ch or factor.shape[2] != levels.size or factor.shape[1] < 1:
+                raise InputError(
+                    f"`covariance_factor` must be (C, R, L) = ({n_ch}, R, {levels.size}), "
+                    f"got {factor.shape}"
+                )
+            object.__setattr__(self, "covariance_factor", factor)
+        if (self.covariance_diagonal is None) != (self.covariance_factor is None):
+            raise InputError("`covariance_factor` and `covariance_diagonal` go together")
+        if self.covariance_diagonal is not None:
+            diag = check_array(
+                self.covariance_diagonal,
+                "covariance_diagonal",
+                shape=(n_ch, levels.size),
+                kind="iuf",
+                finite=True,
+            ).astype(np.float64)
+            if np.any(diag < 0):
+                raise InputError("`covariance_diagonal` must be non-negative (variances)")
+            object.__setattr__(self, "covariance_diagonal", diag)
         for name, value in [
             ("levels", levels),
             ("log_inverse_response", g),
@@ -187,11 +221,26 @@ class ResponseModel:
             valid_min=self.valid_min,
             black_level=self.black_level,
             params=self.params,
+            covariance_factor=self.covariance_factor,
+            covariance_diagonal=self.covariance_diagonal,
         )
+
+    def log_inverse_std(self) -> np.ndarray | None:
+        """Standard uncertainty of ``g`` at ``levels``, ``(C, L)`` (``None``: not estimated)."""
+        if self.covariance_diagonal is None:
+            return None
+        return np.sqrt(self.covariance_diagonal)
 
     # -- persistence -----------------------------------------------------------------
     def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """``(params, images)`` for the camera file: everything is small, no image."""
+        extra: dict[str, Any] = {}
+        if self.covariance_factor is not None:
+            extra["covariance_factor"] = self.covariance_factor.tolist()
+            extra["covariance_diagonal"] = cast(np.ndarray, self.covariance_diagonal).tolist()
+            extra["covariance_factor_quantity"] = (
+                "F per channel (C, R, L): Cov(g) = F^T F at levels, relative to the gauge level"
+            )
         return (
             {
                 "quantity": "g = ln f^-1 (natural log, without balance), linear between levels",
@@ -201,6 +250,7 @@ class ResponseModel:
                 "valid_min": cast(np.ndarray, self.valid_min).tolist(),
                 "black_level": cast(np.ndarray, self.black_level).tolist(),
                 "method_params": self.params,
+                **extra,
             },
             {},
         )
@@ -225,6 +275,12 @@ class ResponseModel:
             if "black_level" in params
             else None,
             params=dict(params.get("method_params") or {}),
+            covariance_factor=_float_array(params["covariance_factor"], "covariance_factor")
+            if "covariance_factor" in params
+            else None,
+            covariance_diagonal=_float_array(params["covariance_diagonal"], "covariance_diagonal")
+            if "covariance_diagonal" in params
+            else None,
         )
 
 

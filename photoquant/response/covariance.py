@@ -1,0 +1,130 @@
+"""The uncertainty of a recovered response ``g``: its covariance, as a low-rank factor.
+
+A response is estimated from a few thousand sampled pixels; another sample
+(or another capture of the same scene) gives another ``g``. The spread of
+``g`` is the response's part of every photoquantity's *calibration*
+uncertainty: it is common to every scene corrected with the camera, and
+strongly correlated across levels (an error in the slope of ``g`` moves
+every level), so it does not average down over a pixel's exposures or over
+repeats.
+
+Covariance of eq. 7's least-squares solution
+--------------------------------------------
+Eq. 7 of Debevec & Malik is a linear least-squares problem in ``g`` and the
+per-pixel ``ln E_p``; with the pixel unknowns eliminated its normal matrix is
+the Schur complement ``S`` (data, smoothness prior and gauge). The
+data rows of one pixel share its ``ln E_p`` and its scene content (motion,
+glare, a defect), and their noise differs from level to level (hat weights
+are not inverse variances), so the textbook ``σ² S⁻¹`` would be wrong twice.
+The *cluster-robust sandwich* [Huber1967]_ [White1980]_ [Liang1986]_ with
+the pixel as the cluster holds under both::
+
+    Cov(g) = S⁻¹ M S⁻¹,   M = P/(P − 1) · Σ_p s_p s_pᵀ,
+
+``s_p = A_pᵀ r_p`` the score of pixel ``p`` (its rows' coefficients on the
+levels times their residuals at the solution; the ``ln E_p`` column is
+orthogonal to it there). The smoothness prior enters the bread ``S`` and not
+the meat ``M``: it is treated as known. What the sandwich does not contain
+is the prior's own bias (a smooth ``g`` where the true one bends) and the
+exposure times' errors; both are systematic and appear in the validation
+against the truth (``tests/photoquant/test_response_covariance.py``).
+
+Every score is orthogonal to a constant shift of ``g`` (``Σ_k w_k r_pk = 0``
+at each pixel's optimum), so ``Cov(g)`` carries no variance along the
+gauge: the covariance is that of ``g`` relative to the level where the fit
+fixed ``g = 0`` — the absolute scale of a photoquantity is not measured by a
+response, only ratios are.
+
+Low-rank factor
+---------------
+``Cov(g)`` is kept as ``F`` with ``Cov ≈ Fᵀ F`` (the leading eigenvectors,
+scaled by the square roots of their eigenvalues, until :data:`KEPT_FRACTION`
+of the trace), so that propagating it through a merge costs one table
+look-up per component and exposure (:mod:`photoquant.merge.uncertainty`).
+
+References
+----------
+.. [Huber1967] Huber, P. J. (1967). The behavior of maximum likelihood
+   estimates under nonstandard conditions. Proc. Fifth Berkeley Symposium
+   on Mathematical Statistics and Probability 1, 221-233.
+.. [White1980] White, H. (1980). A heteroskedasticity-consistent covariance
+   matrix estimator and a direct test for heteroskedasticity. Econometrica
+   48(4), 817-838. doi:10.2307/1912934
+.. [Liang1986] Liang, K.-Y., & Zeger, S. L. (1986). Longitudinal data
+   analysis using generalized linear models. Biometrika 73(1), 13-22.
+   doi:10.1093/biomet/73.1.13
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+__all__ = ["KEPT_FRACTION", "MAX_RANK", "cluster_sandwich_covariance", "low_rank_factor"]
+
+KEPT_FRACTION = 0.999
+"""Share of ``trace(Cov(g))`` the low-rank factor keeps."""
+
+MAX_RANK = 12
+"""Most components of the factor (per channel)."""
+
+
+def cluster_sandwich_covariance(
+    cho: tuple[np.ndarray, bool],
+    idx: np.ndarray,
+    coef: np.ndarray,
+    residual: np.ndarray,
+    n_levels: int,
+) -> np.ndarray:
+    """``S⁻¹ M S⁻¹`` with the pixel as the cluster (module notes).
+
+    Parameters
+    ----------
+    cho : tuple
+        Cholesky factor of the reduced normal matrix ``S`` (:func:`scipy.linalg.cho_factor`).
+    idx : ndarray of int, shape (2K, P)
+        Levels each value's data row touches (its two interpolation knots).
+    coef : ndarray, shape (2K, P)
+        The row's coefficients on those levels (0 where the value is unused).
+    residual : ndarray, shape (K, P)
+        Each data row's residual at the solution (0 where unused).
+    n_levels : int
+        Unknown levels ``n_g``.
+
+    Returns
+    -------
+    ndarray, shape (n_g, n_g)
+    """
+    n_pix = residual.shape[1]
+    r2 = np.concatenate([residual, residual])  # each entry's row residual
+    pixel = np.broadcast_to(np.arange(n_pix), idx.shape)
+    scores = np.bincount(
+        (idx * n_pix + pixel).reshape(-1), (coef * r2).reshape(-1), n_levels * n_pix
+    ).reshape(n_levels, n_pix)
+    meat = scores @ scores.T * (n_pix / max(n_pix - 1, 1))
+    half = scipy.linalg.cho_solve(cho, meat)
+    cov = scipy.linalg.cho_solve(cho, half.T)
+    return 0.5 * (cov + cov.T)
+
+
+def low_rank_factor(
+    cov: np.ndarray, fraction: float = KEPT_FRACTION, max_rank: int = MAX_RANK
+) -> np.ndarray:
+    """``F`` (``(R, n)``) with ``Fᵀ F`` the leading part of ``cov`` (module notes).
+
+    The eigenvectors' signs are fixed (largest entry positive) so that the
+    factor is deterministic.
+    """
+    n = cov.shape[0]
+    total = float(np.trace(cov))
+    if not total > 0.0:
+        return np.zeros((1, n))
+    top = min(max_rank, n)
+    # the leading eigenpairs only (LAPACK's syevr): a fraction of a full decomposition
+    vals, vecs = scipy.linalg.eigh(cov, subset_by_index=[n - top, n - 1])
+    vals, vecs = np.clip(vals[::-1], 0.0, None), vecs[:, ::-1]
+    rank = int(np.searchsorted(np.cumsum(vals) / total, fraction) + 1)
+    rank = max(1, min(rank, top))
+    vecs = vecs[:, :rank]
+    sign = np.sign(vecs[np.argmax(np.abs(vecs), axis=0), np.arange(rank)])
+    return (vecs * np.where(sign == 0, 1.0, sign) * np.sqrt(vals[:rank])).T

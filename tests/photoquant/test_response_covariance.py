@@ -1,0 +1,227 @@
+"""The recovered response's covariance: estimated, stored, propagated, validated.
+
+The sandwich covariance of eq. 7 (:mod:`photoquant.response.covariance`) is
+checked against what it claims to be — the scatter of ``g`` from one capture
+to another of the same camera — over 40 independent captures of analytic
+scenes (a fresh scene, noise and sample each). Against the *truth* it does
+not cover: Debevec's estimate carries a bias from noise and quantisation
+(a ripple with the bracket's step, the one shape of ``g`` that the pixels'
+ratios cannot see), 1.9 standard deviations on average at 2 DN noise and
+8.5 at 0.7 DN; that test is an expected failure until the bias is modelled.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from photoquant.errors import InputError
+from photoquant.merge import DebevecMergeOptions, MergeModel
+from photoquant.merge.uncertainty import log_variance_response_Debevec1997
+from photoquant.response.covariance import low_rank_factor
+from photoquant.response.debevec1997 import camera_response_Debevec1997
+from photoquant.response.model import ResponseModel
+from photoquant.stack import ExposureStack
+
+from .analytic import capture, log_uniform_scene, true_g
+
+EXPOSURES = np.geomspace(0.5, 500.0, 8)
+LEVELS = np.array([20, 40, 60, 90, 110, 160, 200, 230])
+WHITE = (1.0, 1.0, 1.0)
+
+
+def _repeated_fits(n_captures: int, noise_dn: float):
+    """``g`` and its stated standard deviation at LEVELS over independent captures."""
+    g, sd = [], []
+    for seed in range(n_captures):
+        rng = np.random.default_rng(seed)
+        frames = capture(
+            log_uniform_scene(rng, (60, 80, 3)),
+            EXPOSURES,
+            balance=WHITE,
+            noise_dn=noise_dn,
+            rng=rng,
+        )
+        rec = camera_response_Debevec1997(
+            frames[0], EXPOSURES, saturation_level=np.full(3, 255.0), uncertainty=True, rng=seed
+        )
+        g.append(rec.log_inverse_response[:, LEVELS])
+        sd.append(np.sqrt(rec.log_inverse_response_variance[:, LEVELS]))
+    return np.array(g), np.array(sd)
+
+
+@pytest.fixture(scope="module")
+def fits():
+    return _repeated_fits(40, 2.0)
+
+
+def test_stated_uncertainty_matches_the_scatter_between_captures(fits):
+    g, sd = fits
+    n = g.shape[0]
+    z = (g - g.mean(axis=0)) / sd * np.sqrt(n / (n - 1))
+    # 120 fits per level: the std of z is known to ±0.065 per level (1/√(2·119)), a
+    # little better pooled over 8 levels; the sandwich's small-sample bias is a few %
+    assert abs(z.std() - 1.0) < 0.15, z.std()
+    assert np.all(np.abs(z.std(axis=(0, 1)) - 1.0) < 0.3), z.std(axis=(0, 1))
+
+
+def test_stated_uncertainty_shrinks_with_the_noise():
+    _, loud = _repeated_fits(3, 2.0)
+    _, quiet = _repeated_fits(3, 0.7)
+    # the statistical error follows the noise (≈ ∝ σ, less quantisation)
+    assert np.median(quiet / loud) < 0.6
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="Debevec's g is biased by noise and quantisation (a ripple with the bracket's "
+    "step): 1.9 stated standard deviations on average at 2 DN; the covariance is the "
+    "statistical part only (measured 2026-12-03: 67 % inside the nominal 95 % interval)",
+)
+def test_stated_uncertainty_covers_the_truth(fits):
+    g, sd = fits
+    truth = np.stack(
+        [true_g(LEVELS, c, balance=WHITE) - true_g(128, c, balance=WHITE) for c in range(3)]
+    )
+    inside = np.abs(g - truth[None]) / sd < 1.96
+    assert inside.mean() > 0.93
+
+
+def test_uncertainty_is_relative_to_the_gauge_level():
+    rng = np.random.default_rng(0)
+    frames = capture(log_uniform_scene(rng, (40, 50, 3)), EXPOSURES, noise_dn=1.0, rng=rng)
+    rec = camera_response_Debevec1997(frames[0], EXPOSURES, uncertainty=True, n_samples=500)
+    var = rec.log_inverse_response_variance
+    gauge = np.argmin(np.abs(rec.levels - 0.5 * (0 + 255)))
+    assert np.all(var[:, gauge] < 1e-6 * var.max(axis=1))
+    assert np.all(var.max(axis=1) > 0)
+    # without the option: nothing estimated, the same g (the covariance is a by-product)
+    plain = camera_response_Debevec1997(frames[0], EXPOSURES, n_samples=500)
+    assert plain.log_inverse_response_factor is None
+    np.testing.assert_array_equal(plain.log_inverse_response, rec.log_inverse_response)
+
+
+def test_low_rank_factor_keeps_the_leading_part():
+    rng = np.random.default_rng(1)
+    basis = rng.normal(size=(3, 50))
+    cov = basis.T @ np.diag([4.0, 1.0, 1e-9]) @ basis
+    f = low_rank_factor(cov, fraction=0.999)
+    assert f.shape == (2, 50)
+    np.testing.assert_allclose(f.T @ f, cov, atol=1e-6 * np.abs(cov).max())
+    np.testing.assert_array_equal(low_rank_factor(np.zeros((5, 5))), np.zeros((1, 5)))
+
+
+def _response_with_covariance(rng, rest=1e-4):
+    levels = np.arange(256.0)
+    g = np.log(np.maximum(levels, 0.5) / 255.0)[None]
+    # smooth rows (g moved along them stays increasing)
+    phase = rng.uniform(0, 2 * np.pi, (3, 1))
+    factor = (0.01 * np.sin(2 * np.pi * np.arange(1, 4)[:, None] * levels / 256 + phase))[None]
+    diagonal = np.sum(factor**2, axis=1) + rng.uniform(0, rest, (1, 256))
+    return ResponseModel(
+        "given",
+        levels,
+        g,
+        np.array([255.0]),
+        covariance_factor=factor,
+        covariance_diagonal=diagonal,
+    )
+
+
+def _stack(rng, k):
+    frames = rng.integers(1, 255, size=(1, k, 4, 5, 1)).astype(np.uint8)
+    return ExposureStack(frames, 3.0 ** np.arange(k), bit_depth=8, channels=("Y",))
+
+
+def test_propagation_of_the_factor_is_the_merge_moved_along_it():
+    # ln Ê is linear in g for fixed weights: moving g along the factor's rows moves
+    # ln Ê by Σ_k a_k F_r(c_k), whose squares sum to the stated variance
+    rng = np.random.default_rng(2)
+    response = _response_with_covariance(rng, rest=0.0)
+    stack = _stack(rng, 3)
+    merge = MergeModel("Debevec 1997", {"weighting": "hat"})
+    got = log_variance_response_Debevec1997(stack, response, merge.options)
+    base = merge.merge(stack, response).log_photoquantity[..., 0].astype(np.float64)
+    expected = np.zeros_like(base)
+    for row in response.covariance_factor[0]:
+        moved = dataclasses.replace(
+            response,
+            log_inverse_response=response.log_inverse_response + row,
+            covariance_factor=None,
+            covariance_diagonal=None,
+        )
+        expected += (merge.merge(stack, moved).log_photoquantity[..., 0] - base) ** 2
+    # the merge's float32 output: ~1e-7 of ln Ê ≈ −3 against moves of ~1e-2
+    np.testing.assert_allclose(got[..., 0], expected, rtol=1e-3)
+
+
+def test_the_rest_of_the_diagonal_adds_per_value():
+    # one exposure: the merge is g(c) − ln t, its variance the diagonal at c
+    rng = np.random.default_rng(4)
+    response = _response_with_covariance(rng)
+    stack = _stack(rng, 1)
+    got = log_variance_response_Debevec1997(stack, response, DebevecMergeOptions(weighting="hat"))
+    c = stack.frames[0, 0, ..., 0].astype(int)
+    np.testing.assert_allclose(got[..., 0], response.covariance_diagonal[0][c], rtol=1e-12)
+
+
+def test_a_response_without_covariance_is_named():
+    response = _response_with_covariance(np.random.default_rng(5))
+    plain = dataclasses.replace(response, covariance_factor=None, covariance_diagonal=None)
+    with pytest.raises(InputError, match="carries no covariance"):
+        log_variance_response_Debevec1997(_stack(np.random.default_rng(6), 2), plain)
+
+
+def test_response_covariance_validated_and_persisted():
+    rng = np.random.default_rng(3)
+    response = _response_with_covariance(rng)
+    params, images = response.to_params()
+    back = ResponseModel.from_params("given", params, images)
+    np.testing.assert_array_equal(back.covariance_factor, response.covariance_factor)
+    np.testing.assert_array_equal(back.covariance_diagonal, response.covariance_diagonal)
+    # a response written without one still loads, and states none
+    del params["covariance_factor"], params["covariance_diagonal"]
+    assert ResponseModel.from_params("given", params, images).log_inverse_std() is None
+    with pytest.raises(InputError, match="go together"):
+        dataclasses.replace(response, covariance_diagonal=None)
+    with pytest.raises(InputError, match="non-negative"):
+        dataclasses.replace(response, covariance_diagonal=-response.covariance_diagonal)
+    with pytest.raises(InputError, match=r"\(C, R, L\)"):
+        dataclasses.replace(response, covariance_factor=response.covariance_factor[:, :, :10])
+    # the balance folds a constant into g: the covariance stays
+    balanced = response.balanced(np.array([2.0]))
+    np.testing.assert_array_equal(balanced.covariance_factor, response.covariance_factor)
+    np.testing.assert_array_equal(balanced.covariance_diagonal, response.covariance_diagonal)
+
+
+def test_correct_states_the_response_component_beside_the_noise():
+    import photoquant as pq
+
+    rng = np.random.default_rng(7)
+    frames = capture(
+        log_uniform_scene(rng, (40, 50, 3)), EXPOSURES, noise_dn=1.0, n_repeats=2, rng=rng
+    )
+    stack = ExposureStack(frames, EXPOSURES, bit_depth=8)
+    model = pq.calibrate([stack])
+    result = pq.correct(stack, model, uncertainty=True)
+    ok = ~result.mask
+    response, noise = result.log_sigma_response[ok], result.log_sigma_noise[ok]
+    assert np.all(response > 0) and np.all(np.isnan(result.log_sigma_response[~ok]))
+    np.testing.assert_allclose(
+        result.log_sigma[ok],
+        np.sqrt(noise.astype(float) ** 2 + response.astype(float) ** 2),
+        rtol=1e-6,
+    )
+    # a camera whose response states no covariance: the noise alone, and a note says so
+    bare = dataclasses.replace(
+        model,
+        response=dataclasses.replace(
+            model.response, covariance_factor=None, covariance_diagonal=None
+        ),
+    )
+    plain = pq.correct(stack, bare, uncertainty=True)
+    assert plain.log_sigma_response is None
+    assert any("states no covariance" in note for note in plain.notes)
+    np.testing.assert_array_equal(plain.log_sigma, plain.log_sigma_noise)
