@@ -69,7 +69,7 @@ from photoquant.exposure import (
 from photoquant.glare import GlareData, GlareModel, best_exposed_level
 from photoquant.merge import MergeModel, MergeResult
 from photoquant.merge.noise_aware import estimate_noise_parameters
-from photoquant.merge.uncertainty import noise_record
+from photoquant.merge.uncertainty import log_variance_Debevec1997, noise_record
 from photoquant.methods import Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
 from photoquant.profiles import DEFAULT_PROFILE, profile_setting, profile_steps
@@ -642,8 +642,30 @@ def sensor_lut_step(
         log.say("sensor LUT")
         irr = merge.merge(irradiance)
         fit = fit_sensor_lut(irr, spec)
+    model = fit.model
+    if irradiance is not None and model.method != "None" and model.log_variance is None:
+        model = _with_lut_noise(model, irradiance, merge, log)
     log.report["sensor_lut"] = {"method": fit.model.method, **fit.report}
-    return SensorLUTStage(fit.model, spec, irr)
+    return SensorLUTStage(model, spec, irr)
+
+
+def _with_lut_noise(
+    model: SensorLUTModel, irradiance: ExposureStack, merge: MergeStage, log: CalibrationLog
+) -> SensorLUTModel:
+    """The LUT with ``Var(ln u)`` from the irradiance scene's own noise, where its repeats
+    fix a photon-transfer fit and the merge is the ``"Debevec 1997"`` one (else as it is)."""
+    if merge.model.method != "Debevec 1997":
+        return model
+    noise = estimate_noise_parameters(irradiance, merge.response)
+    if noise is None:
+        log.note(
+            "sensor LUT: the irradiance scene's repeats do not fix its noise; the LUT states "
+            "no uncertainty"
+        )
+        return model
+    var = log_variance_Debevec1997(irradiance, merge.response, noise, merge.model.options)
+    var = np.where(np.isfinite(var), var, 0.0).astype(np.float32)  # unmerged: u = 1, unused
+    return dataclasses.replace(model, log_variance=var)
 
 
 def glare_step(

@@ -31,9 +31,11 @@ EXIT_IO = 1
 UNCERTAINTY_LAYER = "sigma_ln"
 """EXR layer of ``photoquant correct --uncertainty``: the standard uncertainty of ``ln l``
 from the frames' noise."""
-RESPONSE_UNCERTAINTY_LAYER = "sigma_response_ln"
+CALIBRATION_UNCERTAINTY_LAYER = "sigma_calibration_ln"
 """EXR layer of ``photoquant correct --uncertainty``: the standard uncertainty of ``ln l``
-from the recovered response's statistical error (a calibration component)."""
+from the calibration's stated statistical errors (response, sensor LUT, vignetting)."""
+TOTAL_UNCERTAINTY_LAYER = "sigma_total_ln"
+"""EXR layer of ``photoquant correct --uncertainty``: noise and calibration combined."""
 
 
 def _log(args: argparse.Namespace, message: str) -> None:
@@ -319,12 +321,16 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         description += (
             f"; {UNCERTAINTY_LAYER}.*: standard uncertainty of ln l from the frames' noise"
         )
-    if result.log_sigma_response is not None:
-        image = np.concatenate([image, result.log_sigma_response], axis=-1)
-        names += [f"{RESPONSE_UNCERTAINTY_LAYER}.{c}" for c in model.channels]
+    calibration = result.log_sigma_calibration
+    if calibration is not None:
+        image = np.concatenate([image, calibration, result.log_sigma], axis=-1)
+        names += [f"{CALIBRATION_UNCERTAINTY_LAYER}.{c}" for c in model.channels]
+        names += [f"{TOTAL_UNCERTAINTY_LAYER}.{c}" for c in model.channels]
         description += (
-            f"; {RESPONSE_UNCERTAINTY_LAYER}.*: standard uncertainty of ln l from the "
-            "recovered response's statistical error (common to every scene)"
+            f"; {CALIBRATION_UNCERTAINTY_LAYER}.*: standard uncertainty of ln l from the "
+            "calibration's statistical errors (response, sensor LUT, vignetting; common to "
+            "every scene); "
+            f"{TOTAL_UNCERTAINTY_LAYER}.*: both combined"
         )
     out.parent.mkdir(parents=True, exist_ok=True)
     # no replace without the flag, and only of an OpenEXR image
@@ -348,13 +354,24 @@ def _cmd_correct(args: argparse.Namespace) -> int:
             f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g}, "
             f"channels {UNCERTAINTY_LAYER}.* in {out.name}"
         )
-    if result.log_sigma_response is not None:
-        sigma = result.log_sigma_response[np.isfinite(result.log_sigma_response)]
+    if calibration is not None:
+        named = [
+            name
+            for name, part in (
+                ("response", result.log_sigma_response),
+                ("sensor LUT", result.log_sigma_sensor_lut),
+                ("vignetting", result.log_sigma_vignetting),
+            )
+            if part is not None
+        ]
+        sigma = calibration[np.isfinite(calibration)]
+        parts = ", ".join(named[:-1]) + (" and " if len(named) > 1 else "") + named[-1]
         print(
-            "uncertainty of ln l from the response's statistical error: "
+            f"uncertainty of ln l from the calibration ({parts}): "
             f"median {np.median(sigma) if sigma.size else float('nan'):.3g}, "
             f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g}, "
-            f"channels {RESPONSE_UNCERTAINTY_LAYER}.* in {out.name}"
+            f"channels {CALIBRATION_UNCERTAINTY_LAYER}.*, combined with the noise in "
+            f"{TOTAL_UNCERTAINTY_LAYER}.* in {out.name}"
         )
     if result.exposures is not None:
         print(f"scene exposures: {_exposure_line(result.exposures.as_dict())}")
@@ -550,9 +567,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--uncertainty",
         action="store_true",
         help=f"also write the standard uncertainty of ln l from the frames' noise "
-        f"(channels {UNCERTAINTY_LAYER}.R, ...) and, where the camera's response states "
-        f"its covariance, from the response's statistical error "
-        f"({RESPONSE_UNCERTAINTY_LAYER}.R, ...)",
+        f"(channels {UNCERTAINTY_LAYER}.R, ...) and, where the camera's fits state their "
+        f"covariance, from the calibration's statistical errors "
+        f"({CALIBRATION_UNCERTAINTY_LAYER}.R, ...; both combined: "
+        f"{TOTAL_UNCERTAINTY_LAYER}.R, ...)",
     )
     cor.set_defaults(func=_cmd_correct)
 

@@ -86,6 +86,16 @@ class Correction:
         (:func:`~photoquant.merge.uncertainty.log_variance_response_Debevec1997`),
         a *calibration* component common to every scene corrected with the
         camera; NaN where ``mask`` is set.
+    log_sigma_vignetting : ndarray, shape (H, W, C), float32, optional
+        With ``uncertainty=True`` and a vignetting that states its parameters'
+        covariance: the standard uncertainty of ``ln l`` from the vignetting
+        fit's statistical error (:meth:`~photoquant.vignetting.base.VignettingModel.log_map_variance`),
+        a calibration component; NaN where ``mask`` is set.
+    log_sigma_sensor_lut : ndarray, shape (H, W, C), float32, optional
+        With ``uncertainty=True`` and a sensor LUT that states its noise: the
+        standard uncertainty of ``ln l`` from the irradiance scene's noise in
+        ``u`` (:attr:`~photoquant.sensor_lut.SensorLUTModel.log_variance`), a
+        calibration component; NaN where ``mask`` is set.
     """
 
     photoquantity: np.ndarray
@@ -98,14 +108,30 @@ class Correction:
     log_sigma_noise: np.ndarray | None = None
     noise: NoiseParameters | None = None
     log_sigma_response: np.ndarray | None = None
+    log_sigma_vignetting: np.ndarray | None = None
+    log_sigma_sensor_lut: np.ndarray | None = None
+
+    @property
+    def log_sigma_calibration(self) -> np.ndarray | None:
+        """The calibration's components stated (response, sensor LUT, vignetting),
+        combined in quadrature (independent fits); ``None``: none stated."""
+        return _quadrature(
+            self.log_sigma_response, self.log_sigma_sensor_lut, self.log_sigma_vignetting
+        )
 
     @property
     def log_sigma(self) -> np.ndarray | None:
-        """The components stated, combined (``√(σ_noise² + σ_response²)``; ``None``: none)."""
-        parts = [p for p in (self.log_sigma_noise, self.log_sigma_response) if p is not None]
-        if not parts:
-            return None
-        return np.sqrt(sum(p.astype(np.float64) ** 2 for p in parts)).astype(np.float32)
+        """The noise and calibration components stated, combined in quadrature
+        (``None``: none)."""
+        return _quadrature(self.log_sigma_noise, self.log_sigma_calibration)
+
+
+def _quadrature(*parts: np.ndarray | None) -> np.ndarray | None:
+    """``√(Σ σ²)`` of the parts given (float32; ``None`` when none is)."""
+    given = [p for p in parts if p is not None]
+    if not given:
+        return None
+    return np.sqrt(sum(p.astype(np.float64) ** 2 for p in given)).astype(np.float32)
 
 
 def _camera_refines(model: CameraModel) -> bool:
@@ -283,7 +309,7 @@ def correct(
     if defects is not None and defects.mask.any():
         photoquantity[defects.mask] = np.nan
         mask |= defects.mask
-    sigma, noise, sigma_response = None, None, None
+    sigma, noise, sigma_response, sigma_vignetting, sigma_lut = None, None, None, None, None
     if uncertainty:
         noise = _noise_parameters(stack, model)
         variance = log_variance_Debevec1997(stack, model.balanced_response(), noise, merger.options)
@@ -301,6 +327,23 @@ def correct(
                 f"uncertainty: the response ({model.response.method}) states no covariance; "
                 "its part of the calibration uncertainty is not included"
             )
+        if model.sensor_lut.log_variance is not None:
+            sigma_lut = np.sqrt(model.sensor_lut.log_variance.astype(np.float32))
+            sigma_lut[mask] = np.nan
+        elif model.sensor_lut.method != "None":
+            notes.append(
+                "uncertainty: the sensor LUT states no noise; its part of the calibration "
+                "uncertainty is not included"
+            )
+        vignetting_variance = model.vignetting.log_map_variance(stack.image_shape)
+        if vignetting_variance is not None:
+            sigma_vignetting = np.sqrt(vignetting_variance).astype(np.float32)
+            sigma_vignetting[mask] = np.nan
+        elif not _is_identity_vignetting(model):
+            notes.append(
+                f"uncertainty: the vignetting ({model.vignetting.method}) states no covariance; "
+                "its part of the calibration uncertainty is not included"
+            )
     return Correction(
         photoquantity=photoquantity,
         mask=mask,
@@ -312,7 +355,14 @@ def correct(
         log_sigma_noise=sigma,
         noise=noise,
         log_sigma_response=sigma_response,
+        log_sigma_vignetting=sigma_vignetting,
+        log_sigma_sensor_lut=sigma_lut,
     )
+
+
+def _is_identity_vignetting(model: CameraModel) -> bool:
+    """Whether the camera's vignetting is left at 1 (nothing fitted, nothing to state)."""
+    return bool(np.all(model.vignetting_map() == 1.0))
 
 
 def _noise_parameters(stack: ExposureStack, model: CameraModel) -> NoiseParameters:

@@ -101,6 +101,7 @@ def sensor_lut_IrradianceScene(
 # ---------------------------------------------------------------------------
 
 _LUT_IMAGE = "sensor_lut"
+_VARIANCE_IMAGE = "sensor_lut_log_variance"
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,11 +116,17 @@ class SensorLUTModel:
         ``u_pλ``: finite and positive; by convention mean 1 per channel.
     params : dict
         The method's own parameters.
+    log_variance : ndarray, shape (H, W, C), optional
+        ``Var(ln u)`` per pixel from the irradiance scene's noise (its merge's
+        noise, :func:`photoquant.merge.uncertainty.log_variance_Debevec1997`;
+        the normalisation's share, one over millions of pixels, is left out).
+        ``None``: not stated.
     """
 
     method: str
     lut: np.ndarray
     params: dict[str, Any] = field(default_factory=dict)
+    log_variance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         lut = check_array(self.lut, "sensor_lut", ndim=3, kind="f", finite=True)
@@ -127,6 +134,13 @@ class SensorLUTModel:
             raise InputError("`sensor_lut` must be positive everywhere")
         object.__setattr__(self, "lut", lut.astype(np.float32))
         object.__setattr__(self, "params", dict(self.params))
+        if self.log_variance is not None:
+            var = check_array(
+                self.log_variance, "sensor LUT log_variance", shape=lut.shape, kind="f", finite=True
+            )
+            if np.any(var < 0):
+                raise InputError("the sensor LUT's `log_variance` must be non-negative")
+            object.__setattr__(self, "log_variance", var.astype(np.float32))
 
     @classmethod
     def identity(cls, image_shape: tuple[int, int], n_channels: int) -> SensorLUTModel:
@@ -144,10 +158,10 @@ class SensorLUTModel:
         return self.lut
 
     def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        return (
-            {"normalisation": "mean 1 per channel", "method_params": self.params},
-            {_LUT_IMAGE: self.lut},
-        )
+        images = {_LUT_IMAGE: self.lut}
+        if self.log_variance is not None:
+            images[_VARIANCE_IMAGE] = self.log_variance
+        return ({"normalisation": "mean 1 per channel", "method_params": self.params}, images)
 
     @classmethod
     def from_params(
@@ -155,7 +169,12 @@ class SensorLUTModel:
     ) -> SensorLUTModel:
         if _LUT_IMAGE not in images:
             raise InputError("the sensor LUT's image is missing")
-        return cls(method, images[_LUT_IMAGE], dict(params.get("method_params") or {}))
+        return cls(
+            method,
+            images[_LUT_IMAGE],
+            dict(params.get("method_params") or {}),
+            images.get(_VARIANCE_IMAGE),
+        )
 
 
 @dataclass(frozen=True)

@@ -42,14 +42,18 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     both, names = read_exr(exr2)
     assert names == (
         "R", "G", "B", "sigma_ln.R", "sigma_ln.G", "sigma_ln.B",
-        "sigma_response_ln.R", "sigma_response_ln.G", "sigma_response_ln.B",
+        "sigma_calibration_ln.R", "sigma_calibration_ln.G", "sigma_calibration_ln.B",
+        "sigma_total_ln.R", "sigma_total_ln.G", "sigma_total_ln.B",
     )  # fmt: skip
     np.testing.assert_array_equal(both[..., :3], img)
-    for sigma in (both[..., 3:6], both[..., 6:]):
+    noise, calibration, total = both[..., 3:6], both[..., 6:9], both[..., 9:]
+    for sigma in (noise, calibration, total):
         assert np.all(np.isfinite(sigma) == np.isfinite(img)) and np.nanmin(sigma) > 0
+    ok = np.isfinite(img)
+    np.testing.assert_allclose(total[ok] ** 2, noise[ok] ** 2 + calibration[ok] ** 2, rtol=1e-5)
     text = capsys.readouterr().out
     assert "uncertainty of ln l from noise" in text
-    assert "uncertainty of ln l from the response's statistical error" in text
+    assert "uncertainty of ln l from the calibration (response, sensor LUT and vignetting)" in text
 
     assert main(["info", str(cam)]) == 0
     text = capsys.readouterr().out

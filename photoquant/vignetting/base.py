@@ -42,6 +42,12 @@ class VignettingModel:
     def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         raise NotImplementedError
 
+    def log_map_variance(self, image_shape: tuple[int, int]) -> np.ndarray | None:
+        """``Var(ln v)`` on the pixel grid, ``(H, W, C)``, from the fit's parameter
+        covariance; ``None`` where the model states none (the default)."""
+        del image_shape
+        return None
+
     @classmethod
     def from_params(
         cls, method: str, params: dict[str, Any], images: dict[str, np.ndarray]
