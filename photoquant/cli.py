@@ -211,9 +211,12 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
         )
     lut = _section(rep, "sensor_lut")
     if "prnu_std" in lut:
-        lines.append(
-            f"sensor LUT: PRNU std {_fmt(lut['prnu_std'])}, flagged {lut.get('n_flagged')}"
-        )
+        line = f"sensor LUT: PRNU std {_fmt(lut['prnu_std'])}, flagged {lut.get('n_flagged')}"
+        lut_variance = model.sensor_lut.log_variance
+        if lut_variance is not None:
+            median = np.sqrt(np.median(lut_variance.reshape(-1, lut_variance.shape[-1]), axis=0))
+            line += f", noise of u (ln, median) {_fmt(median)}"
+        lines.append(line)
     vig = _section(rep, "vignetting")
     if "n_tracks" in vig:
         lines.append(
@@ -227,8 +230,12 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
         and params.ndim == 2
         and params.shape[0] == len(model.channels)
     ):
-        for name, row in zip(model.channels, params, strict=True):
-            lines.append(f"  {name}: {model.vignetting.method} {_fmt(row)}")
+        cov = getattr(model.vignetting, "param_covariance", None)
+        for ch, (name, row) in enumerate(zip(model.channels, params, strict=True)):
+            line = f"  {name}: {model.vignetting.method} {_fmt(row)}"
+            if cov is not None:
+                line += f" ± {_fmt(np.sqrt(np.clip(np.diag(cov[ch]), 0.0, None)))}"
+            lines.append(line)
     if not model.glare.is_identity:  # the glare step (photoquant.glare)
         fit = _section(rep, "glare")
         lines.append(

@@ -61,6 +61,9 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     assert "model adequacy: the data depart from one global response" in text
     assert "noise: gain [" in text and "DN/e-, read noise [" in text
     assert "response uncertainty: std of g (ln, median/largest" in text
+    assert "noise of u (ln, median) [" in text
+    # every vignetting parameter with its standard uncertainty
+    assert re.search(r"  R: Extended Goldman-Chen \[[^]]+\] ± \[[^]]+\]", text), text
     assert "views' exposure times: nominal times kept: likelihood ratio" in text
 
     assert main(["info", str(cam), "--json"]) == 0
