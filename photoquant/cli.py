@@ -330,7 +330,8 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         )
     calibration = result.log_sigma_calibration
     if calibration is not None:
-        image = np.concatenate([image, calibration, result.log_sigma], axis=-1)
+        total = result.log_sigma  # never None here: the calibration's components are in it
+        image = np.concatenate([image, calibration, calibration if total is None else total], -1)
         names += [f"{CALIBRATION_UNCERTAINTY_LAYER}.{c}" for c in model.channels]
         names += [f"{TOTAL_UNCERTAINTY_LAYER}.{c}" for c in model.channels]
         description += (
@@ -379,6 +380,13 @@ def _cmd_correct(args: argparse.Namespace) -> int:
             f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g}, "
             f"channels {CALIBRATION_UNCERTAINTY_LAYER}.*, combined with the noise in "
             f"{TOTAL_UNCERTAINTY_LAYER}.* in {out.name}"
+        )
+    if result.log_sigma_exposure is not None:
+        sigma = result.log_sigma_exposure[np.isfinite(result.log_sigma_exposure)]
+        print(
+            "uncertainty of ln l from the refined exposure times: "
+            f"median {np.median(sigma) if sigma.size else float('nan'):.3g} "
+            f"(in {TOTAL_UNCERTAINTY_LAYER}.*)"
         )
     if result.exposures is not None:
         print(f"scene exposures: {_exposure_line(result.exposures.as_dict())}")

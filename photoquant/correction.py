@@ -40,6 +40,7 @@ from photoquant.merge._tiled import merge_tiles
 from photoquant.merge.noise_aware import NoiseParameters, estimate_noise_parameters
 from photoquant.merge.uncertainty import (
     log_variance_Debevec1997,
+    log_variance_exposure_Debevec1997,
     log_variance_response_Debevec1997,
     noise_parameters_from_record,
 )
@@ -91,6 +92,12 @@ class Correction:
         covariance: the standard uncertainty of ``ln l`` from the vignetting
         fit's statistical error (:meth:`~photoquant.vignetting.base.VignettingModel.log_map_variance`),
         a calibration component; NaN where ``mask`` is set.
+    log_sigma_exposure : ndarray, shape (H, W, C), float32, optional
+        With ``uncertainty=True`` and refined scene times: the standard
+        uncertainty of ``ln l`` from the refined times' own statistical error
+        (:func:`~photoquant.merge.uncertainty.log_variance_exposure_Debevec1997`),
+        common to the scene's pixels; NaN where ``mask`` is set. ``None``
+        where the scene's nominal times were kept.
     log_sigma_sensor_lut : ndarray, shape (H, W, C), float32, optional
         With ``uncertainty=True`` and a sensor LUT that states its noise: the
         standard uncertainty of ``ln l`` from the irradiance scene's noise in
@@ -110,6 +117,7 @@ class Correction:
     log_sigma_response: np.ndarray | None = None
     log_sigma_vignetting: np.ndarray | None = None
     log_sigma_sensor_lut: np.ndarray | None = None
+    log_sigma_exposure: np.ndarray | None = None
 
     @property
     def log_sigma_calibration(self) -> np.ndarray | None:
@@ -121,9 +129,11 @@ class Correction:
 
     @property
     def log_sigma(self) -> np.ndarray | None:
-        """The noise and calibration components stated, combined in quadrature
-        (``None``: none)."""
-        return _quadrature(self.log_sigma_noise, self.log_sigma_calibration)
+        """The noise, exposure-time and calibration components stated, combined in
+        quadrature (``None``: none)."""
+        return _quadrature(
+            self.log_sigma_noise, self.log_sigma_exposure, self.log_sigma_calibration
+        )
 
 
 def _quadrature(*parts: np.ndarray | None) -> np.ndarray | None:
@@ -310,6 +320,7 @@ def correct(
         photoquantity[defects.mask] = np.nan
         mask |= defects.mask
     sigma, noise, sigma_response, sigma_vignetting, sigma_lut = None, None, None, None, None
+    sigma_exposure = None
     if uncertainty:
         noise = _noise_parameters(stack, model)
         variance = log_variance_Debevec1997(stack, model.balanced_response(), noise, merger.options)
@@ -327,6 +338,13 @@ def correct(
                 f"uncertainty: the response ({model.response.method}) states no covariance; "
                 "its part of the calibration uncertainty is not included"
             )
+        if refinement is not None and refinement.log_cov is not None:
+            sigma_exposure = np.sqrt(
+                log_variance_exposure_Debevec1997(
+                    stack, model.balanced_response(), refinement.log_cov, merger.options
+                )
+            ).astype(np.float32)
+            sigma_exposure[mask] = np.nan
         if model.sensor_lut.log_variance is not None:
             sigma_lut = np.sqrt(model.sensor_lut.log_variance.astype(np.float32))
             sigma_lut[mask] = np.nan
@@ -357,6 +375,7 @@ def correct(
         log_sigma_response=sigma_response,
         log_sigma_vignetting=sigma_vignetting,
         log_sigma_sensor_lut=sigma_lut,
+        log_sigma_exposure=sigma_exposure,
     )
 
 

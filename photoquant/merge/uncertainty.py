@@ -48,6 +48,7 @@ from photoquant.stack import ExposureStack
 
 __all__ = [
     "log_variance_Debevec1997",
+    "log_variance_exposure_Debevec1997",
     "log_variance_response_Debevec1997",
     "noise_parameters_from_record",
     "noise_record",
@@ -219,4 +220,40 @@ def log_variance_response_Debevec1997(
             total += (moved * inv) ** 2
         table = tabulated(rest)
         total += sum(w * w * tables.take(table, k) for k, w in enumerate(weights)) * inv**2
+    return np.where(den > 0, total, np.nan)
+
+
+def log_variance_exposure_Debevec1997(
+    stack: ExposureStack,
+    response: ResponseModel,
+    log_cov: np.ndarray,
+    options: DebevecMergeOptions | None = None,
+) -> np.ndarray:
+    """The exposure times' part of ``Var(ln Ê)`` after the ``"Debevec 1997"`` merge.
+
+    ``ln Ê = Σ_k a_k (g(c̄_k) − ln t_k)`` (``a_k = w_k / Σ_k w_k``) moves by
+    ``−Σ_k a_k δ ln t_k`` when the times are off, so ``Var = aᵀ Cov(ln t) a``
+    per pixel, with ``Cov(ln t)`` e.g. the covariance of refined times
+    (:attr:`photoquant.exposure.ExposureRefinement.log_cov`; NaN entries, the
+    rows of exposures kept at their labels, count as 0). The times are
+    common to every pixel of the scene: the errors are correlated across
+    pixels (a component apart from the noise).
+
+    Returns
+    -------
+    ndarray, shape (H, W, C), float64
+        NaN where no exposure has weight.
+    """
+    k = stack.n_exposures
+    cov = np.nan_to_num(np.asarray(log_cov, dtype=np.float64))
+    if cov.shape != (k, k):
+        raise InputError(f"`log_cov` must be ({k}, {k}) for the stack's exposures, got {cov.shape}")
+    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
+    rows = (vecs * np.sqrt(np.clip(vals, 0.0, None))).T  # Cov = rowsᵀ rows
+    _, weights, den = _merge_weights(stack, response, options)
+    total = np.zeros_like(den)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for row in rows:
+            moved = sum(w * float(r) for w, r in zip(weights, row, strict=True))
+            total += (moved / den) ** 2
     return np.where(den > 0, total, np.nan)

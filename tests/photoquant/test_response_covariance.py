@@ -225,3 +225,49 @@ def test_correct_states_the_response_component_beside_the_noise():
     assert plain.log_sigma_response is None
     assert any("states no covariance" in note for note in plain.notes)
     np.testing.assert_array_equal(plain.log_sigma, plain.log_sigma_noise)
+
+
+def test_exposure_component_is_the_merge_moved_along_the_times():
+    from photoquant.merge.uncertainty import log_variance_exposure_Debevec1997
+
+    rng = np.random.default_rng(8)
+    response = _response_with_covariance(rng)
+    stack = _stack(rng, 3)
+    root = rng.normal(scale=0.01, size=(3, 3))
+    cov = root @ root.T
+    merge = MergeModel("Debevec 1997", {"weighting": "hat"})
+    got = log_variance_exposure_Debevec1997(stack, response, cov, merge.options)
+    base = merge.merge(stack, response).log_photoquantity[..., 0].astype(np.float64)
+    vals, vecs = np.linalg.eigh(cov)
+    expected = np.zeros_like(base)
+    for val, vec in zip(vals, vecs.T, strict=True):
+        moved = stack.with_frames(stack.frames, stack.exposure_s * np.exp(np.sqrt(val) * vec))
+        expected += (merge.merge(moved, response).log_photoquantity[..., 0] - base) ** 2
+    np.testing.assert_allclose(got[..., 0], expected, rtol=1e-3)
+    # exposures kept at their labels (NaN rows) add nothing
+    nan_cov = np.full((3, 3), np.nan)
+    nan_cov[:2, :2] = cov[:2, :2]
+    kept = log_variance_exposure_Debevec1997(stack, response, nan_cov, merge.options)
+    assert np.all(kept <= got + 1e-15) and np.all(np.isfinite(kept))
+    with pytest.raises(InputError, match=r"\(3, 3\)"):
+        log_variance_exposure_Debevec1997(stack, response, cov[:2, :2])
+
+
+def test_correct_states_the_refined_times_component():
+    import photoquant as pq
+
+    from .test_exposure import _jittered_capture
+
+    _, stack, *_ = _jittered_capture(n_repeats=2, seed=5)
+    model = pq.calibrate([stack])
+    result = pq.correct(stack, model, uncertainty=True, refine_exposures=True)
+    assert result.exposures is not None
+    ok = ~result.mask
+    exposure = result.log_sigma_exposure[ok].astype(np.float64)
+    assert np.all(exposure > 0) and np.all(np.isnan(result.log_sigma_exposure[~ok]))
+    parts = [result.log_sigma_noise, result.log_sigma_calibration]
+    expected = np.sqrt(exposure**2 + sum(p[ok].astype(np.float64) ** 2 for p in parts))
+    np.testing.assert_allclose(result.log_sigma[ok], expected, rtol=1e-5)
+    # nominal times kept: nothing stated for them
+    kept = pq.correct(stack, model, uncertainty=True, refine_exposures=False)
+    assert kept.exposures is None and kept.log_sigma_exposure is None
