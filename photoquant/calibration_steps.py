@@ -415,19 +415,38 @@ def _recover_with_view_times(
     asked for, that is an error.
     """
     fits: list[StepFit[Any]] = []
+    # the rounds' fits need g only: the covariance is the final fit's (same g either way)
+    method, options = spec
+    rounds_spec = spec
+    if (
+        dataclasses.is_dataclass(options)
+        and not isinstance(options, type)
+        and "uncertainty" in {f.name for f in dataclasses.fields(options)}
+    ):
+        rounds_spec = (method, dataclasses.replace(options, uncertainty=False))
 
-    def recover(stack: ExposureStack) -> tuple[np.ndarray, ...]:
-        fit = fit_response(stack, spec, rng=seed)
-        fits.append(fit)
-        m = fit.model
-        vmin = m.valid_min if m.valid_min is not None else np.full(len(m.saturation_level), 0)
-        return m.levels, m.log_inverse_response, m.saturation_level, vmin
+    def fitter(chosen: Spec) -> Callable[[ExposureStack], tuple[np.ndarray, ...]]:
+        def recover(stack: ExposureStack) -> tuple[np.ndarray, ...]:
+            fit = fit_response(stack, chosen, rng=seed)
+            fits.append(fit)
+            m = fit.model
+            vmin = m.valid_min if m.valid_min is not None else np.full(len(m.saturation_level), 0)
+            return m.levels, m.log_inverse_response, m.saturation_level, vmin
+
+        return recover
 
     try:
         # 3 rounds: the fourth changed no time (measured); 20 000 pixels per view
         # for the response (README, exposure refinement); defects give no samples
         hidden = [hide_defects(v, defects) for v in views]
-        refs, _ = refine_jointly(hidden, recover, rounds=3, combine_pixels=20_000, seed=seed)
+        refs, _ = refine_jointly(
+            hidden,
+            fitter(rounds_spec),
+            rounds=3,
+            combine_pixels=20_000,
+            seed=seed,
+            final=fitter(spec),
+        )
     except CalibrationError as exc:
         if policy.asked:
             raise CalibrationError(

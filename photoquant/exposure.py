@@ -1574,6 +1574,7 @@ def refine_jointly(
     tolerance: float = 2e-4,
     spread: Literal["affine shutter", "nominal"] = "affine shutter",
     combine_pixels: int = 40_000,
+    final: Callable[[ExposureStack], tuple[np.ndarray, ...]] | None = None,
     **options: Any,
 ) -> tuple[list[ExposureRefinement], tuple[np.ndarray, ...]]:
     """Recover one response from several stacks and refine each stack's exposures, alternately.
@@ -1597,6 +1598,10 @@ def refine_jointly(
         ``recover(stack) -> (levels, log_inverse_response, saturation_level[,
         valid_min])``, e.g. a closure over
         :func:`photoquant.response.recover_response`.
+    final : callable, optional
+        Recovers the response returned, from the final times (``recover`` by
+        default): the same fit with what only the result needs (e.g. its
+        covariance), which the rounds' fits can leave out.
     rounds : int
         Rounds at most.
     tolerance : float
@@ -1659,7 +1664,7 @@ def refine_jointly(
         if change < tolerance:
             break
     labelled = [st.with_exposure_times(t) for st, t in zip(thinned, current, strict=True)]
-    response = recover(combine_stacks(labelled, max_pixels=combine_pixels))
+    response = (final or recover)(combine_stacks(labelled, max_pixels=combine_pixels))
     return refs, response
 
 
