@@ -162,20 +162,31 @@ def _section(report: dict[str, Any], key: str) -> dict[str, Any]:
     return value if isinstance(value, dict) else {}
 
 
-def _response_std_summary(response: Any, std: np.ndarray) -> str:
-    """The statistical standard uncertainty of ``g`` per channel, median and largest
-    over the measured levels (``valid_min`` to saturation)."""
-    parts = []
-    for ch in range(std.shape[0]):
-        inside = (response.levels >= response.valid_min[ch]) & (
-            response.levels < response.saturation_level[ch]
-        )
-        s = std[ch][inside] if inside.any() else std[ch]
-        parts.append(f"{np.median(s):.2g}/{np.max(s):.2g}")
-    return (
-        "std of g (ln, median/largest over the measured levels, relative to mid-range) "
-        + " ".join(parts)
-    )
+def _uncertainty_summary(model: Any) -> dict[str, Any]:
+    """The calibrated parameters' standard uncertainties, where the steps state them
+    (``ln`` units; the response's median and largest over its measured levels)."""
+    out: dict[str, Any] = {}
+    std = model.response.log_inverse_std()
+    if std is not None:
+        medians, largest = [], []
+        for ch in range(std.shape[0]):
+            inside = (model.response.levels >= model.response.valid_min[ch]) & (
+                model.response.levels < model.response.saturation_level[ch]
+            )
+            s = std[ch][inside] if inside.any() else std[ch]
+            medians.append(float(np.median(s)))
+            largest.append(float(np.max(s)))
+        out["response_log_std"] = {"median": medians, "largest": largest}
+    lut_variance = model.sensor_lut.log_variance
+    if lut_variance is not None:
+        flat = lut_variance.reshape(-1, lut_variance.shape[-1]).astype(np.float64)
+        out["sensor_lut_log_std_median"] = np.sqrt(np.median(flat, axis=0)).tolist()
+    cov = getattr(model.vignetting, "param_covariance", None)
+    if cov is not None:
+        out["vignetting_param_std"] = np.sqrt(
+            np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None)
+        ).tolist()
+    return out
 
 
 def _print_summary(model: Any, where: Path | None = None) -> None:
@@ -198,9 +209,13 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     if "residual_rms" in resp:
         line += f", residual rms (ln) {_fmt(resp['residual_rms'])}"
     lines.append(line)
-    std = model.response.log_inverse_std()
-    if std is not None:
-        lines.append("response uncertainty: " + _response_std_summary(model.response, std))
+    stated = _uncertainty_summary(model)
+    if "response_log_std" in stated:
+        pairs = zip(*stated["response_log_std"].values(), strict=True)
+        lines.append(
+            "response uncertainty: std of g (ln, median/largest over the measured levels, "
+            "relative to mid-range) " + " ".join(f"{m:.2g}/{x:.2g}" for m, x in pairs)
+        )
     lines.append(f"balance: {_fmt(model.balance.factors)}")
     noise = model.parameters.get("noise")
     if isinstance(noise, dict) and "gain_dn_per_e" in noise:
@@ -212,10 +227,8 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     lut = _section(rep, "sensor_lut")
     if "prnu_std" in lut:
         line = f"sensor LUT: PRNU std {_fmt(lut['prnu_std'])}, flagged {lut.get('n_flagged')}"
-        lut_variance = model.sensor_lut.log_variance
-        if lut_variance is not None:
-            median = np.sqrt(np.median(lut_variance.reshape(-1, lut_variance.shape[-1]), axis=0))
-            line += f", noise of u (ln, median) {_fmt(median)}"
+        if "sensor_lut_log_std_median" in stated:
+            line += f", noise of u (ln, median) {_fmt(stated['sensor_lut_log_std_median'])}"
         lines.append(line)
     vig = _section(rep, "vignetting")
     if "n_tracks" in vig:
@@ -230,11 +243,11 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
         and params.ndim == 2
         and params.shape[0] == len(model.channels)
     ):
-        cov = getattr(model.vignetting, "param_covariance", None)
+        param_std = stated.get("vignetting_param_std")
         for ch, (name, row) in enumerate(zip(model.channels, params, strict=True)):
             line = f"  {name}: {model.vignetting.method} {_fmt(row)}"
-            if cov is not None:
-                line += f" ± {_fmt(np.sqrt(np.clip(np.diag(cov[ch]), 0.0, None)))}"
+            if param_std is not None:
+                line += f" ± {_fmt(param_std[ch])}"
             lines.append(line)
     if not model.glare.is_identity:  # the glare step (photoquant.glare)
         fit = _section(rep, "glare")
@@ -404,7 +417,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(
             json.dumps(
                 {k: data[k] for k in ("parameters", "report")}
-                | {"steps": {k: v["method"] for k, v in data["steps"].items()}},
+                | {"steps": {k: v["method"] for k, v in data["steps"].items()}}
+                | {"uncertainty": _uncertainty_summary(model)},
                 indent=1,
             )
         )

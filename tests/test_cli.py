@@ -71,6 +71,11 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     assert main(["info", str(cam), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["parameters"]["n_views"] == 3 and "report" in info
+    stated = info["uncertainty"]
+    assert len(stated["response_log_std"]["median"]) == 3
+    assert all(0 < m <= x for m, x in zip(*stated["response_log_std"].values(), strict=True))
+    assert len(stated["sensor_lut_log_std_median"]) == 3
+    assert np.asarray(stated["vignetting_param_std"]).shape == (3, 6)
     merge = info["parameters"]["steps"]["merge"]
     assert merge["options"]["weighting"] == "hat-quantisation" and merge["method"] == "Debevec 1997"
     assert info["steps"]["vignetting"] == "Extended Goldman-Chen"
