@@ -42,6 +42,7 @@ from photoquant.merge.uncertainty import (
     log_variance_Debevec1997,
     log_variance_exposure_Debevec1997,
     log_variance_response_Debevec1997,
+    merge_weights_Debevec1997,
     noise_parameters_from_record,
 )
 from photoquant.methods import resolve_method
@@ -319,49 +320,9 @@ def correct(
     if defects is not None and defects.mask.any():
         photoquantity[defects.mask] = np.nan
         mask |= defects.mask
-    sigma, noise, sigma_response, sigma_vignetting, sigma_lut = None, None, None, None, None
-    sigma_exposure = None
+    stated = {}
     if uncertainty:
-        noise = _noise_parameters(stack, model)
-        variance = log_variance_Debevec1997(stack, model.balanced_response(), noise, merger.options)
-        sigma = np.sqrt(variance).astype(np.float32)
-        sigma[mask] = np.nan
-        if not model.glare.is_identity:
-            notes.append("uncertainty: the merge's noise before glare removal")
-        if model.response.covariance_factor is not None:
-            sigma_response = np.sqrt(
-                log_variance_response_Debevec1997(stack, model.balanced_response(), merger.options)
-            ).astype(np.float32)
-            sigma_response[mask] = np.nan
-        else:
-            notes.append(
-                f"uncertainty: the response ({model.response.method}) states no covariance; "
-                "its part of the calibration uncertainty is not included"
-            )
-        if refinement is not None and refinement.log_cov is not None:
-            sigma_exposure = np.sqrt(
-                log_variance_exposure_Debevec1997(
-                    stack, model.balanced_response(), refinement.log_cov, merger.options
-                )
-            ).astype(np.float32)
-            sigma_exposure[mask] = np.nan
-        if model.sensor_lut.log_variance is not None:
-            sigma_lut = np.sqrt(model.sensor_lut.log_variance.astype(np.float32))
-            sigma_lut[mask] = np.nan
-        elif model.sensor_lut.method != "None":
-            notes.append(
-                "uncertainty: the sensor LUT states no noise; its part of the calibration "
-                "uncertainty is not included"
-            )
-        vignetting_variance = model.vignetting.log_map_variance(stack.image_shape)
-        if vignetting_variance is not None:
-            sigma_vignetting = np.sqrt(vignetting_variance).astype(np.float32)
-            sigma_vignetting[mask] = np.nan
-        elif not _is_identity_vignetting(model):
-            notes.append(
-                f"uncertainty: the vignetting ({model.vignetting.method}) states no covariance; "
-                "its part of the calibration uncertainty is not included"
-            )
+        stated = _stated_uncertainty(stack, model, merger, refinement, mask, notes)
     return Correction(
         photoquantity=photoquantity,
         mask=mask,
@@ -370,13 +331,73 @@ def correct(
         exposures=refinement,
         notes=tuple(notes),
         exposure_decision=decision,
-        log_sigma_noise=sigma,
-        noise=noise,
-        log_sigma_response=sigma_response,
-        log_sigma_vignetting=sigma_vignetting,
-        log_sigma_sensor_lut=sigma_lut,
-        log_sigma_exposure=sigma_exposure,
+        **stated,
     )
+
+
+def _stated_uncertainty(
+    stack: ExposureStack,
+    model: CameraModel,
+    merger: MergeModel,
+    refinement: ExposureRefinement | None,
+    mask: np.ndarray,
+    notes: list[str],
+) -> dict[str, Any]:
+    """The parts of the uncertainty of ``ln l`` the scene and the camera state, as the
+    :class:`Correction`'s fields (the merge's weights computed once for all of them);
+    ``notes`` gains what is not stated and why."""
+    response = model.balanced_response()
+    weights = merge_weights_Debevec1997(stack, response, merger.options)
+    noise = _noise_parameters(stack, model)
+    out: dict[str, Any] = {
+        "noise": noise,
+        "log_sigma_noise": _sigma(
+            log_variance_Debevec1997(stack, response, noise, merger.options, weights=weights),
+            mask,
+        ),
+    }
+    if not model.glare.is_identity:
+        notes.append("uncertainty: the merge's noise before glare removal")
+    if model.response.covariance_factor is not None:
+        out["log_sigma_response"] = _sigma(
+            log_variance_response_Debevec1997(stack, response, merger.options, weights=weights),
+            mask,
+        )
+    else:
+        notes.append(
+            f"uncertainty: the response ({model.response.method}) states no covariance; "
+            "its part of the calibration uncertainty is not included"
+        )
+    if refinement is not None and refinement.log_cov is not None:
+        out["log_sigma_exposure"] = _sigma(
+            log_variance_exposure_Debevec1997(
+                stack, response, refinement.log_cov, merger.options, weights=weights
+            ),
+            mask,
+        )
+    if model.sensor_lut.log_variance is not None:
+        out["log_sigma_sensor_lut"] = _sigma(model.sensor_lut.log_variance, mask)
+    elif model.sensor_lut.method != "None":
+        notes.append(
+            "uncertainty: the sensor LUT states no noise; its part of the calibration "
+            "uncertainty is not included"
+        )
+    vignetting_variance = model.vignetting.log_map_variance(stack.image_shape)
+    if vignetting_variance is not None:
+        out["log_sigma_vignetting"] = _sigma(vignetting_variance, mask)
+    elif not _is_identity_vignetting(model):
+        notes.append(
+            f"uncertainty: the vignetting ({model.vignetting.method}) states no covariance; "
+            "its part of the calibration uncertainty is not included"
+        )
+    return out
+
+
+def _sigma(variance: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``√variance`` as float32, NaN where the correction flags the pixel."""
+    sigma = np.sqrt(variance).astype(np.float32)
+    sigma[mask] = np.nan
+    return sigma
 
 
 def _is_identity_vignetting(model: CameraModel) -> bool:

@@ -35,7 +35,7 @@ References
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -47,6 +47,8 @@ from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
 __all__ = [
+    "MergeWeights",
+    "merge_weights_Debevec1997",
     "log_variance_Debevec1997",
     "log_variance_exposure_Debevec1997",
     "log_variance_response_Debevec1997",
@@ -86,6 +88,8 @@ def log_variance_Debevec1997(
     response: ResponseModel,
     noise: NoiseParameters,
     options: DebevecMergeOptions | None = None,
+    *,
+    weights: MergeWeights | None = None,
 ) -> np.ndarray:
     """``Var(ln Ê)`` of :func:`~photoquant.merge.debevec1997.merge_stack_Debevec1997` per pixel.
 
@@ -100,6 +104,8 @@ def log_variance_Debevec1997(
         Gain and read noise per channel, on the response's linear DN scale.
     options : DebevecMergeOptions, optional
         The merge's weighting and ``valid_min`` rule (the defaults when not given).
+    weights : MergeWeights, optional
+        The merge's weights, when already computed (:func:`merge_weights_Debevec1997`).
 
     Returns
     -------
@@ -110,7 +116,7 @@ def log_variance_Debevec1997(
     if not isinstance(noise, NoiseParameters):
         raise InputError(f"`noise` must be NoiseParameters, got {type(noise).__name__}")
     n = stack.n_repeats
-    tables, weights, den = _merge_weights(stack, response, options)
+    tables, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
     scale = _Scale(response)
     read2 = np.asarray(noise.read_noise, dtype=np.float64) ** 2
 
@@ -120,17 +126,27 @@ def log_variance_Debevec1997(
 
     variance_table = tables.table(variance)
     num = np.zeros_like(den)
-    for k, w in enumerate(weights):
+    for k, w in enumerate(per_exposure):
         num += np.where(w > 0, w * w * tables.take(variance_table, k), 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(den > 0, num / np.where(den > 0, den * den, 1.0), np.nan)
 
 
-def _merge_weights(
-    stack: ExposureStack, response: ResponseModel, options: DebevecMergeOptions | None
-) -> tuple[ValueTables, list[np.ndarray], np.ndarray]:
-    """The merge's weight of every value, ``w_k`` ``(H, W, C)`` per exposure (0 where the
-    merge leaves the value out), the value tables, and ``Σ_k w_k``."""
+class MergeWeights(NamedTuple):
+    """The ``"Debevec 1997"`` merge's weights of a stack, shared by the uncertainty's parts."""
+
+    tables: ValueTables
+    """The stack's value tables (quantities of every possible mean value)."""
+    per_exposure: list[np.ndarray]
+    """``w_k`` ``(H, W, C)`` of each exposure, 0 where the merge leaves the value out."""
+    total: np.ndarray
+    """``Σ_k w_k``."""
+
+
+def merge_weights_Debevec1997(
+    stack: ExposureStack, response: ResponseModel, options: DebevecMergeOptions | None = None
+) -> MergeWeights:
+    """The merge's weight of every value (computed once for all the uncertainty's parts)."""
     opts = options or DebevecMergeOptions()
     n = stack.n_repeats
     values = stack.frames[0] if n == 1 else stack.repeat_sum()
@@ -158,13 +174,15 @@ def _merge_weights(
             if mask is not None:
                 w = np.where(mask[k], 0.0, w)
         weights.append(w)
-    return tables, weights, np.sum(weights, axis=0)
+    return MergeWeights(tables, weights, np.sum(weights, axis=0))
 
 
 def log_variance_response_Debevec1997(
     stack: ExposureStack,
     response: ResponseModel,
     options: DebevecMergeOptions | None = None,
+    *,
+    weights: MergeWeights | None = None,
 ) -> np.ndarray:
     """The response's part of ``Var(ln Ê)`` after the ``"Debevec 1997"`` merge, per pixel.
 
@@ -187,6 +205,8 @@ def log_variance_response_Debevec1997(
         The response the merge used, with its covariance (``covariance_factor``).
     options : DebevecMergeOptions, optional
         The merge's weighting and ``valid_min`` rule.
+    weights : MergeWeights, optional
+        The merge's weights, when already computed (:func:`merge_weights_Debevec1997`).
 
     Returns
     -------
@@ -204,7 +224,7 @@ def log_variance_response_Debevec1997(
             f"the response ({response.method!r}) carries no covariance: its method does not "
             "estimate one"
         )
-    tables, weights, den = _merge_weights(stack, response, options)
+    tables, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
     levels = response.levels
     rest = np.clip(diagonal - np.sum(factor**2, axis=1), 0.0, None)
 
@@ -216,10 +236,10 @@ def log_variance_response_Debevec1997(
         total = np.zeros_like(den)
         for r in range(factor.shape[1]):
             table = tabulated(factor[:, r])
-            moved = sum(w * tables.take(table, k) for k, w in enumerate(weights))
+            moved = sum(w * tables.take(table, k) for k, w in enumerate(per_exposure))
             total += (moved * inv) ** 2
         table = tabulated(rest)
-        total += sum(w * w * tables.take(table, k) for k, w in enumerate(weights)) * inv**2
+        total += sum(w * w * tables.take(table, k) for k, w in enumerate(per_exposure)) * inv**2
     return np.where(den > 0, total, np.nan)
 
 
@@ -228,6 +248,8 @@ def log_variance_exposure_Debevec1997(
     response: ResponseModel,
     log_cov: np.ndarray,
     options: DebevecMergeOptions | None = None,
+    *,
+    weights: MergeWeights | None = None,
 ) -> np.ndarray:
     """The exposure times' part of ``Var(ln Ê)`` after the ``"Debevec 1997"`` merge.
 
@@ -237,7 +259,8 @@ def log_variance_exposure_Debevec1997(
     (:attr:`photoquant.exposure.ExposureRefinement.log_cov`; NaN entries, the
     rows of exposures kept at their labels, count as 0). The times are
     common to every pixel of the scene: the errors are correlated across
-    pixels (a component apart from the noise).
+    pixels (a component apart from the noise). ``weights``: the merge's, when
+    already computed (:func:`merge_weights_Debevec1997`).
 
     Returns
     -------
@@ -250,10 +273,10 @@ def log_variance_exposure_Debevec1997(
         raise InputError(f"`log_cov` must be ({k}, {k}) for the stack's exposures, got {cov.shape}")
     vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
     rows = (vecs * np.sqrt(np.clip(vals, 0.0, None))).T  # Cov = rowsᵀ rows
-    _, weights, den = _merge_weights(stack, response, options)
+    _, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
     total = np.zeros_like(den)
     with np.errstate(invalid="ignore", divide="ignore"):
         for row in rows:
-            moved = sum(w * float(r) for w, r in zip(weights, row, strict=True))
+            moved = sum(w * float(r) for w, r in zip(per_exposure, row, strict=True))
             total += (moved / den) ** 2
     return np.where(den > 0, total, np.nan)

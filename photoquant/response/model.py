@@ -261,6 +261,10 @@ class ResponseModel:
     ) -> ResponseModel:
         """Rebuild from :meth:`to_params` (``images`` unused)."""
         del images
+
+        def optional(name: str) -> np.ndarray | None:
+            return _float_array(params[name], name) if name in params else None
+
         return cls(
             method=method,
             levels=_float_array(params["levels"], "levels"),
@@ -268,19 +272,11 @@ class ResponseModel:
                 params["log_inverse_response"], "log_inverse_response"
             ),
             saturation_level=_float_array(params["saturation_level"], "saturation_level"),
-            valid_min=_float_array(params["valid_min"], "valid_min")
-            if "valid_min" in params
-            else None,
-            black_level=_float_array(params["black_level"], "black_level")
-            if "black_level" in params
-            else None,
+            valid_min=optional("valid_min"),
+            black_level=optional("black_level"),
             params=dict(params.get("method_params") or {}),
-            covariance_factor=_float_array(params["covariance_factor"], "covariance_factor")
-            if "covariance_factor" in params
-            else None,
-            covariance_diagonal=_float_array(params["covariance_diagonal"], "covariance_diagonal")
-            if "covariance_diagonal" in params
-            else None,
+            covariance_factor=optional("covariance_factor"),
+            covariance_diagonal=optional("covariance_diagonal"),
         )
 
 
