@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import io
+import logging
 import math
 import os
 import signal
@@ -393,6 +394,27 @@ def test_ctrl_c_is_one_line_and_leaves_no_scratch(tmp_path):
     assert lines[-1] == "photoquant: interrupted", err
     assert len(lines) <= 2, err  # the plan of the sweep, then the one line
     assert not [p for p in scratch.iterdir() if p.name.startswith("photoquant-sweep-")]
+
+
+def test_the_local_workers_log_nothing_even_after_they_close(tmp_path):
+    # a worker's handlers are quieted only while it runs; its logger stays quiet for good
+    script = tmp_path / "workers.py"
+    script.write_text(
+        "import logging\n"
+        "from validation.sweep.engine import _client, _close\n"
+        "if __name__ == '__main__':\n"
+        "    client, cluster = _client(None, 1)\n"
+        "    levels = client.run(\n"
+        "        lambda: logging.getLogger('distributed.worker').getEffectiveLevel()\n"
+        "    )\n"
+        "    _close(client, cluster)\n"
+        "    print(min(levels.values()))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=REPO
+    )
+    assert done.returncode == 0, done.stderr
+    assert int(done.stdout.split()[-1]) > logging.CRITICAL, done.stdout
 
 
 @pytest.mark.slow

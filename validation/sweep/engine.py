@@ -452,6 +452,8 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
     """A Dask client: on a new LocalCluster, or connected to the scheduler at ``scheduler``."""
     try:
         from distributed import Client, LocalCluster
+
+        from validation.sweep.worker_logs import QuietWorkerLogs
     except ImportError:
         raise SweepError(
             "photoquant sweep needs Dask distributed and pyarrow (pip install '.[sweep]')"
@@ -488,6 +490,7 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
         )
         try:
             client = Client(cluster, timeout=NETWORK_TIMEOUT_S)
+            client.register_plugin(QuietWorkerLogs(), name="photoquant-quiet-worker-logs")
         except BaseException:
             cluster.close(timeout=NETWORK_TIMEOUT_S)
             raise
