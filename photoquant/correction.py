@@ -12,10 +12,11 @@ camera's response (:func:`photoquant.exposure.refine_exposure_times`) when the
 camera was calibrated with exposure refinement (the photoquant profile's
 default) or when asked, and the refined times replace the labels only where
 the data contradict them (:func:`photoquant.exposure.judge_exposure_times`).
-By default the labels are first tested from neighbouring exposure pairs of a
-pixel draw (:func:`photoquant.exposure.refine_by_pairs`, a fraction of the
-full refinement's cost); labels that test keeps are kept, and only labels it
-rejects are refined in full and judged again.
+By default the scene's times are estimated from neighbouring exposure pairs
+of a pixel draw (:func:`photoquant.exposure.refine_by_pairs`, a fraction of
+the full refinement's cost, with honest standard errors); where it relates
+no two exposures, :func:`photoquant.exposure.refine_against_response` is
+used instead. ``refine_exposures=True`` always takes the full refinement.
 """
 
 from __future__ import annotations
@@ -447,14 +448,16 @@ def _scene_exposures(
         return None, None, notes
     floor = camera_floor_log(model)
     if refine_exposures is None:
-        # the cheap test first: where the neighbouring pairs keep the labels, so does the scene
+        # the neighbouring pairs' estimate decides and, where it rejects the labels, gives
+        # the times; the full refinement only where the pairs relate no two exposures
         try:
-            screen = judge_exposure_times(refine_by_pairs(stack, model.response), floor_log=floor)
+            pairs = refine_by_pairs(stack, model.response)
         except CalibrationError:
-            screen = None
-        if screen is not None and not screen.refine:
+            pairs = None
+        if pairs is not None:
+            screen = judge_exposure_times(pairs, floor_log=floor)
             notes.append(f"scene's exposure times: {screen.describe()}")
-            return None, screen, notes
+            return (pairs if screen.refine else None), screen, notes
     try:
         # the sample's answer, as the camera's floor was measured (exhaustive=False)
         refinement = refine_against_response(stack, model.response, exhaustive=False)

@@ -1376,7 +1376,18 @@ class _Tables:
         self.inv_step = 1.0 / float(step.mean())
 
     def at(self, z: np.ndarray, chan: np.ndarray) -> np.ndarray:
-        """The tables at levels ``z`` of channels ``chan``, shape ``(T, len(z))``."""
+        """The tables at levels ``z`` of channels ``chan`` (broadcast), shape ``(T, *z.shape)``."""
+        if _tables_at_nb is not None:  # the same arithmetic, one pass without temporaries
+            shape = np.broadcast_shapes(np.shape(z), np.shape(chan))
+            z_flat = np.ascontiguousarray(np.broadcast_to(z, shape), dtype=np.float64).ravel()
+            c_flat = np.ascontiguousarray(np.broadcast_to(chan, shape), dtype=np.intp).ravel()
+            out = np.empty((self.flat.shape[0], z_flat.size))
+            _tables_at_nb(self.flat, self.levels, self.even, self.inv_step, z_flat, c_flat, out)
+            return out.reshape((self.flat.shape[0], *shape))
+        return self._at_numpy(z, chan)
+
+    def _at_numpy(self, z: np.ndarray, chan: np.ndarray) -> np.ndarray:
+        """:meth:`at` in numpy (the kernel's readable twin)."""
         lv = self.levels
         zc = np.clip(np.nan_to_num(z, nan=lv[0]), lv[0], lv[-1])
         if self.even:
@@ -1388,6 +1399,33 @@ class _Tables:
         a = self.flat[:, base]
         b = self.flat[:, base + 1]
         return a + frac * (b - a)
+
+
+def _tables_at_py(  # pragma: no cover - compiled by numba
+    flat: Any, levels: Any, even: bool, inv_step: float, z: Any, chan: Any, out: Any
+) -> None:
+    """numba body of :meth:`_Tables.at` (its numpy twin's operations, value by value)."""
+    n = levels.size
+    lv0 = levels[0]
+    lv_last = levels[n - 1]
+    for e in range(z.size):
+        zz = z[e]
+        if np.isnan(zz):
+            zc = lv0
+        else:
+            zc = min(max(zz, lv0), lv_last)
+        if even:
+            i = min(int((zc - lv0) * inv_step), n - 2)
+        else:
+            i = min(max(np.searchsorted(levels, zc, side="right") - 1, 0), n - 2)
+        frac = (zc - levels[i]) / (levels[i + 1] - levels[i])
+        base = chan[e] * n + i
+        for t in range(flat.shape[0]):
+            a = flat[t, base]
+            out[t, e] = a + frac * (flat[t, base + 1] - a)
+
+
+_tables_at_nb: Any = compile_kernel(_tables_at_py) if HAVE_NUMBA else None
 
 
 def _line_fit(level: np.ndarray, var: np.ndarray) -> np.ndarray:
@@ -1443,14 +1481,21 @@ def _pair_offsets(
     scale = scale or 1.0
     h = np.ones_like(w)
     iterations = 0
-    for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported
-        u = np.abs(resid - theta[step]) * sqrt_w / scale
-        h = np.where(u <= huber_k, 1.0, huber_k / np.maximum(u, 1e-300))
-        new = location(w * h)
-        done = float(np.max(np.abs(new - theta))) < 1e-6
-        theta = new
-        if done:
-            break
+    if _huber_iterations_nb is not None:  # the same arithmetic, without temporaries
+        theta, u_last = theta.copy(), np.empty_like(w)
+        iterations = _huber_iterations_nb(
+            resid, w, sqrt_w, step, scale, huber_k, max_iterations, theta, h, u_last
+        )
+        u = u_last if iterations else u
+    else:
+        for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported
+            u = np.abs(resid - theta[step]) * sqrt_w / scale
+            h = np.where(u <= huber_k, 1.0, huber_k / np.maximum(u, 1e-300))
+            new = location(w * h)
+            done = float(np.max(np.abs(new - theta))) < 1e-6
+            theta = new
+            if done:
+                break
     r = np.where(use, resid - theta[step], 0.0)
     psi = np.zeros((n_rows, n_steps))
     psi[row, step] = w * h * r
@@ -1458,6 +1503,43 @@ def _pair_offsets(
     slope = np.where(slope > 0, slope, np.inf)
     cov = (psi.T @ psi) / np.outer(slope, slope)
     return theta, cov, h, scale, iterations
+
+
+def _huber_iterations_py(  # pragma: no cover - compiled by numba
+    resid: Any, w: Any, sqrt_w: Any, step: Any, scale: float, huber_k: float,
+    max_iterations: int, theta: Any, h: Any, u_last: Any,
+) -> int:  # fmt: skip
+    """numba body of :func:`_pair_offsets`' iterations (its numpy branch's operations in
+    order): updates ``theta`` in place, writes the last iteration's ``h`` and scaled
+    residuals ``u_last``, returns the iterations run."""
+    n_steps = theta.size
+    total = np.empty(n_steps)
+    moment = np.empty(n_steps)
+    iterations = 0
+    for it in range(1, max_iterations + 1):
+        iterations = it
+        total[:] = 0.0
+        moment[:] = 0.0
+        for e in range(resid.size):
+            s = step[e]
+            u = np.abs(resid[e] - theta[s]) * sqrt_w[e] / scale
+            he = 1.0 if u <= huber_k else huber_k / max(u, 1e-300)
+            u_last[e] = u
+            h[e] = he
+            wh = w[e] * he
+            total[s] += wh
+            moment[s] += wh * resid[e]
+        change = 0.0
+        for s in range(n_steps):
+            new = moment[s] / (total[s] if total[s] > 0 else 1.0)
+            change = max(change, np.abs(new - theta[s]))
+            theta[s] = new
+        if change < 1e-6:
+            break
+    return iterations
+
+
+_huber_iterations_nb: Any = compile_kernel(_huber_iterations_py) if HAVE_NUMBA else None
 
 
 def _longest_run(good: np.ndarray, counts: np.ndarray) -> slice:

@@ -1,16 +1,18 @@
 """The correction's exposure screen from neighbouring pairs (:func:`refine_by_pairs`).
 
-``correct`` tests a scene's labels with it before the full refinement
-(:func:`photoquant.exposure.refine_against_response`); these tests hold it to
-the full refinement's answers:
+``correct`` tests a scene's labels with it and takes its times where it
+rejects them (the full refinement,
+:func:`photoquant.exposure.refine_against_response`, only where the pairs
+relate no two exposures); these tests hold it to the full refinement's
+answers:
 
 * on a pqsim capture with exact labels and on one with 3 % jitter, the test
   of :func:`judge_exposure_times` decides alike from both, and the refined
   log-time ratios agree within their stated standard errors;
 * the jittered times move towards the actual ones;
-* the compiled pass gives the numpy pass's bits, the draw is seeded;
-* ``correct`` screens with it: labels it keeps are kept, labels it rejects
-  go to the full refinement, as does a draw that relates no two exposures.
+* the compiled kernels give the numpy twins' bits, the draw is seeded;
+* ``correct`` decides with it and, where it rejects the labels, takes its
+  times; a draw that relates no two exposures goes to the full refinement.
 """
 
 from __future__ import annotations
@@ -81,13 +83,14 @@ def test_pairs_decide_as_the_full_refinement_and_agree_within_errors(capture):
         assert np.abs(got - act).max() < 0.5 * np.abs(nom - act).max()
 
 
-def test_compiled_pass_gives_the_numpy_bits_and_the_draw_is_seeded(capture, monkeypatch):
+def test_compiled_kernels_give_the_numpy_bits_and_the_draw_is_seeded(capture, monkeypatch):
     _, stack, model, _ = capture
     first = refine_by_pairs(stack, model.response, seed=3)
     again = refine_by_pairs(stack, model.response, seed=3)
     np.testing.assert_array_equal(first.exposure_s, again.exposure_s)
     np.testing.assert_array_equal(first.log_cov, again.log_cov)
-    monkeypatch.setattr(exposure, "_pair_pass_nb", None)
+    for kernel in ("_pair_pass_nb", "_tables_at_nb", "_huber_iterations_nb"):
+        monkeypatch.setattr(exposure, kernel, None)
     plain = refine_by_pairs(stack, model.response, seed=3)
     np.testing.assert_array_equal(first.exposure_s, plain.exposure_s)
     np.testing.assert_array_equal(first.log_cov, plain.log_cov)
@@ -98,12 +101,12 @@ def test_correct_uses_the_pairs_and_its_decision(capture):
     jitter, stack, model, _ = capture
     res = pq.correct(stack, model)
     fast = refine_by_pairs(stack, model.response)
-    if jitter:  # the pairs reject the labels: the full refinement decides, and gives the times
-        full = refine_against_response(stack, model.response, exhaustive=False)
-        assert res.exposure_decision == judge_exposure_times(full)
-        np.testing.assert_array_equal(res.exposures.exposure_s, full.exposure_s)
-    else:  # the pairs keep the labels: their decision is the correction's
-        assert res.exposure_decision == judge_exposure_times(fast)
+    assert res.exposure_decision == judge_exposure_times(fast)
+    if jitter:  # the pairs reject the labels: their times are the correction's
+        assert res.exposure_decision.refine
+        np.testing.assert_array_equal(res.exposures.exposure_s, fast.exposure_s)
+        np.testing.assert_array_equal(res.exposures.log_cov, fast.log_cov)
+    else:  # the pairs keep the labels
         assert res.exposures is None
 
 
