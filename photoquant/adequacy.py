@@ -137,6 +137,7 @@ def global_response_departure(
     valid: np.ndarray | None = None,
     *,
     valid_min: np.ndarray | None = None,
+    saturation_level: np.ndarray | None = None,
     block_px: int = 16,
     n_level_bins: int = 32,
     min_values: int = 32,
@@ -152,10 +153,14 @@ def global_response_departure(
     levels, log_inverse_response : ndarray
         The response ``g`` per channel, tabulated at ``levels``.
     valid : ndarray, shape (K, H, W, C) of bool, optional
-        Values to use; by default those not clipped.
+        Values to use; by default those not clipped (at ``saturation_level``
+        or the dark floor).
     valid_min : ndarray, shape (C,), optional
         The response's lowest trusted level per channel (a toe where ``g``
         is flat, e.g. a film scan's floor, tells nothing of eq. 1).
+    saturation_level : ndarray, shape (C,), optional
+        Where ``valid`` is not given: the level at which a value counts as
+        saturated (the response's), the stack's own by default.
     block_px : int
         Side of the blocks the residuals are averaged over.
     n_level_bins : int
@@ -177,10 +182,14 @@ def global_response_departure(
     height, width = stack.image_shape
     n_ch = stack.n_channels
     step = max(1, int(np.ceil(np.sqrt(n_k * height * width * n_ch / 2e6))))
-    z = stack.mean()[:, ::step, ::step]  # (K, H', W', C)
+    # the subsample's own stack: its mean and clipping are those of the whole stack there
+    # (value by value), at a fraction of the cost
+    sub = stack.with_frames(stack.frames[:, :, ::step, ::step])
+    z = sub.mean()  # (K, H', W', C)
     if valid is None:
-        valid = ~(stack.saturated() | stack.dark_clipped())
-    valid = valid[:, ::step, ::step]
+        valid = ~(sub.saturated(saturation_level) | sub.dark_clipped())
+    else:
+        valid = valid[:, ::step, ::step]
     # the well-exposed values only (crossval's scored range): in the toe and the shoulder
     # g is steep and a value's noise, not the model, dominates its residual
     top = 2.0**stack.bit_depth - 1

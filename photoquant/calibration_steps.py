@@ -63,6 +63,7 @@ from photoquant.exposure import (
     fit_affine_shutter,
     judge_exposure_times,
     refine_against_response,
+    refine_by_pairs,
     refine_jointly,
     self_consistency_floor,
 )
@@ -624,8 +625,8 @@ def merge_step(
         merged[0].log_photoquantity,
         response.levels,
         response.log_inverse_response,
-        ~(views[0].saturated(response.saturation_level) | views[0].dark_clipped()),
         valid_min=response.valid_min,
+        saturation_level=response.saturation_level,
     )
     log.report["model_adequacy"] = adequacy.as_dict()
     if not adequacy.adequate:
@@ -1200,16 +1201,14 @@ def _response_floor(
     :data:`~photoquant.exposure.MIN_FLOOR_LOG` (:func:`~photoquant.exposure.self_consistency_floor`).
 
     Each view, labelled with the times the response was recovered with, is
-    refined against it as a scene is at correction (the same pixel sample:
-    ``exhaustive=False``); where a view's exposures are not related by its
-    data it is left out.
+    refined against it as a scene is at correction (the same estimator:
+    :func:`~photoquant.exposure.refine_by_pairs`, the same draw); where a
+    view's exposures are not related by its data it is left out.
     """
 
     def refine(view: ExposureStack) -> ExposureRefinement | None:
         try:
-            return refine_against_response(
-                hide_defects(view, defects), response, seed=seed, exhaustive=False
-            )
+            return refine_by_pairs(hide_defects(view, defects), response, seed=seed)
         except CalibrationError:
             return None
 
@@ -1235,7 +1234,7 @@ def _refine_stack(
     error; the default keeps the labels, with a note.
     """
     try:
-        refinement = _refine_against(stack, response, seed, defects)
+        refinement = _refine_against(stack, response, seed, defects, by_pairs=not asked)
     except CalibrationError as exc:
         if asked:
             raise
@@ -1249,11 +1248,19 @@ def _refine_stack(
 
 
 def _refine_against(
-    stack: ExposureStack, response: ResponseModel, seed: int, defects: DefectMap | None = None
+    stack: ExposureStack,
+    response: ResponseModel,
+    seed: int,
+    defects: DefectMap | None = None,
+    *,
+    by_pairs: bool = False,
 ) -> ExposureRefinement:
     """``stack``'s exposure times re-estimated against a known response (one-line errors).
 
-    The views' hot and stuck pixels (``defects``) are left out
+    ``by_pairs``: as a scene's at correction, from neighbouring exposure pairs
+    (:func:`~photoquant.exposure.refine_by_pairs`, the estimator the floor is
+    measured with), the full refinement only where the pairs relate no two
+    exposures. The views' hot and stuck pixels (``defects``) are left out
     (:func:`photoquant.defects.hide_defects`): a stuck pixel's value is the
     same at every exposure, a ratio of 1 between any two, and on a frame set
     that is mostly dark (a glare capture) such pixels alone can link
@@ -1262,6 +1269,9 @@ def _refine_against(
     if defects is not None and defects.mask.shape == stack.frames.shape[2:]:
         top = np.maximum(np.asarray(stack.saturation_level), response.saturation_level)
         stack = hide_defects(stack, defects, np.minimum(top, stack.c_max))
+    if by_pairs:
+        with contextlib.suppress(CalibrationError):
+            return refine_by_pairs(stack, response, seed=seed)
     try:
         return refine_against_response(stack, response, seed=seed)
     except CalibrationError as exc:

@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from photoquant._checks import default_workers
 from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant._threads import thread_map
 from photoquant.errors import InputError
@@ -192,17 +193,19 @@ def _ring_row_py(
         )[sel]
 
 
-def _ring_rank_py(image: Any, rank: Any, out: Any) -> None:  # pragma: no cover - numba body
-    """numba body of :func:`_ring_rank_fast`: per value, its 8 neighbours sorted
-    (:func:`_sort8_py`), then the ``rank``-th largest; row by row, the first and
-    last pixel of a row (mirrored edges) apart. Measured 2026-12-02 on a
-    768×1024×3 float64 image (2-core machine, quiet): 6 ms, against 17 ms
+def _ring_rank_py(  # pragma: no cover - numba body
+    image: Any, rank: Any, out: Any, row_start: int, row_stop: int
+) -> None:
+    """numba body of :func:`_ring_rank_fast` for rows ``[row_start, row_stop)``: per value,
+    its 8 neighbours sorted (:func:`_sort8_py`), then the ``rank``-th largest; row by
+    row, the first and last pixel of a row (mirrored edges) apart. Measured 2026-12-02
+    on a 768×1024×3 float64 image (2-core machine, quiet): 6 ms, against 17 ms
     pixel by pixel with the channel innermost (no vectors).
     """
     h, w, n_ch = image.shape
     m = w * n_ch
     sel = 8 - rank
-    for i in range(h):
+    for i in range(row_start, row_stop):
         # "mirror" edges: index -1 reads 1, index h reads h - 2 (one row: itself)
         im = i - 1 if i > 0 else min(1, h - 1)
         ip = i + 1 if i < h - 1 else max(h - 2, 0)
@@ -365,8 +368,19 @@ def _ring_rank_fast(image: np.ndarray, rank: int) -> np.ndarray:
         return _ring_rank(image, rank)
     src = np.ascontiguousarray(image)
     out = np.empty_like(src)
-    _ring_rank_nb(src, int(rank), out)
+    # bands of rows on threads (the kernel releases the GIL; each row reads its
+    # neighbours in the whole image): the same values for any split
+    h = src.shape[0]
+    bands = _row_bands(h, src.nbytes)
+    thread_map(lambda band: _ring_rank_nb(src, int(rank), out, *band), bands)
     return out
+
+
+def _row_bands(height: int, nbytes: int) -> list[tuple[int, int]]:
+    """Row ranges splitting an image among the CPUs (one band below about 1 MB)."""
+    n = max(1, min(default_workers(), nbytes // (1 << 20), height))
+    edges = np.linspace(0, height, n + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
 
 
 def _ring_median(image: np.ndarray) -> np.ndarray:
@@ -419,8 +433,8 @@ def _plane_means(stack: ExposureStack) -> Any:
 def _below_clip(stack: ExposureStack, mean: Any) -> Any:
     """``below(k)``: ``stack.mean()[k] < saturation_level − 0.5`` per value (bool).
 
-    For ``N > 1`` integer repeats without cached means, the integer sums are
-    compared instead, with ``sum < ⌈N·(s − ½)⌉``: the same booleans (for an
+    For integer repeats without cached means, the integer sums (one repeat:
+    the frame itself) are compared instead, with ``sum < ⌈N·(s − ½)⌉``: the same booleans (for an
     integer sum ``S``, ``S < x ⟺ S < ⌈x⌉``; and ``S/N`` rounds to below ``s −
     ½`` exactly when ``S < N·(s − ½)``, which lies at least ``1/(2N)`` from any
     ``S/N``, far above a rounding error), with no float64 plane made for the
@@ -431,10 +445,11 @@ def _below_clip(stack: ExposureStack, mean: Any) -> Any:
     sat = np.asarray(stack.saturation_level, dtype=np.float64)
     n = stack.n_repeats
     integral = bool(np.all(sat == np.round(sat))) and float(sat.max()) * n < 2.0**52
-    if stack._mean or n == 1 or not integral:
+    if stack._mean or not integral or stack.frames.dtype.kind not in "iu":
         return lambda k: _compare_per_channel(np.less, mean(k), sat - 0.5)
-    sums = stack.repeat_sum()
     limit = np.ceil(n * (sat - 0.5)).astype(np.int64)
+    # one repeat: the frames themselves are the sums (compared in their own dtype)
+    sums = stack.frames[0] if n == 1 else stack.repeat_sum()
     return lambda k: _compare_per_channel(np.less, sums[k], limit)
 
 
