@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from photoquant.holdout import predict_values
-from photoquant.stack import ExposureStack
+from photoquant.stack import ExposureStack, _compare_per_channel
 
 __all__ = ["ADEQUACY_WARN", "ModelAdequacy", "global_response_departure"]
 
@@ -184,7 +184,7 @@ def global_response_departure(
     step = max(1, int(np.ceil(np.sqrt(n_k * height * width * n_ch / 2e6))))
     # the subsample's own stack: its mean and clipping are those of the whole stack there
     # (value by value), at a fraction of the cost
-    sub = stack.with_frames(stack.frames[:, :, ::step, ::step])
+    sub = stack.with_frames(np.ascontiguousarray(stack.frames[:, :, ::step, ::step]))
     z = sub.mean()  # (K, H', W', C)
     if valid is None:
         valid = ~(sub.saturated(saturation_level) | sub.dark_clipped())
@@ -195,7 +195,9 @@ def global_response_departure(
     top = 2.0**stack.bit_depth - 1
     valid = valid & (z >= 10 / 255 * top) & (z <= 245 / 255 * top)
     if valid_min is not None:
-        valid = valid & (z >= np.asarray(valid_min, dtype=np.float64))
+        valid = valid & _compare_per_channel(
+            np.greater_equal, z, np.broadcast_to(np.asarray(valid_min, dtype=np.float64), (n_ch,))
+        )
     top_level = np.asarray(stack.saturation_level, dtype=np.float64)
     log_photoquantity = log_photoquantity[::step, ::step]
     height, width = z.shape[1:3]
@@ -206,29 +208,35 @@ def global_response_departure(
     block = (by[:, None] * n_bx + bx[None, :]).ravel()
     n_blocks = int(block.max()) + 1
     excess, noise, used = [], [], 0
+    log_t = np.log(stack.exposure_s)
+    n_pix = height * width
     for ch in range(n_ch):
         g = np.asarray(log_inverse_response[ch], dtype=np.float64)
         ln_e = log_photoquantity[..., ch].ravel()
-        sums = np.zeros(n_blocks)
-        squares = np.zeros(n_blocks)
-        counts = np.zeros(n_blocks)
+        # every exposure at once, exposure-major (each exposure's values in raster order)
+        z_ch = z[..., ch].reshape(n_k, n_pix)
+        ok = valid[..., ch].reshape(n_k, n_pix) & np.isfinite(ln_e)[None]
+        k_of, p_of = np.nonzero(ok)
+        z_ok = z_ch[k_of, p_of]
+        # the value predicted from the merge through the response, in code values
+        # (as crossval scores): a steep toe does not blow a value's noise up
+        log_x = (ln_e[p_of] + log_t[k_of])[:, None]
+        r = predict_values(levels, g[None], top_level[ch : ch + 1], log_x)[:, 0] - z_ok
+        # what a wrong global response explains: the mean residual at each level, per
+        # exposure (one bincount over (exposure, level bin))
+        cell = k_of * n_level_bins + _level_bins(z_ok, float(levels[-1]), n_level_bins)
+        size = n_k * n_level_bins
+        mean = np.bincount(cell, r, size) / np.maximum(np.bincount(cell, None, size), 1)
+        r = r - mean[cell]
+        # the blocks' sums per exposure, added exposure by exposure
+        b = k_of * n_blocks + block[p_of]
+        size = n_k * n_blocks
+        per_k = [np.bincount(b, w, size).reshape(n_k, n_blocks) for w in (r, r * r, None)]
+        sums, squares, counts = (np.zeros(n_blocks) for _ in range(3))
         for k in range(n_k):
-            zk = z[k, ..., ch].ravel()
-            ok = valid[k, ..., ch].ravel() & np.isfinite(ln_e)
-            # the value predicted from the merge through the response, in code values
-            # (as crossval scores): a steep toe does not blow a value's noise up
-            log_x = (ln_e[ok] + np.log(stack.exposure_s[k]))[:, None]
-            r = predict_values(levels, g[None], top_level[ch : ch + 1], log_x)[:, 0] - zk[ok]
-            # what a wrong global response explains: the mean residual at each level
-            bins = _level_bins(zk[ok], float(levels[-1]), n_level_bins)
-            mean = np.bincount(bins, r, n_level_bins) / np.maximum(
-                np.bincount(bins, None, n_level_bins), 1
-            )
-            r = r - mean[bins]
-            b = block[ok]
-            sums += np.bincount(b, r, n_blocks)
-            squares += np.bincount(b, r * r, n_blocks)
-            counts += np.bincount(b, None, n_blocks)
+            sums += per_k[0][k]
+            squares += per_k[1][k]
+            counts += per_k[2][k]
         keep = counts >= min_values
         if keep.sum() < 2:
             continue
