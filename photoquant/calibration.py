@@ -280,6 +280,13 @@ def calibrate(
     view only (no independent shutter errors) the views keep their nominal
     times and a note says so.
 
+    *The labels tested first.* With two views or more, ``g`` is first fitted
+    on view 0 at its labels and every view's times are estimated against it
+    from neighbouring exposure pairs (:func:`photoquant.exposure.refine_by_pairs`,
+    the estimator :func:`photoquant.correct` uses); only where that test
+    rejects the labels is the response recovered jointly with the times (a
+    response bent by one view's shutter errors does not absorb the others').
+
     *Which times are used.* Refined times that agree with the labels within
     their errors would only add their noise, so by default each stack's
     refined times replace its labels only where the likelihood-ratio test of

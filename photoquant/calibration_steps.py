@@ -378,14 +378,18 @@ def response_step(
         spec = _step("response", selection.chosen, profile)
         log.note(f"response model: {selection.describe()}")
     joint = None
-    if policy.refine and len(views) >= 2:
+    if policy.refine and len(views) >= 2 and not policy.asked:
+        # the labels tested first against the response fitted at them: where the
+        # views' data do not contradict them, the joint recovery would keep them too
+        joint = _screen_view_times(views, defects, spec, seed, log)
+    if policy.refine and len(views) >= 2 and joint is None:
         log.say("response and exposure refinement")
         joint = _recover_with_view_times(views, defects, spec, seed, policy, log)
         if joint is None:  # failed, and not asked for: off
             policy = ExposurePolicy(False, policy.asked)
     decision = None if joint is None else joint.decision
     view_times = None if joint is None else joint.view_times
-    if joint is not None and view_times is not None:
+    if joint is not None and (view_times is not None or joint.at_labels):
         fit = joint.fit
     else:
         if policy.refine and len(views) < 2:
@@ -398,6 +402,41 @@ def response_step(
     if selection is not None:
         log.report["response"]["selection"] = selection.as_dict()
     return ResponseStage(fit, spec, policy, view_times, decision)
+
+
+def _screen_view_times(
+    views: Sequence[ExposureStack],
+    defects: DefectMap,
+    spec: Spec,
+    seed: int,
+    log: CalibrationLog,
+) -> _JointFit | None:
+    """The response at the views' labels where their data keep them, else ``None``.
+
+    ``g`` is fitted on view 0 at its labels, as without refinement
+    (:func:`photoquant.response.fit_response`); every view's times are
+    estimated against it from neighbouring exposure pairs
+    (:func:`photoquant.exposure.refine_by_pairs`, as :func:`photoquant.correct`
+    estimates a scene's) and tested
+    (:func:`photoquant.exposure.judge_exposure_times`). A response bent by
+    view 0's shutter errors does not absorb the other views' independent ones,
+    so labels off beyond the floor are rejected here, and only then is the
+    response recovered jointly with the times (:func:`_recover_with_view_times`).
+    Where the test keeps the labels, the calibration is, to the bit, the one
+    without refinement.
+    """
+    fit = fit_response(hide_defects(views[0], defects), spec, rng=seed)
+    refs = []
+    for view in views:
+        try:
+            refs.append(refine_by_pairs(hide_defects(view, defects), fit.model, seed=seed))
+        except CalibrationError:
+            return None  # the pairs cannot tell: the joint recovery decides
+    decision = judge_exposure_times(refs)
+    if decision.refine:
+        return None
+    log.note(f"views' exposure times: {decision.describe()}")
+    return _JointFit(fit, None, decision.as_dict(), at_labels=True)
 
 
 def _recover_with_view_times(
@@ -468,11 +507,12 @@ def _recover_with_view_times(
 
 @dataclass(frozen=True, eq=False)
 class _JointFit:
-    """The last round's response, the views' refined times to use (or ``None``), the test."""
+    """The response to use, the views' refined times to use (or ``None``), the test."""
 
     fit: StepFit[Any]
     view_times: list[ExposureRefinement] | None
     decision: dict[str, Any]
+    at_labels: bool = False  # the fit at the views' labels (the screen kept them)
 
 
 def refine_exposures_step(

@@ -172,3 +172,35 @@ def test_correcting_the_calibrations_own_frames_reproduces_its_merge(calibrated)
             calib_std = np.nanmax(np.asarray(views_report[v]["log_std"], dtype=float))
             correct_std = np.nanmax(corrected.exposures.log_std)
             assert diff.max() < 4 * np.hypot(calib_std, correct_std), diff.max()
+
+
+@pytest.mark.parametrize(("jitter", "lag"), [(0.0, 0.0), (0.03, 1e-4)], ids=["exact", "jittered"])
+def test_views_whose_labels_hold_skip_the_joint_recovery(monkeypatch, jitter, lag):
+    """The views' labels are tested first against the response fitted at them.
+
+    Kept (exact labels): the joint recovery never runs and the calibration
+    is the one without refinement, to the bit. Rejected (3 % jitter, a lag):
+    the response is recovered jointly with the views' times, which are used.
+    """
+    import photoquant.calibration_steps as steps
+
+    data = jittered_set(3, (72, 96), jitter=jitter, lag_s=lag, n_views=3)
+    calls = []
+    joint = steps.refine_jointly
+
+    def spy(*args, **kwargs):
+        calls.append(1)
+        return joint(*args, **kwargs)
+
+    monkeypatch.setattr(steps, "refine_jointly", spy)
+    kwargs = {"irradiance": data.irradiance, "white_roi": data.white_roi}
+    kwargs["correspondences"] = data.tracks
+    model = pq.calibrate(data.views, **kwargs)
+    assert model.report["exposures"]["refined"] is (jitter > 0)
+    assert bool(calls) is (jitter > 0)
+    if not jitter:
+        plain = pq.calibrate(data.views, refine_exposures=False, **kwargs)
+        np.testing.assert_array_equal(
+            model.response.log_inverse_response, plain.response.log_inverse_response
+        )
+        np.testing.assert_array_equal(model.sensor_lut.lut, plain.sensor_lut.lut)
