@@ -39,6 +39,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant.errors import InputError
 from photoquant.merge._tables import ValueTables
 from photoquant.merge.debevec1997 import DebevecMergeOptions, _check_inputs
@@ -116,7 +117,6 @@ def log_variance_Debevec1997(
     if not isinstance(noise, NoiseParameters):
         raise InputError(f"`noise` must be NoiseParameters, got {type(noise).__name__}")
     n = stack.n_repeats
-    tables, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
     scale = _Scale(response)
     read2 = np.asarray(noise.read_noise, dtype=np.float64) ** 2
 
@@ -124,6 +124,11 @@ def log_variance_Debevec1997(
         y = scale.linear(scale.log_inverse(v, ch), ch)
         return _log_variance(y, scale.slope(v, ch), float(noise.gain[ch]), float(read2[ch]), n)
 
+    if weights is None and _weighted_variance_nb is not None:
+        setup = _weight_setup(stack, response, options)
+        if setup[0].tabulated:  # one compiled pass over the values, the same arithmetic
+            return _fused_log_variance(stack, setup, variance)
+    tables, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
     variance_table = tables.table(variance)
     num = np.zeros_like(den)
     for k, w in enumerate(per_exposure):
@@ -147,6 +152,26 @@ def merge_weights_Debevec1997(
     stack: ExposureStack, response: ResponseModel, options: DebevecMergeOptions | None = None
 ) -> MergeWeights:
     """The merge's weight of every value (computed once for all the uncertainty's parts)."""
+    tables, weight_table, inp = _weight_setup(stack, response, options)
+    weights: list[np.ndarray] = []
+    total = None
+    for k in range(stack.n_exposures):
+        w = tables.take(weight_table, k)  # a new array: zeroed in place
+        for mask in (inp.saturated, inp.dark_clipped):
+            if mask is not None:
+                w[mask[k]] = 0.0
+        weights.append(w)
+        # Σ_k w_k in exposure order, as a sum over a stacked axis adds (the same bits,
+        # without a (K, H, W, C) copy)
+        total = w.copy() if total is None else np.add(total, w, out=total)
+    assert total is not None  # a stack has at least one exposure
+    return MergeWeights(tables, weights, total)
+
+
+def _weight_setup(
+    stack: ExposureStack, response: ResponseModel, options: DebevecMergeOptions | None
+) -> tuple[ValueTables, Any, Any]:
+    """The stack's value tables, the merge's weight on them and the checked inputs."""
     opts = options or DebevecMergeOptions()
     n = stack.n_repeats
     values = stack.frames[0] if n == 1 else stack.repeat_sum()
@@ -166,15 +191,50 @@ def merge_weights_Debevec1997(
     # the weights of every possible mean value, looked up per exposure (the noise-aware
     # merge's tables): no interpolation per pixel
     tables = ValueTables(stack)
-    weight_table = tables.table(inp.weights)
-    weights = []
-    for k in range(stack.n_exposures):
-        w = tables.take(weight_table, k)
-        for mask in (inp.saturated, inp.dark_clipped):
-            if mask is not None:
-                w = np.where(mask[k], 0.0, w)
-        weights.append(w)
-    return MergeWeights(tables, weights, np.sum(weights, axis=0))
+    return tables, tables.table(inp.weights), inp
+
+
+def _fused_log_variance(
+    stack: ExposureStack, setup: tuple[ValueTables, Any, Any], variance: Any
+) -> np.ndarray:
+    """:func:`log_variance_Debevec1997` in one compiled pass (tabulated stacks)."""
+    tables, weight_table, inp = setup
+    values = stack.frames[0] if stack.n_repeats == 1 else stack.repeat_sum()
+    k, h, w, c = values.shape
+    flat = values.reshape(k, h * w, c)
+    none = np.zeros((0, 0, 0), dtype=bool)
+    sat = none if inp.saturated is None else inp.saturated.reshape(k, h * w, c)
+    dark = none if inp.dark_clipped is None else inp.dark_clipped.reshape(k, h * w, c)
+    out = np.empty((h * w, c))
+    _weighted_variance_nb(flat, tables._size, weight_table, tables.table(variance), sat, dark, out)
+    return out.reshape(h, w, c)
+
+
+def _weighted_variance_py(  # pragma: no cover - compiled by numba
+    values: Any, size: int, w_table: Any, v_table: Any, sat: Any, dark: Any, out: Any
+) -> None:
+    """numba body: ``Σ w_k² v_k / (Σ w_k)²`` per value, the merge's weights (0 where
+    saturated or dark) and the variances looked up on the value tables, summed in
+    exposure order as :func:`log_variance_Debevec1997`'s numpy path does."""
+    n_k, n_p, n_c = values.shape
+    use_sat = sat.size > 0
+    use_dark = dark.size > 0
+    for p in range(n_p):
+        for c in range(n_c):
+            num = 0.0
+            den = 0.0
+            for k in range(n_k):
+                idx = np.intp(values[k, p, c]) + c * size
+                wk = w_table[idx]
+                if (use_sat and sat[k, p, c]) or (use_dark and dark[k, p, c]):
+                    wk = 0.0
+                den = wk if k == 0 else den + wk
+                if wk > 0:
+                    num += wk * wk * v_table[idx]
+            out[p, c] = num / (den * den) if den > 0 else np.nan
+
+
+_weighted_variance_nb: Any = compile_kernel(_weighted_variance_py) if HAVE_NUMBA else None
 
 
 def log_variance_response_Debevec1997(

@@ -78,6 +78,28 @@ def test_no_usable_exposure_has_no_variance():
     assert np.all(np.isnan(log_variance_Debevec1997(stack, _linear_response(), noise)))
 
 
+def test_the_compiled_pass_gives_the_numpy_bits(monkeypatch):
+    import photoquant.merge.uncertainty as uncertainty
+    from photoquant.merge.uncertainty import merge_weights_Debevec1997
+
+    rng = np.random.default_rng(4)
+    # clipped and dark values among them, N = 3 repeats: sums on the tables' grid
+    frames = rng.integers(0, 256, size=(3, 4, 12, 10, 3)).astype(np.uint8)
+    frames[:, 1, :2] = 255
+    frames[:, 2, -2:] = 0
+    frames[:, :, 5, 5] = 255  # clipped in every exposure: no variance
+    stack = pq.ExposureStack(frames, [0.01, 0.03, 0.1, 0.3])
+    noise = NoiseParameters(np.full(3, GAIN), np.full(3, READ), "given")
+    fused = log_variance_Debevec1997(stack, _linear_response(), noise)
+    weights = merge_weights_Debevec1997(stack, _linear_response())
+    plain = log_variance_Debevec1997(stack, _linear_response(), noise, weights=weights)
+    monkeypatch.setattr(uncertainty, "_weighted_variance_nb", None)
+    again = log_variance_Debevec1997(stack, _linear_response(), noise)
+    np.testing.assert_array_equal(fused, plain)
+    np.testing.assert_array_equal(fused, again)
+    assert np.isnan(fused).any() and np.isfinite(fused).any()
+
+
 def test_the_camera_record_round_trips():
     params = NoiseParameters(np.array([0.1, 0.2, 0.3]), np.array([1.0, 0.0, 2.0]), "estimated")
     back = noise_parameters_from_record(noise_record(params), 3)
