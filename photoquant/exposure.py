@@ -1086,20 +1086,61 @@ def refine_by_pairs(
 
     rng = np.random.default_rng(seed)
     sample = stack if max_pixels is None else _pixel_sample(stack, int(max_pixels), rng)
+    pairs = _neighbouring_pairs(sample, levels, g, sat, pair_rows, rng)
+    line = _repeat_noise_line(sample, pairs)
+    nominal = stack.exposure_s.copy()
+    x, cov, counts, run, scale, iterations = _pair_passes(
+        pairs,
+        levels,
+        g,
+        line,
+        stack.n_repeats,
+        floor_level,
+        sat,
+        np.log(nominal),
+        gauge=gauge,
+        margin_sigma=margin_sigma,
+        min_overlap=min_overlap,
+        huber_k=huber_k,
+        max_iterations=max_iterations,
+        max_bend=max_bend,
+        passes=passes,
+    )
+    return _pair_refinement(nominal, x, cov, counts, run, gauge, scale, iterations)
+
+
+@dataclass(frozen=True, eq=False)
+class _Pairs:
+    """The values of :func:`refine_by_pairs`: one entry per (row, step) whose two
+    exposures are valid, a row being a drawn pixel in one channel."""
+
+    row: np.ndarray
+    step: np.ndarray
+    chan: np.ndarray
+    y_lo: np.ndarray  # g at the step's shorter exposure's value
+    y_hi: np.ndarray
+    z_lo: np.ndarray  # the values themselves
+    z_hi: np.ndarray
+    pixels: list[np.ndarray]  # per channel, the drawn pixel of each of its rows
+    n_rows: int
+
+
+def _neighbouring_pairs(
+    sample: ExposureStack,
+    levels: np.ndarray,
+    g: np.ndarray,
+    sat: np.ndarray,
+    pair_rows: int,
+    rng: np.random.Generator,
+) -> _Pairs:
+    """The pairs of :func:`refine_by_pairs`: (row, step) where both exposures of the
+    step are valid, at most a quota per step, rows taken in random order."""
+    n_k, n_ch = sample.n_exposures, sample.n_channels
     n_pix = sample.image_shape[0] * sample.image_shape[1]
     z_all = sample.mean().reshape(n_k, n_pix, n_ch)
     clipped = (sample.saturated(sat) | sample.dark_clipped()).reshape(n_k, n_pix, n_ch)
     order = rng.permutation(n_pix)  # the quota takes pairs in random order, not by row
-
-    finite_g = np.where(np.isfinite(g), g, np.nan)
-    d1 = np.gradient(finite_g, levels, axis=1)
-    tables = _Tables(
-        levels, np.stack([np.nan_to_num(d1), np.nan_to_num(np.gradient(d1, levels, axis=1))])
-    )
-    g_mono = np.maximum.accumulate(np.where(np.isfinite(g), g, -1e300), axis=1)
     step_slope = np.diff(g, axis=1) / np.diff(levels)
-
-    # the pairs: (row, step) where both exposures of the step are valid, a quota per step
     quota = max(pair_rows // n_ch, 1)
     z_perm = z_all[:, order].transpose(2, 1, 0)  # (C, P, K), random order
     chan_all = np.arange(n_ch)[:, None, None]
@@ -1122,26 +1163,76 @@ def refine_by_pairs(
         n_rows += keep.size
     z_obs, y_obs = np.concatenate(z_rows), np.concatenate(y_rows)
     row, step, chan = np.concatenate(entries, axis=1)
-    y_lo, y_hi = y_obs[row, step], y_obs[row, step + 1]
-    z_lo, z_hi = z_obs[row, step], z_obs[row, step + 1]  # evaluated there, then at predictions
+    return _Pairs(
+        row,
+        step,
+        chan,
+        y_obs[row, step],
+        y_obs[row, step + 1],
+        z_obs[row, step],
+        z_obs[row, step + 1],
+        pixels,
+        n_rows,
+    )
 
-    # noise of one repeat, a + b·z per channel (DN²)
+
+def _repeat_noise_line(sample: ExposureStack, pairs: _Pairs) -> np.ndarray:
+    """The noise of one repeat, ``a + b·z`` per channel (DN²), fitted to the pairs'
+    values' variance over the repeats (``N ≥ 2``); ``(1, 0)`` with one repeat (the
+    passes fit it to the pairs' residuals then)."""
+    n_rep, n_k, n_ch = sample.n_repeats, sample.n_exposures, sample.n_channels
     line = np.zeros((n_ch, 2))
     line[:, 0] = 1.0
-    n_rep = stack.n_repeats
-    if n_rep >= 2:
-        frames = sample.frames.reshape(n_rep, n_k, n_pix, n_ch)
-        for ch in range(n_ch):
-            mine = chan == ch
-            rows_ch = row[mine] - (row[mine].min() if mine.any() else 0)
-            if rows_ch.size < 2:
-                continue
-            pix = pixels[ch]
-            vals = frames[:, :, pix, ch].astype(np.float64)  # (N, K, rows)
-            var = vals.var(axis=0, ddof=1)
-            s = step[mine]
-            level = np.r_[z_lo[mine], z_hi[mine]]
-            line[ch] = _line_fit(level, np.r_[var[s, rows_ch], var[s + 1, rows_ch]])
+    if n_rep < 2:
+        return line
+    n_pix = sample.image_shape[0] * sample.image_shape[1]
+    frames = sample.frames.reshape(n_rep, n_k, n_pix, n_ch)
+    row, step, chan = pairs.row, pairs.step, pairs.chan
+    for ch in range(n_ch):
+        mine = chan == ch
+        rows_ch = row[mine] - (row[mine].min() if mine.any() else 0)
+        if rows_ch.size < 2:
+            continue
+        pix = pairs.pixels[ch]
+        vals = frames[:, :, pix, ch].astype(np.float64)  # (N, K, rows)
+        var = vals.var(axis=0, ddof=1)
+        s = step[mine]
+        level = np.r_[pairs.z_lo[mine], pairs.z_hi[mine]]
+        line[ch] = _line_fit(level, np.r_[var[s, rows_ch], var[s + 1, rows_ch]])
+    return line
+
+
+def _pair_passes(
+    pairs: _Pairs,
+    levels: np.ndarray,
+    g: np.ndarray,
+    line: np.ndarray,
+    n_rep: int,
+    floor_level: np.ndarray,
+    sat: np.ndarray,
+    x_nom: np.ndarray,
+    *,
+    gauge: Gauge,
+    margin_sigma: float,
+    min_overlap: int,
+    huber_k: float,
+    max_iterations: int,
+    max_bend: float,
+    passes: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, slice, float, int]:
+    """The passes of :func:`refine_by_pairs`: each end of a pair predicted from the
+    other at the current times (bias-corrected), the values to use and their weights,
+    the steps' Huber locations; ``(ln t, Cov(steps), counts, run, scale, iterations)``.
+    ``line`` (the noise of one repeat) is refitted to the residuals where ``N = 1``."""
+    n_ch = line.shape[0]
+    row, step, chan, y_lo, y_hi = pairs.row, pairs.step, pairs.chan, pairs.y_lo, pairs.y_hi
+    z_lo, z_hi = pairs.z_lo.copy(), pairs.z_hi.copy()  # evaluated there, then at predictions
+    finite_g = np.where(np.isfinite(g), g, np.nan)
+    d1 = np.gradient(finite_g, levels, axis=1)
+    tables = _Tables(
+        levels, np.stack([np.nan_to_num(d1), np.nan_to_num(np.gradient(d1, levels, axis=1))])
+    )
+    g_mono = np.maximum.accumulate(np.where(np.isfinite(g), g, -1e300), axis=1)
 
     def one_repeat(zz: np.ndarray) -> np.ndarray:
         return np.maximum(line[chan, 0] + line[chan, 1] * zz, 1 / 12)
@@ -1158,10 +1249,9 @@ def refine_by_pairs(
             out[mine] = np.interp(values[mine], g_mono[ch], levels)
         return out
 
-    nominal = stack.exposure_s.copy()
-    x_nom = np.log(nominal)
+    n_rows = pairs.n_rows
     x = x_nom.copy()
-    n_steps = n_k - 1
+    n_steps = x_nom.size - 1
     theta = np.zeros(n_steps)
     cov = np.zeros((n_steps, n_steps))
     counts = np.zeros(n_steps, dtype=np.int64)
@@ -1232,6 +1322,22 @@ def refine_by_pairs(
                     coef = _solve2(design, r2[m])
                     if coef is not None:
                         line[ch] = coef
+    return x, cov, counts, run, scale, iterations
+
+
+def _pair_refinement(
+    nominal: np.ndarray,
+    x: np.ndarray,
+    cov: np.ndarray,
+    counts: np.ndarray,
+    run: slice,
+    gauge: Gauge,
+    scale: float,
+    iterations: int,
+) -> ExposureRefinement:
+    """The :class:`ExposureRefinement` of the longest run of determined steps: their
+    covariance chained to the exposures' ``ln t`` in the gauge."""
+    n_k = nominal.size
     steps = np.arange(run.start, run.stop)
     sel = np.zeros(n_k, dtype=bool)
     sel[run.start : run.stop + 1] = True
