@@ -767,177 +767,25 @@ def refine_exposure_times(
     ):
         raise InputError(f"`max_pixels` must be a positive integer or None, got {max_pixels!r}")
 
+    problem = _RefinementProblem(
+        levels=levels,
+        g=g,
+        sat=sat,
+        lo=lo,
+        hi=hi,
+        black=black,
+        gauge=gauge,
+        margin_sigma=margin_sigma,
+        min_overlap=min_overlap,
+        max_values=max_values,
+        huber_k=huber_k,
+        max_iterations=max_iterations,
+        bias_correction=bias_correction,
+        max_bend=max_bend,
+    )
+
     def attempt(stack: ExposureStack, rng: np.random.Generator) -> ExposureRefinement:
-        z_all = stack.mean()  # (K, H, W, C)
-        clipped = stack.saturated(sat) | stack.dark_clipped()
-        rows: list[tuple[np.ndarray, ...]] = []
-        for ch in range(n_ch):
-            z = z_all[..., ch].reshape(n_k, -1).T  # (P, K)
-            y, slope = _interp_g(z, levels, g[ch])
-            ok = ~clipped[..., ch].reshape(n_k, -1).T & np.isfinite(y) & (slope > 0)
-            keep = np.flatnonzero(ok.sum(axis=1) >= 2)
-            if keep.size > max_values // n_ch:
-                keep = np.sort(rng.choice(keep, max_values // n_ch, replace=False))
-            rows.append((z[keep], y[keep], ok[keep], np.full(keep.size, ch)))
-        z = np.concatenate([r[0] for r in rows])
-        y = np.concatenate([r[1] for r in rows])
-        ok0 = np.concatenate([r[2] for r in rows])
-        chan = np.concatenate([r[3] for r in rows])
-        y = np.where(ok0, y, 0.0)
-
-        # the rows are the channels' in turn: each channel's rows are one block
-        ends = np.cumsum([r[0].shape[0] for r in rows])
-        blocks = [slice(int(e - r[0].shape[0]), int(e)) for e, r in zip(ends, rows, strict=True)]
-
-        def per_channel(zz: np.ndarray, fun: Callable[[int, np.ndarray], np.ndarray]) -> np.ndarray:
-            out = np.empty_like(zz)
-            for ch, block in enumerate(blocks):
-                out[block] = fun(ch, zz[block])
-            return out
-
-        # noise of one repeat against level, per channel
-        tables = [_repeat_variance(stack, ch) for ch in range(n_ch)]
-
-        def var_one(zz: np.ndarray, ch: int) -> np.ndarray:
-            table = tables[ch]
-            if table is None:
-                return np.ones_like(zz)
-            return interp(zz, table[0], table[1])
-
-        def variance(zz: np.ndarray) -> np.ndarray:
-            return per_channel(zz, lambda ch, v: var_one(v, ch))
-
-        def mean_variance(zz: np.ndarray) -> np.ndarray:
-            """var(z̄) about the noise-free level: noise / N, plus rounding that survives averaging."""
-            v = variance(zz)
-            if stack.n_repeats == 1:
-                return v  # measured from residuals: rounding included
-            return v / stack.n_repeats + rounding_variance(np.sqrt(np.maximum(v - 1 / 12, 0.0)))
-
-        g_mono = [
-            np.maximum.accumulate(np.where(np.isfinite(g[ch]), g[ch], -1e300)) for ch in range(n_ch)
-        ]
-
-        def inverse_g(values: np.ndarray) -> np.ndarray:
-            return per_channel(values, lambda ch, v: np.interp(v, g_mono[ch], levels))
-
-        nominal = stack.exposure_s.copy()
-        x_nom = np.log(nominal)
-        c_full = np.full(n_k, 1.0 / n_k) if gauge == "geometric mean" else np.eye(n_k)[-1]
-        x = x_nom.copy()
-        use = ok0
-        w0 = np.zeros_like(y)
-        cov = np.full((n_k, n_k), np.nan)
-        scale, iterations = 1.0, 0
-        refined = np.zeros(n_k, dtype=bool)
-        counts = np.zeros(n_k, dtype=np.int64)
-        # slope and curvature tables of g per channel
-        d1 = [
-            np.gradient(np.where(np.isfinite(g[ch]), g[ch], np.nan), levels) for ch in range(n_ch)
-        ]
-        d2 = [np.nan_to_num(np.gradient(d, levels)) for d in d1]
-
-        d1_tab = [np.nan_to_num(d) for d in d1]
-
-        def at(zz: np.ndarray, tabs: list[np.ndarray]) -> np.ndarray:
-            return per_channel(zz, lambda ch, v: interp(v, levels, tabs[ch]))
-
-        y_obs = y
-        z_ref = z  # where weights are evaluated: first the observed levels, then predictions
-        # g' and g'' at z_ref (kept while z_ref stays)
-        s1, s2 = at(z_ref, d1_tab), at(z_ref, d2)
-        for _ in range(3):  # selection and weights from predictions, refined twice
-            var_z = mean_variance(z_ref)
-            var_y = np.where(ok0, s1**2 * var_z, 1.0)
-            ok_w = ok0 & (var_y > 0) & np.isfinite(var_y)
-            if bias_correction:
-                y = np.where(ok0, y_obs - 0.5 * s2 * var_z, 0.0)
-            w_all = np.where(ok_w, 1.0 / np.where(ok_w, var_y, 1.0), 0.0)
-            # leave-one-out prediction of each value's level from the pixel's others
-            wp = (w_all * use).sum(axis=1, keepdims=True)
-            wyp = (w_all * use * (y - x)).sum(axis=1, keepdims=True)
-            own = w_all * use
-            with np.errstate(invalid="ignore", divide="ignore"):
-                a_loo = (wyp - own * (y - x)) / (wp - own)
-            z_hat = inverse_g(np.where(np.isfinite(a_loo), a_loo + x, -np.inf))
-            # weights at the predicted level are independent of the value's own noise;
-            # at the observed level they would favour noise that flattens g (bias)
-            z_ref = np.where(np.isfinite(a_loo), z_hat, z)
-            s1, s2 = at(z_ref, d1_tab), at(z_ref, d2)
-            var_z = mean_variance(z_ref)
-            var_y = s1**2 * var_z
-            ok_w = ok0 & (var_y > 0) & np.isfinite(var_y)
-            w_all = np.where(ok_w, 1.0 / np.where(ok_w, var_y, 1.0), 0.0)
-            if bias_correction:
-                y = np.where(ok0, y_obs - 0.5 * s2 * var_z, 0.0)
-            v_one = variance(z_hat)
-            # one value's error: noise and rounding (the latter matters below σ ≈ 0.5 DN)
-            sigma = np.sqrt(v_one + rounding_variance(np.sqrt(np.maximum(v_one - 1 / 12, 0.0))))
-            floor = np.maximum(black[chan], lo[chan])[:, None]
-            top = np.minimum(sat[chan], hi[chan])[:, None]
-            inside = (z_hat >= floor + margin_sigma * sigma) & (z_hat <= top - margin_sigma * sigma)
-            # the delta method holds where the slope of g changes little over one σ
-            with np.errstate(invalid="ignore", divide="ignore"):
-                bend = np.abs(s2) * sigma / s1
-            inside &= bend <= max_bend
-            use = ok_w & inside & np.isfinite(a_loo)
-            use &= use.sum(axis=1, keepdims=True) >= 2
-            counts = use.sum(axis=0)
-            refined = counts >= min_overlap
-            if refined.sum() < 2:
-                raise CalibrationError(
-                    f"exposure refinement: only {int(refined.sum())} exposure(s) have at least "
-                    f"{min_overlap} values shared with another exposure (per exposure: "
-                    f"{counts.tolist()}); the data do not determine the exposure times"
-                )
-            use &= refined[None, :]
-            rows_ok = use.sum(axis=1) >= 2
-            w0 = np.where(use, w_all, 0.0)[rows_ok][:, refined]
-            c = c_full[refined] / c_full[refined].sum() if gauge == "geometric mean" else None
-            if c is None:
-                c = np.zeros(int(refined.sum()))
-                c[-1] = 1.0
-            target = float(c @ x_nom[refined])
-            xr, cov_r, a_p, scale, iterations = _solve(
-                np.where(use, y, 0.0)[rows_ok][:, refined],
-                w0,
-                x[refined],
-                c,
-                target,
-                huber_k,
-                max_iterations,
-            )
-            x = x_nom.copy()
-            x[refined] = xr
-            cov = np.full((n_k, n_k), np.nan)
-            cov[np.ix_(refined, refined)] = cov_r
-            if stack.n_repeats == 1:
-                # σ²(z) from the residuals of this pass, corrected for leverage w/W
-                yy = np.where(use, y, 0.0)[rows_ok][:, refined]
-                res = np.where(w0 > 0, yy - a_p[:, None] - xr[None, :], np.nan)
-                lev = w0 / w0.sum(axis=1, keepdims=True)
-                z_levels = z_ref[rows_ok][:, refined]
-                var_z = (res / s1[rows_ok][:, refined]) ** 2 / np.maximum(1 - lev, 1e-3)
-                for ch in range(n_ch):
-                    sel = (chan[rows_ok] == ch)[:, None] & (w0 > 0)
-                    tables[ch] = _binned_variance(
-                        z_levels[sel], var_z[sel], float(black[ch]), float(sat[ch])
-                    )
-        log_std = np.full(n_k, np.nan)
-        log_std[refined] = np.sqrt(np.clip(np.diag(cov)[refined], 0, None))
-        out = nominal.copy()
-        out[refined] = np.exp(x[refined])
-        return ExposureRefinement(
-            exposure_s=out,
-            nominal_s=nominal,
-            log_std=log_std,
-            refined=refined,
-            n_values=counts,
-            residual_rms=scale,
-            gauge=gauge,
-            iterations=iterations,
-            log_cov=cov,
-        )
+        return _refine_once(stack, problem, rng)
 
     rng = np.random.default_rng(seed)
     if max_pixels is None:
@@ -960,6 +808,238 @@ def refine_exposure_times(
     # the sample did not determine an exposure (a narrow response, an exposure
     # few pixels see): every pixel, as without a sample
     return attempt(stack, np.random.default_rng(seed))
+
+
+@dataclass(frozen=True, eq=False)
+class _RefinementProblem:
+    """What :func:`refine_exposure_times` is given, checked: the response tables, the
+    trusted range, the gauge and the estimator's settings."""
+
+    levels: np.ndarray
+    g: np.ndarray  # (C, L)
+    sat: np.ndarray
+    lo: np.ndarray  # valid_min per channel
+    hi: np.ndarray  # valid_max per channel
+    black: np.ndarray
+    gauge: Gauge
+    margin_sigma: float
+    min_overlap: int
+    max_values: int
+    huber_k: float
+    max_iterations: int
+    bias_correction: bool
+    max_bend: float
+
+
+class _ChannelBlocks:
+    """The value rows are the channels' in turn: each channel's rows are one block."""
+
+    def __init__(self, sizes: Sequence[int]) -> None:
+        ends = np.cumsum(sizes)
+        self.blocks = [slice(int(e - n), int(e)) for e, n in zip(ends, sizes, strict=True)]
+
+    def apply(self, zz: np.ndarray, fun: Callable[[int, np.ndarray], np.ndarray]) -> np.ndarray:
+        """``fun(channel, rows)`` on each channel's block of ``zz``."""
+        out = np.empty_like(zz)
+        for ch, block in enumerate(self.blocks):
+            out[block] = fun(ch, zz[block])
+        return out
+
+
+class _RepeatNoise:
+    """The noise of one repeat against level, per channel (the repeats' variance, or,
+    with one repeat, the residuals' once a pass has measured them)."""
+
+    def __init__(self, stack: ExposureStack, blocks: _ChannelBlocks) -> None:
+        self.tables = [_repeat_variance(stack, ch) for ch in range(stack.n_channels)]
+        self.blocks = blocks
+        self.n_repeats = stack.n_repeats
+
+    def one(self, zz: np.ndarray, ch: int) -> np.ndarray:
+        table = self.tables[ch]
+        if table is None:
+            return np.ones_like(zz)
+        return interp(zz, table[0], table[1])
+
+    def variance(self, zz: np.ndarray) -> np.ndarray:
+        return self.blocks.apply(zz, lambda ch, v: self.one(v, ch))
+
+    def mean_variance(self, zz: np.ndarray) -> np.ndarray:
+        """var(z̄) about the noise-free level: noise / N, plus rounding that survives averaging."""
+        v = self.variance(zz)
+        if self.n_repeats == 1:
+            return v  # measured from residuals: rounding included
+        return v / self.n_repeats + rounding_variance(np.sqrt(np.maximum(v - 1 / 12, 0.0)))
+
+
+def _value_rows(
+    stack: ExposureStack, p: _RefinementProblem, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, _ChannelBlocks]:
+    """The pixels (rows) of :func:`refine_exposure_times`, channel by channel: their
+    values ``z`` (P, K), ``g(z)`` (0 where unusable), which values are usable, each
+    row's channel; at most ``max_values`` rows, a random draw."""
+    n_k, n_ch = stack.n_exposures, stack.n_channels
+    z_all = stack.mean()  # (K, H, W, C)
+    clipped = stack.saturated(p.sat) | stack.dark_clipped()
+    rows: list[tuple[np.ndarray, ...]] = []
+    for ch in range(n_ch):
+        z = z_all[..., ch].reshape(n_k, -1).T  # (P, K)
+        y, slope = _interp_g(z, p.levels, p.g[ch])
+        ok = ~clipped[..., ch].reshape(n_k, -1).T & np.isfinite(y) & (slope > 0)
+        keep = np.flatnonzero(ok.sum(axis=1) >= 2)
+        if keep.size > p.max_values // n_ch:
+            keep = np.sort(rng.choice(keep, p.max_values // n_ch, replace=False))
+        rows.append((z[keep], y[keep], ok[keep], np.full(keep.size, ch)))
+    z = np.concatenate([r[0] for r in rows])
+    y = np.concatenate([r[1] for r in rows])
+    ok0 = np.concatenate([r[2] for r in rows])
+    chan = np.concatenate([r[3] for r in rows])
+    y = np.where(ok0, y, 0.0)
+    return z, y, ok0, chan, _ChannelBlocks([r[0].shape[0] for r in rows])
+
+
+def _refine_once(
+    stack: ExposureStack, p: _RefinementProblem, rng: np.random.Generator
+) -> ExposureRefinement:
+    """One refinement of ``stack`` (all its pixels, or the draw it is): the value rows,
+    three passes of leave-one-out predictions, selection, weights and the solve."""
+    n_k, n_ch = stack.n_exposures, stack.n_channels
+    levels, g, sat, lo, hi, black = p.levels, p.g, p.sat, p.lo, p.hi, p.black
+    gauge, margin_sigma, min_overlap = p.gauge, p.margin_sigma, p.min_overlap
+    huber_k, max_iterations, bias_correction, max_bend = (
+        p.huber_k,
+        p.max_iterations,
+        p.bias_correction,
+        p.max_bend,
+    )
+    z, y, ok0, chan, blocks = _value_rows(stack, p, rng)
+    noise = _RepeatNoise(stack, blocks)
+    tables = noise.tables
+    variance, mean_variance = noise.variance, noise.mean_variance
+    per_channel = blocks.apply
+
+    g_mono = [
+        np.maximum.accumulate(np.where(np.isfinite(g[ch]), g[ch], -1e300)) for ch in range(n_ch)
+    ]
+
+    def inverse_g(values: np.ndarray) -> np.ndarray:
+        return per_channel(values, lambda ch, v: np.interp(v, g_mono[ch], levels))
+
+    nominal = stack.exposure_s.copy()
+    x_nom = np.log(nominal)
+    c_full = np.full(n_k, 1.0 / n_k) if gauge == "geometric mean" else np.eye(n_k)[-1]
+    x = x_nom.copy()
+    use = ok0
+    w0 = np.zeros_like(y)
+    cov = np.full((n_k, n_k), np.nan)
+    scale, iterations = 1.0, 0
+    refined = np.zeros(n_k, dtype=bool)
+    counts = np.zeros(n_k, dtype=np.int64)
+    # slope and curvature tables of g per channel
+    d1 = [np.gradient(np.where(np.isfinite(g[ch]), g[ch], np.nan), levels) for ch in range(n_ch)]
+    d2 = [np.nan_to_num(np.gradient(d, levels)) for d in d1]
+
+    d1_tab = [np.nan_to_num(d) for d in d1]
+
+    def at(zz: np.ndarray, tabs: list[np.ndarray]) -> np.ndarray:
+        return per_channel(zz, lambda ch, v: interp(v, levels, tabs[ch]))
+
+    y_obs = y
+    z_ref = z  # where weights are evaluated: first the observed levels, then predictions
+    # g' and g'' at z_ref (kept while z_ref stays)
+    s1, s2 = at(z_ref, d1_tab), at(z_ref, d2)
+    for _ in range(3):  # selection and weights from predictions, refined twice
+        var_z = mean_variance(z_ref)
+        var_y = np.where(ok0, s1**2 * var_z, 1.0)
+        ok_w = ok0 & (var_y > 0) & np.isfinite(var_y)
+        if bias_correction:
+            y = np.where(ok0, y_obs - 0.5 * s2 * var_z, 0.0)
+        w_all = np.where(ok_w, 1.0 / np.where(ok_w, var_y, 1.0), 0.0)
+        # leave-one-out prediction of each value's level from the pixel's others
+        wp = (w_all * use).sum(axis=1, keepdims=True)
+        wyp = (w_all * use * (y - x)).sum(axis=1, keepdims=True)
+        own = w_all * use
+        with np.errstate(invalid="ignore", divide="ignore"):
+            a_loo = (wyp - own * (y - x)) / (wp - own)
+        z_hat = inverse_g(np.where(np.isfinite(a_loo), a_loo + x, -np.inf))
+        # weights at the predicted level are independent of the value's own noise;
+        # at the observed level they would favour noise that flattens g (bias)
+        z_ref = np.where(np.isfinite(a_loo), z_hat, z)
+        s1, s2 = at(z_ref, d1_tab), at(z_ref, d2)
+        var_z = mean_variance(z_ref)
+        var_y = s1**2 * var_z
+        ok_w = ok0 & (var_y > 0) & np.isfinite(var_y)
+        w_all = np.where(ok_w, 1.0 / np.where(ok_w, var_y, 1.0), 0.0)
+        if bias_correction:
+            y = np.where(ok0, y_obs - 0.5 * s2 * var_z, 0.0)
+        v_one = variance(z_hat)
+        # one value's error: noise and rounding (the latter matters below σ ≈ 0.5 DN)
+        sigma = np.sqrt(v_one + rounding_variance(np.sqrt(np.maximum(v_one - 1 / 12, 0.0))))
+        floor = np.maximum(black[chan], lo[chan])[:, None]
+        top = np.minimum(sat[chan], hi[chan])[:, None]
+        inside = (z_hat >= floor + margin_sigma * sigma) & (z_hat <= top - margin_sigma * sigma)
+        # the delta method holds where the slope of g changes little over one σ
+        with np.errstate(invalid="ignore", divide="ignore"):
+            bend = np.abs(s2) * sigma / s1
+        inside &= bend <= max_bend
+        use = ok_w & inside & np.isfinite(a_loo)
+        use &= use.sum(axis=1, keepdims=True) >= 2
+        counts = use.sum(axis=0)
+        refined = counts >= min_overlap
+        if refined.sum() < 2:
+            raise CalibrationError(
+                f"exposure refinement: only {int(refined.sum())} exposure(s) have at least "
+                f"{min_overlap} values shared with another exposure (per exposure: "
+                f"{counts.tolist()}); the data do not determine the exposure times"
+            )
+        use &= refined[None, :]
+        rows_ok = use.sum(axis=1) >= 2
+        w0 = np.where(use, w_all, 0.0)[rows_ok][:, refined]
+        c = c_full[refined] / c_full[refined].sum() if gauge == "geometric mean" else None
+        if c is None:
+            c = np.zeros(int(refined.sum()))
+            c[-1] = 1.0
+        target = float(c @ x_nom[refined])
+        xr, cov_r, a_p, scale, iterations = _solve(
+            np.where(use, y, 0.0)[rows_ok][:, refined],
+            w0,
+            x[refined],
+            c,
+            target,
+            huber_k,
+            max_iterations,
+        )
+        x = x_nom.copy()
+        x[refined] = xr
+        cov = np.full((n_k, n_k), np.nan)
+        cov[np.ix_(refined, refined)] = cov_r
+        if stack.n_repeats == 1:
+            # σ²(z) from the residuals of this pass, corrected for leverage w/W
+            yy = np.where(use, y, 0.0)[rows_ok][:, refined]
+            res = np.where(w0 > 0, yy - a_p[:, None] - xr[None, :], np.nan)
+            lev = w0 / w0.sum(axis=1, keepdims=True)
+            z_levels = z_ref[rows_ok][:, refined]
+            var_z = (res / s1[rows_ok][:, refined]) ** 2 / np.maximum(1 - lev, 1e-3)
+            for ch in range(n_ch):
+                sel = (chan[rows_ok] == ch)[:, None] & (w0 > 0)
+                tables[ch] = _binned_variance(
+                    z_levels[sel], var_z[sel], float(black[ch]), float(sat[ch])
+                )
+    log_std = np.full(n_k, np.nan)
+    log_std[refined] = np.sqrt(np.clip(np.diag(cov)[refined], 0, None))
+    out = nominal.copy()
+    out[refined] = np.exp(x[refined])
+    return ExposureRefinement(
+        exposure_s=out,
+        nominal_s=nominal,
+        log_std=log_std,
+        refined=refined,
+        n_values=counts,
+        residual_rms=scale,
+        gauge=gauge,
+        iterations=iterations,
+        log_cov=cov,
+    )
 
 
 PAIR_ROWS = 3_000
