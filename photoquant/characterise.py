@@ -473,7 +473,10 @@ def _pair_fit(
         x = np.asarray(design)
         w = 1.0 / np.asarray(se) ** 2
         xtwx = x.T @ (x * w[:, None])
-        coef = np.linalg.solve(xtwx, x.T @ (w * np.asarray(target)))
+        try:
+            coef = np.linalg.solve(xtwx, x.T @ (w * np.asarray(target)))
+        except np.linalg.LinAlgError:  # the bins do not separate gain from read noise
+            return None
         resid = (np.asarray(target) - x @ coef) * np.sqrt(w)
         chi2 = float(resid @ resid) / max(len(target) - 2, 1)
         cov = np.linalg.inv(xtwx) * max(chi2, 1.0)

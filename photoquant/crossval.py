@@ -117,6 +117,16 @@ class HeldOutScore:
         Of those, the values predicted from a clipping bound.
     time_s : float
         Time of the fit, merge and prediction.
+    within_68, within_95 : float or None
+        Fractions of the scored values inside their nominal 68 % and 95 %
+        prediction intervals (:func:`prediction_sigma_dn`); ``None`` where the
+        pipeline states no uncertainty (a peer, the calibration's merge alone,
+        a response without covariance, noise the data cannot fix).
+    z_spread : float or None
+        Standard deviation of ``(ẑ − z) / σ`` over those values (1 when the
+        stated uncertainty is the actual one).
+    n_intervals : int
+        Values with an interval.
     """
 
     index: int
@@ -128,6 +138,10 @@ class HeldOutScore:
     n_fallback: int
     n_bound: int
     time_s: float
+    within_68: float | None = None
+    within_95: float | None = None
+    z_spread: float | None = None
+    n_intervals: int = 0
 
 
 @dataclass(frozen=True)
@@ -188,6 +202,18 @@ class CrossvalResult:
         scores = [r.mae_dn for r in self.rows if r.n_scored]
         return float(np.mean(scores)) if scores else float("nan")
 
+    def interval_coverage(self) -> tuple[float, float, float] | None:
+        """Over every held-out frame (value-weighted): the fractions within the nominal
+        68 % and 95 % prediction intervals and the spread of ``(ẑ − z) / σ``."""
+        rows = [r for r in self.rows if r.n_intervals and r.within_68 is not None]
+        if not rows:
+            return None
+        n = sum(r.n_intervals for r in rows)
+        c68 = sum(float(r.within_68 or 0.0) * r.n_intervals for r in rows) / n
+        c95 = sum(float(r.within_95 or 0.0) * r.n_intervals for r in rows) / n
+        spread = np.sqrt(sum(float(r.z_spread or 0.0) ** 2 * r.n_intervals for r in rows) / n)
+        return float(c68), float(c95), float(spread)
+
     @property
     def n_fallback(self) -> int:
         """Scored values predicted from the fallback merge (the merge left them NaN)."""
@@ -208,6 +234,7 @@ class CrossvalResult:
             "mean_of_frames_mae_dn": _json_float(self.mean_of_frames_mae_dn),
             "n_scored": self.n_scored,
             "n_fallback": self.n_fallback,
+            "prediction_intervals": _coverage_json(self.interval_coverage()),
             "held_out": [
                 {
                     "index": r.index,
@@ -219,6 +246,10 @@ class CrossvalResult:
                     "n_fallback": r.n_fallback,
                     "n_bound": r.n_bound,
                     "time_s": r.time_s,
+                    "within_68": r.within_68,
+                    "within_95": r.within_95,
+                    "z_spread": r.z_spread,
+                    "n_intervals": r.n_intervals,
                 }
                 for r in self.rows
             ],
@@ -249,12 +280,30 @@ class CrossvalResult:
             f"values; mean over held-out frames: {self.mean_of_frames_mae_dn:.3f} DN; "
             f"fallback-predicted values: {self.n_fallback}"
         )
+        coverage = self.interval_coverage()
+        if coverage is not None:
+            lines.append(
+                f"prediction intervals (noise, response, scene times): {100 * coverage[0]:.1f} % "
+                f"within the nominal 68 %, {100 * coverage[1]:.1f} % within the 95 %; "
+                f"(ẑ − z) / σ spread {coverage[2]:.2f}"
+            )
+        elif self.pipeline == "calibrate + correct":
+            lines.append(
+                "prediction intervals: not stated (the folds' noise is not fixed by repeats or "
+                "by values neighbouring exposures share, or the response states no covariance)"
+            )
         from photoquant.adequacy import ModelAdequacy
 
         adequacy = ModelAdequacy.from_dict(self.model_adequacy)
         if adequacy is not None:
             lines.append(f"model adequacy: {adequacy.describe()}")
         return "\n".join(lines)
+
+
+def _coverage_json(coverage: tuple[float, float, float] | None) -> dict[str, float] | None:
+    if coverage is None:
+        return None
+    return {"within_68": coverage[0], "within_95": coverage[1], "z_spread": coverage[2]}
 
 
 def _json_float(value: float) -> float | None:
@@ -324,6 +373,7 @@ def _fit_photoquant(
     calibration_only: bool = False,
     given: Any = None,
     adequacies: list[Any] | None = None,
+    context: dict[str, Any] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any]:
     """The ``K − 1`` frames through photoquant (the profile's pipeline, with ``method`` as
     the response, ``options`` over its defaults): the response table the prediction goes
@@ -334,7 +384,9 @@ def _fit_photoquant(
     defaults, ``ln X − ln t = ln(l·u·v)`` through the balanced response; with
     ``calibration_only`` the calibration's own merge through its response.
     ``given``: a known response replaces the recovered one (the other steps
-    and the camera's exposure floor are measured with it).
+    and the camera's exposure floor are measured with it). ``context``
+    receives the camera, the frames as corrected (their refined times) and
+    the refinement, for :func:`prediction_sigma_dn`.
     """
     from photoquant.calibration import calibrate
     from photoquant.calibration_steps import _response_floor
@@ -356,6 +408,9 @@ def _fit_photoquant(
     else:
         resp = model.balanced_response()
         corrected = correct(stack, model)
+        if context is not None:
+            used = stack if corrected.exposures is None else corrected.exposures.apply(stack)
+            context.update(model=model, stack=used, refinement=corrected.exposures)
         with np.errstate(divide="ignore", invalid="ignore"):
             log_e = np.log(corrected.photoquantity.astype(np.float64)) - np.log(
                 gain_map_f32(model).astype(np.float64)
@@ -471,6 +526,7 @@ def crossval_stack(
             bit_depth=stack.bit_depth,
             channels=stack.channels,
         )
+        context: dict[str, Any] = {}
         if peer is None:
             levels, g, sat, log_e, flagged = _fit_photoquant(
                 sub,
@@ -481,6 +537,7 @@ def crossval_stack(
                 calibration_only=calibration_only,
                 given=given,
                 adequacies=adequacies,
+                context=context,
             )
         else:
             fit = peer.fit(sub)
@@ -496,6 +553,7 @@ def crossval_stack(
         pred, bound = predict_held_out(levels, g, sat, log_e, stack.exposure_s[k], sub.frames)
         err = pred - z
         e = err[scored]
+        intervals = _interval_scores(context, pred, err, scored & ~flagged, stack)
         per_channel = tuple(
             float(np.abs(err[..., c][scored[..., c]]).mean()) if scored[..., c].any() else np.nan
             for c in range(stack.n_channels)
@@ -511,6 +569,7 @@ def crossval_stack(
                 n_fallback=int(np.count_nonzero(flagged & scored)),
                 n_bound=int(np.count_nonzero(bound & scored)),
                 time_s=time.perf_counter() - t0,
+                **intervals,
             )
         )
     return CrossvalResult(
@@ -543,6 +602,125 @@ def _mean_adequacy(records: Sequence[Any]) -> dict[str, Any] | None:
         found[0].code_range,
     )
     return {**mean.as_dict(), "n_folds": len(found)}
+
+
+def _interval_scores(
+    context: Mapping[str, Any],
+    pred: np.ndarray,
+    err: np.ndarray,
+    scored: np.ndarray,
+    stack: ExposureStack,
+) -> dict[str, Any]:
+    """The held-out frame's interval coverage (:class:`HeldOutScore`'s fields), or
+    nothing where the fold states no uncertainty."""
+    if "model" not in context:
+        return {}
+    sigma = prediction_sigma_dn(
+        context["model"],
+        context["stack"],
+        context.get("refinement"),
+        pred,
+        stack.n_repeats,
+    )
+    if sigma is None:
+        return {}
+    ok = scored & np.isfinite(sigma) & (sigma > 0)
+    if not ok.any():
+        return {}
+    z = err[ok] / sigma[ok]
+    return {
+        "within_68": float(np.mean(np.abs(z) <= 1.0)),
+        "within_95": float(np.mean(np.abs(z) <= 1.959964)),
+        "z_spread": float(np.std(z)),
+        "n_intervals": int(z.size),
+    }
+
+
+def prediction_sigma_dn(
+    model: Any,
+    stack: ExposureStack,
+    refinement: Any,
+    predicted: np.ndarray,
+    n_repeats: int,
+) -> np.ndarray | None:
+    """The standard uncertainty (DN) of a held-out frame's values predicted from ``stack``.
+
+    The frame's value ``z`` is predicted as ``ẑ`` with ``g(ẑ) = ln Ê + ln t``
+    (:func:`photoquant.holdout.predict_held_out`), ``ln Ê`` the ``"Debevec
+    1997"`` merge of ``stack`` (the other exposures, at the times the
+    correction used) with the camera's response. Its uncertainty, in DN:
+
+        σ² = [Var_noise(ln Ê) + Var_g(ln Ê − g(ẑ)) + Var_t(ln Ê)] / g'(ẑ)²
+             + σ²_value(ẑ)
+
+    * the merge's noise (:func:`photoquant.merge.uncertainty.log_variance_Debevec1997`)
+      with a photon-transfer fit: of the repeats where ``N ≥ 2``, else of
+      neighbouring exposures of one frame each (the characterisation's fit);
+    * the response's covariance, with the same error of ``g`` entering the
+      merge and the read-back at ``ẑ``
+      (:func:`~photoquant.merge.uncertainty.log_variance_response_Debevec1997`
+      with ``held_out_level``);
+    * the refined times' covariance, where the correction refined them;
+    * the held-out value's own noise and rounding at ``ẑ`` (the mean of
+      ``n_repeats``).
+
+    The held-out frame's own exposure error is not in it: a shutter off its
+    label shows as intervals that cover less than they state. ``None`` where
+    no uncertainty can be stated: another merge than ``"Debevec 1997"``, a
+    response without covariance, or noise the data do not fix.
+    """
+    from photoquant.characterise import _pair_fit
+    from photoquant.merge.noise_aware import (
+        NoiseParameters,
+        _log_variance,
+        _Scale,
+        estimate_noise_parameters,
+    )
+    from photoquant.merge.uncertainty import (
+        log_variance_Debevec1997,
+        log_variance_exposure_Debevec1997,
+        log_variance_response_Debevec1997,
+        merge_weights_Debevec1997,
+    )
+
+    response = model.response
+    if model.merge.method != "Debevec 1997" or response.covariance_factor is None:
+        return None
+    noise: NoiseParameters | None
+    if stack.n_repeats >= 2:
+        noise = estimate_noise_parameters(stack, response)
+    else:
+        fit = _pair_fit(stack, model, "held-out fold")
+        noise = None
+        if fit is not None:
+            gains, reads = fit[0], fit[1]
+            noise = NoiseParameters(
+                gains, np.sqrt(np.maximum(reads, 0.0)), "neighbouring exposures"
+            )
+    if noise is None:
+        return None
+    options = model.merge.options
+    weights = merge_weights_Debevec1997(stack, response, options)
+    var = log_variance_Debevec1997(stack, response, noise, options, weights=weights)
+    level = np.where(np.isfinite(predicted), predicted, float(response.levels[0]))
+    var = var + log_variance_response_Debevec1997(
+        stack, response, options, weights=weights, held_out_level=level
+    )
+    if refinement is not None and refinement.log_cov is not None:
+        var = var + log_variance_exposure_Debevec1997(
+            stack, response, refinement.log_cov, options, weights=weights
+        )
+    scale = _Scale(response)
+    read2 = np.asarray(noise.read_noise, dtype=np.float64) ** 2
+    out = np.empty(var.shape)
+    for ch in range(var.shape[-1]):
+        z = level[..., ch]
+        slope = scale.slope(z, ch)
+        y = scale.linear(scale.log_inverse(z, ch), ch)
+        own = _log_variance(y, slope, float(noise.gain[ch]), float(read2[ch]), int(n_repeats))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[..., ch] = np.sqrt((var[..., ch] + own) / (slope * slope))
+    return out
 
 
 def crossval_manifest(

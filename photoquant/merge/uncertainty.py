@@ -243,6 +243,7 @@ def log_variance_response_Debevec1997(
     options: DebevecMergeOptions | None = None,
     *,
     weights: MergeWeights | None = None,
+    held_out_level: np.ndarray | None = None,
 ) -> np.ndarray:
     """The response's part of ``Var(ln Ê)`` after the ``"Debevec 1997"`` merge, per pixel.
 
@@ -267,6 +268,12 @@ def log_variance_response_Debevec1997(
         The merge's weighting and ``valid_min`` rule.
     weights : MergeWeights, optional
         The merge's weights, when already computed (:func:`merge_weights_Debevec1997`).
+    held_out_level : ndarray, shape (H, W, C), optional
+        A level per value at which the prediction of another exposure reads
+        ``g`` back (``ẑ`` with ``g(ẑ) = ln Ê + ln t``): the variance is then
+        that of ``ln Ê − g(ẑ)``, ``Σ_r (Σ_k a_k F_r(c̄_k) − F_r(ẑ))² + Σ_k a_k²
+        D(c̄_k) + D(ẑ)``, the same error of ``g`` entering both (the held-out
+        prediction of :mod:`photoquant.crossval`).
 
     Returns
     -------
@@ -291,15 +298,27 @@ def log_variance_response_Debevec1997(
     def tabulated(rows: np.ndarray) -> Any:
         return tables.table(lambda v, ch: np.interp(v, levels, rows[ch]))
 
+    def at_level(rows: np.ndarray) -> np.ndarray:
+        """``rows`` (C, L) at ``held_out_level`` (H, W, C), as ``g`` is interpolated."""
+        assert held_out_level is not None
+        return np.stack(
+            [np.interp(held_out_level[..., ch], levels, rows[ch]) for ch in range(rows.shape[0])],
+            axis=-1,
+        )
+
     with np.errstate(invalid="ignore", divide="ignore"):
         inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), np.nan)
         total = np.zeros_like(den)
         for r in range(factor.shape[1]):
             table = tabulated(factor[:, r])
-            moved = sum(w * tables.take(table, k) for k, w in enumerate(per_exposure))
-            total += (moved * inv) ** 2
+            moved = sum(w * tables.take(table, k) for k, w in enumerate(per_exposure)) * inv
+            if held_out_level is not None:
+                moved = moved - at_level(factor[:, r])
+            total += moved**2
         table = tabulated(rest)
         total += sum(w * w * tables.take(table, k) for k, w in enumerate(per_exposure)) * inv**2
+        if held_out_level is not None:
+            total += at_level(rest)
     return np.where(den > 0, total, np.nan)
 
 

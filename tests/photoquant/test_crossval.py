@@ -143,8 +143,10 @@ def test_json_and_table(gamma_stack):
     assert len(data["held_out"]) == 4 and data["score_range"] == [10.0, 245.0]
     assert {"mae_dn", "bias_dn", "n_scored", "n_fallback", "n_bound"} <= set(data["held_out"][0])
     table = res.format_table()
-    # the header, a row per held-out frame, the overall scores, the model's adequacy
-    assert "overall (every scored value)" in table and len(table.splitlines()) == 2 + 4 + 1 + 1
+    # the header, a row per held-out frame, the overall scores, the prediction
+    # intervals, the model's adequacy
+    assert "overall (every scored value)" in table and len(table.splitlines()) == 2 + 4 + 1 + 2
+    assert table.splitlines()[-2].startswith("prediction intervals")
     assert table.splitlines()[-1].startswith("model adequacy: ")
 
 
@@ -283,3 +285,43 @@ def test_a_given_response_that_does_not_fit_the_bracket_is_named(gamma_stack):
     true = ResponseModel("the truth", levels, np.tile(g, (3, 1)), np.full(3, 255.0))
     res = crossval_stack(gamma_stack, true)
     assert res.method == "the truth" and res.pipeline == "calibrate + correct"
+
+
+def test_prediction_intervals_cover_a_simulated_cameras_held_out_values():
+    """On a pqsim camera (noise and response known to the model) the stated intervals
+    hold about their nominal share: the noise from a photon-transfer fit of the
+    repeats, the response's covariance, the held-out value's own noise."""
+    import photoquant as pq
+    from benchmarks._data import hdr_stack
+
+    data = hdr_stack(120, 160, 6, 2, 0, preset="cmos")
+    result = crossval_stack(pq.ExposureStack(data.frames, data.exposure_s, bit_depth=8))
+    c68, c95, spread = result.interval_coverage()
+    # the response's bias is not stated (see the response covariance's notes): a
+    # little less than nominal is expected, far less or far more would be a wrong σ
+    assert 0.60 <= c68 <= 0.80 and 0.88 <= c95 <= 0.99, (c68, c95)
+    assert 0.75 <= spread <= 1.35, spread
+    doc = result.to_json()
+    assert doc["prediction_intervals"]["within_95"] == pytest.approx(c95)
+    assert all(row["n_intervals"] > 0 for row in doc["held_out"])
+    assert "prediction intervals" in result.format_table()
+
+
+def test_a_peer_states_no_interval(gamma_stack):
+    result = crossval_stack(gamma_stack, "opencv")
+    assert result.interval_coverage() is None
+    assert result.to_json()["prediction_intervals"] is None
+
+
+def test_a_fold_whose_noise_the_data_do_not_fix_states_none_and_runs():
+    # one frame per exposure of a clean CCD: the neighbouring exposures' variance bins
+    # do not separate gain from read noise in some folds (a singular fit): those folds
+    # state no interval, the others do, and nothing fails
+    import photoquant as pq
+    from benchmarks._data import hdr_stack
+
+    data = hdr_stack(120, 160, 8, 1, 0, preset="ccd")
+    result = crossval_stack(pq.ExposureStack(data.frames, data.exposure_s, bit_depth=8))
+    stated = [row.within_95 is not None for row in result.rows]
+    assert any(stated) and not all(stated), stated
+    assert result.interval_coverage() is not None

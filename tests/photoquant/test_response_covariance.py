@@ -167,6 +167,26 @@ def test_the_rest_of_the_diagonal_adds_per_value():
     np.testing.assert_allclose(got[..., 0], response.covariance_diagonal[0][c], rtol=1e-12)
 
 
+def test_a_read_back_at_the_merged_level_shares_the_responses_error():
+    # one exposure read back at its own value: g's error enters both and the factor's
+    # part cancels; the rest of the diagonal is independent per read, so it counts twice
+    rng = np.random.default_rng(5)
+    response = _response_with_covariance(rng)
+    stack = _stack(rng, 1)
+    options = DebevecMergeOptions(weighting="hat")
+    c = stack.frames[0, 0].astype(np.float64)  # (H, W, 1)
+    got = log_variance_response_Debevec1997(stack, response, options, held_out_level=c)
+    rest = response.covariance_diagonal[0] - np.sum(response.covariance_factor[0] ** 2, axis=0)
+    np.testing.assert_allclose(got[..., 0], 2 * rest[c[..., 0].astype(int)], rtol=1e-9, atol=1e-15)
+    # read back elsewhere: the factor's rows moved g by F_r(c) − F_r(ẑ)
+    other = np.full_like(c, 128.0)
+    far = log_variance_response_Debevec1997(stack, response, options, held_out_level=other)
+    factor = response.covariance_factor[0]
+    idx = c[..., 0].astype(int)
+    expected = sum((row[idx] - row[128]) ** 2 for row in factor) + rest[idx] + rest[128]
+    np.testing.assert_allclose(far[..., 0], expected, rtol=1e-9)
+
+
 def test_a_response_without_covariance_is_named():
     response = _response_with_covariance(np.random.default_rng(5))
     plain = dataclasses.replace(response, covariance_factor=None, covariance_diagonal=None)
