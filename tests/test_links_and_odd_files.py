@@ -108,6 +108,27 @@ def test_odd_files_give_one_line_or_a_result(originals, tmp_path, capsys, data):
             assert sum(line.startswith("photoquant: error: ") for line in lines) == 1, err
 
 
+def test_a_truth_file_that_is_a_named_pipe_is_one_line(originals, tmp_path, capsys):
+    # reading a FIFO blocks until a writer comes: the truth is read as a regular file only
+    import threading
+
+    commands = _commands(tmp_path)
+    shutil.copytree(originals / "set", tmp_path / "set", symlinks=True)
+    shutil.copytree(originals / "cam", tmp_path / "cam", symlinks=True)
+    truth = next((tmp_path / "set").rglob("truth.json"))
+    _make_odd(truth, "named pipe")
+    result: dict[str, int] = {}
+    worker = threading.Thread(
+        target=lambda: result.update(status=main(commands["compare"])), daemon=True
+    )
+    worker.start()
+    worker.join(120)
+    assert not worker.is_alive(), "compare blocked on the named pipe"
+    err = capsys.readouterr().err.strip().splitlines()
+    assert result["status"] == 2 and err[-1].startswith("photoquant: error: "), err
+    assert "truth.json" in err[-1] and "not a regular file" in err[-1]
+
+
 def test_a_camera_whose_map_is_a_symlink_loop(originals, tmp_path, capsys):
     cam = tmp_path / "cam"
     shutil.copytree(originals / "cam", cam)

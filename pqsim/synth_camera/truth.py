@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import stat
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -560,6 +561,11 @@ def load_truth(folder: str | Path) -> TruthSet:
     path = folder if folder.name == "truth.json" else folder / "truth.json"
     folder = path.parent
     try:
+        # a FIFO would block the read and a device never end it: regular files only
+        if not stat.S_ISREG(path.stat().st_mode):
+            raise InputError(
+                f"`folder`: {str(path)!r} is not a regular file (a folder, device, FIFO or socket)"
+            )
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"`folder`: cannot read {str(path)!r}: {exc}") from None
