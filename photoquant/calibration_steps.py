@@ -224,6 +224,10 @@ class ResponseStage:
         The likelihood-ratio test of the views' labels
         (:meth:`photoquant.exposure.ExposureDecision.as_dict`), where the
         views' times were recovered.
+    label_refinements : list of ExposureRefinement or None
+        Where the test kept the views' labels: each view refined from
+        neighbouring pairs against this response (what the exposure floor is
+        measured from, :func:`_response_floor`).
     """
 
     fit: StepFit[ResponseModel]
@@ -231,6 +235,7 @@ class ResponseStage:
     policy: ExposurePolicy
     view_times: list[ExposureRefinement] | None = None
     view_decision: dict[str, Any] | None = None
+    label_refinements: list[ExposureRefinement] | None = None
 
     @property
     def model(self) -> ResponseModel:
@@ -389,7 +394,7 @@ def response_step(
             policy = ExposurePolicy(False, policy.asked)
     decision = None if joint is None else joint.decision
     view_times = None if joint is None else joint.view_times
-    if joint is not None and (view_times is not None or joint.at_labels):
+    if joint is not None and (view_times is not None or joint.at_labels is not None):
         fit = joint.fit
     else:
         if policy.refine and len(views) < 2:
@@ -401,7 +406,8 @@ def response_step(
     log.report["response"] = {"method": spec[0].name, **fit.report}
     if selection is not None:
         log.report["response"]["selection"] = selection.as_dict()
-    return ResponseStage(fit, spec, policy, view_times, decision)
+    at_labels = None if joint is None else joint.at_labels
+    return ResponseStage(fit, spec, policy, view_times, decision, at_labels)
 
 
 def _screen_view_times(
@@ -425,18 +431,19 @@ def _screen_view_times(
     Where the test keeps the labels, the calibration is, to the bit, the one
     without refinement.
     """
-    fit = fit_response(hide_defects(views[0], defects), spec, rng=seed)
+    hidden = [hide_defects(view, defects) for view in views]
+    fit = fit_response(hidden[0], spec, rng=seed)
     refs = []
-    for view in views:
+    for view in hidden:
         try:
-            refs.append(refine_by_pairs(hide_defects(view, defects), fit.model, seed=seed))
+            refs.append(refine_by_pairs(view, fit.model, seed=seed))
         except CalibrationError:
             return None  # the pairs cannot tell: the joint recovery decides
     decision = judge_exposure_times(refs)
     if decision.refine:
         return None
     log.note(f"views' exposure times: {decision.describe()}")
-    return _JointFit(fit, None, decision.as_dict(), at_labels=True)
+    return _JointFit(fit, None, decision.as_dict(), at_labels=refs)
 
 
 def _recover_with_view_times(
@@ -512,7 +519,9 @@ class _JointFit:
     fit: StepFit[Any]
     view_times: list[ExposureRefinement] | None
     decision: dict[str, Any]
-    at_labels: bool = False  # the fit at the views' labels (the screen kept them)
+    # the screen kept the labels: the fit is at them, and these are the views refined
+    # against it from pairs (the exposure floor's refinements)
+    at_labels: list[ExposureRefinement] | None = None
 
 
 def refine_exposures_step(
@@ -577,7 +586,7 @@ def refine_exposures_step(
     irradiance, flat_field, glare = captures.irradiance, captures.flat_field, captures.glare
     floor = MIN_FLOOR_LOG
     if policy.refine:
-        floor = _response_floor(views, resp, seed, defects)
+        floor = _response_floor(views, resp, seed, defects, response.label_refinements)
         exposures["floor_log"] = floor
     if policy.refine and irradiance is not None:
         irradiance, exposures["irradiance"] = _refine_stack(
@@ -1235,7 +1244,11 @@ def _refine_source_exposures(
 
 
 def _response_floor(
-    views: Sequence[ExposureStack], response: ResponseModel, seed: int, defects: Any
+    views: Sequence[ExposureStack],
+    response: ResponseModel,
+    seed: int,
+    defects: Any,
+    refinements: Sequence[ExposureRefinement] | None = None,
 ) -> float:
     """The systematic error per exposure the response leaves on its own views, at least
     :data:`~photoquant.exposure.MIN_FLOOR_LOG` (:func:`~photoquant.exposure.self_consistency_floor`).
@@ -1244,7 +1257,10 @@ def _response_floor(
     refined against it as a scene is at correction (the same estimator:
     :func:`~photoquant.exposure.refine_by_pairs`, the same draw); where a
     view's exposures are not related by its data it is left out.
+    ``refinements``: those already made (:func:`_screen_view_times`).
     """
+    if refinements is not None:
+        return max(MIN_FLOOR_LOG, self_consistency_floor(refinements))
 
     def refine(view: ExposureStack) -> ExposureRefinement | None:
         try:
