@@ -1025,21 +1025,7 @@ def _refine_once(
                 tables[ch] = _binned_variance(
                     z_levels[sel], var_z[sel], float(black[ch]), float(sat[ch])
                 )
-    log_std = np.full(n_k, np.nan)
-    log_std[refined] = np.sqrt(np.clip(np.diag(cov)[refined], 0, None))
-    out = nominal.copy()
-    out[refined] = np.exp(x[refined])
-    return ExposureRefinement(
-        exposure_s=out,
-        nominal_s=nominal,
-        log_std=log_std,
-        refined=refined,
-        n_values=counts,
-        residual_rms=scale,
-        gauge=gauge,
-        iterations=iterations,
-        log_cov=cov,
-    )
+    return _refinement_of(nominal, x, refined, cov, counts, scale, gauge, iterations)
 
 
 PAIR_ROWS = 3_000
@@ -1428,20 +1414,35 @@ def _pair_refinement(
     cov_x = proj @ lower @ cov[np.ix_(steps, steps)] @ lower.T @ proj.T
     log_cov = np.full((n_k, n_k), np.nan)
     log_cov[np.ix_(sel, sel)] = cov_x
-    log_std = np.full(n_k, np.nan)
-    log_std[sel] = np.sqrt(np.clip(np.diag(cov_x), 0, None))
     n_values = np.zeros(n_k, dtype=np.int64)
     n_values[:-1] += counts
     n_values[1:] += counts
+    return _refinement_of(nominal, x, sel, log_cov, n_values, scale, gauge, iterations)
+
+
+def _refinement_of(
+    nominal: np.ndarray,
+    x: np.ndarray,
+    refined: np.ndarray,
+    log_cov: np.ndarray,
+    n_values: np.ndarray,
+    residual_rms: float,
+    gauge: Gauge,
+    iterations: int,
+) -> ExposureRefinement:
+    """The :class:`ExposureRefinement` of log times ``x`` where ``refined`` (the nominal
+    times elsewhere), their standard errors from ``log_cov``'s diagonal."""
+    log_std = np.full(nominal.size, np.nan)
+    log_std[refined] = np.sqrt(np.clip(np.diag(log_cov)[refined], 0, None))
     out = nominal.copy()
-    out[sel] = np.exp(x[sel])
+    out[refined] = np.exp(x[refined])
     return ExposureRefinement(
         exposure_s=out,
         nominal_s=nominal,
         log_std=log_std,
-        refined=sel,
+        refined=refined,
         n_values=n_values,
-        residual_rms=scale,
+        residual_rms=residual_rms,
         gauge=gauge,
         iterations=iterations,
         log_cov=log_cov,
