@@ -206,7 +206,8 @@ def _fused_log_variance(
     sat = none if inp.saturated is None else inp.saturated.reshape(k, h * w, c)
     dark = none if inp.dark_clipped is None else inp.dark_clipped.reshape(k, h * w, c)
     out = np.empty((h * w, c))
-    _weighted_variance_nb(flat, tables._size, weight_table, tables.table(variance), sat, dark, out)
+    size = tables.grid.size  # values per channel on the tables
+    _weighted_variance_nb(flat, size, weight_table, tables.table(variance), sat, dark, out)
     return out.reshape(h, w, c)
 
 
