@@ -82,16 +82,19 @@ from photoquant.errors import InputError
 from photoquant.io.outputs import OutputKind, folder_of_kind
 from photoquant.merge.noise_aware import _QUANTISATION, _Scale, estimate_noise_parameters
 from photoquant.model import CameraModel
+from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
 __all__ = [
     "CHARACTERISATION_FORMAT",
     "CHARACTERISATION_REPORT",
     "Characterisation",
+    "PhotonTransferFit",
     "Quantity",
     "characterise",
     "characterise_manifest",
     "load_characterisation",
+    "photon_transfer_from_exposures",
     "plot_characterisation",
 ]
 
@@ -411,15 +414,62 @@ def _ptc_points(
     return out
 
 
-def _pair_fit(
-    stack: ExposureStack, camera: CameraModel, name: str, n_bins: int = 24
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]] | None:
-    """Gain, read variance and their covariances from neighbouring exposures of one frame each.
+@dataclass(frozen=True)
+class PhotonTransferFit:
+    """A photon-transfer line on the linear DN scale, per channel (module notes).
 
-    Returns ``(K (C,), σ_r² (C,), cov (C, 2, 2), points)`` or ``None`` when
-    too few values pair up.
+    Attributes
+    ----------
+    gain : ndarray, shape (C,)
+        System gain ``K``, linear DN per electron.
+    read_variance : ndarray, shape (C,)
+        Read noise variance ``σ_r²``, linear DN².
+    covariance : ndarray, shape (C, 2, 2)
+        Covariance of ``(K, σ_r²)`` per channel (scaled by the fit's reduced
+        χ² where that exceeds 1).
+    points : list of dict
+        The binned curve of each channel (``mean_dn``, ``variance_dn2``, for
+        the plot), labelled with the frame set and how it was measured.
     """
-    resp = camera.response
+
+    gain: np.ndarray
+    read_variance: np.ndarray
+    covariance: np.ndarray
+    points: list[dict[str, Any]]
+
+
+def photon_transfer_from_exposures(
+    stack: ExposureStack, response: ResponseModel, *, name: str = "frame set", n_bins: int = 24
+) -> PhotonTransferFit | None:
+    """The photon-transfer line from neighbouring exposures of one frame each.
+
+    Exposures ``k`` and ``k + 1`` of a static scene see the same
+    photoquantity: on the linear DN scale of the camera's ``response`` the
+    difference ``d = y_{k+1}/r − y_k`` (``r`` their time ratio, its error
+    removed as a robust slope) has variance ``K ȳ (1 + 1/r) + σ_r² (1 +
+    1/r²)``. The variances of ``d`` less quantisation, in ``n_bins``
+    bins of ``ȳ``, are fitted by weighted least squares (module notes).
+    Uses the first repeat of every exposure.
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        A bracket (``K ≥ 2``) of a static scene.
+    response : ResponseModel
+        The camera's calibrated response (its levels and linear scale).
+    name : str
+        The frame set's name in the fit's ``points``.
+    n_bins : int
+        Bins of ``ȳ`` per channel at most.
+
+    Returns
+    -------
+    PhotonTransferFit or None
+        ``None`` where the data do not fix the line: too few unclipped
+        values pair up, the bins do not separate gain from read noise, or
+        the fitted gain is not positive.
+    """
+    resp = response
     scale = _Scale(resp)
     sat = np.asarray(resp.saturation_level, dtype=np.float64)
     lo = np.asarray(resp.valid_min, dtype=np.float64)
@@ -492,7 +542,7 @@ def _pair_fit(
                 "variance_dn2": [float(v) / 2.0 for v in target],
             }
         )
-    return gains, reads, covs, points
+    return PhotonTransferFit(gains, reads, covs, points)
 
 
 def _noise_batches(
@@ -755,16 +805,21 @@ def characterise(
                 points += _ptc_points(stack, camera, name)
         kind = "repeats"
     else:
-        fits = [f for n, s in named if s.n_exposures >= 2 and (f := _pair_fit(s, camera, n))]
+        fits = [
+            f
+            for n, s in named
+            if s.n_exposures >= 2
+            and (f := photon_transfer_from_exposures(s, camera.response, name=n))
+        ]
         if not fits:
             raise InputError(
                 "no frame set can fix a photon-transfer curve: it needs repeats of an "
                 "exposure, or neighbouring exposures whose values overlap"
             )
-        gs = np.array([f[0] for f in fits])
-        rs = np.array([f[1] for f in fits])
-        w_g = np.array([1.0 / f[2][:, 0, 0] for f in fits])
-        w_r = np.array([1.0 / f[2][:, 1, 1] for f in fits])
+        gs = np.array([f.gain for f in fits])
+        rs = np.array([f.read_variance for f in fits])
+        w_g = np.array([1.0 / f.covariance[:, 0, 0] for f in fits])
+        w_r = np.array([1.0 / f.covariance[:, 1, 1] for f in fits])
         g = (w_g * gs).sum(axis=0) / w_g.sum(axis=0)
         u_g = 1.0 / np.sqrt(w_g.sum(axis=0))
         r2 = (w_r * rs).sum(axis=0) / w_r.sum(axis=0)
@@ -775,7 +830,7 @@ def characterise(
             f"{len(fits)} frame set(s); the fit's covariance"
         )
         for f in fits:
-            points += f[3]
+            points += f.points
         kind = "neighbouring exposures"
     read = [_sqrt_u(float(a), float(b)) for a, b in zip(r2, u_r2, strict=True)]
     r_dn = np.array([v for v, _ in read])

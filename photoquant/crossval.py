@@ -669,7 +669,7 @@ def prediction_sigma_dn(
     no uncertainty can be stated: another merge than ``"Debevec 1997"``, a
     response without covariance, or noise the data do not fix.
     """
-    from photoquant.characterise import _pair_fit
+    from photoquant.characterise import photon_transfer_from_exposures
     from photoquant.merge.noise_aware import (
         NoiseParameters,
         _log_variance,
@@ -690,12 +690,11 @@ def prediction_sigma_dn(
     if stack.n_repeats >= 2:
         noise = estimate_noise_parameters(stack, response)
     else:
-        fit = _pair_fit(stack, model, "held-out fold")
+        fit = photon_transfer_from_exposures(stack, response, name="held-out fold")
         noise = None
         if fit is not None:
-            gains, reads = fit[0], fit[1]
             noise = NoiseParameters(
-                gains, np.sqrt(np.maximum(reads, 0.0)), "neighbouring exposures"
+                fit.gain, np.sqrt(np.maximum(fit.read_variance, 0.0)), "neighbouring exposures"
             )
     if noise is None:
         return None
