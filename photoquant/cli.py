@@ -538,15 +538,29 @@ def _add_plugin_commands(sub: Any) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``photoquant`` command."""
-    from photoquant.profiles import DEFAULT_PROFILE, PROFILES
-    from photoquant.weighting import WEIGHTING_FUNCTIONS
-
     parser = argparse.ArgumentParser(
         prog="photoquant",
         description="Radiometric camera calibration and photoquantity measurement.",
     )
     parser.add_argument("--version", action="version", version=f"photoquant {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
+    for add_command in (
+        _add_calibrate,
+        _add_correct,
+        _add_info,
+        _add_methods,
+        _add_crossval,
+        _add_characterise,
+    ):
+        add_command(sub)
+    _add_plugin_commands(sub)
+    return parser
+
+
+def _add_calibrate(sub: Any) -> None:
+    """``photoquant calibrate``: a capture manifest to a camera folder."""
+    from photoquant.profiles import DEFAULT_PROFILE, PROFILES
+    from photoquant.weighting import WEIGHTING_FUNCTIONS
 
     cal = sub.add_parser("calibrate", help="calibrate a camera from a capture manifest")
     cal.add_argument("manifest", help="capture manifest (photoquant.captures/1 JSON)")
@@ -587,7 +601,11 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--merge-method", help="same as --method merge=NAME")
     cal.add_argument("--seed", type=int, default=0, help="seed of the sample selection")
     cal.set_defaults(func=_cmd_calibrate)
+    _add_capture_options(cal)
 
+
+def _add_correct(sub: Any) -> None:
+    """``photoquant correct``: a manifest's scene to an OpenEXR photoquantity."""
     cor = sub.add_parser("correct", help="measure the photoquantity of a manifest's scene")
     cor.add_argument("manifest", help="capture manifest with `scene` frames")
     cor.add_argument("--camera", required=True, help="camera folder from `photoquant calibrate`")
@@ -602,52 +620,67 @@ def build_parser() -> argparse.ArgumentParser:
         f"{TOTAL_UNCERTAINTY_LAYER}.R, ...)",
     )
     cor.set_defaults(func=_cmd_correct)
+    _add_capture_options(cor)
 
-    for p in (cal, cor):
-        p.add_argument("--overwrite", action="store_true", help="replace an existing output")
-        p.add_argument(
-            "--allow-outside",
-            action="store_true",
-            help="allow manifest paths outside the manifest's folder",
-        )
-        p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
-        p.add_argument(
-            "--refine-exposures",
-            dest="refine_exposures",
-            action="store_true",
-            default=None,
-            help="re-estimate the frames' exposure times from the data (photoquant.exposure; "
-            "the photoquant profile's default, not the paper profile's)",
-        )
-        p.add_argument(
-            "--no-refine-exposures",
-            dest="refine_exposures",
-            action="store_false",
-            help="keep the frames' nominal exposure times",
-        )
-        p.add_argument(
-            "--dark-subtraction",
-            dest="dark_subtraction",
-            action="store_true",
-            default=None,
-            help="subtract the manifest's `dark` frames pixel by pixel (photoquant.darkframe); "
-            "default: the manifest's `dark_subtraction`",
-        )
-        p.add_argument(
-            "--no-dark-subtraction",
-            dest="dark_subtraction",
-            action="store_false",
-            help="use the `dark` frames' mean as the black level only",
-        )
 
+def _add_capture_options(p: argparse.ArgumentParser) -> None:
+    """The options ``calibrate`` and ``correct`` share: output, paths, progress, exposure
+    refinement and dark subtraction."""
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    p.add_argument(
+        "--allow-outside",
+        action="store_true",
+        help="allow manifest paths outside the manifest's folder",
+    )
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    p.add_argument(
+        "--refine-exposures",
+        dest="refine_exposures",
+        action="store_true",
+        default=None,
+        help="re-estimate the frames' exposure times from the data (photoquant.exposure; "
+        "the photoquant profile's default, not the paper profile's)",
+    )
+    p.add_argument(
+        "--no-refine-exposures",
+        dest="refine_exposures",
+        action="store_false",
+        help="keep the frames' nominal exposure times",
+    )
+    p.add_argument(
+        "--dark-subtraction",
+        dest="dark_subtraction",
+        action="store_true",
+        default=None,
+        help="subtract the manifest's `dark` frames pixel by pixel (photoquant.darkframe); "
+        "default: the manifest's `dark_subtraction`",
+    )
+    p.add_argument(
+        "--no-dark-subtraction",
+        dest="dark_subtraction",
+        action="store_false",
+        help="use the `dark` frames' mean as the black level only",
+    )
+
+
+def _add_info(sub: Any) -> None:
+    """``photoquant info``: describe a camera folder."""
     info = sub.add_parser("info", help="describe a calibrated camera")
     info.add_argument("camera", help="camera folder")
     info.add_argument("--json", action="store_true", help="machine-readable output")
     info.set_defaults(func=_cmd_info)
 
+
+def _add_methods(sub: Any) -> None:
+    """``photoquant methods``: every step's methods and options."""
     meth = sub.add_parser("methods", help="list the methods of every step and their options")
     meth.add_argument("--json", action="store_true", help="machine-readable output")
     meth.set_defaults(func=_cmd_methods)
+
+
+def _add_crossval(sub: Any) -> None:
+    """``photoquant crossval``: leave-one-exposure-out cross-validation of a response method."""
+    from photoquant.profiles import DEFAULT_PROFILE, PROFILES
 
     xval = sub.add_parser(
         "crossval",
@@ -695,6 +728,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     xval.set_defaults(func=_cmd_crossval)
 
+
+def _add_characterise(sub: Any) -> None:
+    """``photoquant characterise``: an EMVA-1288-style noise report of a camera."""
     char = sub.add_parser(
         "characterise",
         help="EMVA-1288-style noise report of a calibrated camera (gain, read noise, full "
@@ -709,9 +745,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     char.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     char.set_defaults(func=_cmd_characterise)
-
-    _add_plugin_commands(sub)
-    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
