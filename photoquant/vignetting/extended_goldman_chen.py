@@ -516,28 +516,263 @@ def _solve_pairs(
     return result, fun, cov
 
 
+@dataclass(frozen=True)
+class _FitSettings:
+    """The checked options of one extended Goldman–Chen fit.
+
+    See :func:`fit_vignetting_ExtendedGoldmanChen` for their meaning;
+    ``scale_invariant`` and ``view_gains`` are plain bools, the others are
+    kept as given.
+    """
+
+    normalise: str
+    scale_invariant: bool
+    view_gains: bool
+    view_gain_centre: str
+    view_gain_sigma: float | None
+    min_pairs: int
+    max_nfev: int
+    min_spread: float
+    max_uncertainty: float
+
+    @classmethod
+    def checked(
+        cls,
+        *,
+        normalise: str,
+        scale_invariant: bool,
+        view_gains: bool,
+        view_gain_centre: str,
+        view_gain_sigma: float | None,
+        min_pairs: int,
+        max_nfev: int,
+        min_spread: float,
+        max_uncertainty: float,
+    ) -> _FitSettings:
+        """The settings, or an InputError naming the first malformed option (in this order)."""
+        if normalise not in ("track", "none"):
+            raise InputError(f"`normalise` must be 'track' or 'none', got {normalise!r}")
+        if not isinstance(scale_invariant, bool | np.bool_):
+            raise InputError(f"`scale_invariant` must be a bool, got {scale_invariant!r}")
+        if not isinstance(view_gains, bool | np.bool_):
+            raise InputError(f"`view_gains` must be a bool, got {view_gains!r}")
+        if view_gain_centre not in ("image", "free"):
+            raise InputError(
+                f"`view_gain_centre` must be 'image' or 'free', got {view_gain_centre!r}"
+            )
+        if view_gain_sigma is not None and not (
+            isinstance(view_gain_sigma, int | float | np.number) and view_gain_sigma > 0
+        ):
+            raise InputError(
+                f"`view_gain_sigma` must be a positive number, got {view_gain_sigma!r}"
+            )
+        min_pairs = check_int(min_pairs, "min_pairs", 1)
+        max_nfev = check_int(max_nfev, "max_nfev", 1)
+        if not isinstance(min_spread, int | float | np.number) or not 0.0 <= min_spread <= 1.0:
+            raise InputError(f"`min_spread` must be a number in [0, 1], got {min_spread!r}")
+        if not isinstance(max_uncertainty, int | float | np.number) or not max_uncertainty > 0:
+            raise InputError(
+                f"`max_uncertainty` must be a positive number, got {max_uncertainty!r}"
+            )
+        return cls(
+            normalise=normalise,
+            scale_invariant=bool(scale_invariant),
+            view_gains=bool(view_gains),
+            view_gain_centre=view_gain_centre,
+            view_gain_sigma=view_gain_sigma,
+            min_pairs=min_pairs,
+            max_nfev=max_nfev,
+            min_spread=min_spread,
+            max_uncertainty=max_uncertainty,
+        )
+
+
+def _checked_observations(
+    values: Any, xy: Any, view: Any, track: Any, image_shape: Any
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[int, int]]:
+    """The observations as checked arrays, and ``(H, W)``.
+
+    ``values`` (M, C) and ``xy`` (M, 2) as float64, ``view`` and ``track``
+    (M,) as integers; an InputError names the first malformed argument.
+    """
+    values = check_array(values, "values", ndim=2, kind="iuf").astype(np.float64)
+    m = values.shape[0]
+    xy = check_array(xy, "xy", shape=(m, 2), kind="iuf", finite=True).astype(np.float64)
+    view = check_array(view, "view", shape=(m,), kind="iu")
+    track = check_array(track, "track", shape=(m,), kind="iu")
+    return values, xy, view, track, _check_image_shape(image_shape)
+
+
+def _check_positions(xy: np.ndarray, view: np.ndarray, image_shape: tuple[int, int]) -> None:
+    """Raise an InputError for a point outside the image or a negative view index."""
+    h, w = image_shape
+    x, y = xy[:, 0], xy[:, 1]
+    if np.any((x < -0.5) | (x > w - 0.5) | (y < -0.5) | (y > h - 0.5)):
+        raise InputError(
+            f"`xy` has points outside the image of shape {(h, w)} "
+            "(valid: -0.5 <= x <= W - 0.5 and -0.5 <= y <= H - 0.5)"
+        )
+    if np.any(view < 0):
+        raise InputError("`view` must hold non-negative view indices")
+
+
+def _starting_parameters(initial: Any, n_channels: int, view_gains: bool) -> np.ndarray | None:
+    """``initial`` as ``(C, 6)`` starting parameters, a ``(6,)`` vector repeated per channel.
+
+    ``None`` without ``initial``: each channel then starts from its linear
+    least-squares solution (:meth:`_PairProblem.linear_start`).
+    """
+    if initial is None:
+        return None
+    start = _as_channel_params(initial, "initial")
+    if view_gains:
+        raise InputError("`initial` cannot be combined with `view_gains`")
+    if start.shape[0] == 1:
+        return np.repeat(start, n_channels, axis=0)
+    if start.shape[0] != n_channels:
+        raise InputError(f"`initial` must have shape (6,) or ({n_channels}, 6), got {start.shape}")
+    return start
+
+
+def _track_index(track: np.ndarray, view: np.ndarray) -> np.ndarray:
+    """Each observation's track as a label ``0 … T − 1``, in the order of the track ids.
+
+    A track that lists a view twice is malformed, not noisy: an InputError.
+    """
+    # np.unique's hash path is 70 ms on 3 × 10⁵ observations: sorted input and
+    # small view indices take the O(n) routes of _labels and _view_labels
+    _, track_index = _labels(track)
+    key = track_index.astype(np.int64) * (int(view.max()) + 1) + view.astype(np.int64)
+    if not np.all(key[1:] > key[:-1]):
+        key = np.sort(key)
+        if np.any(key[1:] == key[:-1]):
+            raise InputError("`track` lists the same view twice for at least one scene point")
+    return track_index
+
+
+@dataclass(frozen=True)
+class _PairedObservations:
+    """The usable observations that take part in a pair, and the pairs ``(a, b)``.
+
+    An observation is usable when its values are finite and positive in every
+    channel; every pair of usable observations of one track is a pair, ``a``
+    in the lower-numbered view.
+    """
+
+    values: np.ndarray  # (n_observations, C)
+    x_n: np.ndarray  # (n_observations,) normalised pixel-centre coordinates
+    y_n: np.ndarray
+    a: np.ndarray  # (n_pairs,) indices into the observations
+    b: np.ndarray
+    obs_view: np.ndarray  # (n_observations,) view of each observation
+    obs_track: np.ndarray  # (n_observations,) track label 0 … n_tracks − 1
+    pair_track: np.ndarray  # (n_pairs,) track label of each pair
+    n_tracks: int
+    n_pairs: int
+    n_observations: int
+    n_views: int
+    dropped_note: str  # how many observations were dropped as unusable, in words
+
+
+def _paired_observations(
+    values: np.ndarray,
+    xy: np.ndarray,
+    view: np.ndarray,
+    track_index: np.ndarray,
+    image_shape: tuple[int, int],
+) -> _PairedObservations:
+    """The usable observations in pairs within their tracks, re-indexed to those in a pair.
+
+    Raises a CalibrationError when fewer than two views have usable observations.
+    """
+    h, w = image_shape
+    m = values.shape[0]
+    usable = np.all(np.isfinite(values) & (values > 0), axis=1)
+    n_dropped = int(m - np.count_nonzero(usable))
+    dropped_note = f"{n_dropped} of {m} observations dropped for non-finite or non-positive values"
+    n_usable_views = int(np.count_nonzero(np.bincount(view[usable]))) if usable.any() else 0
+    if n_usable_views < 2:
+        raise CalibrationError(
+            f"vignetting fit needs usable observations in at least 2 views (view directions); "
+            f"got {n_usable_views} ({dropped_note})"
+        )
+    a, b, _ = _pairs_within_tracks(track_index[usable], view[usable])
+    in_pair = np.zeros(np.count_nonzero(usable), dtype=bool)
+    in_pair[a] = True
+    in_pair[b] = True
+    used = np.flatnonzero(in_pair)
+    remap = np.full(np.count_nonzero(usable), -1)
+    remap[used] = np.arange(used.size)
+    a, b = remap[a], remap[b]
+    obs_view = view[usable][used]
+    obs_track = _labels(track_index[usable][used])[1]
+    n_obs = int(used.size)
+    return _PairedObservations(
+        values=values[usable][used],
+        x_n=(xy[usable][used, 0] + 0.5) / w,
+        y_n=(xy[usable][used, 1] + 0.5) / h,
+        a=a,
+        b=b,
+        obs_view=obs_view,
+        obs_track=obs_track,
+        pair_track=obs_track[a],
+        n_tracks=int(obs_track.max()) + 1 if n_obs else 0,
+        n_pairs=int(a.size),
+        n_observations=n_obs,
+        n_views=int(np.count_nonzero(np.bincount(obs_view))),
+        dropped_note=dropped_note,
+    )
+
+
+def _check_pairs_suffice(pairs: _PairedObservations, min_pairs: int, min_spread: float) -> None:
+    """Raise a CalibrationError when the pairs are too few or bunched in one spot of the image."""
+    if pairs.n_pairs < min_pairs:
+        raise CalibrationError(
+            f"vignetting fit needs at least {min_pairs} pairs of observations of one scene "
+            f"point in two views; only {pairs.n_pairs} usable pairs from {pairs.n_tracks} "
+            f"tracks ({pairs.dropped_note})"
+        )
+    spread_x, spread_y = _spread(pairs.x_n), _spread(pairs.y_n)
+    if min(spread_x, spread_y) < min_spread:
+        raise CalibrationError(
+            f"vignetting fit needs observations spread over the image: the "
+            f"{pairs.n_observations} usable observations span {spread_x:.1%} of the width "
+            f"and {spread_y:.1%} of the height (5th to 95th percentile); at least "
+            f"{min_spread:.0%} of each is needed"
+        )
+
+
+def _pair_weights(c: np.ndarray, pairs: _PairedObservations, normalise: str) -> np.ndarray:
+    """The weight of each pair's residual: 1 over its track's mean of ``c``, or 1.
+
+    The former with ``normalise="track"``, the latter with ``"none"``.
+    """
+    if normalise == "track":
+        track_mean = np.bincount(pairs.obs_track, weights=c) / np.bincount(pairs.obs_track)
+        return 1.0 / track_mean[pairs.pair_track]
+    return np.ones(pairs.n_pairs)
+
+
 def _centred_gains(
-    x_n: np.ndarray,
-    y_n: np.ndarray,
-    a: np.ndarray,
-    b: np.ndarray,
+    pairs: _PairedObservations,
     c: np.ndarray,
-    obs_track: np.ndarray,
-    pair_track: np.ndarray,
-    normalise: str,
-    scale_invariant: bool,
+    settings: _FitSettings,
     gain_index: np.ndarray,
     n_gains: int,
-    max_nfev: int,
-    prior: float | None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One channel's view gains (reference first, 1) and their std, centre held at the image's."""
-    if normalise == "track":
-        weight = 1.0 / (np.bincount(obs_track, weights=c) / np.bincount(obs_track))[pair_track]
-    else:
-        weight = np.ones(a.size)
     problem = _PairProblem(
-        x_n, y_n, a, b, c[a], c[b], weight, scale_invariant, gain_index[a], gain_index[b], n_gains
+        pairs.x_n,
+        pairs.y_n,
+        pairs.a,
+        pairs.b,
+        c[pairs.a],
+        c[pairs.b],
+        _pair_weights(c, pairs, settings.normalise),
+        settings.scale_invariant,
+        gain_index[pairs.a],
+        gain_index[pairs.b],
+        n_gains,
     )
     free = np.r_[0, 1, 2, 3, np.arange(_N_PARAMS, _N_PARAMS + n_gains)]
 
@@ -549,8 +784,8 @@ def _centred_gains(
         lambda q: problem.jacobian(full(q))[:, free],
         problem.linear_start()[free],
         4,
-        max_nfev,
-        prior,
+        settings.max_nfev,
+        settings.view_gain_sigma,
     )
     std = np.sqrt(np.maximum(np.diag(cov)[4:], 0.0))
     return np.r_[1.0, result.x[4:]], np.r_[0.0, std]
@@ -729,6 +964,219 @@ def _parameter_covariance(fun: np.ndarray, jac: np.ndarray) -> np.ndarray:
     """
     dof = max(fun.size - jac.shape[1], 1)
     return float(fun @ fun) / dof * np.linalg.pinv(jac.T @ jac, rcond=1e-12)
+
+
+@dataclass(frozen=True)
+class _ChannelFit:
+    """One channel's fitted parameters, residual RMS and whether it can be trusted.
+
+    ``note`` says why not (``None`` when it can). ``uncertainty`` (the map's
+    mean relative uncertainty) and ``covariance`` (of the six parameters,
+    clustered by track) are stated only when the solver converged; ``gains``
+    and ``gain_std`` only when the view gains were fitted with the model, one
+    per view with observations (the reference first).
+    """
+
+    params: np.ndarray
+    rms: float
+    converged: bool
+    note: str | None
+    uncertainty: float = float("nan")
+    covariance: np.ndarray | None = None
+    gains: np.ndarray | None = None
+    gain_std: np.ndarray | None = None
+
+
+def _why_untrusted(
+    ch: int,
+    p: np.ndarray,
+    uncertainty: float,
+    image_shape: tuple[int, int],
+    max_uncertainty: float,
+) -> str | None:
+    """Why channel ``ch``'s converged parameters ``p`` cannot be trusted, or ``None``.
+
+    The fitted ``v`` must be positive over the image, must not have collapsed
+    towards 0, must not span more than :data:`MAX_FALLOFF`, and the map's
+    uncertainty must not exceed ``max_uncertainty``.
+    """
+    v_min, v_max = _range_over_image(p[:_N_PARAMS], image_shape)
+    if not v_min > 0:
+        return (
+            f"channel {ch}: fitted vignetting is not positive over the image "
+            f"(minimum {v_min:.3g}); it cannot be used for correction"
+        )
+    if v_max < 0.5:
+        return (
+            f"channel {ch}: fitted vignetting is below 0.5 everywhere in the image "
+            f"(maximum {v_max:.3g}, centre ({p[4]:.3g}, {p[5]:.3g})): "
+            "the fit has collapsed towards v = 0"
+        )
+    if v_max > MAX_FALLOFF * v_min:
+        return (
+            f"channel {ch}: fitted vignetting spans a factor {v_max / v_min:.3g} over "
+            f"the image (more than {MAX_FALLOFF:g}): the polynomial diverged, no lens "
+            "falls off so (check the response and the correspondences)"
+        )
+    if not uncertainty <= max_uncertainty:
+        return (
+            f"channel {ch}: the views constrain the model poorly (map uncertainty "
+            f"{uncertainty:.1%} > {max_uncertainty:.1%}); spread the view "
+            "directions in both axes (pan and tilt) and use more points"
+        )
+    return None
+
+
+def _fit_channel(
+    pairs: _PairedObservations,
+    c: np.ndarray,
+    ch: int,
+    settings: _FitSettings,
+    p0: np.ndarray | None,
+    gain_index: np.ndarray,
+    n_gains: int,
+    image_shape: tuple[int, int],
+) -> _ChannelFit:
+    """The fit of channel ``ch`` (values ``c``) from ``p0``, or from the linear start.
+
+    With ``n_gains`` the free view gains are fitted with the model (with the
+    prior ``settings.view_gain_sigma``); the stated covariance is clustered by
+    track, as a track's pairs share its values.
+    """
+    problem = _PairProblem(
+        pairs.x_n,
+        pairs.y_n,
+        pairs.a,
+        pairs.b,
+        c[pairs.a],
+        c[pairs.b],
+        _pair_weights(c, pairs, settings.normalise),
+        settings.scale_invariant,
+        gain_index[pairs.a] if n_gains else None,
+        gain_index[pairs.b] if n_gains else None,
+        n_gains,
+    )
+    result, fun, cov = _solve_pairs(
+        problem.residuals,
+        problem.jacobian,
+        p0 if p0 is not None else problem.linear_start(),
+        _N_PARAMS,
+        settings.max_nfev,
+        settings.view_gain_sigma if n_gains else None,
+    )
+    gains: np.ndarray | None = None
+    gain_std: np.ndarray | None = None
+    if n_gains:
+        gains = np.r_[1.0, result.x[_N_PARAMS:]]
+        gain_std = np.r_[0.0, np.sqrt(np.maximum(np.diag(cov)[_N_PARAMS:], 0.0))]
+    params = result.x[:_N_PARAMS]
+    rms = float(np.sqrt(np.mean(fun**2)))
+    if not (bool(result.success) and bool(np.all(np.isfinite(result.x)))):
+        reason = f"channel {ch}: did not converge ({result.message})"
+        return _ChannelFit(
+            params, rms, converged=False, note=reason, gains=gains, gain_std=gain_std
+        )
+    covariance = _track_clustered_covariance(result.jac, fun, pairs.pair_track)
+    uncertainty = _map_uncertainty(result.x, fun, result.jac, image_shape, cov)
+    note = _why_untrusted(ch, result.x, uncertainty, image_shape, settings.max_uncertainty)
+    return _ChannelFit(
+        params,
+        rms,
+        converged=note is None,
+        note=note,
+        uncertainty=uncertainty,
+        covariance=covariance[:_N_PARAMS, :_N_PARAMS],
+        gains=gains,
+        gain_std=gain_std,
+    )
+
+
+@dataclass(frozen=True)
+class _ChannelFits:
+    """The fits of all channels, as the arrays of :class:`VignettingFit`, and their notes."""
+
+    params: np.ndarray  # (C, 6)
+    rms: np.ndarray  # (C,)
+    converged: np.ndarray  # (C,) bool
+    uncertainty: np.ndarray  # (C,), NaN where the solver failed
+    param_covariance: np.ndarray  # (C, 6, 6), NaN where the solver failed
+    gains: np.ndarray | None  # (C, V) with view gains, NaN for a view without observations
+    gain_std: np.ndarray | None
+    notes: tuple[str, ...]  # why a channel cannot be trusted, channel by channel
+
+
+def _fit_channels(
+    pairs: _PairedObservations,
+    settings: _FitSettings,
+    start: np.ndarray | None,
+    image_shape: tuple[int, int],
+    n_view_slots: int,
+) -> _ChannelFits:
+    """Every channel's fit, and with ``settings.view_gains`` every view's gain.
+
+    With ``view_gain_centre="image"`` the gains are fitted first with the
+    centre held at the image centre (no ramp to trade for them), their
+    geometric mean over the channels is applied to the values, and the model
+    is fitted with them held; with ``"free"`` each channel fits its own gains
+    with the model. ``n_view_slots`` is the number of columns of the gains.
+    """
+    n_channels = pairs.values.shape[1]
+    params = np.empty((n_channels, _N_PARAMS))
+    rms = np.empty(n_channels)
+    uncertainty = np.full(n_channels, np.nan)
+    param_cov = np.full((n_channels, _N_PARAMS, _N_PARAMS), np.nan)
+    converged = np.zeros(n_channels, dtype=bool)
+    notes: list[str] = []
+    present, gain_index = _view_labels(pairs.obs_view)
+    n_gains = int(present.size - 1) if settings.view_gains else 0
+    gains = np.full((n_channels, n_view_slots), np.nan)
+    gain_std = np.full((n_channels, n_view_slots), np.nan)
+    values = pairs.values
+    if n_gains and settings.view_gain_centre == "image":
+        for ch in range(n_channels):
+            gains[ch, present], gain_std[ch, present] = _centred_gains(
+                pairs, values[:, ch], settings, gain_index, n_gains
+            )
+        common = np.exp(np.mean(np.log(gains[:, present]), axis=0))
+        values = values * common[gain_index][:, None]
+        n_gains = 0
+    for ch in range(n_channels):
+        p0 = start[ch] if start is not None else None
+        fit = _fit_channel(pairs, values[:, ch], ch, settings, p0, gain_index, n_gains, image_shape)
+        params[ch], rms[ch], converged[ch] = fit.params, fit.rms, fit.converged
+        if fit.gains is not None:
+            gains[ch, present], gain_std[ch, present] = fit.gains, fit.gain_std
+        if fit.covariance is not None:
+            param_cov[ch], uncertainty[ch] = fit.covariance, fit.uncertainty
+        if fit.note is not None:
+            notes.append(fit.note)
+    return _ChannelFits(
+        params=params,
+        rms=rms,
+        converged=converged,
+        uncertainty=uncertainty,
+        param_covariance=param_cov,
+        gains=gains if settings.view_gains else None,
+        gain_std=gain_std if settings.view_gains else None,
+        notes=tuple(notes),
+    )
+
+
+def _fit_message(pairs: _PairedObservations, settings: _FitSettings, fits: _ChannelFits) -> str:
+    """The fit's summary: counts, options, dropped observations, map uncertainties, notes."""
+    status = "converged" if fits.converged.all() else "NOT TRUSTWORTHY"
+    message = (
+        f"{status}: extended Goldman-Chen fit of {fits.params.shape[0]} channel(s) from "
+        f"{pairs.n_tracks} tracks, {pairs.n_pairs} pairs, {pairs.n_observations} observations "
+        f"in {pairs.n_views} views (normalise={settings.normalise!r}, "
+        f"scale_invariant={settings.scale_invariant}"
+        f"{', view gains' if settings.view_gains else ''}); {pairs.dropped_note}; "
+        "relative map uncertainty (1 sigma, image mean) "
+        + ", ".join("n/a" if np.isnan(u) else f"{u:.2%}" for u in fits.uncertainty)
+    )
+    if fits.notes:
+        message += "; " + "; ".join(fits.notes)
+    return message
 
 
 def fit_vignetting_ExtendedGoldmanChen(
@@ -917,230 +1365,35 @@ def fit_vignetting_ExtendedGoldmanChen(
        and theory", Lecture Notes in Mathematics 630, 1978.
        doi:10.1007/BFb0067700
     """
-    values = check_array(values, "values", ndim=2, kind="iuf").astype(np.float64)
-    m, n_channels = values.shape
-    xy = check_array(xy, "xy", shape=(m, 2), kind="iuf", finite=True).astype(np.float64)
-    view = check_array(view, "view", shape=(m,), kind="iu")
-    track = check_array(track, "track", shape=(m,), kind="iu")
-    h, w = _check_image_shape(image_shape)
-    if normalise not in ("track", "none"):
-        raise InputError(f"`normalise` must be 'track' or 'none', got {normalise!r}")
-    if not isinstance(scale_invariant, bool | np.bool_):
-        raise InputError(f"`scale_invariant` must be a bool, got {scale_invariant!r}")
-    if not isinstance(view_gains, bool | np.bool_):
-        raise InputError(f"`view_gains` must be a bool, got {view_gains!r}")
-    if view_gain_centre not in ("image", "free"):
-        raise InputError(f"`view_gain_centre` must be 'image' or 'free', got {view_gain_centre!r}")
-    if view_gain_sigma is not None and not (
-        isinstance(view_gain_sigma, int | float | np.number) and view_gain_sigma > 0
-    ):
-        raise InputError(f"`view_gain_sigma` must be a positive number, got {view_gain_sigma!r}")
-    min_pairs = check_int(min_pairs, "min_pairs", 1)
-    max_nfev = check_int(max_nfev, "max_nfev", 1)
-    if not isinstance(min_spread, int | float | np.number) or not 0.0 <= min_spread <= 1.0:
-        raise InputError(f"`min_spread` must be a number in [0, 1], got {min_spread!r}")
-    if not isinstance(max_uncertainty, int | float | np.number) or not max_uncertainty > 0:
-        raise InputError(f"`max_uncertainty` must be a positive number, got {max_uncertainty!r}")
-    x, y = xy[:, 0], xy[:, 1]
-    if np.any((x < -0.5) | (x > w - 0.5) | (y < -0.5) | (y > h - 0.5)):
-        raise InputError(
-            f"`xy` has points outside the image of shape {(h, w)} "
-            "(valid: -0.5 <= x <= W - 0.5 and -0.5 <= y <= H - 0.5)"
-        )
-    if np.any(view < 0):
-        raise InputError("`view` must hold non-negative view indices")
-    start: np.ndarray | None = None
-    if initial is not None:
-        start = _as_channel_params(initial, "initial")
-        if view_gains:
-            raise InputError("`initial` cannot be combined with `view_gains`")
-        if start.shape[0] == 1:
-            start = np.repeat(start, n_channels, axis=0)
-        elif start.shape[0] != n_channels:
-            raise InputError(
-                f"`initial` must have shape (6,) or ({n_channels}, 6), got {start.shape}"
-            )
-
-    # A track listing a view twice is malformed, not noisy.
-    # (np.unique's hash path is 70 ms on 3 × 10⁵ observations: sorted input and
-    # small view indices take the O(n) routes of _labels and _view_labels)
-    _, track_index = _labels(track)
-    key = track_index.astype(np.int64) * (int(view.max()) + 1) + view.astype(np.int64)
-    if not np.all(key[1:] > key[:-1]):
-        key = np.sort(key)
-        if np.any(key[1:] == key[:-1]):
-            raise InputError("`track` lists the same view twice for at least one scene point")
-
-    usable = np.all(np.isfinite(values) & (values > 0), axis=1)
-    n_dropped = int(m - np.count_nonzero(usable))
-    dropped_note = f"{n_dropped} of {m} observations dropped for non-finite or non-positive values"
-    n_usable_views = int(np.count_nonzero(np.bincount(view[usable]))) if usable.any() else 0
-    if n_usable_views < 2:
-        raise CalibrationError(
-            f"vignetting fit needs usable observations in at least 2 views (view directions); "
-            f"got {n_usable_views} ({dropped_note})"
-        )
-    a, b, pair_track = _pairs_within_tracks(track_index[usable], view[usable])
-    # Keep only observations that take part in a pair, and re-index the pairs.
-    in_pair = np.zeros(np.count_nonzero(usable), dtype=bool)
-    in_pair[a] = True
-    in_pair[b] = True
-    used = np.flatnonzero(in_pair)
-    remap = np.full(np.count_nonzero(usable), -1)
-    remap[used] = np.arange(used.size)
-    a, b = remap[a], remap[b]
-    values = values[usable][used]
-    x_n = (xy[usable][used, 0] + 0.5) / w
-    y_n = (xy[usable][used, 1] + 0.5) / h
-    obs_view = view[usable][used]
-    obs_track = _labels(track_index[usable][used])[1]
-    pair_track = obs_track[a]
-    n_pairs, n_obs = int(a.size), int(used.size)
-    n_tracks = int(obs_track.max()) + 1 if n_obs else 0
-    if n_pairs < min_pairs:
-        raise CalibrationError(
-            f"vignetting fit needs at least {min_pairs} pairs of observations of one scene "
-            f"point in two views; only {n_pairs} usable pairs from {n_tracks} tracks "
-            f"({dropped_note})"
-        )
-    n_views = int(np.count_nonzero(np.bincount(obs_view)))
-    spread_x, spread_y = _spread(x_n), _spread(y_n)
-    if min(spread_x, spread_y) < min_spread:
-        raise CalibrationError(
-            f"vignetting fit needs observations spread over the image: the {n_obs} usable "
-            f"observations span {spread_x:.1%} of the width and {spread_y:.1%} of the height "
-            f"(5th to 95th percentile); at least {min_spread:.0%} of each is needed"
-        )
-
-    params = np.empty((n_channels, _N_PARAMS))
-    rms = np.empty(n_channels)
-    uncertainty = np.full(n_channels, np.nan)
-    param_cov = np.full((n_channels, _N_PARAMS, _N_PARAMS), np.nan)
-    converged = np.zeros(n_channels, dtype=bool)
-    notes: list[str] = []
-    present, gain_index = _view_labels(obs_view)
-    n_gains = int(present.size - 1) if view_gains else 0
-    n_view_slots = int(view.max()) + 1
-    gains = np.full((n_channels, n_view_slots), np.nan) if view_gains else None
-    gain_std = np.full((n_channels, n_view_slots), np.nan) if view_gains else None
-    if n_gains and view_gain_centre == "image" and gains is not None and gain_std is not None:
-        # the gains with the centre held at the image centre (no ramp to trade
-        # for them), then one gain per view for every channel, held in the fit
-        for ch in range(n_channels):
-            g, g_std = _centred_gains(
-                x_n,
-                y_n,
-                a,
-                b,
-                values[:, ch],
-                obs_track,
-                pair_track,
-                normalise,
-                bool(scale_invariant),
-                gain_index,
-                n_gains,
-                int(max_nfev),
-                view_gain_sigma,
-            )
-            gains[ch, present], gain_std[ch, present] = g, g_std
-        common = np.exp(np.mean(np.log(gains[:, present]), axis=0))
-        values = values * common[gain_index][:, None]
-        n_gains = 0
-    for ch in range(n_channels):
-        c = values[:, ch]
-        if normalise == "track":
-            track_mean = np.bincount(obs_track, weights=c) / np.bincount(obs_track)
-            weight = 1.0 / track_mean[pair_track]
-        else:
-            weight = np.ones(n_pairs)
-        problem = _PairProblem(
-            x_n,
-            y_n,
-            a,
-            b,
-            c[a],
-            c[b],
-            weight,
-            bool(scale_invariant),
-            gain_index[a] if n_gains else None,
-            gain_index[b] if n_gains else None,
-            n_gains,
-        )
-        p0 = start[ch] if start is not None else problem.linear_start()
-        result, fun, cov = _solve_pairs(
-            problem.residuals,
-            problem.jacobian,
-            p0,
-            _N_PARAMS,
-            int(max_nfev),
-            view_gain_sigma if n_gains else None,
-        )
-        params[ch] = result.x[:_N_PARAMS]
-        if n_gains and gains is not None and gain_std is not None:
-            gains[ch, present] = np.r_[1.0, result.x[_N_PARAMS:]]
-            gain_std[ch, present] = np.r_[0.0, np.sqrt(np.maximum(np.diag(cov)[_N_PARAMS:], 0.0))]
-        rms[ch] = float(np.sqrt(np.mean(fun**2)))
-        ok = bool(result.success) and bool(np.all(np.isfinite(result.x)))
-        if not ok:
-            notes.append(f"channel {ch}: did not converge ({result.message})")
-        else:
-            # the stated covariance: clustered by track (a track's pairs share its values)
-            param_cov[ch] = _track_clustered_covariance(result.jac, fun, pair_track)[
-                :_N_PARAMS, :_N_PARAMS
-            ]
-            uncertainty[ch] = _map_uncertainty(result.x, fun, result.jac, (h, w), cov)
-            v_min, v_max = _range_over_image(result.x[:_N_PARAMS], (h, w))
-            if not v_min > 0:
-                ok = False
-                notes.append(
-                    f"channel {ch}: fitted vignetting is not positive over the image "
-                    f"(minimum {v_min:.3g}); it cannot be used for correction"
-                )
-            elif v_max < 0.5:
-                ok = False
-                notes.append(
-                    f"channel {ch}: fitted vignetting is below 0.5 everywhere in the image "
-                    f"(maximum {v_max:.3g}, centre ({result.x[4]:.3g}, {result.x[5]:.3g})): "
-                    "the fit has collapsed towards v = 0"
-                )
-            elif v_max > MAX_FALLOFF * v_min:
-                ok = False
-                notes.append(
-                    f"channel {ch}: fitted vignetting spans a factor {v_max / v_min:.3g} over "
-                    f"the image (more than {MAX_FALLOFF:g}): the polynomial diverged, no lens "
-                    "falls off so (check the response and the correspondences)"
-                )
-            elif not uncertainty[ch] <= max_uncertainty:
-                ok = False
-                notes.append(
-                    f"channel {ch}: the views constrain the model poorly (map uncertainty "
-                    f"{uncertainty[ch]:.1%} > {max_uncertainty:.1%}); spread the view "
-                    "directions in both axes (pan and tilt) and use more points"
-                )
-        converged[ch] = ok
-    status = "converged" if converged.all() else "NOT TRUSTWORTHY"
-    message = (
-        f"{status}: extended Goldman-Chen fit of {n_channels} channel(s) from {n_tracks} tracks, "
-        f"{n_pairs} pairs, {n_obs} observations in {n_views} views "
-        f"(normalise={normalise!r}, scale_invariant={bool(scale_invariant)}"
-        f"{', view gains' if view_gains else ''}); {dropped_note}; "
-        "relative map uncertainty (1 sigma, image mean) "
-        + ", ".join("n/a" if np.isnan(u) else f"{u:.2%}" for u in uncertainty)
+    values, xy, view, track, shape = _checked_observations(values, xy, view, track, image_shape)
+    settings = _FitSettings.checked(
+        normalise=normalise,
+        scale_invariant=scale_invariant,
+        view_gains=view_gains,
+        view_gain_centre=view_gain_centre,
+        view_gain_sigma=view_gain_sigma,
+        min_pairs=min_pairs,
+        max_nfev=max_nfev,
+        min_spread=min_spread,
+        max_uncertainty=max_uncertainty,
     )
-    if notes:
-        message += "; " + "; ".join(notes)
+    _check_positions(xy, view, shape)
+    start = _starting_parameters(initial, values.shape[1], settings.view_gains)
+    pairs = _paired_observations(values, xy, view, _track_index(track, view), shape)
+    _check_pairs_suffice(pairs, settings.min_pairs, settings.min_spread)
+    fits = _fit_channels(pairs, settings, start, shape, n_view_slots=int(view.max()) + 1)
     return VignettingFit(
-        params=params,
-        residual_rms=rms,
-        n_tracks=n_tracks,
-        n_pairs=n_pairs,
-        n_observations=n_obs,
-        converged=converged,
-        message=message,
-        map_uncertainty=uncertainty,
-        view_gains=gains,
-        view_gain_std=gain_std,
-        param_covariance=param_cov,
+        params=fits.params,
+        residual_rms=fits.rms,
+        n_tracks=pairs.n_tracks,
+        n_pairs=pairs.n_pairs,
+        n_observations=pairs.n_observations,
+        converged=fits.converged,
+        message=_fit_message(pairs, settings, fits),
+        map_uncertainty=fits.uncertainty,
+        view_gains=fits.gains,
+        view_gain_std=fits.gain_std,
+        param_covariance=fits.param_covariance,
     )
 
 
