@@ -69,7 +69,11 @@ from photoquant.exposure import (
 )
 from photoquant.glare import GlareData, GlareModel, best_exposed_level
 from photoquant.merge import MergeModel, MergeResult
-from photoquant.merge.noise_aware import estimate_noise_parameters
+from photoquant.merge.noise_aware import (
+    MAX_GAIN_ERROR,
+    estimate_noise_from_exposures,
+    estimate_noise_parameters,
+)
 from photoquant.merge.uncertainty import log_variance_Debevec1997, noise_record
 from photoquant.methods import Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
@@ -722,13 +726,18 @@ def _with_lut_noise(
     model: SensorLUTModel, irradiance: ExposureStack, merge: MergeStage, log: CalibrationLog
 ) -> SensorLUTModel:
     """The LUT with ``Var(ln u)`` from the irradiance scene's own noise, where its repeats
-    fix a photon-transfer fit and the merge is the ``"Debevec 1997"`` one (else as it is)."""
+    (or, with one frame per exposure, its neighbouring exposures) fix a photon-transfer fit
+    and the merge is the ``"Debevec 1997"`` one (else as it is)."""
     if merge.model.method != "Debevec 1997":
         return model
-    noise = estimate_noise_parameters(irradiance, merge.response)
+    if irradiance.n_repeats >= 2:
+        noise = estimate_noise_parameters(irradiance, merge.response)
+    else:
+        pairs = estimate_noise_from_exposures(irradiance, merge.response, name="irradiance")
+        noise = None if pairs is None else pairs.noise_parameters(MAX_GAIN_ERROR)
     if noise is None:
         log.note(
-            "sensor LUT: the irradiance scene's repeats do not fix its noise; the LUT states "
+            "sensor LUT: the irradiance scene's frames do not fix its noise; the LUT states "
             "no uncertainty"
         )
         return model
@@ -924,7 +933,7 @@ def assemble_camera(
     ``parameters["steps"]`` records the method and options each step used
     (the identity where its input was missing; the correspondence finder
     only where it ran); ``parameters["noise"]`` the sensor's gain and read
-    noise from view 0's repeats (:func:`_noise_record`).
+    noise from view 0 (:func:`_noise_record`).
     """
     used = {**steps, "response": response.spec}
     used.update(
@@ -1071,12 +1080,16 @@ def fit_glare_step(
 
 
 def _noise_record(view: ExposureStack, response: ResponseModel) -> dict[str, Any] | None:
-    """The camera's gain and read noise from a photon-transfer fit of a view's repeats
-    (``None`` with one frame per exposure): what :func:`photoquant.correct` propagates
-    into a scene's uncertainty when the scene has no repeats of its own."""
-    if view.n_repeats < 2:
-        return None
-    fitted = estimate_noise_parameters(view, response)
+    """The camera's gain and read noise, what :func:`photoquant.correct` propagates into a
+    scene's uncertainty when the scene has no repeats of its own: a photon-transfer fit of
+    a view's repeats, or with one frame per exposure of its neighbouring exposures
+    (:func:`~photoquant.merge.noise_aware.estimate_noise_from_exposures`); ``None`` where
+    neither fixes it."""
+    if view.n_repeats >= 2:
+        fitted = estimate_noise_parameters(view, response)
+    else:
+        pairs = estimate_noise_from_exposures(view, response, name="views[0]")
+        fitted = None if pairs is None else pairs.noise_parameters(MAX_GAIN_ERROR)
     return None if fitted is None else noise_record(fitted)
 
 

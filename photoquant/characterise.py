@@ -80,21 +80,24 @@ from photoquant._json import load_json, to_json_value
 from photoquant._version import __version__
 from photoquant.errors import InputError
 from photoquant.io.outputs import OutputKind, folder_of_kind
-from photoquant.merge.noise_aware import _QUANTISATION, _Scale, estimate_noise_parameters
+from photoquant.merge.noise_aware import (
+    _QUANTISATION,
+    _dy_dc,
+    _Scale,
+    estimate_noise_from_exposures,
+    estimate_noise_parameters,
+)
 from photoquant.model import CameraModel
-from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
 __all__ = [
     "CHARACTERISATION_FORMAT",
     "CHARACTERISATION_REPORT",
     "Characterisation",
-    "PhotonTransferFit",
     "Quantity",
     "characterise",
     "characterise_manifest",
     "load_characterisation",
-    "photon_transfer_from_exposures",
     "plot_characterisation",
 ]
 
@@ -109,9 +112,6 @@ CHARACTERISATION_REPORT = OutputKind(
     folder=True,
     problem=folder_of_kind("characterisation report", (_JSON_NAME, "*.png"), (_JSON_NAME,)),
 )
-
-_MIN_PAIR_VALUES = 32
-"""Fewest value pairs in a bin of the neighbouring-exposure fit."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -340,11 +340,6 @@ def _sqrt_u(var: float, u_var: float) -> tuple[float, float]:
     return sigma, math.sqrt(sigma * sigma + u_var) - sigma
 
 
-def _dy_dc(scale: _Scale, c: np.ndarray, ch: int) -> np.ndarray:
-    """The linear DN scale's slope ``dy/dc = y·g'(c)`` at values ``c``."""
-    return scale.linear(scale.log_inverse(c, ch), ch) * scale.slope(c, ch)
-
-
 def _black_slope(camera: CameraModel) -> np.ndarray:
     """``dy/dc`` near the black level per channel (1 for a linear camera).
 
@@ -412,137 +407,6 @@ def _ptc_points(
             }
         )
     return out
-
-
-@dataclass(frozen=True)
-class PhotonTransferFit:
-    """A photon-transfer line on the linear DN scale, per channel (module notes).
-
-    Attributes
-    ----------
-    gain : ndarray, shape (C,)
-        System gain ``K``, linear DN per electron.
-    read_variance : ndarray, shape (C,)
-        Read noise variance ``σ_r²``, linear DN².
-    covariance : ndarray, shape (C, 2, 2)
-        Covariance of ``(K, σ_r²)`` per channel (scaled by the fit's reduced
-        χ² where that exceeds 1).
-    points : list of dict
-        The binned curve of each channel (``mean_dn``, ``variance_dn2``, for
-        the plot), labelled with the frame set and how it was measured.
-    """
-
-    gain: np.ndarray
-    read_variance: np.ndarray
-    covariance: np.ndarray
-    points: list[dict[str, Any]]
-
-
-def photon_transfer_from_exposures(
-    stack: ExposureStack, response: ResponseModel, *, name: str = "frame set", n_bins: int = 24
-) -> PhotonTransferFit | None:
-    """The photon-transfer line from neighbouring exposures of one frame each.
-
-    Exposures ``k`` and ``k + 1`` of a static scene see the same
-    photoquantity: on the linear DN scale of the camera's ``response`` the
-    difference ``d = y_{k+1}/r − y_k`` (``r`` their time ratio, its error
-    removed as a robust slope) has variance ``K ȳ (1 + 1/r) + σ_r² (1 +
-    1/r²)``. The variances of ``d`` less quantisation, in ``n_bins``
-    bins of ``ȳ``, are fitted by weighted least squares (module notes).
-    Uses the first repeat of every exposure.
-
-    Parameters
-    ----------
-    stack : ExposureStack
-        A bracket (``K ≥ 2``) of a static scene.
-    response : ResponseModel
-        The camera's calibrated response (its levels and linear scale).
-    name : str
-        The frame set's name in the fit's ``points``.
-    n_bins : int
-        Bins of ``ȳ`` per channel at most.
-
-    Returns
-    -------
-    PhotonTransferFit or None
-        ``None`` where the data do not fix the line: too few unclipped
-        values pair up, the bins do not separate gain from read noise, or
-        the fitted gain is not positive.
-    """
-    resp = response
-    scale = _Scale(resp)
-    sat = np.asarray(resp.saturation_level, dtype=np.float64)
-    lo = np.asarray(resp.valid_min, dtype=np.float64)
-    frames = stack.frames[0].astype(np.float64)
-    clipped = stack.saturated(resp.saturation_level) | stack.dark_clipped()
-    t = np.asarray(stack.exposure_s, dtype=np.float64)
-    order_t = np.argsort(t)
-    n_ch = stack.n_channels
-    gains, reads, covs, points = np.zeros(n_ch), np.zeros(n_ch), np.zeros((n_ch, 2, 2)), []
-    for ch in range(n_ch):
-        rows: list[np.ndarray] = []
-        for a, b in zip(order_t[:-1], order_t[1:], strict=True):
-            r = t[b] / t[a]
-            ca, cb = frames[a, ..., ch].ravel(), frames[b, ..., ch].ravel()
-            ok = (
-                ~clipped[a, ..., ch].ravel()
-                & ~clipped[b, ..., ch].ravel()
-                & (ca >= lo[ch])
-                & (cb >= lo[ch])
-                & (ca < sat[ch])
-                & (cb < sat[ch])
-            )
-            if np.count_nonzero(ok) < 2 * _MIN_PAIR_VALUES:
-                continue
-            ya = scale.linear(scale.log_inverse(ca[ok], ch), ch)
-            yb = scale.linear(scale.log_inverse(cb[ok], ch), ch)
-            d = yb / r - ya
-            ybar = 0.5 * (ya + yb / r)
-            # the ratio's error scales d with the signal: remove it by a robust slope
-            ratio = np.median(d / np.maximum(ybar, 1e-9))
-            d = d - ratio * ybar
-            q = _QUANTISATION * (
-                _dy_dc(scale, ca[ok], ch) ** 2 + _dy_dc(scale, cb[ok], ch) ** 2 / r**2
-            )
-            rows.append(np.stack([ybar, np.full(ybar.size, r), d * d - q]))
-        if not rows:
-            return None
-        data = np.concatenate(rows, axis=1)
-        order = np.argsort(data[0])
-        groups = np.array_split(order, min(n_bins, max(1, order.size // _MIN_PAIR_VALUES)))
-        design, target, se = [], [], []
-        for idx in groups:
-            if idx.size < _MIN_PAIR_VALUES:
-                continue
-            ybar, r, v = data[0, idx], data[1, idx], data[2, idx]
-            design.append([float(np.mean(ybar * (1 + 1 / r))), float(np.mean(1 + 1 / r**2))])
-            target.append(float(v.mean()))
-            se.append(max(float(v.std(ddof=1)) / math.sqrt(idx.size), 1e-12))
-        if len(target) < 3:
-            return None
-        x = np.asarray(design)
-        w = 1.0 / np.asarray(se) ** 2
-        xtwx = x.T @ (x * w[:, None])
-        try:
-            coef = np.linalg.solve(xtwx, x.T @ (w * np.asarray(target)))
-        except np.linalg.LinAlgError:  # the bins do not separate gain from read noise
-            return None
-        resid = (np.asarray(target) - x @ coef) * np.sqrt(w)
-        chi2 = float(resid @ resid) / max(len(target) - 2, 1)
-        cov = np.linalg.inv(xtwx) * max(chi2, 1.0)
-        if not coef[0] > 0:
-            return None
-        gains[ch], reads[ch], covs[ch] = coef[0], coef[1], cov
-        points.append(
-            {
-                "frame_set": name,
-                "channel": stack.channels[ch],
-                "kind": "neighbouring exposures",
-                "mean_dn": [float(v) for v in x[:, 0] / 2.0],
-                "variance_dn2": [float(v) / 2.0 for v in target],
-            }
-        )
-    return PhotonTransferFit(gains, reads, covs, points)
 
 
 def _noise_batches(
@@ -809,7 +673,7 @@ def characterise(
             f
             for n, s in named
             if s.n_exposures >= 2
-            and (f := photon_transfer_from_exposures(s, camera.response, name=n))
+            and (f := estimate_noise_from_exposures(s, camera.response, name=n))
         ]
         if not fits:
             raise InputError(

@@ -612,12 +612,21 @@ def _add_correct(sub: Any) -> None:
     cor.add_argument("-o", "--output", required=True, help="OpenEXR file to write (R, G, B)")
     cor.add_argument(
         "--uncertainty",
+        dest="uncertainty",
         action="store_true",
-        help=f"also write the standard uncertainty of ln l from the frames' noise "
+        default="auto",
+        help=f"require the standard uncertainty of ln l (an error where it cannot be "
+        f"stated); by default it is written wherever it can be: from the frames' noise "
         f"(channels {UNCERTAINTY_LAYER}.R, ...) and, where the camera's fits state their "
         f"covariance, from the calibration's statistical errors "
         f"({CALIBRATION_UNCERTAINTY_LAYER}.R, ...; both combined: "
         f"{TOTAL_UNCERTAINTY_LAYER}.R, ...)",
+    )
+    cor.add_argument(
+        "--no-uncertainty",
+        dest="uncertainty",
+        action="store_false",
+        help="write the photoquantity alone (R, G, B)",
     )
     cor.set_defaults(func=_cmd_correct)
     _add_capture_options(cor)

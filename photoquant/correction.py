@@ -38,7 +38,12 @@ from photoquant.exposure import (
 )
 from photoquant.merge import MergeModel
 from photoquant.merge._tiled import merge_tiles
-from photoquant.merge.noise_aware import NoiseParameters, estimate_noise_parameters
+from photoquant.merge.noise_aware import (
+    MAX_GAIN_ERROR,
+    NoiseParameters,
+    estimate_noise_from_exposures,
+    estimate_noise_parameters,
+)
 from photoquant.merge.uncertainty import (
     log_variance_Debevec1997,
     log_variance_exposure_Debevec1997,
@@ -187,7 +192,7 @@ def correct(
     refine_exposures: bool | None = None,
     tile_rows: int | None = None,
     workers: int | None = None,
-    uncertainty: bool = False,
+    uncertainty: bool | str = False,
 ) -> Correction:
     """Measure the photoquantity of a scene with a calibrated camera (§4 of the paper).
 
@@ -226,12 +231,16 @@ def correct(
         result does not depend on it, nor on ``workers`` (threads over tiles).
     workers : int, optional
         Threads (every CPU by default).
-    uncertainty : bool
+    uncertainty : bool or "auto"
         Also return the standard uncertainty of ``ln l`` from the frames'
         noise (:attr:`Correction.log_sigma_noise`), with the gain and read
         noise of a photon-transfer fit of the scene's repeats (``N ≥ 2``),
-        else of the camera's calibration captures. For the ``"Debevec
-        1997"`` merge; before any glare removal.
+        else of the camera's calibration captures, else of the scene's
+        neighbouring exposures; and the calibration's parts where the
+        camera states them. For the ``"Debevec 1997"`` merge; before any
+        glare removal. ``True`` where it cannot be stated is an error;
+        ``"auto"`` states it where it can and says in ``notes`` why not
+        where it cannot (``photoquant correct``'s default).
 
     Returns
     -------
@@ -271,13 +280,17 @@ def correct(
         raise InputError(
             f"`refine_exposures` must be true, false or None, got {refine_exposures!r}"
         )
-    if not isinstance(uncertainty, bool):
-        raise InputError(f"`uncertainty` must be true or false, got {uncertainty!r}")
+    if not (isinstance(uncertainty, bool) or uncertainty == "auto"):
+        raise InputError(f"`uncertainty` must be true, false or 'auto', got {uncertainty!r}")
+    refinement, decision, notes = _scene_exposures(stack, model, refine_exposures)
     if uncertainty and merger.method != "Debevec 1997":
-        raise InputError(
+        problem = (
             f"the uncertainty is propagated through the 'Debevec 1997' merge, not {merger.method!r}"
         )
-    refinement, decision, notes = _scene_exposures(stack, model, refine_exposures)
+        if uncertainty is True:
+            raise InputError(problem)
+        notes.append(f"no uncertainty: {problem}")
+        uncertainty = False
     if refinement is not None:
         stack = refinement.apply(stack)
     photoquantity, mask, all_saturated, all_dark = _merge_and_uniformise(
@@ -291,7 +304,12 @@ def correct(
         mask |= defects.mask
     stated = {}
     if uncertainty:
-        stated = _stated_uncertainty(stack, model, merger, refinement, mask, notes)
+        try:
+            stated = _stated_uncertainty(stack, model, merger, refinement, mask, notes)
+        except InputError as exc:
+            if uncertainty is True:
+                raise
+            notes.append(f"no uncertainty: {exc}")
     return Correction(
         photoquantity=photoquantity,
         mask=mask,
@@ -425,19 +443,25 @@ def _is_identity_vignetting(model: CameraModel) -> bool:
 
 
 def _noise_parameters(stack: ExposureStack, model: CameraModel) -> NoiseParameters:
-    """Gain and read noise: the scene's photon-transfer fit (``N ≥ 2``), else the camera's."""
+    """Gain and read noise: the scene's photon-transfer fit (``N ≥ 2``), else the camera's,
+    else (a camera that stores none) the scene's neighbouring exposures'."""
+    response = model.balanced_response()
     if stack.n_repeats >= 2:
-        fitted = estimate_noise_parameters(stack, model.balanced_response())
+        fitted = estimate_noise_parameters(stack, response)
         if fitted is not None:
             return fitted
     stored = noise_parameters_from_record(model.parameters.get("noise"), stack.n_channels)
-    if stored is None:
+    if stored is not None:
+        return stored
+    pairs = estimate_noise_from_exposures(stack, response, name="scene")
+    noise = None if pairs is None else pairs.noise_parameters(MAX_GAIN_ERROR)
+    if noise is None:
         raise InputError(
-            "no noise information for the uncertainty: the scene's repeats do not fix a "
-            "photon-transfer fit and the camera stores none (calibrate from captures with "
-            "N >= 2 repeats per exposure)"
+            "no noise information for the uncertainty: the scene's repeats and neighbouring "
+            "exposures do not fix a photon-transfer fit and the camera stores none "
+            "(calibrate from captures with N >= 2 repeats per exposure)"
         )
-    return stored
+    return noise
 
 
 def camera_floor_log(model: CameraModel) -> float:
@@ -502,7 +526,7 @@ def correct_manifest(
     progress_bars: bool = False,
     refine_exposures: bool | None = None,
     dark_subtraction: bool | None = None,
-    uncertainty: bool = False,
+    uncertainty: bool | str = False,
 ) -> Correction:
     """Correct the ``scene`` of a capture manifest (a path or ``CaptureManifest``).
 

@@ -669,11 +669,11 @@ def prediction_sigma_dn(
     no uncertainty can be stated: another merge than ``"Debevec 1997"``, a
     response without covariance, or noise the data do not fix.
     """
-    from photoquant.characterise import photon_transfer_from_exposures
     from photoquant.merge.noise_aware import (
         NoiseParameters,
         _log_variance,
         _Scale,
+        estimate_noise_from_exposures,
         estimate_noise_parameters,
     )
     from photoquant.merge.uncertainty import (
@@ -690,12 +690,8 @@ def prediction_sigma_dn(
     if stack.n_repeats >= 2:
         noise = estimate_noise_parameters(stack, response)
     else:
-        fit = photon_transfer_from_exposures(stack, response, name="held-out fold")
-        noise = None
-        if fit is not None:
-            noise = NoiseParameters(
-                fit.gain, np.sqrt(np.maximum(fit.read_variance, 0.0)), "neighbouring exposures"
-            )
+        fit = estimate_noise_from_exposures(stack, response, name="held-out fold")
+        noise = None if fit is None else fit.noise_parameters()
     if noise is None:
         return None
     options = model.merge.options

@@ -31,14 +31,14 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     assert model.image_shape == (48, 64)
 
     exr = tmp_path / "scene.exr"
-    assert main(["correct", str(capture), "--camera", str(cam), "-o", str(exr), "-q"]) == 0
+    args = ["correct", str(capture), "--camera", str(cam), "-o", str(exr), "-q", "--no-uncertainty"]
+    assert main(args) == 0
     img, channels = read_exr(exr)
     assert channels == ("R", "G", "B") and img.dtype == np.float32 and img.shape == (48, 64, 3)
     assert "photoquantity written" in capsys.readouterr().out
-    # with its uncertainty: three more channels, the layer named in the header and output
+    # by default with its uncertainty: the layers named in the header and output
     exr2 = tmp_path / "scene-sigma.exr"
-    args = ["correct", str(capture), "--camera", str(cam), "-o", str(exr2), "-q", "--uncertainty"]
-    assert main(args) == 0
+    assert main(["correct", str(capture), "--camera", str(cam), "-o", str(exr2), "-q"]) == 0
     both, names = read_exr(exr2)
     assert names == (
         "R", "G", "B", "sigma_ln.R", "sigma_ln.G", "sigma_ln.B",
@@ -56,6 +56,14 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     assert np.all(total[ok] ** 2 >= (noise[ok] ** 2 + calibration[ok] ** 2) * (1 - 1e-5))
     assert "uncertainty of ln l from noise" in text
     assert "uncertainty of ln l from the calibration (response, sensor LUT and vignetting)" in text
+    # --uncertainty asks for the same (and would fail where it cannot be stated)
+    exr3 = tmp_path / "scene-required.exr"
+    args = ["correct", str(capture), "--camera", str(cam), "-o", str(exr3), "-q", "--uncertainty"]
+    assert main(args) == 0
+    required, names3 = read_exr(exr3)
+    assert names3 == names
+    np.testing.assert_array_equal(required, both)
+    capsys.readouterr()
 
     assert main(["info", str(cam)]) == 0
     text = capsys.readouterr().out
@@ -345,5 +353,6 @@ def test_a_monochrome_camera_with_a_white_chart_calibrates_and_corrects(tmp_path
     scene = tmp_path / "scene.exr"
     assert main(["correct", str(manifest), "--camera", str(cam), "-o", str(scene), "-q"]) == 0
     image, names = read_exr(scene)
-    assert tuple(names) == ("Y",) and image.shape[-1] == 1
-    assert np.isfinite(image).any()
+    # the photoquantity, then its stated uncertainty's layers
+    assert names[0] == "Y" and "sigma_ln.Y" in names and image.shape[-1] == len(names)
+    assert np.isfinite(image[..., 0]).any()

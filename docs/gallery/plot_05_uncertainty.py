@@ -2,7 +2,7 @@
 How far may a photoquantity be from the truth?
 ==============================================
 
-``photoquant correct --uncertainty`` states, beside every photoquantity, the
+``photoquant correct`` states, beside every photoquantity, the
 standard uncertainty of its logarithm, in parts: the frames' noise (it
 changes from capture to capture) and the calibration's statistical errors
 (the response, the sensor LUT, the vignetting: common to every scene the

@@ -91,6 +91,8 @@ from photoquant.weighting import WEIGHTING_FUNCTIONS
 __all__ = [
     "NoiseAwareMergeOptions",
     "NoiseParameters",
+    "PhotonTransferFit",
+    "estimate_noise_from_exposures",
     "estimate_noise_parameters",
     "merge_stack_NoiseAware",
 ]
@@ -102,6 +104,14 @@ _FIT_MIN_VARIANCE = 0.25
 """Photon-transfer bins whose mean variance of the repeats is below this (DN²,
 a noise of 0.5 DN) are left out of the fit: there the quantised repeats'
 variance is no longer the noise's plus 1/12 (Sheppard's correction fails)."""
+
+_MIN_PAIR_VALUES = 32
+"""Values a neighbouring-exposure bin needs (and twice that, a pair of exposures)."""
+
+MAX_GAIN_ERROR = 0.2
+"""The largest relative standard error of a gain from neighbouring exposures that a
+calibration or a correction states uncertainties with (the stated ``σ ∝ √K`` is then
+known to about 10 %)."""
 
 _FIT_MIN_COUNT = 32
 """Fewest values in a photon-transfer bin for its mean variance to be used."""
@@ -291,6 +301,185 @@ def _lowest_valid(
     if min_signal_dn > 0:
         lo = np.maximum(lo, np.asarray(response.black_level, dtype=np.float64) + min_signal_dn)
     return lo
+
+
+def _dy_dc(scale: _Scale, c: np.ndarray, ch: int) -> np.ndarray:
+    """The linear DN scale's slope ``dy/dc = y·g'(c)`` at values ``c``."""
+    return scale.linear(scale.log_inverse(c, ch), ch) * scale.slope(c, ch)
+
+
+@dataclass(frozen=True)
+class PhotonTransferFit:
+    """A photon-transfer line on the linear DN scale, per channel, from neighbouring exposures.
+
+    Attributes
+    ----------
+    gain : ndarray, shape (C,)
+        System gain ``K``, linear DN per electron.
+    read_variance : ndarray, shape (C,)
+        Read noise variance ``σ_r²``, linear DN².
+    covariance : ndarray, shape (C, 2, 2)
+        Covariance of ``(K, σ_r²)`` per channel (scaled by the fit's reduced
+        χ² where that exceeds 1).
+    points : list of dict
+        The binned curve of each channel (``mean_dn``, ``variance_dn2``, for
+        the plot), labelled with the frame set and how it was measured.
+    """
+
+    gain: np.ndarray
+    read_variance: np.ndarray
+    covariance: np.ndarray
+    points: list[dict[str, Any]]
+
+    def noise_parameters(self, max_gain_error: float | None = None) -> NoiseParameters | None:
+        """The gain and read noise (``σ_r = √max(σ_r², 0)``) as a merge's noise.
+
+        ``None`` where ``max_gain_error`` is given and some channel's gain has a
+        larger relative standard error: a noise the data fix that loosely would
+        state uncertainties off by as much.
+        """
+        if max_gain_error is not None:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rel = np.sqrt(np.maximum(self.covariance[:, 0, 0], 0.0)) / self.gain
+            if not np.all(rel <= max_gain_error):
+                return None
+        read = np.sqrt(np.maximum(self.read_variance, 0.0))
+        return NoiseParameters(self.gain, read, "neighbouring exposures")
+
+
+def _weighted_line(
+    x: np.ndarray, y: np.ndarray, se: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Weighted least squares of ``y ≈ x @ coef`` (weights ``1/se²``): ``(coef, cov)``, the
+    covariance scaled by the reduced χ² where that exceeds 1; ``None`` with fewer than 3
+    rows or a singular fit (the rows do not separate the two coefficients)."""
+    if y.size < 3:
+        return None
+    w = 1.0 / se**2
+    xtwx = x.T @ (x * w[:, None])
+    try:
+        coef = np.linalg.solve(xtwx, x.T @ (w * y))
+    except np.linalg.LinAlgError:
+        return None
+    resid = (y - x @ coef) * np.sqrt(w)
+    chi2 = float(resid @ resid) / max(y.size - 2, 1)
+    return coef, np.linalg.inv(xtwx) * max(chi2, 1.0)
+
+
+def estimate_noise_from_exposures(
+    stack: ExposureStack, response: ResponseModel, *, name: str = "frame set", n_bins: int = 24
+) -> PhotonTransferFit | None:
+    """The photon-transfer line from neighbouring exposures of one frame each.
+
+    Exposures ``k`` and ``k + 1`` of a static scene see the same
+    photoquantity: on the linear DN scale of the camera's ``response`` the
+    difference ``d = y_{k+1}/r − y_k`` (``r`` their time ratio, its error
+    removed as a robust slope) has variance ``K ȳ (1 + 1/r) + σ_r² (1 +
+    1/r²)`` with ``ȳ = (y_k + y_{k+1}/r)/2``; PRNU cancels in ``d``. The
+    mean of ``d²`` less its quantisation variance (``1/12`` through each
+    value's ``dy/dc``) in up to ``n_bins`` quantile bins of ``ȳ`` is fitted
+    by weighted least squares, the weights the bins' standard errors; the
+    fit's covariance is scaled by its reduced χ² where that exceeds 1. Bins
+    whose ``ȳ`` lies within 3 fitted standard deviations of the lowest
+    trusted level (the response's ``valid_min``) are left out and the line
+    refitted: there the values are truncated (clipped, or refused below the
+    level) and their pairs vary less than the line says. Uses the first
+    repeat of every exposure.
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        A bracket (``K ≥ 2``) of a static scene.
+    response : ResponseModel
+        The camera's calibrated response (its levels and linear scale).
+    name : str
+        The frame set's name in the fit's ``points``.
+    n_bins : int
+        Bins of ``ȳ`` per channel at most.
+
+    Returns
+    -------
+    PhotonTransferFit or None
+        ``None`` where the data do not fix the line: too few unclipped
+        values pair up, the bins do not separate gain from read noise, or
+        the fitted gain is not positive.
+    """
+    scale = _Scale(response)
+    sat = np.asarray(response.saturation_level, dtype=np.float64)
+    lo = np.asarray(response.valid_min, dtype=np.float64)
+    frames = stack.frames[0].astype(np.float64)
+    clipped = stack.saturated(response.saturation_level) | stack.dark_clipped()
+    t = np.asarray(stack.exposure_s, dtype=np.float64)
+    order_t = np.argsort(t)
+    n_ch = stack.n_channels
+    gains, reads, covs, points = np.zeros(n_ch), np.zeros(n_ch), np.zeros((n_ch, 2, 2)), []
+    for ch in range(n_ch):
+        rows: list[np.ndarray] = []
+        for a, b in zip(order_t[:-1], order_t[1:], strict=True):
+            r = t[b] / t[a]
+            ca, cb = frames[a, ..., ch].ravel(), frames[b, ..., ch].ravel()
+            ok = (
+                ~clipped[a, ..., ch].ravel()
+                & ~clipped[b, ..., ch].ravel()
+                & (ca >= lo[ch])
+                & (cb >= lo[ch])
+                & (ca < sat[ch])
+                & (cb < sat[ch])
+            )
+            if np.count_nonzero(ok) < 2 * _MIN_PAIR_VALUES:
+                continue
+            ya = scale.linear(scale.log_inverse(ca[ok], ch), ch)
+            yb = scale.linear(scale.log_inverse(cb[ok], ch), ch)
+            d = yb / r - ya
+            ybar = 0.5 * (ya + yb / r)
+            # the ratio's error scales d with the signal: remove it by a robust slope
+            ratio = np.median(d / np.maximum(ybar, 1e-9))
+            d = d - ratio * ybar
+            q = _QUANTISATION * (
+                _dy_dc(scale, ca[ok], ch) ** 2 + _dy_dc(scale, cb[ok], ch) ** 2 / r**2
+            )
+            rows.append(np.stack([ybar, np.full(ybar.size, r), d * d - q]))
+        if not rows:
+            return None
+        data = np.concatenate(rows, axis=1)
+        order = np.argsort(data[0])
+        groups = np.array_split(order, min(n_bins, max(1, order.size // _MIN_PAIR_VALUES)))
+        design, target, se, level = [], [], [], []
+        for idx in groups:
+            if idx.size < _MIN_PAIR_VALUES:
+                continue
+            ybar, r, v = data[0, idx], data[1, idx], data[2, idx]
+            design.append([float(np.mean(ybar * (1 + 1 / r))), float(np.mean(1 + 1 / r**2))])
+            target.append(float(v.mean()))
+            se.append(max(float(v.std(ddof=1)) / math.sqrt(idx.size), 1e-12))
+            level.append(float(ybar.mean()))
+        x, y, s = np.asarray(design), np.asarray(target), np.asarray(se)
+        fit = _weighted_line(x, y, s)
+        if fit is None:
+            return None
+        # values within 3 σ of the lowest trusted level are truncated there (clipped
+        # or refused), their pairs' variance too low: those bins are left out, refitted
+        floor = float(scale.linear(scale.log_inverse(np.array([lo[ch]]), ch), ch)[0])
+        sd = np.sqrt(np.maximum(fit[0][0] * np.asarray(level) + fit[0][1], 0.0))
+        clear = np.asarray(level) - 3.0 * sd >= floor
+        if not np.all(clear):
+            fit = _weighted_line(x[clear], y[clear], s[clear])
+            if fit is None:
+                return None
+        coef, cov = fit
+        if not coef[0] > 0:
+            return None
+        gains[ch], reads[ch], covs[ch] = coef[0], coef[1], cov
+        points.append(
+            {
+                "frame_set": name,
+                "channel": stack.channels[ch],
+                "kind": "neighbouring exposures",
+                "mean_dn": [float(v) for v in x[:, 0] / 2.0],
+                "variance_dn2": [float(v) / 2.0 for v in y],
+            }
+        )
+    return PhotonTransferFit(gains, reads, covs, points)
 
 
 def estimate_noise_parameters(

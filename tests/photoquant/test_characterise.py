@@ -151,8 +151,9 @@ def _linear_8bit_response():
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_neighbouring_exposures_give_the_photon_transfer_line(seed):
     """One frame per exposure of a linear camera (``c = round(K·Poisson + N(0, σ_r))``): the
-    pairs' fit recovers ``K`` and ``σ_r²`` within 4 of its own standard errors."""
-    from photoquant.characterise import photon_transfer_from_exposures
+    pairs' fit recovers ``K`` and ``σ_r²`` within 4 of its own standard errors (values near
+    the lowest level, truncated there, left out: with them the gain came out 18 % high)."""
+    from photoquant.merge.noise_aware import estimate_noise_from_exposures
     from photoquant.stack import ExposureStack
 
     gain, read_dn = 0.05, 0.8
@@ -162,21 +163,21 @@ def test_neighbouring_exposures_give_the_photon_transfer_line(seed):
     electrons = rng.poisson(rate[None] * times[:, None, None, None])
     values = np.round(gain * electrons + rng.normal(0.0, read_dn, electrons.shape))
     stack = ExposureStack(np.clip(values, 0, 255).astype(np.uint8)[None], times, channels=("Y",))
-    fit = photon_transfer_from_exposures(stack, _linear_8bit_response(), name="bracket")
+    fit = estimate_noise_from_exposures(stack, _linear_8bit_response(), name="bracket")
     assert fit is not None
     se = np.sqrt(fit.covariance[0].diagonal())
     assert abs(fit.gain[0] - gain) < 4 * se[0], (fit.gain, se)
     assert abs(fit.read_variance[0] - read_dn**2) < 4 * se[1], (fit.read_variance, se)
-    assert se[0] < 0.1 * gain  # the fit is informative, not merely wide
+    assert se[0] < 0.05 * gain  # the fit is informative, not merely wide
     assert fit.points[0]["frame_set"] == "bracket"
 
 
 def test_neighbouring_exposures_that_do_not_overlap_fix_nothing():
     """Two exposures whose values never share the trusted range: no line, ``None``."""
-    from photoquant.characterise import photon_transfer_from_exposures
+    from photoquant.merge.noise_aware import estimate_noise_from_exposures
     from photoquant.stack import ExposureStack
 
     frames = np.zeros((1, 2, 32, 32, 1), dtype=np.uint8)
     frames[0, 1] = 255
     stack = ExposureStack(frames, np.array([0.1, 1.0]), channels=("Y",))
-    assert photon_transfer_from_exposures(stack, _linear_8bit_response()) is None
+    assert estimate_noise_from_exposures(stack, _linear_8bit_response()) is None
