@@ -123,6 +123,25 @@ def _table1(m: _Metrics) -> list[Headline]:
     return [("r corrected vs CIE, out, in", ours, "0.87, 0.84 / 0.90, 0.86", "–")]
 
 
+def _uncertainty(m: _Metrics) -> list[Headline]:
+    if not m.has("uncertainty.{p}.stated.z_spread"):
+        return []
+    return [
+        (
+            "z spread (stated σ vs truth)",
+            m.join("uncertainty.{p}.stated.z_spread", lambda v: _num(v, ".2f")),
+            "–",
+            "1",
+        ),
+        (
+            "within nominal 95 % %",
+            m.join("uncertainty.{p}.stated.within_95", lambda v: _num(v and 100 * v, ".1f")),
+            "–",
+            "95",
+        ),
+    ]
+
+
 def _fig7(m: _Metrics) -> list[Headline]:
     p = m.presets[0]
     key = f"fig7.{p}.outdoor.corrected.cie"
@@ -164,6 +183,7 @@ SHORT = {
     "sensor_lut": "sensor LUT (§5.4)",
     "vignetting": "vignetting (Fig. 9)",
     "noise": "noise (§6.3, Fig. 8)",
+    "uncertainty": "stated uncertainty",
     "table1": "Table 1",
     "fig7": "Fig. 7",
     "timings": "timings (§6.1)",
@@ -181,6 +201,7 @@ HEADLINES: dict[str, Callable[[_Metrics], list[Headline]]] = {
     "sensor_lut": _sensor_lut,
     "vignetting": _vignetting,
     "noise": _noise,
+    "uncertainty": _uncertainty,
     "table1": _table1,
     "fig7": _fig7,
     "timings": _timings,

@@ -418,13 +418,14 @@ def check_configuration(
         if (theirs.get("source"), theirs.get("sha256")) != (p["source"], p.get("sha256")):
             diff = _first_difference(p.get("content"), theirs.get("content"))
             raise ValidationError(f"{head}: preset {p['name']!r} differs ({diff})")
-    from validation.experiments import OPT_IN
+    from validation.experiments import OPT_IN, REPORTED_ONLY
 
-    # opt-in experiments (robustness) are reported, never checked: a baseline need not have them
+    # opt-in experiments (robustness) and reported-only ones are never checked: a baseline
+    # need not have them
     extra = [
         e
         for e in description["experiments"]
-        if e not in (ref.get("experiments") or []) and e not in OPT_IN
+        if e not in (ref.get("experiments") or []) and e not in OPT_IN and e not in REPORTED_ONLY
     ]
     if extra:
         raise ValidationError(f"{head}: experiment(s) {', '.join(extra)} are not in the baseline")

@@ -341,8 +341,9 @@ def _fig_sweep(plt, spec: FigureSpec):
                 xytext=(2, 2),
                 textcoords="offset points",
             )
-        ax.set_xticks(x)
-        ax.set_xticklabels([f"{v:g}" for v in x], fontsize=8)
+        ticks = np.asarray(p.get("xticks", x), dtype=float)  # every point's x by default
+        ax.set_xticks(ticks)
+        ax.set_xticklabels([f"{v:g}" for v in ticks], fontsize=8)
         ax.set_xlabel(p["xlabel"])
         ax.set_ylabel(p["ylabel"])
         ax.set_title(p["title"], fontsize=10)

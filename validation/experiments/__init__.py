@@ -52,6 +52,7 @@ EXPERIMENTS: dict[str, str] = {
     "sensor_lut": "validation.experiments.sensor_lut",
     "vignetting": "validation.experiments.vignetting",
     "noise": "validation.experiments.noise",
+    "uncertainty": "validation.experiments.uncertainty",
     "table1": "validation.experiments.table1",
     "fig7": "validation.experiments.fig7",
     "timings": "validation.experiments.timings",
@@ -66,6 +67,10 @@ EXPERIMENTS: dict[str, str] = {
 OPT_IN: dict[str, str] = {"robustness": "robustness", "robustness_pairs": "robustness_pairs"}
 """Experiment key → the :class:`ValidationConfig` flag that includes it in a default run
 (a flag the configuration does not have: only when named)."""
+
+REPORTED_ONLY: frozenset[str] = frozenset({"uncertainty"})
+"""Experiments whose metrics are reported, never checked by ``--check``: a baseline recorded
+before them need not have them."""
 
 
 @dataclass

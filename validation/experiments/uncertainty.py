@@ -1,0 +1,174 @@
+"""The stated uncertainty against the truth: is a photoquantity as far off as it says?
+
+``photoquant correct`` states, beside every photoquantity, the standard
+uncertainty of ``ln l``: the frames' noise, the calibration's statistical
+errors (the response, the sensor LUT, the vignetting) and, where the scene's
+times were refined, theirs (:attr:`photoquant.Correction.log_sigma`). On the
+simulator the truth shows how far each corrected value actually is. The
+capture set's HDR test scene is corrected with the calibrated camera and
+
+    z = (ln l̂ − ln l − ŝ_λ) / σ
+
+is formed per pixel and channel, ``ŝ_λ`` the inverse-variance weighted mean
+of ``ln l̂ − ln l`` of channel ``λ`` (the photoquantity is measured up to one
+scale per channel: the gauge, one number fitted to tens of thousands). Where
+the stated uncertainty is the actual one, ``z`` is a standard normal
+variate: its spread is 1, and the central interval of nominal level ``p``
+(``|z| < Φ⁻¹((1 + p)/2)``) holds a share ``p`` of the values. Reported per
+camera: the spread and the shares within the nominal 68 % and 95 % intervals
+of the whole stated uncertainty and of its noise part alone, and a
+reliability diagram (the share within each nominal interval against its
+level). A spread above 1 measures what the stated uncertainty leaves out:
+the response's bias (a ripple of ``g`` with the bracket's exposure step,
+which the fit's covariance cannot see, :doc:`/user-guide/correct`), and any
+disturbance of the camera the calibration does not model.
+
+The metrics are reported, not checked against the stored baseline.
+
+References
+----------
+.. [GUM] JCGM 100:2008, Evaluation of measurement data — Guide to the
+   expression of uncertainty in measurement, §6 (coverage intervals).
+.. [Gneiting2007] Gneiting, T., Balabdaoui, F., & Raftery, A. E. (2007).
+   Probabilistic forecasts, calibration and sharpness. J. R. Stat. Soc. B
+   69(2), 243-268 (the reliability of stated intervals).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from validation.config import ValidationConfig
+from validation.experiments.base import ExperimentResult, FigureSpec, fmt_num, fmt_pct
+from validation.experiments.shared import Shared
+
+__all__ = ["run", "TITLE", "NOMINAL_LEVELS", "normalised_errors", "interval_shares"]
+
+TITLE = "Stated uncertainty against the truth"
+
+NOMINAL_LEVELS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.68, 0.8, 0.9, 0.95, 0.99)
+"""Levels of the central intervals of the reliability diagram."""
+
+
+def normalised_errors(estimate: np.ndarray, truth: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """``z = (ln l̂ − ln l − ŝ_λ)/σ`` of every value with a finite estimate, truth and
+    ``σ > 0`` (channels last; ``ŝ_λ`` per channel, module notes), as one flat array."""
+    out = []
+    for ch in range(estimate.shape[-1]):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d = np.log(estimate[..., ch].astype(np.float64)) - np.log(
+                truth[..., ch].astype(np.float64)
+            )
+        s = sigma[..., ch].astype(np.float64)
+        ok = np.isfinite(d) & np.isfinite(s) & (s > 0)
+        if not np.any(ok):
+            continue
+        w = 1.0 / s[ok] ** 2
+        d_ok = d[ok] - float(np.sum(w * d[ok]) / np.sum(w))
+        out.append(d_ok / s[ok])
+    return np.concatenate(out) if out else np.empty(0)
+
+
+def interval_shares(z: np.ndarray, levels: tuple[float, ...] = NOMINAL_LEVELS) -> np.ndarray:
+    """The share of ``z`` inside each central interval of nominal level ``p``."""
+    from scipy.special import ndtri
+
+    bounds = ndtri(0.5 + 0.5 * np.asarray(levels, dtype=np.float64))
+    if z.size == 0:
+        return np.full(len(levels), np.nan)
+    return np.array([float(np.mean(np.abs(z) < b)) for b in bounds])
+
+
+def _stated(shared: Shared, preset: str) -> Any:
+    """The test scene corrected with its stated uncertainty (once per run)."""
+    key = ("uncertainty", preset)
+    if key not in shared.cache:
+        from photoquant.correction import correct
+        from photoquant.io import load_manifest, load_stack
+
+        cal = shared.calibration(preset)
+        manifest = load_manifest(cal.manifest)
+        shared.cache[key] = correct(
+            load_stack(manifest.scene, manifest), cal.model, uncertainty="auto"
+        )
+    return shared.cache[key]
+
+
+def run(
+    config: ValidationConfig, seed: int, workdir: Path, *, shared: Shared | None = None
+) -> ExperimentResult:
+    """Per preset: ``z`` of the corrected test scene against its truth, and its shares."""
+    shared = shared or Shared(config, seed, workdir)
+    res = ExperimentResult("uncertainty", TITLE, "GUM §6; the correction's stated uncertainty")
+    panels = []
+    for preset in config.presets:
+        cal = shared.calibration(preset)
+        result = _stated(shared, preset)
+        if result.log_sigma is None:
+            res.notes.append(f"{preset}: no uncertainty stated ({'; '.join(result.notes)})")
+            continue
+        truth = cal.truth.captures["scene"].l
+        series = []
+        for part, sigma in (("stated", result.log_sigma), ("noise", result.log_sigma_noise)):
+            z = normalised_errors(result.photoquantity, truth, sigma)
+            shares = interval_shares(z)
+            spread = float(z.std()) if z.size else None
+            i68, i95 = NOMINAL_LEVELS.index(0.68), NOMINAL_LEVELS.index(0.95)
+            label = "stated uncertainty" if part == "stated" else "its noise part alone"
+            res.metric(
+                f"{preset}.{part}.z_spread",
+                spread,
+                better="both",
+                check=False,
+                description=f"std of (ln l̂ − ln l − ŝ)/σ, σ the {label} (1: honest)",
+            )
+            res.metric(f"{preset}.{part}.within_68", shares[i68], better="both", check=False)
+            res.metric(f"{preset}.{part}.within_95", shares[i95], better="both", check=False)
+            res.row(
+                f"{preset}: z spread, within 68 % / 95 % ({label})",
+                f"{fmt_num(spread, '.2f')}, {fmt_pct(shares[i68], 1)} / {fmt_pct(shares[i95], 1)}",
+                "1, 68 % / 95 %",
+                detail=part == "noise",
+            )
+            series.append({"label": f"{label} ({z.size} values)", "y": [float(v) for v in shares]})
+        series.append({"label": "nominal", "y": list(NOMINAL_LEVELS), "style": "k:"})
+        parts = [
+            name
+            for name, value in (
+                ("noise", result.log_sigma_noise),
+                ("response", result.log_sigma_response),
+                ("sensor LUT", result.log_sigma_sensor_lut),
+                ("vignetting", result.log_sigma_vignetting),
+                ("exposure times", result.log_sigma_exposure),
+            )
+            if value is not None
+        ]
+        res.row(f"{preset}: parts stated", ", ".join(parts), detail=True)
+        panels.append(
+            {
+                "title": f"{preset}",
+                "x": list(NOMINAL_LEVELS),
+                "xticks": [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
+                "xlabel": "nominal level of the central interval",
+                "ylabel": "share of the values inside it",
+                "series": series,
+            }
+        )
+    if panels:
+        res.figures.append(
+            FigureSpec(
+                "uncertainty_reliability",
+                "sweep",
+                "Stated uncertainty: reliability against the truth",
+                "The share of the corrected test scene's values whose error against the "
+                "truth lies inside the central interval of each nominal level, for the "
+                "whole stated uncertainty and its noise part alone; on the dotted "
+                "diagonal the stated uncertainty is the actual one, below it it is too "
+                "small.",
+                {"panels": panels},
+            )
+        )
+    return res
