@@ -735,6 +735,529 @@ def _solve_channel(
     return g, rms, constrained, n_data, eq["support"], log_e, system
 
 
+@dataclass(frozen=True, eq=False)
+class _CheckedInputs:
+    """The arguments of :func:`camera_response_Debevec1997`, checked.
+
+    ``values`` and ``saturated`` keep the caller's shape ``(K, H, W, C)``;
+    ``sat`` and ``floor`` are the channels' saturation and black levels
+    ``(C,)``; ``rounds`` counts the solves of eq. 7 (the least-squares one
+    and the reweighted ones); ``rng`` is a generator.
+    """
+
+    values: np.ndarray
+    t: np.ndarray
+    bit_depth: int
+    saturated: np.ndarray | None
+    sat: np.ndarray
+    floor: np.ndarray
+    smoothness: float
+    rounds: int
+    workers: int
+    max_pixels: int | None
+    wfun: WeightingFunction
+    sampler: Callable[..., np.ndarray]
+    rng: np.random.Generator
+
+
+def _check_inputs(
+    values: np.ndarray,
+    exposure_s: np.ndarray,
+    *,
+    bit_depth: int,
+    saturation_level: np.ndarray | None,
+    saturated: np.ndarray | None,
+    smoothness: float,
+    n_samples: int,
+    weighting: str | WeightingFunction,
+    rng: np.random.Generator | int | None,
+    c_min: float | np.ndarray,
+    sampling: str,
+    toe: str,
+    max_pixels: int | None,
+    censoring: str,
+    wide_steps: str,
+    workers: int | None,
+    robust: str,
+    robust_rounds: int,
+) -> _CheckedInputs:
+    """The checked arguments of :func:`camera_response_Debevec1997` (its parameters, by name).
+
+    Raises an :class:`~photoquant.errors.InputError` naming the first bad
+    argument, in the order of the checks below.
+    """
+    values = check_array(values, "values", ndim=4, kind="iuf", finite=True)
+    t = check_exposure_times(exposure_s)
+    bit_depth = check_bit_depth(bit_depth)
+    k_count, _, _, n_ch = values.shape
+    if t.size != k_count:
+        raise InputError(f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures")
+    if k_count < 2:
+        raise InputError("response recovery needs at least 2 exposure times, got 1")
+    smoothness = check_positive(smoothness, "smoothness", allow_zero=True)
+    if toe not in TOE_MODES:
+        raise InputError(f"`toe` must be one of {list(TOE_MODES)}, got {toe!r}")
+    if censoring not in CENSORING_MODES:
+        raise InputError(f"`censoring` must be one of {list(CENSORING_MODES)}, got {censoring!r}")
+    if wide_steps not in WIDE_STEP_MODES:
+        raise InputError(f"`wide_steps` must be one of {list(WIDE_STEP_MODES)}, got {wide_steps!r}")
+    if int(n_samples) < 2:
+        raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
+    check_robust(robust, robust_rounds)
+    rounds = 1 + int(robust_rounds) if robust != "none" else 1
+    if workers is None:  # one thread per channel wherever there is more than one CPU
+        workers = n_ch if default_workers() > 1 else 1
+    workers = check_workers(workers)
+    if saturation_level is None:
+        sat = np.full(n_ch, 2**bit_depth - 1, dtype=np.float64)
+    else:
+        sat = check_array(saturation_level, "saturation_level", shape=(n_ch,), kind="iuf")
+        sat = sat.astype(np.float64)
+    if saturated is not None:
+        saturated = check_array(saturated, "saturated", shape=values.shape, kind="b")
+    if max_pixels is not None:
+        max_pixels = check_int(max_pixels, "max_pixels", 2)
+    floor = np.broadcast_to(np.asarray(c_min, dtype=np.float64), (n_ch,))
+    if not np.all(np.isfinite(floor)) or np.any(floor < 0) or np.any(floor >= sat):
+        raise InputError(
+            f"`c_min` (the black level) {floor.tolist()} must lie in [0, saturation_level)"
+        )
+    wfun = weighting_function(weighting)
+    sampler = SAMPLING_METHODS[validate_method(sampling, SAMPLING_METHODS, "sampling")]
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(rng)
+    return _CheckedInputs(
+        values=values,
+        t=t,
+        bit_depth=bit_depth,
+        saturated=saturated,
+        sat=sat,
+        floor=floor,
+        smoothness=smoothness,
+        rounds=rounds,
+        workers=workers,
+        max_pixels=max_pixels,
+        wfun=wfun,
+        sampler=sampler,
+        rng=rng,
+    )
+
+
+def _candidate_values(inputs: _CheckedInputs) -> tuple[np.ndarray, np.ndarray]:
+    """The candidate pixels' values and clipped-value mask, ``(K, P, C)`` channel by channel.
+
+    Above ``max_pixels`` pixels, the candidates are a random thinning of the
+    image, in pixel order (module notes, *Samples*; one draw per pixel from
+    ``rng``); otherwise every pixel. Values at or above their channel's
+    saturation level count as clipped when no mask is given.
+    """
+    k_count, height, width, n_ch = inputs.values.shape
+    n_pix = height * width
+    values = inputs.values.reshape(k_count, n_pix, n_ch)
+    saturated = inputs.saturated
+    if saturated is not None:
+        saturated = saturated.reshape(k_count, n_pix, n_ch)
+    max_pixels = inputs.max_pixels
+    if max_pixels is not None and n_pix > max_pixels:
+        cand = np.flatnonzero(inputs.rng.random(n_pix) < max_pixels / n_pix)
+        # np.take along the pixels, not values[:, cand]: the fancy index walks the
+        # trailing channels three at a time (4× slower, as in exposure._take_pixels)
+        values = np.take(values, cand, axis=1)
+        saturated = None if saturated is None else np.take(saturated, cand, axis=1)
+    # every step of the fit reads one channel at a time, several times over
+    values = _channel_major(values)
+    if saturated is None:
+        return values, _at_or_above_by_channel(values, inputs.sat)
+    return values, _channel_major(saturated)
+
+
+@dataclass(frozen=True, eq=False)
+class _FitSettings:
+    """What the fits of every channel share: the levels of ``g``, the exposure times, the options.
+
+    ``rounds`` counts the solves of eq. 7 (the least-squares one and the
+    reweighted ones); the other fields are
+    :func:`camera_response_Debevec1997`'s arguments of the same names.
+    """
+
+    levels: np.ndarray
+    t: np.ndarray
+    wfun: WeightingFunction
+    smoothness: float
+    min_support: float
+    toe: str
+    censoring: str
+    wide_steps: str
+    robust: str
+    rounds: int
+    uncertainty: bool
+
+    @property
+    def spacing(self) -> float:
+        """The step between consecutive levels (1 unless the levels are binned)."""
+        return self.levels[1] - self.levels[0]
+
+    @property
+    def log_t(self) -> np.ndarray:
+        """``ln t_k``."""
+        return np.log(self.t)
+
+
+def _usable_values(
+    vals: np.ndarray,
+    saturated: np.ndarray,
+    c_lo: float,
+    c_sat: float,
+    settings: _FitSettings,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One channel's valid values and usable pixels (of its ``(K, P)`` candidate values).
+
+    A value is valid above the black level ``c_lo``, below the saturation
+    level ``c_sat`` and not marked clipped, with the partners of censored
+    pairs trimmed (``censoring="trimmed"``,
+    :func:`~photoquant.response.censoring.trim_censored_partners`); a pixel is
+    usable with two valid values or more.
+    """
+    valid = (vals > c_lo) & (vals < c_sat) & ~saturated
+    if settings.censoring == "trimmed":
+        valid = trim_censored_partners(vals, valid, settings.t, settings.spacing)
+    return valid, _usable_pixels(valid)
+
+
+@dataclass(frozen=True, eq=False)
+class _ChannelSample:
+    """One channel's sampled pixels as eq. 7's data rows.
+
+    ``weights``, ``valid`` and ``knots`` are ``(K, n)``: each sampled value's
+    weight ``w(c)``, whether its row is used (valid, weight > 0) and its
+    position ``c / spacing`` among the levels; ``top`` is the highest level
+    solved for (the saturation level's), ``gauge`` the level where
+    ``g = 0``.
+    """
+
+    n_pixels: int
+    weights: np.ndarray
+    valid: np.ndarray
+    knots: np.ndarray
+    top: int
+    gauge: int
+
+
+def _channel_sample(
+    ch: int,
+    vals: np.ndarray,
+    valid: np.ndarray,
+    idx: np.ndarray,
+    c_lo: float,
+    c_sat: float,
+    settings: _FitSettings,
+) -> _ChannelSample:
+    """Channel ``ch``'s data rows at its sampled pixels ``idx``, with its top and gauge levels.
+
+    The gauge is the level nearest the middle of ``[c_lo, c_sat]`` (the
+    lower one on a tie). Raises a :class:`~photoquant.errors.CalibrationError`
+    with fewer than two sampled pixels or fewer than four levels below the
+    saturation level.
+    """
+    levels = settings.levels
+    sampled = vals[:, idx]
+    weights = settings.wfun(sampled, c_lo, c_sat)
+    valid_idx = valid[:, idx] & (weights > 0)
+    if idx.size < 2:
+        raise CalibrationError(
+            f"channel {ch}: only {idx.size} pixels have two or more well-exposed "
+            "values; the exposures do not overlap (add exposure times in between)"
+        )
+    top = min(int(np.ceil(c_sat / settings.spacing)), levels.size - 1)
+    if top < 3:
+        raise CalibrationError(f"channel {ch}: saturation level {c_sat} is too low")
+    mid = 0.5 * (c_lo + c_sat)
+    gauge = int(np.argmin(np.abs(levels[: top + 1] - mid)))
+    return _ChannelSample(idx.size, weights, valid_idx, sampled / settings.spacing, top, gauge)
+
+
+def _smoothness_weights(c_lo: float, c_sat: float, settings: _FitSettings) -> np.ndarray:
+    """The weights ``w(c_j)`` of eq. 7's smoothness rows at every level.
+
+    Below the black level there are no data: the smoothness prior alone, at
+    the weight of the first level above it, continues ``g`` there (never
+    used: ``valid_min`` lies above), so that the system stays regular.
+    """
+    levels = settings.levels
+    smooth_w = settings.wfun(levels, c_lo, c_sat)
+    if c_lo > levels[0]:
+        first = settings.wfun(np.array([c_lo + settings.spacing]), c_lo, c_sat)[0]
+        smooth_w = np.where(levels <= c_lo, first, smooth_w)
+    return smooth_w
+
+
+def _wide_step_prior(
+    sample: _ChannelSample,
+    smooth_w: np.ndarray,
+    c_lo: float,
+    c_sat: float,
+    settings: _FitSettings,
+) -> tuple[float, np.ndarray | None]:
+    """The channel's smoothness factor ``F`` and the template penalty it adds to eq. 7.
+
+    With ``wide_steps="template"``, ``F`` follows the typical step of the
+    sampled values' bracket (:mod:`photoquant.response.wide_steps`) and, when
+    above 1, the penalty (``(top + 1, top + 1)``, times β) draws ``g``
+    towards the EMoR mean response's shape; otherwise ``F = 1`` and no penalty.
+    """
+    if settings.wide_steps != "template":
+        return 1.0, None
+    factor = step_factor(typical_step(sample.valid, settings.log_t))
+    if not factor > 1.0:
+        return factor, None
+    top = sample.top
+    g0 = emor_mean_log_inverse(settings.levels[: top + 1], c_lo, c_sat)
+    rows = smooth_w[1:top] ** 2
+    return factor, settings.smoothness * template_penalty(rows, g0, factor)
+
+
+@dataclass(frozen=True, eq=False)
+class _Eq7Solution:
+    """Eq. 7 solved for one channel (the items of :func:`_solve_channel`, by name)."""
+
+    g: np.ndarray
+    residual_rms: float
+    constrained: bool
+    n_equations: int
+    support: np.ndarray
+    log_e: np.ndarray
+    system: dict[str, Any]
+
+
+def _reweighted_rows(
+    sample: _ChannelSample,
+    solution: _Eq7Solution,
+    black: float,
+    loss: str,
+    settings: _FitSettings,
+) -> np.ndarray:
+    """The data rows' weights for the next solve of eq. 7, by ``loss`` of their residuals.
+
+    A row is ``w·(g(z) − ln E − ln t)``; its squared weight is scaled by the
+    robust weight of that residual against the noise of its band of levels
+    (:func:`_log_bands`, bands above ``black`` in units of the level spacing;
+    :func:`photoquant.response.robust.robust_weights`).
+    """
+    top, weights = sample.top, sample.weights
+    at = np.minimum(sample.knots, top)
+    fitted = np.interp(at, np.arange(top + 1), solution.g)
+    resid = weights * (fitted - solution.log_e - settings.log_t[:, None])
+    band = _log_bands(at, black, top)
+    return weights * np.sqrt(robust_weights(resid, sample.valid, band, loss=loss))
+
+
+def _eq7_solution(
+    sample: _ChannelSample,
+    row_w: np.ndarray,
+    smooth_w: np.ndarray,
+    prior: np.ndarray | None,
+    settings: _FitSettings,
+) -> _Eq7Solution:
+    """Eq. 7 solved for one channel, its data rows weighted by ``row_w`` ``(K, n)``."""
+    return _Eq7Solution(
+        *_solve_channel(
+            sample.valid,
+            row_w,
+            settings.log_t,
+            sample.knots,
+            sample.top,
+            smooth_w,
+            settings.smoothness,
+            sample.gauge,
+            prior,
+        )
+    )
+
+
+def _robust_solution(
+    sample: _ChannelSample,
+    smooth_w: np.ndarray,
+    prior: np.ndarray | None,
+    c_lo: float,
+    settings: _FitSettings,
+) -> _Eq7Solution:
+    """Eq. 7 for one channel after its robust reweighting rounds (module notes, *Robust fit*).
+
+    The least-squares solution first, then ``rounds − 1`` solves, each with
+    the data rows reweighted by the residuals of the solve before
+    (iteratively reweighted least squares; with ``robust="none"`` only the
+    first). The last solve is returned.
+    """
+    n_reweights = settings.rounds - 1
+    row_w = np.where(sample.valid, sample.weights, 0.0)
+    for n_round in range(n_reweights):
+        solution = _eq7_solution(sample, row_w, smooth_w, prior, settings)
+        loss = round_loss(settings.robust, n_round, n_reweights)
+        row_w = _reweighted_rows(sample, solution, c_lo / settings.spacing, loss, settings)
+    return _eq7_solution(sample, row_w, smooth_w, prior, settings)
+
+
+def _toe_and_valid_min(
+    g: np.ndarray, support: np.ndarray, gauge: int, settings: _FitSettings
+) -> tuple[np.ndarray, int]:
+    """``g`` with its toe treated (module notes, *Toe*), and the index of ``valid_min``.
+
+    The lowest measured level is the first with ``min_support`` data
+    equations or more (below it ``g`` is extrapolated by the prior alone;
+    gaps between measured levels are interpolated, which is fine), the gauge
+    level when none below it is. With ``toe="continued"`` ``g`` is continued
+    linearly below the steepest level above it (:func:`continue_toe`), which
+    becomes ``valid_min``.
+    """
+    measured = np.flatnonzero(support[: gauge + 1] >= settings.min_support)
+    lowest = int(measured[0]) if measured.size else gauge
+    if settings.toe == "continued":
+        g, lowest = continue_toe(g, lowest, gauge)
+    return g, lowest
+
+
+def _covariance_of_g(
+    system: dict[str, Any], gauge: int, top: int, n_levels: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The covariance of ``g`` at every level: its low-rank factor ``(R, L)`` and diagonal ``(L,)``.
+
+    The pixel-clustered sandwich of the last solve
+    (:func:`~photoquant.response.covariance.cluster_sandwich_covariance`),
+    made relative to the gauge level, as ``g`` is, and constant above the top
+    level, as ``g`` is.
+    """
+    cov = cluster_sandwich_covariance(
+        system["cho"], system["idx"], system["coef"], system["residual"], top + 1
+    )
+    cov = cov - cov[gauge][None, :] - cov[:, gauge][:, None] + cov[gauge, gauge]
+    above = n_levels - top - 1
+    f = low_rank_factor(cov)
+    factor = np.concatenate([f, np.repeat(f[:, -1:], above, axis=1)], axis=1)
+    var = np.clip(np.diag(cov), 0.0, None)
+    return factor, np.concatenate([var, np.repeat(var[-1:], above)])
+
+
+@dataclass(frozen=True, eq=False)
+class _ChannelFit:
+    """One channel's recovered ``g`` at every level and its diagnostics.
+
+    The channel's entries of :class:`ResponseRecovery`'s fields; the
+    covariance factor ``(R, L)`` and variance ``(L,)`` only with
+    ``uncertainty``.
+    """
+
+    g: np.ndarray
+    n_samples: int
+    n_equations: int
+    residual_rms: float
+    constrained: bool
+    valid_min: float
+    smoothness_factor: float
+    covariance_factor: np.ndarray | None
+    variance: np.ndarray | None
+
+
+def _fit_channel(
+    ch: int,
+    vals: np.ndarray,
+    valid: np.ndarray,
+    idx: np.ndarray,
+    c_lo: float,
+    c_sat: float,
+    settings: _FitSettings,
+) -> _ChannelFit:
+    """Channel ``ch``'s fit past its random draws: its samples ``idx``, eq. 7, the toe.
+
+    ``vals`` and ``valid`` are the channel's ``(K, P)`` candidate values and
+    their validity (:func:`_usable_values`).
+    """
+    n_levels = settings.levels.size
+    sample = _channel_sample(ch, vals, valid, idx, c_lo, c_sat, settings)
+    top, gauge = sample.top, sample.gauge
+    smooth_w = _smoothness_weights(c_lo, c_sat, settings)
+    factor, prior = _wide_step_prior(sample, smooth_w, c_lo, c_sat, settings)
+    solution = _robust_solution(sample, smooth_w, prior, c_lo, settings)
+    g, lowest = _toe_and_valid_min(solution.g, solution.support, gauge, settings)
+    cov_factor, variance = None, None
+    if settings.uncertainty:
+        cov_factor, variance = _covariance_of_g(solution.system, gauge, top, n_levels)
+    return _ChannelFit(
+        g=np.concatenate([g, np.repeat(g[-1:], n_levels - top - 1)]),
+        n_samples=sample.n_pixels,
+        n_equations=solution.n_equations,
+        residual_rms=solution.residual_rms,
+        constrained=solution.constrained,
+        valid_min=settings.levels[lowest],
+        smoothness_factor=factor,
+        covariance_factor=cov_factor,
+        variance=variance,
+    )
+
+
+def _fit_channels(
+    values: np.ndarray,
+    saturated: np.ndarray,
+    inputs: _CheckedInputs,
+    settings: _FitSettings,
+    n_samples: int,
+) -> list[_ChannelFit]:
+    """Every channel's fit, from the candidates' values and clipped-value mask ``(K, P, C)``.
+
+    Channels are independent but for the sampler's random draws: those are
+    made in channel order (each channel's after the one before it),
+    everything else runs on ``workers`` threads (the compiled kernels,
+    numpy's large passes and LAPACK release the GIL), so the result does not
+    depend on the threads. The dense systems are small (≤ 1024²): one BLAS
+    thread is fastest, and a multi-threaded BLAS on a loaded machine can be
+    100× slower.
+    """
+    n_ch = values.shape[-1]
+    sat, floor = inputs.sat, inputs.floor
+    drawn = [threading.Event() for _ in range(n_ch)]
+
+    def channel(ch: int) -> _ChannelFit:
+        """A channel's usable values, its draws once the channel before has drawn, its fit."""
+        try:
+            valid, usable = _usable_values(
+                values[..., ch], saturated[..., ch], floor[ch], sat[ch], settings
+            )
+            if ch:
+                drawn[ch - 1].wait()  # set by a job taken before this one: it runs
+            pick = _draw_samples(
+                inputs.sampler, values[..., ch], valid, usable, sat[ch], n_samples, inputs.rng
+            )
+        finally:
+            drawn[ch].set()  # also on failure (whose error thread_map raises first)
+        return _fit_channel(ch, values[..., ch], valid, pick(), float(floor[ch]), sat[ch], settings)
+
+    with _blas_controller().limit(limits=1, user_api="blas"):
+        return thread_map(channel, range(n_ch), min(inputs.workers, n_ch))
+
+
+def _response_recovery(
+    levels: np.ndarray, inputs: _CheckedInputs, fits: list[_ChannelFit], uncertainty: bool
+) -> ResponseRecovery:
+    """The channels' fits gathered into a :class:`ResponseRecovery` (one row per channel)."""
+    return ResponseRecovery(
+        levels=levels,
+        log_inverse_response=np.array([fit.g for fit in fits], dtype=np.float64),
+        saturation_level=inputs.sat,
+        n_samples=np.array([fit.n_samples for fit in fits], dtype=np.int64),
+        n_equations=np.array([fit.n_equations for fit in fits], dtype=np.int64),
+        residual_rms=np.array([fit.residual_rms for fit in fits], dtype=np.float64),
+        monotone_constrained=np.array([fit.constrained for fit in fits], dtype=bool),
+        smoothness=inputs.smoothness,
+        valid_min=np.array([fit.valid_min for fit in fits], dtype=np.float64),
+        smoothness_factor=np.array([fit.smoothness_factor for fit in fits], dtype=np.float64),
+        log_inverse_response_factor=(
+            _stack_factors([fit.covariance_factor for fit in fits]) if uncertainty else None
+        ),
+        log_inverse_response_variance=(
+            np.array([fit.variance for fit in fits], dtype=np.float64) if uncertainty else None
+        ),
+    )
+
+
 def camera_response_Debevec1997(
     values: np.ndarray,
     exposure_s: np.ndarray,
@@ -851,193 +1374,43 @@ def camera_response_Debevec1997(
     -------
     ResponseRecovery
     """
-    values = check_array(values, "values", ndim=4, kind="iuf", finite=True)
-    t = check_exposure_times(exposure_s)
-    bit_depth = check_bit_depth(bit_depth)
-    k_count, height, width, n_ch = values.shape
-    if t.size != k_count:
-        raise InputError(f"`exposure_s` has {t.size} times but `values` has K={k_count} exposures")
-    if k_count < 2:
-        raise InputError("response recovery needs at least 2 exposure times, got 1")
-    smoothness = check_positive(smoothness, "smoothness", allow_zero=True)
-    if toe not in TOE_MODES:
-        raise InputError(f"`toe` must be one of {list(TOE_MODES)}, got {toe!r}")
-    if censoring not in CENSORING_MODES:
-        raise InputError(f"`censoring` must be one of {list(CENSORING_MODES)}, got {censoring!r}")
-    if wide_steps not in WIDE_STEP_MODES:
-        raise InputError(f"`wide_steps` must be one of {list(WIDE_STEP_MODES)}, got {wide_steps!r}")
-    if int(n_samples) < 2:
-        raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
-    check_robust(robust, robust_rounds)
-    rounds = 1 + int(robust_rounds) if robust != "none" else 1
-    if workers is None:  # one thread per channel wherever there is more than one CPU
-        workers = n_ch if default_workers() > 1 else 1
-    workers = check_workers(workers)
-    c_full = 2**bit_depth - 1
-    if saturation_level is None:
-        sat = np.full(n_ch, c_full, dtype=np.float64)
-    else:
-        sat = check_array(saturation_level, "saturation_level", shape=(n_ch,), kind="iuf")
-        sat = sat.astype(np.float64)
-    if saturated is not None:
-        saturated = check_array(saturated, "saturated", shape=values.shape, kind="b")
-    if max_pixels is not None:
-        max_pixels = check_int(max_pixels, "max_pixels", 2)
-    floor = np.broadcast_to(np.asarray(c_min, dtype=np.float64), (n_ch,))
-    if not np.all(np.isfinite(floor)) or np.any(floor < 0) or np.any(floor >= sat):
-        raise InputError(
-            f"`c_min` (the black level) {floor.tolist()} must lie in [0, saturation_level)"
-        )
-    wfun = weighting_function(weighting)
-    sampler = SAMPLING_METHODS[validate_method(sampling, SAMPLING_METHODS, "sampling")]
-    if not isinstance(rng, np.random.Generator):
-        rng = np.random.default_rng(rng)
-    n_pix = height * width
-    values = values.reshape(k_count, n_pix, n_ch)
-    if saturated is not None:
-        saturated = saturated.reshape(k_count, n_pix, n_ch)
-    if max_pixels is not None and n_pix > max_pixels:
-        # the candidates: a random thinning, in pixel order (module notes, *Samples*)
-        cand = np.flatnonzero(rng.random(n_pix) < max_pixels / n_pix)
-        # np.take along the pixels, not values[:, cand]: the fancy index walks the
-        # trailing channels three at a time (4× slower, as in exposure._take_pixels)
-        values = np.take(values, cand, axis=1)
-        saturated = None if saturated is None else np.take(saturated, cand, axis=1)
-    # every step below reads one channel at a time, several times over
-    values = _channel_major(values)
-    if saturated is None:
-        saturated = _at_or_above_by_channel(values, sat)
-    else:
-        saturated = _channel_major(saturated)
-
-    levels = response_levels(bit_depth, max_levels)
-    spacing = levels[1] - levels[0]
-    log_t = np.log(t)
-    n_levels = levels.size
-    g_all = np.zeros((n_ch, n_levels))
-    n_used = np.zeros(n_ch, dtype=np.int64)
-    n_eq = np.zeros(n_ch, dtype=np.int64)
-    rms = np.zeros(n_ch)
-    constrained = np.zeros(n_ch, dtype=bool)
-    valid_min = np.zeros(n_ch)
-    factors = np.ones(n_ch)
-    n_draw = int(n_samples)
-    factors_g: list[np.ndarray | None] = [None] * n_ch
-    variances_g = np.zeros((n_ch, n_levels))
-
-    def usable_values(ch: int) -> tuple[np.ndarray, np.ndarray]:
-        """Stage 1 of a channel: its valid values (trimmed) and usable pixels."""
-        vals = values[..., ch]
-        valid = (vals > floor[ch]) & (vals < sat[ch]) & ~saturated[..., ch]
-        if censoring == "trimmed":
-            valid = trim_censored_partners(vals, valid, t, spacing)
-        return valid, _usable_pixels(valid)
-
-    def fit_channel(ch: int, valid: np.ndarray, pick: Callable[[], np.ndarray]) -> None:
-        """Stage 2 of a channel, past its random draws: samples, eq. 7, the toe."""
-        vals = values[..., ch]
-        c_lo = float(floor[ch])
-        idx = pick()
-        weights = wfun(vals[:, idx], c_lo, sat[ch])
-        valid_idx = valid[:, idx] & (weights > 0)
-        if idx.size < 2:
-            raise CalibrationError(
-                f"channel {ch}: only {idx.size} pixels have two or more well-exposed "
-                "values; the exposures do not overlap (add exposure times in between)"
-            )
-        top = min(int(np.ceil(sat[ch] / spacing)), n_levels - 1)
-        if top < 3:
-            raise CalibrationError(f"channel {ch}: saturation level {sat[ch]} is too low")
-        mid = 0.5 * (c_lo + sat[ch])
-        gauge = int(np.argmin(np.abs(levels[: top + 1] - mid)))
-        smooth_w = wfun(levels, c_lo, sat[ch])
-        if c_lo > levels[0]:
-            # below the black level there are no data: the smoothness prior
-            # alone (at the weight of the first level above it) continues g there
-            # (never used: valid_min lies above), so the system stays regular
-            first = wfun(np.array([c_lo + spacing]), c_lo, sat[ch])[0]
-            smooth_w = np.where(levels <= c_lo, first, smooth_w)
-        prior = None
-        if wide_steps == "template":
-            factors[ch] = step_factor(typical_step(valid_idx, log_t))
-            if factors[ch] > 1.0:
-                g0 = emor_mean_log_inverse(levels[: top + 1], c_lo, sat[ch])
-                rows = smooth_w[1:top] ** 2
-                prior = smoothness * template_penalty(rows, g0, factors[ch])
-        row_w = np.where(valid_idx, weights, 0.0)
-        knots = vals[:, idx] / spacing
-        for n_round in range(rounds):
-            g, rms[ch], constrained[ch], n_eq[ch], support, log_e, system = _solve_channel(
-                valid_idx, row_w, log_t, knots, top, smooth_w, smoothness, gauge, prior
-            )
-            if n_round == rounds - 1:
-                break
-            # Huber's reweighting of eq. 7's data rows (photoquant.response.robust):
-            # the row is w·(g(z) − ln E − ln t), its squared weight scales by the
-            # Huber weight of that residual against its band of levels' noise
-            at = np.minimum(knots, top)
-            resid = weights * (np.interp(at, np.arange(top + 1), g) - log_e - log_t[:, None])
-            band = _log_bands(at, c_lo / spacing, top)
-            loss = round_loss(robust, n_round, rounds - 1)
-            row_w = weights * np.sqrt(robust_weights(resid, valid_idx, band, loss=loss))
-        # lowest measured level: below it g is extrapolated by the prior alone
-        # (gaps between measured levels are interpolated, which is fine)
-        measured = np.flatnonzero(support[: gauge + 1] >= min_support)
-        lowest = int(measured[0]) if measured.size else gauge
-        if toe == "continued":
-            g, lowest = continue_toe(g, lowest, gauge)
-        valid_min[ch] = levels[lowest]
-        g_all[ch, : top + 1] = g
-        g_all[ch, top + 1 :] = g[-1]
-        n_used[ch] = idx.size
-        if uncertainty:
-            cov = cluster_sandwich_covariance(
-                system["cho"], system["idx"], system["coef"], system["residual"], top + 1
-            )
-            # relative to the gauge level, as g is; constant above the top level, as g is
-            cov = cov - cov[gauge][None, :] - cov[:, gauge][:, None] + cov[gauge, gauge]
-            above = n_levels - top - 1
-            f = low_rank_factor(cov)
-            factors_g[ch] = np.concatenate([f, np.repeat(f[:, -1:], above, axis=1)], axis=1)
-            var = np.clip(np.diag(cov), 0.0, None)
-            variances_g[ch] = np.concatenate([var, np.repeat(var[-1:], above)])
-
-    # Channels are independent but for the sampler's random draws: those are made
-    # in channel order (each channel's after the one before it), everything else
-    # runs on `workers` threads (the compiled kernels, numpy's large passes and
-    # LAPACK release the GIL), so the result does not depend on the threads. The
-    # dense systems are small (≤ 1024²): one BLAS thread is fastest, and a
-    # multi-threaded BLAS on a loaded machine can be 100× slower.
-    drawn = [threading.Event() for _ in range(n_ch)]
-
-    def channel(ch: int) -> None:
-        """A channel's usable values, its draws once the channel before has drawn, its fit."""
-        try:
-            valid, usable = usable_values(ch)
-            if ch:
-                drawn[ch - 1].wait()  # set by a job taken before this one: it runs
-            pick = _draw_samples(sampler, values[..., ch], valid, usable, sat[ch], n_draw, rng)
-        finally:
-            drawn[ch].set()  # also on failure (whose error thread_map raises first)
-        fit_channel(ch, valid, pick)
-
-    with _blas_controller().limit(limits=1, user_api="blas"):
-        thread_map(channel, range(n_ch), min(workers, n_ch))
-    del height, width
-    return ResponseRecovery(
-        levels=levels,
-        log_inverse_response=g_all,
-        saturation_level=sat,
-        n_samples=n_used,
-        n_equations=n_eq,
-        residual_rms=rms,
-        monotone_constrained=constrained,
+    inputs = _check_inputs(
+        values,
+        exposure_s,
+        bit_depth=bit_depth,
+        saturation_level=saturation_level,
+        saturated=saturated,
         smoothness=smoothness,
-        valid_min=valid_min,
-        smoothness_factor=factors,
-        log_inverse_response_factor=_stack_factors(factors_g) if uncertainty else None,
-        log_inverse_response_variance=variances_g if uncertainty else None,
+        n_samples=n_samples,
+        weighting=weighting,
+        rng=rng,
+        c_min=c_min,
+        sampling=sampling,
+        toe=toe,
+        max_pixels=max_pixels,
+        censoring=censoring,
+        wide_steps=wide_steps,
+        workers=workers,
+        robust=robust,
+        robust_rounds=robust_rounds,
     )
+    candidates, clipped = _candidate_values(inputs)
+    levels = response_levels(inputs.bit_depth, max_levels)
+    settings = _FitSettings(
+        levels=levels,
+        t=inputs.t,
+        wfun=inputs.wfun,
+        smoothness=inputs.smoothness,
+        min_support=min_support,
+        toe=toe,
+        censoring=censoring,
+        wide_steps=wide_steps,
+        robust=robust,
+        rounds=inputs.rounds,
+        uncertainty=uncertainty,
+    )
+    fits = _fit_channels(candidates, clipped, inputs, settings, int(n_samples))
+    return _response_recovery(levels, inputs, fits, uncertainty)
 
 
 def _stack_factors(factors: list[np.ndarray | None]) -> np.ndarray:
