@@ -21,7 +21,8 @@ reliability diagram (the share within each nominal interval against its
 level). A spread above 1 measures what the stated uncertainty leaves out:
 the response's bias (a ripple of ``g`` with the bracket's exposure step,
 which the fit's covariance cannot see, :doc:`/user-guide/correct`), and any
-disturbance of the camera the calibration does not model.
+disturbance of the camera the calibration does not model (the ``cmos``
+preset's dark current in the test scene's shadows, without dark frames).
 
 The metrics are reported, not checked against the stored baseline.
 
