@@ -266,6 +266,7 @@ SAME_NAME_SAME_CONCEPT = {
     "debevec1997.py": "the paper's method, for the response step and for the merge",
     "robertson2003.py": "the paper's method, for the response step and for the merge",
     "model.py": "a fitted model: the camera's (photoquant) and the response's",
+    "uncertainty.py": "the stated uncertainty (the merge's), and the experiment that validates it",
 }
 
 
