@@ -513,6 +513,10 @@ def _prnu(
     }
 
 
+_MIN_DARK_PIXELS = 32
+"""Fewest unclipped pixels per channel the dark frames need for DSNU and dark current."""
+
+
 def _dark(
     dark: ExposureStack, camera: CameraModel
 ) -> tuple[dict[str, tuple[np.ndarray, np.ndarray, str]], np.ndarray]:
@@ -523,6 +527,8 @@ def _dark(
     bad = bad | (dark.frames == 0).any(axis=(0, 1)) | (dark.frames >= dark.c_max).any(axis=(0, 1))
     mean_map = frames.mean(axis=(0, 1))
     c = frames.shape[-1]
+    if np.any((~bad).reshape(-1, c).sum(axis=0) < _MIN_DARK_PIXELS):
+        return {}, mean_map  # clipped at 0 (no pedestal) or at the top: nothing to measure
     dsnu, u_dsnu, rate, u_rate = (np.zeros(c) for _ in range(4))
     for ch in range(c):
         good = ~bad[..., ch]
@@ -719,9 +725,12 @@ def characterise(
         fw, fw * rel_g, "e-", "(saturation − black level) / gain: the linear scale's span", dof
     )
     maps: dict[str, np.ndarray] = {"sensor_lut": camera.sensor_lut.lut}
+    dark_problem = None
     if dark is not None:
         found, mean_map = _dark(dark, camera)
         maps["mean_dark"] = mean_map
+        if not found:
+            dark_problem = "the dark frames are clipped: at 0 (no pedestal) or at the top"
         slope = _black_slope(camera)
         units = {
             "dsnu_dn": ("DN", "dsnu_e", "e-"),
@@ -743,8 +752,8 @@ def characterise(
         quantities.update({k: dataclasses.replace(q, dof=dof) for k, q in prnu.items()})
     not_measured = [k for k, q in quantities.items() if q is None]
     why = {
-        "dsnu_dn": "no dark frames",
-        "dark_current_dn_per_s": "dark frames at fewer than two exposure times",
+        "dsnu_dn": dark_problem or "no dark frames",
+        "dark_current_dn_per_s": dark_problem or "dark frames at fewer than two exposure times",
         "prnu": "the camera has no sensor LUT (no flat field / irradiance scene)",
     }
     for key in list(not_measured):
@@ -784,7 +793,7 @@ def characterise_manifest(
     are read raw for the DSNU and the dark current.
     """
     from photoquant.io import CaptureManifest, load_manifest, load_stack
-    from photoquant.io.frames import black_level_from_dark, dark_frame_model
+    from photoquant.io.frames import black_level_from_dark, dark_frame_model, load_dark_stack
     from photoquant.model import load_camera
 
     if not isinstance(manifest, CaptureManifest):
@@ -807,11 +816,7 @@ def characterise_manifest(
         if ref is not None:
             sets[key] = stack(ref)
     flat = sets.get("irradiance", sets.get("flatfield"))
-    dark = None
-    if manifest.dark is not None:
-        c = len(manifest.channels)
-        dark = load_stack(manifest.dark, manifest, black_level=np.zeros(c), dark_subtraction=False)
-    return characterise(sets, camera, dark=dark, flat_field=flat)
+    return characterise(sets, camera, dark=load_dark_stack(manifest), flat_field=flat)
 
 
 # ---------------------------------------------------------------------------

@@ -78,14 +78,14 @@ def _check_capture_output(args: argparse.Namespace) -> None:
     """
     from photoquant.io.outputs import Output, check_outputs
     from pqsim.capture_set import CAPTURE_SET
-    from pqsim.synth_camera.presets import _is_preset_file
+    from pqsim.synth_camera.presets import is_preset_file
 
     inputs = [
-        Path(args.preset) if _is_preset_file(args.preset) else None,
+        Path(args.preset) if is_preset_file(args.preset) else None,
         Path(args.cache_dir).expanduser() if getattr(args, "cache_dir", None) else None,
     ]
     sens = getattr(args, "sensitivities", None)
-    if sens and _is_preset_file(sens):
+    if sens and is_preset_file(sens):
         inputs.append(Path(sens))
     check_outputs([Output(Path(args.output), CAPTURE_SET)], inputs, overwrite=args.overwrite)
 
@@ -216,8 +216,8 @@ def _cmd_preset(args: argparse.Namespace) -> int:
     from photoquant.io.outputs import Output, check_outputs
     from pqsim.synth_camera.presets import (
         PRESET_FILE,
-        _is_preset_file,
         camera_from_preset,
+        is_preset_file,
         preset_json,
     )
 
@@ -238,7 +238,7 @@ def _cmd_preset(args: argparse.Namespace) -> int:
         return 0
     out = Path(args.output)
     inputs: list[Path | None] = [
-        Path(args.name) if args.name is not None and _is_preset_file(args.name) else None
+        Path(args.name) if args.name is not None and is_preset_file(args.name) else None
     ]
     inputs += [Path(p) for p in (args.from_camera, args.characterisation) if p is not None]
     check_outputs([Output(out, PRESET_FILE)], inputs, overwrite=args.overwrite)

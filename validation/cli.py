@@ -202,13 +202,13 @@ def validate_inputs(args: argparse.Namespace) -> list[Any]:
     an output may lie inside them, not be or hold them.
     """
     from photoquant.io.outputs import Holder
-    from pqsim.synth_camera.presets import _is_preset_file
+    from pqsim.synth_camera.presets import is_preset_file
     from validation.regression import STORED_BASELINES
 
     check = args.check
     if check == "default":
         check = STORED_BASELINES.get(args.mode)
-    presets = [p for p in args.preset or [] if _is_preset_file(p)]
+    presets = [p for p in args.preset or [] if is_preset_file(p)]
     kept = [Holder(Path(p).expanduser()) for p in (args.cache_dir, args.workdir) if p is not None]
     return [check, *presets, *kept]
 

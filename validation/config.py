@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import zlib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -54,6 +54,7 @@ __all__ = [
     "PAPER_EXPOSURES_S",
     "CHART_SOURCES",
     "get_config",
+    "preset_labels",
     "stream_seed",
 ]
 
@@ -322,3 +323,41 @@ def stream_seed(seed: int, *names: Any) -> int:
     """
     words = [_check_int(seed, "seed", 0)] + [zlib.crc32(str(n).encode()) for n in names]
     return int(np.random.SeedSequence(words).generate_state(1, dtype=np.uint32)[0])
+
+
+def preset_labels(presets: Sequence[str]) -> tuple[tuple[str, ...], tuple[tuple[str, str], ...]]:
+    """Labels and ``(label, file)`` pairs of the presets given (built-in names or files).
+
+    A built-in preset is labelled by its name, a preset file (a twin, a user's
+    camera) by its file name's stem, the file kept by its real path
+    (:attr:`ValidationConfig.preset_files`). Unknown names, unreadable or
+    invalid files, a file named like a built-in preset and a preset given twice
+    are one-line :class:`ValidationError` s.
+    """
+    import re
+    from pathlib import Path
+
+    from photoquant.io.outputs import real_path
+    from pqsim.synth_camera.presets import CAMERA_PRESETS, is_preset_file, preset_fields
+
+    names: list[str] = []
+    files: list[tuple[str, str]] = []
+    for p in presets:
+        try:
+            preset_fields(p)  # unknown name, unreadable or invalid file: one line
+        except InputError as exc:
+            raise ValidationError(str(exc)) from None
+        if not is_preset_file(p):  # a built-in name (ccd, emor-3, ...)
+            label = p.lower()
+        else:
+            path = real_path(Path(p).expanduser())
+            label = re.sub(r"[^A-Za-z0-9_-]+", "_", path.stem) or "preset"
+            if label.lower() in CAMERA_PRESETS:
+                raise ValidationError(
+                    f"preset file {p}: its name {label!r} is a built-in preset's; rename the file"
+                )
+            files.append((label, str(path)))
+        if label in names:
+            raise ValidationError(f"preset {label!r} is given twice")
+        names.append(label)
+    return tuple(names), tuple(files)

@@ -75,7 +75,7 @@ import numpy as np
 
 from photoquant.io.atomic import make_scratch_directory, remove_scratch_directory
 from photoquant.io.outputs import real_path
-from validation.config import QUICK, ValidationConfig
+from validation.config import QUICK, ValidationConfig, preset_labels
 
 __all__ = [
     "RANKED_STEPS",
@@ -915,11 +915,15 @@ def run_leaderboard(
             raise InputError("no camera preset to rank on")
         from pqsim.synth_camera.presets import camera_from_preset
 
-        for p in presets:
+        known = dict(config.preset_files)
+        # built-in names and preset files (a twin): labels, the files kept by path
+        names, files = preset_labels([known.get(p, p) for p in presets])
+        for p in names:
             camera_from_preset(
-                config.preset_source(p)
+                dict(files).get(p, config.preset_source(p))
             )  # an unknown preset is a one-line error naming the valid ones
-        config = config.replace(presets=presets)
+        presets = names
+        config = config.replace(presets=presets, preset_files=(*config.preset_files, *files))
     t_start = time.perf_counter()
     keep = workdir is not None or shared is not None
     root = (

@@ -41,7 +41,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import re
 import time
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
@@ -49,7 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from photoquant.io.outputs import Output, OutputKind, check_outputs, file_of_kind, real_path
+from photoquant.io.outputs import Output, OutputKind, check_outputs, file_of_kind
 from photoquant.profiles import DEFAULT_PROFILE
 from validation.baseline import (
     BASELINE_FORMAT,
@@ -64,7 +63,7 @@ from validation.baseline import (
     seal_baseline,
     validate_baseline,
 )
-from validation.config import CONFIGS, ValidationConfig, ValidationError, get_config
+from validation.config import CONFIGS, ValidationConfig, ValidationError, get_config, preset_labels
 
 __all__ = [
     "DEFAULT_SEEDS",
@@ -218,7 +217,7 @@ class RunConfiguration:
             kwargs[_CALIBRATE_KEY.get(step, step)] = spec
         changes["calibrate_kwargs"] = kwargs
         if self.presets:
-            names, files = _presets(self.presets)
+            names, files = preset_labels(self.presets)
             changes["presets"] = names
             changes["preset_files"] = files
             if config.sweep_preset not in names:
@@ -230,34 +229,6 @@ class RunConfiguration:
 
             _select(self.experiments)
         return config
-
-
-def _presets(presets: Sequence[str]) -> tuple[tuple[str, ...], tuple[tuple[str, str], ...]]:
-    """Labels and ``(label, file)`` pairs of the presets given (built-in names or files)."""
-    from photoquant.errors import InputError
-    from pqsim.synth_camera.presets import CAMERA_PRESETS, preset_fields
-
-    names: list[str] = []
-    files: list[tuple[str, str]] = []
-    for p in presets:
-        try:
-            preset_fields(p)  # unknown name, unreadable or invalid file: one line
-        except InputError as exc:
-            raise ValidationError(str(exc)) from None
-        if p.lower() in CAMERA_PRESETS:
-            label = p.lower()
-        else:
-            path = real_path(Path(p).expanduser())
-            label = re.sub(r"[^A-Za-z0-9_-]+", "_", path.stem) or "preset"
-            if label.lower() in CAMERA_PRESETS:
-                raise ValidationError(
-                    f"preset file {p}: its name {label!r} is a built-in preset's; rename the file"
-                )
-            files.append((label, str(path)))
-        if label in names:
-            raise ValidationError(f"preset {label!r} is given twice")
-        names.append(label)
-    return tuple(names), tuple(files)
 
 
 def _resolved_steps(config: ValidationConfig) -> dict[str, Any]:

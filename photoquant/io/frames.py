@@ -46,6 +46,7 @@ __all__ = [
     "black_level_from_dark",
     "dark_frame_model",
     "exposure_value",
+    "load_dark_stack",
     "RAW_BLACK_TOLERANCE_DN",
 ]
 
@@ -374,6 +375,19 @@ def dark_frame_model(
     """
     if manifest.dark is None:
         return None
+    frames, order = _dark_frames(manifest, "dark-frame subtraction needs", progress, workers)
+    try:
+        return characterise_dark_frames(frames, order, channels=manifest.channels)
+    except InputError as exc:
+        raise _manifest_error(manifest)(f"`dark`: {exc}") from None
+
+
+def _dark_frames(
+    manifest: CaptureManifest, need: str, progress: bool, workers: int | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``dark`` frames ``(N, M, H, W, C)`` grouped by their exposure times, and the times
+    (every frame must have one: ``need`` says what for)."""
+    assert manifest.dark is not None
     error = _manifest_error(manifest)
     times = []
     for frame in manifest.dark.frames:
@@ -381,16 +395,46 @@ def dark_frame_model(
         if t is None:
             raise error(
                 f"dark frame {frame.file} has no `exposure_s` in the manifest and no EXIF "
-                "ExposureTime: dark-frame subtraction needs each dark frame's time"
+                f"ExposureTime: {need} each dark frame's time"
             )
         times.append(float(t))
     frames, order, _, _ = _read_grouped(
         manifest.dark.frames, times, manifest, "dark", error, progress=progress, workers=workers
     )
-    try:
-        return characterise_dark_frames(frames, order, channels=manifest.channels)
-    except InputError as exc:
-        raise error(f"`dark`: {exc}") from None
+    return frames, np.asarray(order, dtype=np.float64)
+
+
+def load_dark_stack(
+    manifest: CaptureManifest, *, progress: bool = False, workers: int | None = None
+) -> ExposureStack | None:
+    """The manifest's ``dark`` frames as they are, grouped by exposure time (None without them).
+
+    Black level 0 and the saturation level at the top of the bit depth: dark
+    frames carry no light, so nothing in them is detected as clipping (a
+    camera without a pedestal gives dark frames at 0, which
+    :func:`load_stack` would read as a saturation level of 0).
+
+    Raises
+    ------
+    ManifestError
+        If a dark frame has no exposure time (manifest or EXIF), the times
+        have different numbers of repeats, or a frame does not match the
+        manifest.
+    ImageReadError
+        If a dark frame cannot be read.
+    """
+    if manifest.dark is None:
+        return None
+    frames, order = _dark_frames(manifest, "DSNU and dark current need", progress, workers)
+    n_ch = len(manifest.channels)
+    return ExposureStack(
+        frames,
+        np.asarray(order, dtype=np.float64),
+        bit_depth=manifest.bit_depth,
+        channels=manifest.channels,
+        black_level=np.zeros(n_ch),
+        saturation_level=np.full(n_ch, float(2**manifest.bit_depth - 1)),
+    )
 
 
 def load_stack(

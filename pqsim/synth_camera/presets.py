@@ -91,6 +91,7 @@ __all__ = [
     "PRESET_FORMAT",
     "PRESET_FILE",
     "camera_from_preset",
+    "is_preset_file",
     "preset_fields",
     "preset_json",
     "preset_sensitivities",
@@ -284,7 +285,8 @@ def _preset_file_problem(path: Path) -> str | None:
 PRESET_FILE = OutputKind("pqsim preset file", folder=False, problem=_preset_file_problem)
 
 
-def _is_preset_file(name: str) -> bool:
+def is_preset_file(name: str) -> bool:
+    """Whether ``name`` names a preset file (a ``.json`` name or a path), not a built-in preset."""
     return name.lower().endswith(".json") or "/" in name or "\\" in name
 
 
@@ -308,7 +310,7 @@ def preset_fields(name: str | os.PathLike[str]) -> dict[str, Any]:
         For an unknown name (listing the built-in presets), an unreadable or
         invalid file (naming the problem), or an unknown field.
     """
-    if isinstance(name, os.PathLike) or (isinstance(name, str) and _is_preset_file(name)):
+    if isinstance(name, os.PathLike) or (isinstance(name, str) and is_preset_file(name)):
         return _read_preset_file(Path(name))
     if not isinstance(name, str):
         raise InputError(f"a camera preset is a name or a .json file, got {name!r}")
@@ -342,7 +344,7 @@ def _read_preset_file(path: Path) -> dict[str, Any]:
             f"preset file {path}: unknown field(s) {sorted(unknown)}; valid: {sorted(valid)}"
         )
     base = doc.get("base", "ccd")
-    if not isinstance(base, str) or _is_preset_file(base):
+    if not isinstance(base, str) or is_preset_file(base):
         raise InputError(f"preset file {path}: `base` must name a built-in preset, got {base!r}")
     try:
         fields = dict(CAMERA_PRESETS[validate_method(base, CAMERA_PRESETS, "camera preset")])

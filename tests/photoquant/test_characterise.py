@@ -181,3 +181,17 @@ def test_neighbouring_exposures_that_do_not_overlap_fix_nothing():
     frames[0, 1] = 255
     stack = ExposureStack(frames, np.array([0.1, 1.0]), channels=("Y",))
     assert estimate_noise_from_exposures(stack, _linear_8bit_response()) is None
+
+
+def test_dark_frames_without_a_pedestal_measure_nothing_and_say_why(tmp_path):
+    """An 8-bit camera without a black level: its dark frames sit at 0 (clipped), so DSNU and
+    dark current cannot be measured; the report says so instead of failing."""
+    manifest = write_capture_set(
+        tmp_path / "set", camera_from_preset("ccd"), shape=(48, 64), n_repeats=2, seed=2,
+        dark_frames=2,
+    )  # fmt: skip
+    model = calibrate_manifest(manifest)
+    char = characterise_manifest(manifest, model)
+    assert char.quantities["dsnu_dn"] is None and char.quantities["dark_current_dn_per_s"] is None
+    assert any("dsnu: not measured (the dark frames are clipped" in n for n in char.notes)
+    assert char.quantities["gain"] is not None  # the rest is measured as usual

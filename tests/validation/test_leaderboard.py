@@ -482,3 +482,26 @@ def test_given_synthetic_manifests_are_ranked_with_their_truth(board, command, t
     assert "no ground truth" in line and "crossval" in line
     line = _one_error_line(*command("leaderboard", str(manifest), "--presets", "ccd")[::2])
     assert "not both" in line
+
+
+def test_a_preset_file_ranks_under_its_name_from_any_folder(tmp_path):
+    """A preset given as a file (a twin, a user's camera), by an absolute path: labelled by
+    its stem, simulated from the file (its capture set under the label, not inside the
+    file's path), scored beside a built-in preset; a file named like a built-in is refused."""
+    from pqsim.cli import main as pqsim_main
+
+    mycam = tmp_path / "presets" / "mycam.json"
+    mycam.parent.mkdir()
+    assert pqsim_main(["preset", "cmos", "-o", str(mycam)]) == 0
+    lb = run_leaderboard(
+        "response", methods=["Debevec 1997"], presets=["ccd", str(mycam.resolve())],
+        config=TINY, repeats=1, workdir=tmp_path / "work", progress=_quiet,
+    )  # fmt: skip
+    assert lb.presets == ("ccd", "mycam")
+    scores = lb.boards[0].entries[0].scores
+    assert scores["mycam"]["g_rms"] is not None and scores["ccd"]["g_rms"] is not None
+    assert (tmp_path / "work" / "mycam").is_dir() and mycam.is_file()
+    clash = tmp_path / "ccd.json"
+    clash.write_text(mycam.read_text())
+    with pytest.raises(PhotoquantError, match="is a built-in preset's; rename the file"):
+        run_leaderboard("response", methods=["Debevec 1997"], presets=[str(clash)], config=TINY)
