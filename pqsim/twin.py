@@ -9,9 +9,13 @@ preset (format ``pqsim.preset/1``) for :func:`~pqsim.synth_camera.presets.camera
   ``(c − black) / c_max``; the charge of a value is its linear-DN-scale value
   over the channel's gain, ``n = y(c) / K``, so that the twin's photon
   transfer is the measured one.
-- ``exposure_scale``: electrons per unit of the camera's photoquantity·s
-  (the camera's photoquantity unit: relative), the geometric mean over the
-  channels; the tables carry each channel's own sensitivity.
+- ``exposure_scale``: pqsim's convention, ``100 · full_well`` (a photoquantity
+  of 1, the analytic scenes' white chart, fills the well in 10 ms, as in the
+  built-in presets): a camera measures photoquantities up to one scale, so
+  its own unit cannot be carried, and in pqsim's unit the twin's captures
+  of pqsim's scenes span its range as the built-in cameras' do. The tables
+  carry each channel's sensitivity relative to the others (the geometric
+  mean over the channels is the reference).
 - ``noise``: one full well, read noise and dark current (the means over the
   channels of the measured ones; pqsim's sensor has one of each).
 - ``vignetting_params``: the camera's extended Goldman–Chen parameters.
@@ -45,6 +49,9 @@ __all__ = ["MAX_TABLE_POINTS", "twin_preset", "twin_preset_json"]
 
 MAX_TABLE_POINTS = 1024
 """Most points of a response table (a 16-bit response is subsampled evenly)."""
+
+PQSIM_SCALE_PER_FULL_WELL = 100.0
+"""A twin's ``exposure_scale`` over its full well (pqsim's presets' convention)."""
 
 _DEFAULT_FULL_WELL_E = 20000.0
 """The full well taken when the camera's gain was never measured (named as assumed)."""
@@ -177,6 +184,11 @@ def twin_preset(
         g_ch = float(gain[ch]) * per_channel[ch] / scale
         responses.append(_table(cam, ch, g_ch, full_well))
     assumed.append("response uncertainty (the camera stores none: the table is the estimate)")
+    assumed.append(
+        f"exposure_scale ({PQSIM_SCALE_PER_FULL_WELL:g} × the full well: pqsim's convention, a "
+        "photoquantity of 1 fills the well in 10 ms; a camera measures photoquantities up to "
+        "one scale, so its own unit is not carried)"
+    )
 
     vig = cam.vignetting
     params, _ = vig.to_params()
@@ -263,7 +275,9 @@ def twin_preset(
         "prnu_sigma_lowfreq": min(sigma_low, 0.25),
         "prnu_seed": 0,
         "bit_depth": int(cam.bit_depth),
-        "exposure_scale": scale,
+        # the camera's photoquantity unit is relative (its gauge): pqsim's convention sets
+        # it, a photoquantity of 1 filling the well in 10 ms, as in the built-in presets
+        "exposure_scale": PQSIM_SCALE_PER_FULL_WELL * full_well,
         "channels": list(cam.channels),
         "glare": glare,
         "disturbances": disturbances,
