@@ -466,9 +466,9 @@ def load_spec(path: str | Path) -> SweepSpec:
 def _preset_data(name: str, base_dir: Path, files: dict[str, Any]) -> dict[str, Any]:
     """The preset's fields as plain data (a file's read once, relative to the spec)."""
     from photoquant.utils import to_json_value
-    from pqsim.synth_camera.presets import _is_preset_file, preset_fields
+    from pqsim.synth_camera.presets import is_preset_file, preset_fields
 
-    if _is_preset_file(name):
+    if is_preset_file(name):
         if name not in files:
             p = Path(name)
             try:
