@@ -751,15 +751,17 @@ def characterise(
     if prnu is not None:  # the response's slope's share has the gain's degrees of freedom
         quantities.update({k: dataclasses.replace(q, dof=dof) for k, q in prnu.items()})
     not_measured = [k for k, q in quantities.items() if q is None]
-    why = {
-        "dsnu_dn": dark_problem or "no dark frames",
-        "dark_current_dn_per_s": dark_problem or "dark frames at fewer than two exposure times",
-        "prnu": "the camera has no sensor LUT (no flat field / irradiance scene)",
-    }
-    for key in list(not_measured):
-        for prefix, reason in why.items():
-            if key.startswith(prefix.rsplit("_", 1)[0]) and reason not in " ".join(notes):
-                notes.append(f"{prefix.rsplit('_', 1)[0]}: not measured ({reason})")
+    why = (  # (quantities' prefix, name, reason): one note per reason
+        ("dsnu", "DSNU", dark_problem or "no dark frames"),
+        ("dark_current", "dark current", dark_problem or "dark frames at one exposure time"),
+        ("prnu", "PRNU", "the camera has no sensor LUT (no flat field / irradiance scene)"),
+    )
+    missing: dict[str, list[str]] = {}
+    for prefix, name, reason in why:
+        if any(k.startswith(prefix) for k in not_measured):
+            missing.setdefault(reason, []).append(name)
+    for reason, names in missing.items():
+        notes.append(f"{' and '.join(names)}: not measured ({reason})")
     if kind == "neighbouring exposures":
         notes.append(
             "no repeats: the photon-transfer curve comes from neighbouring exposures of one "

@@ -57,6 +57,12 @@ _DEFAULT_FULL_WELL_E = 20000.0
 """The full well taken when the camera's gain was never measured (named as assumed)."""
 
 
+def _not_measured(char: Characterisation | None, name: str, needs: str) -> str:
+    """Why the characterisation did not measure ``name`` (its note), or what it needs."""
+    note = next((n for n in (char.notes if char else ()) if name in n.split(":")[0]), None)
+    return note if note else f"not measured: needs a characterisation with {needs}"
+
+
 def _mean(values: Any) -> float:
     return float(np.mean(np.asarray(values, dtype=np.float64)))
 
@@ -158,7 +164,8 @@ def twin_preset(
         dark_current = max(_mean(dark_q.value), 0.0)
     else:
         dark_current = 0.0
-        assumed.append("noise.dark_current_e_per_s (0: no dark frames at two exposure times)")
+        why = _not_measured(char, "dark current", "dark frames at two exposure times")
+        assumed.append(f"noise.dark_current_e_per_s (0: {why})")
     quantity("full_well_e")
     quantity("read_noise_dn")
 
@@ -228,7 +235,7 @@ def twin_preset(
         disturbances["dsnu_e"] = _mean(dsnu_dn) * full_well / c_max
         disturbances["dsnu_stage"] = "readout"
     else:
-        assumed.append("disturbances.dsnu_e (0: no dark frames)")
+        assumed.append(f"disturbances.dsnu_e (0: {_not_measured(char, 'DSNU', 'dark frames')})")
     if cam.defects is not None:
         size = float(cam.defects.hot.size)
         disturbances["hot_pixel_fraction"] = float(cam.defects.hot.sum()) / size
