@@ -753,15 +753,16 @@ def _pair_weights(c: np.ndarray, pairs: _PairedObservations, normalise: str) -> 
     return np.ones(pairs.n_pairs)
 
 
-def _centred_gains(
+def _pair_problem(
     pairs: _PairedObservations,
     c: np.ndarray,
     settings: _FitSettings,
     gain_index: np.ndarray,
     n_gains: int,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One channel's view gains (reference first, 1) and their std, centre held at the image's."""
-    problem = _PairProblem(
+) -> _PairProblem:
+    """The least-squares problem of one channel's values ``c`` over the pairs, with
+    ``n_gains`` free view gains (none: the views' gain indices are not passed)."""
+    return _PairProblem(
         pairs.x_n,
         pairs.y_n,
         pairs.a,
@@ -770,10 +771,21 @@ def _centred_gains(
         c[pairs.b],
         _pair_weights(c, pairs, settings.normalise),
         settings.scale_invariant,
-        gain_index[pairs.a],
-        gain_index[pairs.b],
+        gain_index[pairs.a] if n_gains else None,
+        gain_index[pairs.b] if n_gains else None,
         n_gains,
     )
+
+
+def _centred_gains(
+    pairs: _PairedObservations,
+    c: np.ndarray,
+    settings: _FitSettings,
+    gain_index: np.ndarray,
+    n_gains: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One channel's view gains (reference first, 1) and their std, centre held at the image's."""
+    problem = _pair_problem(pairs, c, settings, gain_index, n_gains)
     free = np.r_[0, 1, 2, 3, np.arange(_N_PARAMS, _N_PARAMS + n_gains)]
 
     def full(q: np.ndarray) -> np.ndarray:
@@ -1043,19 +1055,7 @@ def _fit_channel(
     prior ``settings.view_gain_sigma``); the stated covariance is clustered by
     track, as a track's pairs share its values.
     """
-    problem = _PairProblem(
-        pairs.x_n,
-        pairs.y_n,
-        pairs.a,
-        pairs.b,
-        c[pairs.a],
-        c[pairs.b],
-        _pair_weights(c, pairs, settings.normalise),
-        settings.scale_invariant,
-        gain_index[pairs.a] if n_gains else None,
-        gain_index[pairs.b] if n_gains else None,
-        n_gains,
-    )
+    problem = _pair_problem(pairs, c, settings, gain_index, n_gains)
     result, fun, cov = _solve_pairs(
         problem.residuals,
         problem.jacobian,
