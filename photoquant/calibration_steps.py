@@ -69,11 +69,7 @@ from photoquant.exposure import (
 )
 from photoquant.glare import GlareData, GlareModel, best_exposed_level
 from photoquant.merge import MergeModel, MergeResult
-from photoquant.merge.noise_aware import (
-    MAX_GAIN_ERROR,
-    estimate_noise_from_exposures,
-    estimate_noise_parameters,
-)
+from photoquant.merge.noise_aware import estimate_noise
 from photoquant.merge.uncertainty import log_variance_Debevec1997, noise_record
 from photoquant.methods import Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
@@ -730,11 +726,7 @@ def _with_lut_noise(
     and the merge is the ``"Debevec 1997"`` one (else as it is)."""
     if merge.model.method != "Debevec 1997":
         return model
-    if irradiance.n_repeats >= 2:
-        noise = estimate_noise_parameters(irradiance, merge.response)
-    else:
-        pairs = estimate_noise_from_exposures(irradiance, merge.response, name="irradiance")
-        noise = None if pairs is None else pairs.noise_parameters(MAX_GAIN_ERROR)
+    noise = estimate_noise(irradiance, merge.response, name="irradiance")
     if noise is None:
         log.note(
             "sensor LUT: the irradiance scene's frames do not fix its noise; the LUT states "
@@ -1083,13 +1075,9 @@ def _noise_record(view: ExposureStack, response: ResponseModel) -> dict[str, Any
     """The camera's gain and read noise, what :func:`photoquant.correct` propagates into a
     scene's uncertainty when the scene has no repeats of its own: a photon-transfer fit of
     a view's repeats, or with one frame per exposure of its neighbouring exposures
-    (:func:`~photoquant.merge.noise_aware.estimate_noise_from_exposures`); ``None`` where
+    (:func:`~photoquant.merge.noise_aware.estimate_noise`); ``None`` where
     neither fixes it."""
-    if view.n_repeats >= 2:
-        fitted = estimate_noise_parameters(view, response)
-    else:
-        pairs = estimate_noise_from_exposures(view, response, name="views[0]")
-        fitted = None if pairs is None else pairs.noise_parameters(MAX_GAIN_ERROR)
+    fitted = estimate_noise(view, response, name="views[0]")
     return None if fitted is None else noise_record(fitted)
 
 

@@ -39,10 +39,9 @@ from photoquant.exposure import (
 from photoquant.merge import MergeModel
 from photoquant.merge._tiled import merge_tiles
 from photoquant.merge.noise_aware import (
-    MAX_GAIN_ERROR,
     NoiseParameters,
-    estimate_noise_from_exposures,
     estimate_noise_parameters,
+    noise_from_exposures,
 )
 from photoquant.merge.uncertainty import (
     log_variance_Debevec1997,
@@ -53,6 +52,7 @@ from photoquant.merge.uncertainty import (
 )
 from photoquant.methods import resolve_method
 from photoquant.model import CameraModel
+from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
 __all__ = ["Correction", "camera_floor_log", "correct", "correct_manifest", "gain_map_f32"]
@@ -385,7 +385,7 @@ def _stated_uncertainty(
     ``notes`` gains what is not stated and why."""
     response = model.balanced_response()
     weights = merge_weights_Debevec1997(stack, response, merger.options)
-    noise = _noise_parameters(stack, model)
+    noise = _noise_parameters(stack, model, response)
     out: dict[str, Any] = {
         "noise": noise,
         "log_sigma_noise": _sigma(
@@ -442,10 +442,12 @@ def _is_identity_vignetting(model: CameraModel) -> bool:
     return bool(np.all(model.vignetting_map() == 1.0))
 
 
-def _noise_parameters(stack: ExposureStack, model: CameraModel) -> NoiseParameters:
+def _noise_parameters(
+    stack: ExposureStack, model: CameraModel, response: ResponseModel
+) -> NoiseParameters:
     """Gain and read noise: the scene's photon-transfer fit (``N ≥ 2``), else the camera's,
-    else (a camera that stores none) the scene's neighbouring exposures'."""
-    response = model.balanced_response()
+    else (a camera that stores none) the scene's neighbouring exposures' (``response``: the
+    camera's balanced response)."""
     if stack.n_repeats >= 2:
         fitted = estimate_noise_parameters(stack, response)
         if fitted is not None:
@@ -453,8 +455,7 @@ def _noise_parameters(stack: ExposureStack, model: CameraModel) -> NoiseParamete
     stored = noise_parameters_from_record(model.parameters.get("noise"), stack.n_channels)
     if stored is not None:
         return stored
-    pairs = estimate_noise_from_exposures(stack, response, name="scene")
-    noise = None if pairs is None else pairs.noise_parameters(MAX_GAIN_ERROR)
+    noise = noise_from_exposures(stack, response, name="scene")
     if noise is None:
         raise InputError(
             "no noise information for the uncertainty: the scene's repeats and neighbouring "

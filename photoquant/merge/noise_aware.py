@@ -92,8 +92,10 @@ __all__ = [
     "NoiseAwareMergeOptions",
     "NoiseParameters",
     "PhotonTransferFit",
+    "estimate_noise",
     "estimate_noise_from_exposures",
     "estimate_noise_parameters",
+    "noise_from_exposures",
     "merge_stack_NoiseAware",
 ]
 
@@ -480,6 +482,31 @@ def estimate_noise_from_exposures(
             }
         )
     return PhotonTransferFit(gains, reads, covs, points)
+
+
+def noise_from_exposures(
+    stack: ExposureStack,
+    response: ResponseModel,
+    *,
+    name: str = "frame set",
+    max_gain_error: float = MAX_GAIN_ERROR,
+) -> NoiseParameters | None:
+    """The noise of :func:`estimate_noise_from_exposures`, where it fixes every channel's
+    gain to ``max_gain_error`` (relative standard error); else ``None``."""
+    fit = estimate_noise_from_exposures(stack, response, name=name)
+    return None if fit is None else fit.noise_parameters(max_gain_error)
+
+
+def estimate_noise(
+    stack: ExposureStack, response: ResponseModel, *, name: str = "frame set"
+) -> NoiseParameters | None:
+    """A frame set's noise: the photon-transfer fit of its repeats (``N ≥ 2``,
+    :func:`estimate_noise_parameters`), else of its neighbouring exposures where that fixes
+    every gain to :data:`MAX_GAIN_ERROR` (:func:`noise_from_exposures`); ``None`` where
+    neither does."""
+    if stack.n_repeats >= 2:
+        return estimate_noise_parameters(stack, response)
+    return noise_from_exposures(stack, response, name=name)
 
 
 def estimate_noise_parameters(
