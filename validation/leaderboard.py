@@ -917,13 +917,13 @@ def run_leaderboard(
 
         known = dict(config.preset_files)
         # built-in names and preset files (a twin): labels, the files kept by path
-        names, files = preset_labels([known.get(p, p) for p in presets])
-        for p in names:
-            camera_from_preset(
-                dict(files).get(p, config.preset_source(p))
-            )  # an unknown preset is a one-line error naming the valid ones
-        presets = names
-        config = config.replace(presets=presets, preset_files=(*config.preset_files, *files))
+        presets, files = preset_labels([known.get(p, p) for p in presets])
+        config = config.replace(
+            presets=presets, preset_files=tuple({**known, **dict(files)}.items())
+        )
+        for p in presets:
+            # an unknown preset is a one-line error naming the valid ones
+            camera_from_preset(config.preset_source(p))
     t_start = time.perf_counter()
     keep = workdir is not None or shared is not None
     root = (
