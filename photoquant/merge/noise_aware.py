@@ -89,6 +89,7 @@ from photoquant.stack import ExposureStack
 from photoquant.weighting import WEIGHTING_FUNCTIONS
 
 __all__ = [
+    "MAX_PAIR_PIXELS",
     "NoiseAwareMergeOptions",
     "NoiseParameters",
     "PhotonTransferFit",
@@ -368,8 +369,128 @@ def _weighted_line(
     return coef, np.linalg.inv(xtwx) * max(chi2, 1.0)
 
 
+MAX_PAIR_PIXELS = 2**16
+"""Pixels of each frame the neighbouring-exposure fit reads at most (a regular grid): a
+photon-transfer line of two parameters per channel is fixed to a few percent by far fewer
+values than a frame has."""
+
+
+def _grid_step(height: int, width: int, max_pixels: int) -> int:
+    """The smallest stride ``s`` whose grid ``[::s, ::s]`` has at most ``max_pixels`` pixels."""
+    step = 1
+    while -(-height // step) * -(-width // step) > max_pixels:
+        step += 1
+    return step
+
+
+class _LinearScale:
+    """``y(c)`` and ``dy/dc`` of one channel: table lookups for integer values (the same
+    numbers as the interpolation, computed once per level), the interpolation otherwise."""
+
+    def __init__(self, scale: _Scale, ch: int, dtype: np.dtype) -> None:
+        self.scale, self.ch = scale, ch
+        self.tables: tuple[np.ndarray, np.ndarray] | None = None
+        if np.issubdtype(dtype, np.integer) and np.iinfo(dtype).bits <= 16:
+            codes = np.arange(int(np.iinfo(dtype).max) + 1, dtype=np.float64)
+            self.tables = (self._y(codes), _dy_dc(scale, codes, ch))
+
+    def _y(self, c: np.ndarray) -> np.ndarray:
+        return self.scale.linear(self.scale.log_inverse(c, self.ch), self.ch)
+
+    def y(self, c: np.ndarray) -> np.ndarray:
+        return self._y(c.astype(np.float64)) if self.tables is None else self.tables[0][c]
+
+    def dy_dc(self, c: np.ndarray) -> np.ndarray:
+        if self.tables is None:
+            return _dy_dc(self.scale, c.astype(np.float64), self.ch)
+        return self.tables[1][c]
+
+
+def _pair_values(ca: np.ndarray, cb: np.ndarray, r: float, lin: _LinearScale) -> np.ndarray:
+    """``(3, n)``: ``ȳ``, ``r`` and ``d² − q`` of one pair of exposures' values (see
+    :func:`estimate_noise_from_exposures`)."""
+    ya, yb = lin.y(ca), lin.y(cb)
+    d = yb / r - ya
+    ybar = 0.5 * (ya + yb / r)
+    # the ratio's error scales d with the signal: remove it by a robust slope
+    ratio = np.median(d / np.maximum(ybar, 1e-9))
+    d = d - ratio * ybar
+    q = _QUANTISATION * (lin.dy_dc(ca) ** 2 + lin.dy_dc(cb) ** 2 / r**2)
+    return np.stack([ybar, np.full(ybar.size, r), d * d - q])
+
+
+def _quantile_groups(x: np.ndarray, n_groups: int) -> np.ndarray:
+    """Each value's group among ``n_groups`` in the order of ``x``, of the sizes
+    :func:`numpy.array_split` gives its sorted order: the boundaries are order statistics
+    (found by partition, no full sort), and values tied with a boundary are split between
+    its two groups in their order in ``x``. ``1 ≤ n_groups ≤ x.size``."""
+    sizes = np.full(n_groups, x.size // n_groups)
+    sizes[: x.size % n_groups] += 1
+    kth = np.cumsum(sizes)[:-1]
+    if kth.size == 0:
+        return np.zeros(x.size, dtype=np.intp)
+    bounds = np.partition(x, kth)[kth]
+    group = np.searchsorted(bounds, x, side="right")
+    for value in np.unique(bounds):
+        tied = np.flatnonzero(x == value)
+        first = np.count_nonzero(x < value)  # the sorted position of the first tied value
+        group[tied] = np.searchsorted(kth, first + np.arange(tied.size), side="right")
+    return group
+
+
+def _binned_curve(
+    data: np.ndarray, n_bins: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs' values in quantile bins of ``ȳ``: the design rows ``(mean ȳ(1 + 1/r),
+    mean(1 + 1/r²))``, the mean ``d² − q``, its standard error and the mean ``ȳ``, of the
+    bins with at least :data:`_MIN_PAIR_VALUES` values."""
+    ybar, r, v = data
+    n_groups = min(n_bins, max(1, ybar.size // _MIN_PAIR_VALUES))
+    group = _quantile_groups(ybar, n_groups)
+    count = np.bincount(group, minlength=n_groups).astype(np.float64)
+    keep = count >= _MIN_PAIR_VALUES
+    n = np.maximum(count, 1.0)
+
+    def mean(values: np.ndarray) -> np.ndarray:
+        return np.bincount(group, weights=values, minlength=n_groups) / n
+
+    v_mean = mean(v)
+    ss = np.bincount(group, weights=(v - v_mean[group]) ** 2, minlength=n_groups)
+    se = np.sqrt(ss / np.maximum(count - 1.0, 1.0)) / np.sqrt(n)
+    design = np.stack([mean(ybar * (1 + 1 / r)), mean(1 + 1 / r**2)], axis=1)
+    return design[keep], v_mean[keep], np.maximum(se[keep], 1e-12), mean(ybar)[keep]
+
+
+def _channel_line(
+    data: np.ndarray, floor: float, n_bins: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """One channel's line ``(coef, cov)`` and its binned curve ``(x, y)``, the bins within
+    3 fitted σ of ``floor`` (the lowest trusted level, linear DN) left out and refitted."""
+    x, y, s, level = _binned_curve(data, n_bins)
+    fit = _weighted_line(x, y, s)
+    if fit is None:
+        return None
+    # values within 3 σ of the lowest trusted level are truncated there (clipped
+    # or refused), their pairs' variance too low: those bins are left out, refitted
+    sd = np.sqrt(np.maximum(fit[0][0] * level + fit[0][1], 0.0))
+    clear = level - 3.0 * sd >= floor
+    if not np.all(clear):
+        fit = _weighted_line(x[clear], y[clear], s[clear])
+        if fit is None:
+            return None
+    coef, cov = fit
+    if not coef[0] > 0:
+        return None
+    return coef, cov, x, y
+
+
 def estimate_noise_from_exposures(
-    stack: ExposureStack, response: ResponseModel, *, name: str = "frame set", n_bins: int = 24
+    stack: ExposureStack,
+    response: ResponseModel,
+    *,
+    name: str = "frame set",
+    n_bins: int = 24,
+    max_pixels: int = MAX_PAIR_PIXELS,
 ) -> PhotonTransferFit | None:
     """The photon-transfer line from neighbouring exposures of one frame each.
 
@@ -386,7 +507,8 @@ def estimate_noise_from_exposures(
     trusted level (the response's ``valid_min``) are left out and the line
     refitted: there the values are truncated (clipped, or refused below the
     level) and their pairs vary less than the line says. Uses the first
-    repeat of every exposure.
+    repeat of every exposure, on a regular grid of at most ``max_pixels``
+    pixels per frame.
 
     Parameters
     ----------
@@ -398,6 +520,9 @@ def estimate_noise_from_exposures(
         The frame set's name in the fit's ``points``.
     n_bins : int
         Bins of ``ȳ`` per channel at most.
+    max_pixels : int
+        Pixels of each frame read at most (:data:`MAX_PAIR_PIXELS`): the
+        grid ``[::s, ::s]`` with the smallest stride ``s`` that fits.
 
     Returns
     -------
@@ -409,68 +534,30 @@ def estimate_noise_from_exposures(
     scale = _Scale(response)
     sat = np.asarray(response.saturation_level, dtype=np.float64)
     lo = np.asarray(response.valid_min, dtype=np.float64)
-    frames = stack.frames[0].astype(np.float64)
-    clipped = stack.saturated(response.saturation_level) | stack.dark_clipped()
+    step = _grid_step(*stack.image_shape, max_pixels)
+    frames = stack.frames[0, :, ::step, ::step]
+    clipped = (stack.saturated(response.saturation_level) | stack.dark_clipped())[:, ::step, ::step]
+    trusted = ~clipped & (frames >= lo) & (frames < sat)
     t = np.asarray(stack.exposure_s, dtype=np.float64)
     order_t = np.argsort(t)
     n_ch = stack.n_channels
     gains, reads, covs, points = np.zeros(n_ch), np.zeros(n_ch), np.zeros((n_ch, 2, 2)), []
     for ch in range(n_ch):
+        lin = _LinearScale(scale, ch, frames.dtype)
         rows: list[np.ndarray] = []
         for a, b in zip(order_t[:-1], order_t[1:], strict=True):
-            r = t[b] / t[a]
-            ca, cb = frames[a, ..., ch].ravel(), frames[b, ..., ch].ravel()
-            ok = (
-                ~clipped[a, ..., ch].ravel()
-                & ~clipped[b, ..., ch].ravel()
-                & (ca >= lo[ch])
-                & (cb >= lo[ch])
-                & (ca < sat[ch])
-                & (cb < sat[ch])
-            )
+            ok = trusted[a, ..., ch] & trusted[b, ..., ch]
             if np.count_nonzero(ok) < 2 * _MIN_PAIR_VALUES:
                 continue
-            ya = scale.linear(scale.log_inverse(ca[ok], ch), ch)
-            yb = scale.linear(scale.log_inverse(cb[ok], ch), ch)
-            d = yb / r - ya
-            ybar = 0.5 * (ya + yb / r)
-            # the ratio's error scales d with the signal: remove it by a robust slope
-            ratio = np.median(d / np.maximum(ybar, 1e-9))
-            d = d - ratio * ybar
-            q = _QUANTISATION * (
-                _dy_dc(scale, ca[ok], ch) ** 2 + _dy_dc(scale, cb[ok], ch) ** 2 / r**2
-            )
-            rows.append(np.stack([ybar, np.full(ybar.size, r), d * d - q]))
+            ca, cb = frames[a, ..., ch][ok], frames[b, ..., ch][ok]
+            rows.append(_pair_values(ca, cb, float(t[b] / t[a]), lin))
         if not rows:
             return None
-        data = np.concatenate(rows, axis=1)
-        order = np.argsort(data[0])
-        groups = np.array_split(order, min(n_bins, max(1, order.size // _MIN_PAIR_VALUES)))
-        design, target, se, level = [], [], [], []
-        for idx in groups:
-            if idx.size < _MIN_PAIR_VALUES:
-                continue
-            ybar, r, v = data[0, idx], data[1, idx], data[2, idx]
-            design.append([float(np.mean(ybar * (1 + 1 / r))), float(np.mean(1 + 1 / r**2))])
-            target.append(float(v.mean()))
-            se.append(max(float(v.std(ddof=1)) / math.sqrt(idx.size), 1e-12))
-            level.append(float(ybar.mean()))
-        x, y, s = np.asarray(design), np.asarray(target), np.asarray(se)
-        fit = _weighted_line(x, y, s)
-        if fit is None:
-            return None
-        # values within 3 σ of the lowest trusted level are truncated there (clipped
-        # or refused), their pairs' variance too low: those bins are left out, refitted
         floor = float(scale.linear(scale.log_inverse(np.array([lo[ch]]), ch), ch)[0])
-        sd = np.sqrt(np.maximum(fit[0][0] * np.asarray(level) + fit[0][1], 0.0))
-        clear = np.asarray(level) - 3.0 * sd >= floor
-        if not np.all(clear):
-            fit = _weighted_line(x[clear], y[clear], s[clear])
-            if fit is None:
-                return None
-        coef, cov = fit
-        if not coef[0] > 0:
+        line = _channel_line(np.concatenate(rows, axis=1), floor, n_bins)
+        if line is None:
             return None
+        coef, cov, x, y = line
         gains[ch], reads[ch], covs[ch] = coef[0], coef[1], cov
         points.append(
             {
