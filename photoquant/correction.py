@@ -44,6 +44,7 @@ from photoquant.merge.noise_aware import (
     noise_from_exposures,
 )
 from photoquant.merge.uncertainty import (
+    compiled_passes_apply,
     log_variance_Debevec1997,
     log_variance_exposure_Debevec1997,
     log_variance_response_Debevec1997,
@@ -384,7 +385,13 @@ def _stated_uncertainty(
     :class:`Correction`'s fields (the merge's weights computed once for all of them);
     ``notes`` gains what is not stated and why."""
     response = model.balanced_response()
-    weights = merge_weights_Debevec1997(stack, response, merger.options)
+    # the merge's weights computed once for every part, unless the parts' compiled
+    # passes look them up themselves
+    weights = (
+        None
+        if compiled_passes_apply(stack)
+        else merge_weights_Debevec1997(stack, response, merger.options)
+    )
     noise = _noise_parameters(stack, model, response)
     out: dict[str, Any] = {
         "noise": noise,

@@ -659,7 +659,7 @@ def estimate_noise_parameters(
         f = stack.frames[:, k].reshape(n, h * w, n_ch)[:, ::stride].astype(np.int64)
         s1 = f.sum(axis=0)
         # exact integers: N·Σc² − (Σc)², then one division
-        s2 = (n * np.einsum("n...,n...->...", f, f) - s1 * s1) / (n * (n - 1))
+        s2 = (n * (f * f).sum(axis=0) - s1 * s1) / (n * (n - 1))
         m = s1 / n
         ok = ~clipped[k].reshape(h * w, n_ch)[::stride] & (m >= lo) & (m < sat)
         for ch in range(n_ch):

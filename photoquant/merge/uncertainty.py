@@ -35,13 +35,15 @@ References
 
 from __future__ import annotations
 
+import os
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from photoquant._numba import HAVE_NUMBA, compile_kernel
+from photoquant._threads import even_spans, thread_map
 from photoquant.errors import InputError
-from photoquant.merge._tables import ValueTables
+from photoquant.merge._tables import MAX_TABLE_SIZE, ValueTables
 from photoquant.merge.debevec1997 import DebevecMergeOptions, _check_inputs
 from photoquant.merge.noise_aware import NoiseParameters, _log_variance, _Scale
 from photoquant.response.model import ResponseModel
@@ -49,6 +51,7 @@ from photoquant.stack import ExposureStack
 
 __all__ = [
     "MergeWeights",
+    "compiled_passes_apply",
     "merge_weights_Debevec1997",
     "log_variance_Debevec1997",
     "log_variance_exposure_Debevec1997",
@@ -168,6 +171,14 @@ def merge_weights_Debevec1997(
     return MergeWeights(tables, weights, total)
 
 
+def compiled_passes_apply(stack: ExposureStack) -> bool:
+    """Whether the uncertainty's parts of ``stack`` run as compiled passes over its values
+    (numba installed, the values on :class:`~photoquant.merge._tables.ValueTables`): they
+    then look the merge's weights up themselves, and precomputed
+    :func:`merge_weights_Debevec1997` would only cost time."""
+    return HAVE_NUMBA and stack.n_repeats * stack.c_max < MAX_TABLE_SIZE
+
+
 def _weight_setup(
     stack: ExposureStack, response: ResponseModel, options: DebevecMergeOptions | None
 ) -> tuple[ValueTables, Any, Any]:
@@ -194,21 +205,92 @@ def _weight_setup(
     return tables, tables.table(inp.weights), inp
 
 
+def _value_shape(stack: ExposureStack) -> tuple[int, int, int]:
+    """``(H, W, C)``: the shape of a per-value result of ``stack``."""
+    return (*stack.image_shape, stack.n_channels)
+
+
+def _fused_arguments(
+    stack: ExposureStack, setup: tuple[ValueTables, Any, Any]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The compiled passes' values ``(K, H·W, C)`` (sums of the repeats: the tables'
+    indices), saturated and dark masks (empty where none) and output ``(H·W, C)``."""
+    inp = setup[2]
+    values = stack.frames[0] if stack.n_repeats == 1 else stack.repeat_sum()
+    k, h, w, c = values.shape
+    none = np.zeros((0, 0, 0), dtype=bool)
+    sat = none if inp.saturated is None else inp.saturated.reshape(k, h * w, c)
+    dark = none if inp.dark_clipped is None else inp.dark_clipped.reshape(k, h * w, c)
+    return values.reshape(k, h * w, c), sat, dark, np.empty((h * w, c))
+
+
+def _run_in_spans(
+    kernel: Any,
+    values: np.ndarray,
+    sat: np.ndarray,
+    dark: np.ndarray,
+    out: np.ndarray,
+    *tables: Any,
+) -> None:
+    """``kernel(values, *tables, sat, dark, out)`` over spans of the pixels on every CPU
+    (the kernels release the GIL; each value's result depends on that value alone)."""
+
+    def span(part: slice) -> None:
+        kernel(
+            values[:, part],
+            *tables,
+            sat[:, part] if sat.size else sat,
+            dark[:, part] if dark.size else dark,
+            out[part],
+        )
+
+    thread_map(span, even_spans(values.shape[1], 4 * (os.cpu_count() or 1)))
+
+
 def _fused_log_variance(
     stack: ExposureStack, setup: tuple[ValueTables, Any, Any], variance: Any
 ) -> np.ndarray:
     """:func:`log_variance_Debevec1997` in one compiled pass (tabulated stacks)."""
-    tables, weight_table, inp = setup
-    values = stack.frames[0] if stack.n_repeats == 1 else stack.repeat_sum()
-    k, h, w, c = values.shape
-    flat = values.reshape(k, h * w, c)
-    none = np.zeros((0, 0, 0), dtype=bool)
-    sat = none if inp.saturated is None else inp.saturated.reshape(k, h * w, c)
-    dark = none if inp.dark_clipped is None else inp.dark_clipped.reshape(k, h * w, c)
-    out = np.empty((h * w, c))
+    tables, weight_table, _ = setup
+    values, sat, dark, out = _fused_arguments(stack, setup)
     size = tables.grid.size  # values per channel on the tables
-    _weighted_variance_nb(flat, size, weight_table, tables.table(variance), sat, dark, out)
-    return out.reshape(h, w, c)
+    _run_in_spans(
+        _weighted_variance_nb, values, sat, dark, out, size, weight_table, tables.table(variance)
+    )
+    return out.reshape(_value_shape(stack))
+
+
+def _fused_response_variance(
+    stack: ExposureStack,
+    setup: tuple[ValueTables, Any, Any],
+    levels: np.ndarray,
+    factor: np.ndarray,
+    rest: np.ndarray,
+) -> np.ndarray:
+    """:func:`log_variance_response_Debevec1997` in one compiled pass (tabulated stacks):
+    the factor's columns and the rest of the diagonal tabulated as ``g`` is interpolated."""
+    tables, weight_table, _ = setup
+
+    def tabulated(rows: np.ndarray) -> np.ndarray:
+        table = tables.table(lambda v, ch: np.interp(v, levels, rows[ch]))
+        assert isinstance(table, np.ndarray)
+        return table
+
+    factor_tables = np.stack([tabulated(factor[:, r]) for r in range(factor.shape[1])])
+    values, sat, dark, out = _fused_arguments(stack, setup)
+    size = tables.grid.size
+    _run_in_spans(
+        _response_variance_nb,
+        values,
+        sat,
+        dark,
+        out,
+        size,
+        weight_table,
+        factor_tables.reshape(-1, size * stack.n_channels),
+        tabulated(rest),
+    )
+    return out.reshape(_value_shape(stack))
 
 
 def _weighted_variance_py(  # pragma: no cover - compiled by numba
@@ -236,6 +318,87 @@ def _weighted_variance_py(  # pragma: no cover - compiled by numba
 
 
 _weighted_variance_nb: Any = compile_kernel(_weighted_variance_py) if HAVE_NUMBA else None
+
+
+def _weights_py(  # pragma: no cover - compiled by numba
+    values: Any, p: int, c: int, size: int, w_table: Any, sat: Any, dark: Any, wk: Any
+) -> float:
+    """numba body: the merge's weights ``wk (K,)`` of value ``(p, c)`` (0 where saturated
+    or dark) and their sum in exposure order (as :func:`merge_weights_Debevec1997`)."""
+    n_k = values.shape[0]
+    den = 0.0
+    for k in range(n_k):
+        w = w_table[np.intp(values[k, p, c]) + c * size]
+        if (sat.size > 0 and sat[k, p, c]) or (dark.size > 0 and dark[k, p, c]):
+            w = 0.0
+        wk[k] = w
+        den = w if k == 0 else den + w
+    return den
+
+
+def _response_variance_py(  # pragma: no cover - compiled by numba
+    values: Any,
+    size: int,
+    w_table: Any,
+    f_tables: Any,
+    d_table: Any,
+    sat: Any,
+    dark: Any,
+    out: Any,
+) -> None:
+    """numba body: ``Σ_r (Σ_k w_k F_r(c̄_k) / Σ_k w_k)² + Σ_k w_k² D(c̄_k) / (Σ_k w_k)²``
+    per value, in the order of :func:`log_variance_response_Debevec1997`'s numpy path."""
+    n_k, n_p, n_c = values.shape
+    wk = np.empty(n_k)
+    idx = np.empty(n_k, dtype=np.intp)
+    for p in range(n_p):
+        for c in range(n_c):
+            den = _weights_nb(values, p, c, size, w_table, sat, dark, wk)
+            if not den > 0:
+                out[p, c] = np.nan
+                continue
+            for k in range(n_k):
+                idx[k] = np.intp(values[k, p, c]) + c * size
+            inv = 1.0 / den
+            total = 0.0
+            for r in range(f_tables.shape[0]):
+                acc = 0.0
+                for k in range(n_k):
+                    acc += wk[k] * f_tables[r, idx[k]]
+                moved = acc * inv
+                total += moved * moved
+            acc = 0.0
+            for k in range(n_k):
+                acc += wk[k] * wk[k] * d_table[idx[k]]
+            out[p, c] = total + acc * (inv * inv)
+
+
+def _exposure_variance_py(  # pragma: no cover - compiled by numba
+    values: Any, size: int, w_table: Any, rows: Any, sat: Any, dark: Any, out: Any
+) -> None:
+    """numba body: ``Σ_q (Σ_k w_k R_qk / Σ_k w_k)²`` per value (``Cov(ln t) = Rᵀ R``), in
+    the order of :func:`log_variance_exposure_Debevec1997`'s numpy path."""
+    n_k, n_p, n_c = values.shape
+    wk = np.empty(n_k)
+    for p in range(n_p):
+        for c in range(n_c):
+            den = _weights_nb(values, p, c, size, w_table, sat, dark, wk)
+            if not den > 0:
+                out[p, c] = np.nan
+                continue
+            total = 0.0
+            for q in range(rows.shape[0]):
+                acc = 0.0
+                for k in range(n_k):
+                    acc += wk[k] * rows[q, k]
+                moved = acc / den
+                total += moved * moved
+            out[p, c] = total
+
+
+_weights_nb: Any = compile_kernel(_weights_py) if HAVE_NUMBA else None
+_response_variance_nb: Any = compile_kernel(_response_variance_py) if HAVE_NUMBA else None
+_exposure_variance_nb: Any = compile_kernel(_exposure_variance_py) if HAVE_NUMBA else None
 
 
 def log_variance_response_Debevec1997(
@@ -292,9 +455,13 @@ def log_variance_response_Debevec1997(
             f"the response ({response.method!r}) carries no covariance: its method does not "
             "estimate one"
         )
-    tables, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
     levels = response.levels
     rest = np.clip(diagonal - np.sum(factor**2, axis=1), 0.0, None)
+    if weights is None and held_out_level is None and _response_variance_nb is not None:
+        setup = _weight_setup(stack, response, options)
+        if setup[0].tabulated:  # one compiled pass over the values, the same arithmetic
+            return _fused_response_variance(stack, setup, levels, factor, rest)
+    tables, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
 
     def tabulated(rows: np.ndarray) -> Any:
         return tables.table(lambda v, ch: np.interp(v, levels, rows[ch]))
@@ -353,6 +520,14 @@ def log_variance_exposure_Debevec1997(
         raise InputError(f"`log_cov` must be ({k}, {k}) for the stack's exposures, got {cov.shape}")
     vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
     rows = (vecs * np.sqrt(np.clip(vals, 0.0, None))).T  # Cov = rowsᵀ rows
+    if weights is None and _exposure_variance_nb is not None:
+        setup = _weight_setup(stack, response, options)
+        if setup[0].tabulated:  # one compiled pass over the values, the same arithmetic
+            values, sat, dark, out = _fused_arguments(stack, setup)
+            _run_in_spans(
+                _exposure_variance_nb, values, sat, dark, out, setup[0].grid.size, setup[1], rows
+            )
+            return out.reshape(_value_shape(stack))
     _, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
     total = np.zeros_like(den)
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -1462,8 +1462,9 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
         y_n = np.repeat((np.arange(h, dtype=np.float64) + 0.5) / h, w)
         out = np.empty((h, w, self.params.shape[0]))
         for ch, (p, cov) in enumerate(zip(self.params, self.param_covariance, strict=True)):
-            v, jac = _model_and_jacobian(x_n, y_n, p)
-            var = np.einsum("ij,jk,ik->i", jac, cov, jac) / (v * v)
+            v, rows = _model_and_jacobian_rows(x_n, y_n, p)  # (6, N)
+            # gᵀ Cov g per pixel as Σ_j g_j (Cov g)_j: one matrix product, one reduction
+            var = np.einsum("jn,jn->n", rows, cov @ rows) / (v * v)
             out[..., ch] = np.maximum(var, 0.0).reshape(h, w)
         return out
 

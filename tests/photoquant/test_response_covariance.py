@@ -291,3 +291,49 @@ def test_correct_states_the_refined_times_component():
     # nominal times kept: nothing stated for them
     kept = pq.correct(stack, model, uncertainty=True, refine_exposures=False)
     assert kept.exposures is None and kept.log_sigma_exposure is None
+
+
+@pytest.mark.parametrize("part", ["response", "exposure"])
+def test_the_compiled_calibration_parts_give_the_numpy_bits(monkeypatch, part):
+    """The response's and the exposure times' parts, computed in compiled passes over the
+    values, equal the numpy path over the merge's weights to the bit (clipped and dark
+    values, a value clipped in every exposure, N = 3 repeats, three channels)."""
+    import photoquant.merge.uncertainty as uncertainty
+    from photoquant.merge.uncertainty import (
+        log_variance_exposure_Debevec1997,
+        merge_weights_Debevec1997,
+    )
+
+    if uncertainty._weights_nb is None:
+        pytest.skip("numba is not installed: the numpy path is the only one")
+    rng = np.random.default_rng(11)
+    frames = rng.integers(0, 256, size=(3, 4, 12, 10, 3)).astype(np.uint8)
+    frames[:, 1, :2] = 255
+    frames[:, 2, -2:] = 0
+    frames[:, :, 5, 5] = 255
+    stack = ExposureStack(frames, [0.01, 0.03, 0.1, 0.3], bit_depth=8)
+    one = _response_with_covariance(rng)
+    response = ResponseModel(
+        "given",
+        one.levels,
+        np.repeat(one.log_inverse_response, 3, axis=0),
+        np.full(3, 255.0),
+        covariance_factor=np.repeat(one.covariance_factor, 3, axis=0) * [[[1.0]], [[0.5]], [[2]]],
+        covariance_diagonal=np.repeat(one.covariance_diagonal, 3, axis=0),
+    )
+    a = rng.normal(size=(4, 4)) * 0.01
+    log_cov = a @ a.T
+    log_cov[2] = log_cov[:, 2] = np.nan  # an exposure kept at its label
+
+    def variance(**kw):
+        if part == "response":
+            return log_variance_response_Debevec1997(stack, response, **kw)
+        return log_variance_exposure_Debevec1997(stack, response, log_cov, **kw)
+
+    fused = variance()
+    plain = variance(weights=merge_weights_Debevec1997(stack, response))
+    monkeypatch.setattr(uncertainty, f"_{part}_variance_nb", None)
+    again = variance()
+    np.testing.assert_array_equal(fused, plain)
+    np.testing.assert_array_equal(fused, again)
+    assert np.isnan(fused).any() and (np.nan_to_num(fused) > 0).any()
