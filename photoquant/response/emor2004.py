@@ -10,9 +10,8 @@ tabulated on 1024 evenly spaced exposures. ``M = (c − black)/(saturation −
 black)`` is the normalised value, so the clipping level is ``f(1) = 1`` and
 the gauge is ``g = 0`` there.
 
-The coefficients are the maximum-likelihood fit in the **values** (the
-default, ``objective="values"``): with an unknown log exposure ``x_p`` per
-sampled pixel,
+The coefficients are the maximum-likelihood fit in the **values**: with an
+unknown log exposure ``x_p`` per sampled pixel,
 
     min over c, x   Σ_kp w_kp [ M_kp − f(e^{x_p} t_k) ]²,   w_kp = 1 / Var(M̄_kp),
 
@@ -29,23 +28,19 @@ joint Gauss–Newton steps in ``(c, x)`` (``rounds`` in all), started from the
 projection on the basis of a Debevec 1997 estimate of the same stack
 [Debevec1997]_.
 
-``objective="log-ratio"`` keeps the earlier fit, which minimises the
-weighted squared log-ratio constraints of pairs of usable values of one
-pixel at exposure times ``t_a < t_b``::
-
-    Σ w_a w_b [ ln f⁻¹(M_b) − ln f⁻¹(M_a) − ln(t_b / t_a) ]²,
-
-where ``f⁻¹`` is the tabulated ``f`` inverted by linear interpolation and
-``w`` the hat weights (eq. 6 of [PQ]_). It puts the noise inside
+Why the values and not the pairs' log ratios: a fit of the weighted squared
+log-ratio constraints of pairs of usable values of one pixel at exposure
+times ``t_a < t_b``, ``Σ w_a w_b [ln f⁻¹(M_b) − ln f⁻¹(M_a) − ln(t_b/t_a)]²``
+(``w`` the hat weights of eq. 6 of [PQ]_), puts the noise inside
 ``ln f⁻¹``: at dark values, where a few DN of noise span a large part of
 ``ln E``, the mean of ``ln f⁻¹(M̄)`` is biased (errors in variables) and the
-pairs' residuals are far from equal in variance; on cameras whose responses
+pairs' residuals are far from equal in variance. On cameras whose responses
 are drawn from the EMoR space itself (pqsim ``emor``, ``emor-1``, an
-optics-free log-uniform scene, 160×120, N = 2) it recovered ``g`` 2–3× worse
-than Debevec 1997 (worst channel 0.019 / 0.027 rms against 0.0036 /
-0.0085), where the values fit gets 0.0020 / 0.0028 (measured 2026-12-01). The log-ratio fit's objective at the true
-coefficients was *above* its minimum by 6 % (blue, ``emor``): the objective,
-not the solver, was wrong.
+optics-free log-uniform scene, 160×120, N = 2) such a fit recovered ``g``
+2–3× worse than Debevec 1997 (worst channel 0.019 / 0.027 rms against
+0.0036 / 0.0085), the values fit 0.0020 / 0.0028 (measured 2026-12-01); its
+objective at the true coefficients was *above* its minimum by 6 % (blue,
+``emor``): the objective, not the solver, was wrong.
 
 Notes
 -----
@@ -60,26 +55,10 @@ Notes
   to O(1)). It stops when no ``x_p`` and no ``c_k`` moves by more than
   ``1e-7`` (12-bit data need it: ``1e-4`` in ``x`` is a third of a DN at the
   top) or after ``rounds`` rounds (measured: 5–6 rounds). A local method:
-  the Debevec start puts it in the right basin, where the log-ratio fit's
-  two starts (below) missed a camera with a near-flat stretch (``emor-1``
-  red: 0.027 rms from both, 0.0021 from the Debevec start).
-* **Log-ratio solver**: sequential quadratic programming in the ``K`` coefficients
-  (:func:`scipy.optimize.minimize`, SLSQP) with the analytic gradient (the derivative of the interpolated
-  inverse, :func:`_log_inverse_and_jacobian`) and monotonicity as the 1023
-  linear constraints ``Δf_i = Δf0_i + Σ c_k Δh_{k,i} ≥ 0``. (A penalty on
-  the decreasing steps with a trust-region solver was tried first: the
-  hinge makes it stiff, and a linear truth, whose best few-component
-  approximation decreases near the ends, took minutes.) A result that
-  decreases by more than a tenth of a 16-bit step (``1.5e-6``) is an error;
-  smaller dips, which no data can see, are flattened.
-* **Starts**: the log-ratio constraints fix ``f⁻¹`` only up to a scale over
-  the data's range (``f(1) = 1`` fixes it through the model's shape near
-  saturation), and the objective has several minima: from ``c = 0`` (the
-  mean response, concave) a linear camera lands on a concave curve whose
-  ``g`` is 0.03–0.05 off. The fit is therefore started both from ``c = 0``
-  and from the power law ``E^(1/γ)`` that fits the pairs (closed form, as
-  the ``"Gamma"`` method) projected on the basis, and the lower minimum is
-  kept.
+  the Debevec start puts it in the right basin, where starts from the mean
+  response and from a power law fitted to the pairs missed a camera with a
+  near-flat stretch (``emor-1`` red: 0.027 rms from both, 0.0021 from the
+  Debevec start).
 * **What few components can fit**: the EMoR basis describes measured
   camera curves; a pure power law ``E^(1/2.2)`` (infinite slope at 0) is
   approximated within 1.4 % of the range by 5 components and 0.35 % by 8
@@ -157,7 +136,6 @@ __all__ = [
     "emor_response",
     "OBJECTIVES",
     "CHANNEL_MODES",
-    "fit_emor_coefficients",
     "fit_emor_values",
     "value_variance",
 ]
@@ -165,8 +143,8 @@ __all__ = [
 EMOR_N_COMPONENTS = 25
 """Principal components shipped (those of the database's ``emor.txt``)."""
 
-OBJECTIVES = ("values", "log-ratio")
-"""The fits of the ``"EMoR 2004"`` method (option ``objective``)."""
+OBJECTIVES = ("values",)
+"""The fits of the ``"EMoR 2004"`` method (option ``objective``): the values fit."""
 
 CHANNEL_MODES = ("separate", "shared")
 """One EMoR curve per channel, or one for every channel (option ``channels``)."""
@@ -232,9 +210,9 @@ class EMoRResponseOptions:
     min_support : float
         Values below the ``min_support``-th lowest used one are outside the
         fitted range (``valid_min``).
-    objective : {"values", "log-ratio"}
-        The maximum-likelihood fit in the values (default) or the earlier
-        fit of the pairs' log ratios (see the module notes).
+    objective : {"values"}
+        The maximum-likelihood fit in the values (the one fit; the module
+        notes say why not the pairs' log ratios).
     rounds : int
         Most rounds of the values fit (two alternating, then joint Gauss–Newton).
     channels : {"separate", "shared"}
@@ -277,122 +255,10 @@ class EMoRResponseOptions:
             raise InputError(
                 f"unknown EMoR robust loss {self.robust!r}; valid: {', '.join(ROBUST_LOSSES)}"
             )
-        if self.robust != "none" and self.objective != "values":
-            raise InputError("a robust EMoR fit needs objective='values'")
         if self.channels not in CHANNEL_MODES:
             raise InputError(
                 f"unknown EMoR channels {self.channels!r}; valid: {', '.join(CHANNEL_MODES)}"
             )
-
-
-def fit_emor_coefficients(
-    m_a: np.ndarray,
-    m_b: np.ndarray,
-    log_ratio: np.ndarray,
-    weights: np.ndarray,
-    n_components: int,
-    *,
-    max_iterations: int = 200,
-) -> tuple[np.ndarray, float, int, bool]:
-    """EMoR coefficients from pairs of normalised values and their log exposure ratios.
-
-    Parameters
-    ----------
-    m_a, m_b : ndarray, shape (n,)
-        Normalised values in ``(0, 1)`` at the shorter and the longer exposure.
-    log_ratio : ndarray, shape (n,)
-        ``ln(t_b / t_a)``.
-    weights : ndarray, shape (n,)
-        Non-negative pair weights.
-    n_components : int
-        ``K``.
-    max_iterations : int
-        Most iterations of the solver.
-
-    Returns
-    -------
-    coefficients : ndarray, shape (K,)
-    residual_rms : float
-        Weighted RMS of the log-ratio residuals (ln units).
-    iterations : int
-        Iterations the solver used.
-    converged : bool
-        Whether it converged within ``max_iterations``.
-    """
-    e, f0, h = emor_basis()
-    hk = h[:n_components]
-    keep = weights > 0
-    m_a, m_b, log_ratio = m_a[keep], m_b[keep], log_ratio[keep]
-    sw = np.sqrt(weights[keep])
-    if sw.size < n_components:
-        raise CalibrationError(
-            f"{sw.size} weighted exposure pairs cannot fix {n_components} EMoR coefficients"
-        )
-    total = float(np.sum(sw**2))
-
-    def objective(c: np.ndarray) -> tuple[float, np.ndarray]:
-        f = f0 + c @ hk
-        la, ja = _log_inverse_and_jacobian(f, hk, e, m_a)
-        lb, jb = _log_inverse_and_jacobian(f, hk, e, m_b)
-        r = sw * (lb - la - log_ratio)
-        return float(r @ r) / total, 2.0 * ((r * sw) @ (jb - ja)) / total
-
-    d_h = np.diff(hk, axis=1).T  # Δf = Δf0 + Δh·c ≥ 0 on every step of the grid
-    d_f0 = np.diff(f0)
-    # two starts: the mean response, and the power law that fits the pairs
-    # (closed form) projected on the basis; the lower minimum is kept
-    d_m = np.log(m_b) - np.log(m_a)
-    slope = float(np.sum(sw**2 * d_m * log_ratio) / np.sum(sw**2 * log_ratio**2))
-    starts = [np.zeros(n_components)]
-    if slope > 0:
-        power = e ** min(max(slope, 0.05), 20.0)
-        starts.append(hk @ (power - f0))  # the basis is orthonormal: least squares
-    best = None
-    for x0 in starts:
-        res = scipy.optimize.minimize(
-            objective,
-            x0,
-            jac=True,
-            method="SLSQP",
-            constraints=[{"type": "ineq", "fun": lambda c: d_f0 + d_h @ c, "jac": lambda _c: d_h}],
-            options={"maxiter": int(max_iterations), "ftol": 1e-14},
-        )
-        feasible = np.min(d_f0 + d_h @ res.x) >= -_INVISIBLE_DIP
-        if feasible and (best is None or res.fun < best.fun):
-            best = res
-    if best is None:
-        raise CalibrationError(f"the {n_components}-component EMoR fit found no monotone response")
-    res = best
-    c = res.x
-    f = f0 + c @ hk
-    if not res.success and res.status != 9:  # 9: iteration limit, reported below
-        raise CalibrationError(f"the EMoR fit failed: {res.message}")
-    if np.min(np.diff(f)) < -_INVISIBLE_DIP:
-        raise CalibrationError(
-            f"the {n_components}-component EMoR fit decreases (by {-np.min(np.diff(f)):.2g})"
-        )
-    return c, float(np.sqrt(res.fun)), int(res.nit), bool(res.success)
-
-
-def _log_inverse_and_jacobian(
-    f: np.ndarray, hk: np.ndarray, e: np.ndarray, m: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """``ln f⁻¹(m)`` of the linearly interpolated table and its derivative in the coefficients.
-
-    On the segment ``[E_i, E_{i+1}]`` holding ``m``,
-    ``E* = E_i + ΔE (m − f_i) / Δf_i``, whence
-    ``∂E*/∂c_k = −ΔE/Δf_i · [(1 − u) h_k(E_i) + u h_k(E_{i+1})]`` with
-    ``u = (m − f_i)/Δf_i``: the component at ``E*`` over the local slope.
-    """
-    f_inc = np.maximum.accumulate(f) + 1e-12 * e
-    i = np.clip(np.searchsorted(f_inc, m, side="right") - 1, 0, e.size - 2)
-    df = np.maximum(f_inc[i + 1] - f_inc[i], 1e-12)
-    u = (m - f_inc[i]) / df
-    de = e[i + 1] - e[i]
-    e_star = np.maximum(e[i] + de * u, 1e-300)
-    h_star = hk[:, i] * (1 - u) + hk[:, i + 1] * u  # (K, n)
-    jac = (-(de / df) * h_star / e_star).T  # ∂ ln E* / ∂c, (n, K)
-    return np.log(e_star), jac
 
 
 def value_variance(stack: ExposureStack) -> list[np.ndarray] | None:
@@ -655,23 +521,19 @@ def characterise_response_EMoR2004(
     StepFit
         A :class:`~photoquant.response.model.ResponseModel` with
         ``params["coefficients"]`` (``c_1 … c_K`` per channel), and the
-        report (pairs, residual RMS: in normalised values for the values fit,
-        in ln units for the log-ratio fit; rounds or solver iterations,
-        convergence).
+        report (pairs, residual RMS in normalised values, rounds, convergence).
     """
     opts = options or EMoRResponseOptions()
     gen = as_generator(rng)
     samples = channel_samples(stack, opts.n_samples, gen)
     wfun = PAIR_WEIGHTINGS[validate_method(opts.weighting, PAIR_WEIGHTINGS, "weighting")]
-    values_fit = opts.objective == "values"
-    if values_fit:
-        variance = value_variance(stack)
-        starts = _debevec_start(stack, samples, opts.n_components, gen)
+    variance = value_variance(stack)
+    starts = _debevec_start(stack, samples, opts.n_components, gen)
     e, _, _ = emor_basis()
     shared = opts.channels == "shared" and len(samples) > 1
     groups = [list(range(len(samples)))] if shared else [[ch] for ch in range(len(samples))]
     coefficients: list[np.ndarray] = [np.zeros(0)] * len(samples)
-    rms, n_pairs, nit, converged = [], [], [], []
+    rms, n_pairs, nit = [], [], []
     vmin = [0.0] * len(samples)
     for group in groups:
         parts = []
@@ -680,45 +542,28 @@ def characterise_response_EMoR2004(
             k_a, k_b, p = exposure_pairs(s.valid)
             w_val = wfun(s.values, s.black, s.saturation)
             w_m = np.where(s.valid, 1.0, 0.0)
-            if values_fit and variance is not None:
+            if variance is not None:
                 span = s.saturation - s.black
                 levels = np.arange(variance[ch].size)
                 w_m = np.where(s.valid, span**2 / np.interp(s.values, levels, variance[ch]), 0.0)
-            parts.append((s, k_a, k_b, p, w_val[k_a, p] * w_val[k_b, p], w_m))
-        if values_fit:
-            # the group's pixels side by side: one curve, a log exposure per pixel and channel
-            start = np.mean([starts[ch] for ch in group], axis=0)
-            c, r, n = fit_emor_values(
-                np.concatenate([s.normalised for s, *_ in parts], axis=1),
-                np.concatenate([w_m for *_, w_m in parts], axis=1),
-                samples[group[0]].exposure_s,
-                start,
-                rounds=opts.rounds,
-                max_iterations=opts.max_iterations,
-                robust=opts.robust,
-            )
-            ok = True
-        else:
-            log_t = np.log(samples[group[0]].exposure_s)
-            c, r, n, ok = fit_emor_coefficients(
-                np.concatenate([s.normalised[k_a, p] for s, k_a, _, p, _, _ in parts]),
-                np.concatenate([s.normalised[k_b, p] for s, _, k_b, p, _, _ in parts]),
-                np.concatenate([log_t[k_b] - log_t[k_a] for _, k_a, k_b, _, _, _ in parts]),
-                np.concatenate([wp for *_, wp, _ in parts]),
-                opts.n_components,
-                max_iterations=opts.max_iterations,
-            )
-        for ch, (s, k_a, k_b, p, wp, w_m) in zip(group, parts, strict=True):
+            parts.append((s, w_val[k_a, p] * w_val[k_b, p], w_m))
+        # the group's pixels side by side: one curve, a log exposure per pixel and channel
+        start = np.mean([starts[ch] for ch in group], axis=0)
+        c, r, n = fit_emor_values(
+            np.concatenate([s.normalised for s, *_ in parts], axis=1),
+            np.concatenate([w_m for *_, w_m in parts], axis=1),
+            samples[group[0]].exposure_s,
+            start,
+            rounds=opts.rounds,
+            max_iterations=opts.max_iterations,
+            robust=opts.robust,
+        )
+        for ch, (s, wp, w_m) in zip(group, parts, strict=True):
             coefficients[ch] = c
             rms.append(r)
             n_pairs.append(int(np.count_nonzero(wp > 0)))
             nit.append(n)
-            converged.append(ok)
-            if values_fit:
-                used = s.values[w_m > 0]
-            else:
-                used = np.concatenate([s.values[k_a, p][wp > 0], s.values[k_b, p][wp > 0]])
-            vmin[ch] = lowest_supported(used, opts.min_support)
+            vmin[ch] = lowest_supported(s.values[w_m > 0], opts.min_support)
     curves = [np.maximum.accumulate(emor_response(c)) for c in coefficients]
     model = response_model(
         "EMoR 2004",
@@ -740,7 +585,7 @@ def characterise_response_EMoR2004(
         "n_pairs": np.asarray(n_pairs),
         "residual_rms": np.asarray(rms),
         "iterations": np.asarray(nit),
-        "converged": np.asarray(converged),
+        "converged": np.ones(len(rms), dtype=bool),
         "valid_min": model.valid_min,
     }
     return StepFit(model, report)

@@ -312,3 +312,22 @@ def test_a_sample_that_cannot_decide_falls_back_to_every_pixel():
     tiny = refine_exposure_times(stack, levels, g, cam.saturation_dn, max_pixels=40)
     np.testing.assert_array_equal(tiny.exposure_s, every.exposure_s)
     np.testing.assert_array_equal(tiny.n_values, every.n_values)
+
+
+def test_a_refinements_derived_quantities_follow_from_its_fields():
+    """``std_s`` is each refined time times its ``ln`` standard deviation and
+    ``relative_change`` the refined time over the label, less one."""
+    from photoquant.exposure import ExposureRefinement
+
+    ref = ExposureRefinement(
+        exposure_s=np.array([0.011, 0.0195]),
+        nominal_s=np.array([0.01, 0.02]),
+        log_std=np.array([0.02, 0.01]),
+        refined=np.array([True, True]),
+        n_values=np.array([100, 100]),
+        residual_rms=0.01,
+        gauge="geometric mean",
+        iterations=3,
+    )
+    np.testing.assert_allclose(ref.std_s, [0.00022, 0.000195])
+    np.testing.assert_allclose(ref.relative_change, [0.1, -0.025])

@@ -165,7 +165,7 @@ def test_bad_robust_options_are_named(options, message):
 def test_emor_robust_options_are_checked():
     with pytest.raises(InputError, match="unknown EMoR robust loss"):
         EMoRResponseOptions(robust="l2")
-    with pytest.raises(InputError, match="objective='values'"):
+    with pytest.raises(InputError, match="unknown EMoR objective 'log-ratio'; valid: values"):
         EMoRResponseOptions(robust="huber", objective="log-ratio")
 
 
