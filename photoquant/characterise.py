@@ -82,6 +82,7 @@ from photoquant.errors import InputError
 from photoquant.io.outputs import OutputKind, folder_of_kind
 from photoquant.merge.noise_aware import (
     _QUANTISATION,
+    PhotonTransferFit,
     _dy_dc,
     _Scale,
     estimate_noise_from_exposures,
@@ -434,6 +435,39 @@ def _noise_batches(
     return np.asarray(gains), np.asarray(reads), how
 
 
+def _combined_pair_fits(
+    fits: list[PhotonTransferFit],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, str]:
+    """Gain and read variance from the frame sets' neighbouring-exposure fits, with their
+    standard uncertainties, degrees of freedom and how they were evaluated.
+
+    One frame set: its fit and the fit's covariance. Several: their mean, the
+    uncertainty the larger of the scatter between them (``n − 1`` degrees of freedom)
+    and the fits' own combined error. Through a recovered response a frame set's line
+    carries the response's slope error at the levels it sees, which its own covariance
+    does not: a uniform field, whose values sit at one level per exposure, read a
+    gain half the camera's where the views read it within 10 % (a 12-bit linear camera,
+    the response recovered from one frame per exposure); the scatter between frame sets
+    sees that, the inverse-variance mean would trust the narrow wrong one.
+    """
+    gs = np.array([f.gain for f in fits])
+    rs = np.array([f.read_variance for f in fits])
+    fit_u_g = 1.0 / np.sqrt(np.sum([1.0 / f.covariance[:, 0, 0] for f in fits], axis=0))
+    fit_u_r2 = 1.0 / np.sqrt(np.sum([1.0 / f.covariance[:, 1, 1] for f in fits], axis=0))
+    if len(fits) == 1:
+        return gs[0], fit_u_g, rs[0], fit_u_r2, math.inf, "the fit's covariance"
+    g, u_g = _mean_se(gs)
+    r2, u_r2 = _mean_se(rs)
+    return (
+        g,
+        np.maximum(u_g, fit_u_g),
+        r2,
+        np.maximum(u_r2, fit_u_r2),
+        float(len(fits) - 1),
+        "their mean, the uncertainty from the scatter between them",
+    )
+
+
 def _mean_se(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     g = values.shape[0]
     return values.mean(axis=0), values.std(axis=0, ddof=1) / math.sqrt(g)
@@ -686,18 +720,10 @@ def characterise(
                 "no frame set can fix a photon-transfer curve: it needs repeats of an "
                 "exposure, or neighbouring exposures whose values overlap"
             )
-        gs = np.array([f.gain for f in fits])
-        rs = np.array([f.read_variance for f in fits])
-        w_g = np.array([1.0 / f.covariance[:, 0, 0] for f in fits])
-        w_r = np.array([1.0 / f.covariance[:, 1, 1] for f in fits])
-        g = (w_g * gs).sum(axis=0) / w_g.sum(axis=0)
-        u_g = 1.0 / np.sqrt(w_g.sum(axis=0))
-        r2 = (w_r * rs).sum(axis=0) / w_r.sum(axis=0)
-        u_r2 = 1.0 / np.sqrt(w_r.sum(axis=0))
-        dof = math.inf
+        g, u_g, r2, u_r2, dof, spread = _combined_pair_fits(fits)
         how = (
             "the residuals between neighbouring exposures of one frame each (no repeats), "
-            f"{len(fits)} frame set(s); the fit's covariance"
+            f"{len(fits)} frame set(s); {spread}"
         )
         for f in fits:
             points += f.points
