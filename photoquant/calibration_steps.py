@@ -69,7 +69,12 @@ from photoquant.exposure import (
 )
 from photoquant.glare import GlareData, GlareModel, best_exposed_level
 from photoquant.merge import MergeModel, MergeResult
-from photoquant.merge.noise_aware import estimate_noise
+from photoquant.merge.noise_aware import (
+    MAX_GAIN_ERROR,
+    combine_photon_transfer_fits,
+    estimate_noise,
+    estimate_noise_from_exposures,
+)
 from photoquant.merge.uncertainty import log_variance_Debevec1997, noise_record
 from photoquant.methods import Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
@@ -948,7 +953,7 @@ def assemble_camera(
         "exposure_floor_log": float(exposures.floor_log),
         "n_views": len(views),
         "white_roi": None if white_roi is None else [int(v) for v in white_roi],
-        "noise": _noise_record(views[0], response.model),
+        "noise": _noise_record(views, response.model),
     }
     ref = views[0]
     height, width = ref.image_shape
@@ -1071,13 +1076,25 @@ def fit_glare_step(
     return _checked_fit(method.function(data, options), method, GlareModel)
 
 
-def _noise_record(view: ExposureStack, response: ResponseModel) -> dict[str, Any] | None:
+def _noise_record(views: Sequence[ExposureStack], response: ResponseModel) -> dict[str, Any] | None:
     """The camera's gain and read noise, what :func:`photoquant.correct` propagates into a
     scene's uncertainty when the scene has no repeats of its own: a photon-transfer fit of
-    a view's repeats, or with one frame per exposure of its neighbouring exposures
-    (:func:`~photoquant.merge.noise_aware.estimate_noise`); ``None`` where
-    neither fixes it."""
-    fitted = estimate_noise(view, response, name="views[0]")
+    view 0's repeats (:func:`~photoquant.merge.noise_aware.estimate_noise_parameters`), or
+    with one frame per exposure of every view's neighbouring exposures, combined with the
+    scatter between the views
+    (:func:`~photoquant.merge.noise_aware.combine_photon_transfer_fits`), kept where it
+    fixes every gain to :data:`~photoquant.merge.noise_aware.MAX_GAIN_ERROR`; ``None``
+    where neither fixes it."""
+    if views[0].n_repeats >= 2:
+        fitted = estimate_noise(views[0], response, name="views[0]")
+    else:
+        fits = [
+            fit
+            for i, view in enumerate(views)
+            if (fit := estimate_noise_from_exposures(view, response, name=f"views[{i}]"))
+        ]
+        line = combine_photon_transfer_fits(fits) if fits else None
+        fitted = None if line is None else line.noise_parameters(MAX_GAIN_ERROR)
     return None if fitted is None else noise_record(fitted)
 
 

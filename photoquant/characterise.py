@@ -82,9 +82,9 @@ from photoquant.errors import InputError
 from photoquant.io.outputs import OutputKind, folder_of_kind
 from photoquant.merge.noise_aware import (
     _QUANTISATION,
-    PhotonTransferFit,
     _dy_dc,
     _Scale,
+    combine_photon_transfer_fits,
     estimate_noise_from_exposures,
     estimate_noise_parameters,
 )
@@ -435,39 +435,6 @@ def _noise_batches(
     return np.asarray(gains), np.asarray(reads), how
 
 
-def _combined_pair_fits(
-    fits: list[PhotonTransferFit],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, str]:
-    """Gain and read variance from the frame sets' neighbouring-exposure fits, with their
-    standard uncertainties, degrees of freedom and how they were evaluated.
-
-    One frame set: its fit and the fit's covariance. Several: their mean, the
-    uncertainty the larger of the scatter between them (``n − 1`` degrees of freedom)
-    and the fits' own combined error. Through a recovered response a frame set's line
-    carries the response's slope error at the levels it sees, which its own covariance
-    does not: a uniform field, whose values sit at one level per exposure, read a
-    gain half the camera's where the views read it within 10 % (a 12-bit linear camera,
-    the response recovered from one frame per exposure); the scatter between frame sets
-    sees that, the inverse-variance mean would trust the narrow wrong one.
-    """
-    gs = np.array([f.gain for f in fits])
-    rs = np.array([f.read_variance for f in fits])
-    fit_u_g = 1.0 / np.sqrt(np.sum([1.0 / f.covariance[:, 0, 0] for f in fits], axis=0))
-    fit_u_r2 = 1.0 / np.sqrt(np.sum([1.0 / f.covariance[:, 1, 1] for f in fits], axis=0))
-    if len(fits) == 1:
-        return gs[0], fit_u_g, rs[0], fit_u_r2, math.inf, "the fit's covariance"
-    g, u_g = _mean_se(gs)
-    r2, u_r2 = _mean_se(rs)
-    return (
-        g,
-        np.maximum(u_g, fit_u_g),
-        r2,
-        np.maximum(u_r2, fit_u_r2),
-        float(len(fits) - 1),
-        "their mean, the uncertainty from the scatter between them",
-    )
-
-
 def _mean_se(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     g = values.shape[0]
     return values.mean(axis=0), values.std(axis=0, ddof=1) / math.sqrt(g)
@@ -709,9 +676,13 @@ def characterise(
                 points += _ptc_points(stack, camera, name)
         kind = "repeats"
     else:
+        # the views where there are any: the response was recovered from their pairs, whose
+        # time ratios its level errors cancel at; a scene bracketed at other ratios reads
+        # them as noise (a 12-bit linear camera's test scene: gains 2-4x the camera's)
+        pairs = [(n, s) for n, s in named if n.startswith("views[")] or named
         fits = [
             f
-            for n, s in named
+            for n, s in pairs
             if s.n_exposures >= 2
             and (f := estimate_noise_from_exposures(s, camera.response, name=n))
         ]
@@ -720,7 +691,14 @@ def characterise(
                 "no frame set can fix a photon-transfer curve: it needs repeats of an "
                 "exposure, or neighbouring exposures whose values overlap"
             )
-        g, u_g, r2, u_r2, dof, spread = _combined_pair_fits(fits)
+        line = combine_photon_transfer_fits(fits)
+        g, r2, dof = line.gain, line.read_variance, line.dof
+        u_g, u_r2 = np.sqrt(line.covariance[:, 0, 0]), np.sqrt(line.covariance[:, 1, 1])
+        spread = (
+            "the fit's covariance"
+            if len(fits) == 1
+            else "their mean, the uncertainty from the scatter between them"
+        )
         how = (
             "the residuals between neighbouring exposures of one frame each (no repeats), "
             f"{len(fits)} frame set(s); {spread}"

@@ -143,6 +143,11 @@ def detect_saturation_levels_processed(
         counts = np.bincount(values[:, ch], minlength=c_max + 1)
         lo = max(c_max + 1 - int(window), 2 * span)
         peak = lo + int(np.argmax(counts[lo:]))
+        if peak == int(values[:, ch].max()):
+            # a pile at the maximum itself is exact: the exact detector judged it (with
+            # its own background) and found none; judged again here with another
+            # background, a pile at its threshold could be taken
+            continue
         background = counts[peak - 2 * span : peak - span].mean()
         pile = counts[peak]
         if pile >= min_fraction * values.shape[0] and pile >= pile_up_ratio * background:
