@@ -87,16 +87,12 @@ def test_closed_loop_recovers_the_presets_noise(tmp_path, seed):
     assert char.exposure_error["refined"] is False
 
 
-def test_one_frame_per_exposure_states_the_scatter_between_frame_sets(tmp_path):
-    """Without repeats, each frame set's neighbouring exposures give a photon-transfer
-    line through the recovered response, which carries the response's errors at the
-    levels and time ratios that frame set sees (a uniform field read half the gain, the
-    test scene 2-4x it): the views' mean with the scatter between them covers the
-    preset's gain, where the frame sets' inverse-variance mean was 12-19 of its own
-    standard errors off (seed 3)."""
+@pytest.fixture(scope="module")
+def one_frame_each(tmp_path_factory):
+    """The known camera's capture set with one frame per exposure (seed 3), calibrated."""
     camera = known_camera()
     manifest = write_capture_set(
-        tmp_path / "set",
+        tmp_path_factory.mktemp("n1") / "set",
         camera,
         shape=SHAPE,
         n_repeats=1,
@@ -105,7 +101,18 @@ def test_one_frame_per_exposure_states_the_scatter_between_frame_sets(tmp_path):
         dark_frames=4,
         dark_subtraction=True,
     )
-    char = characterise_manifest(manifest, calibrate_manifest(manifest))
+    return camera, manifest, calibrate_manifest(manifest)
+
+
+def test_one_frame_per_exposure_states_the_scatter_between_frame_sets(one_frame_each):
+    """Without repeats, each frame set's neighbouring exposures give a photon-transfer
+    line through the recovered response, which carries the response's errors at the
+    levels and time ratios that frame set sees (a uniform field read half the gain, the
+    test scene 2-4x it): the views' mean with the scatter between them covers the
+    preset's gain, where the frame sets' inverse-variance mean was 12-19 of its own
+    standard errors off."""
+    camera, manifest, model = one_frame_each
+    char = characterise_manifest(manifest, model)
     q, truth = char.quantities["gain"], true_values(camera)["gain"]
     assert "scatter between them" in q.method and np.isfinite(q.dof)
     assert np.all(np.abs(q.value - truth) <= coverage_factor(q.dof) * q.uncertainty), (
@@ -116,23 +123,13 @@ def test_one_frame_per_exposure_states_the_scatter_between_frame_sets(tmp_path):
     assert np.all(q.uncertainty < 0.5 * truth)  # informative: to within half
 
 
-def test_a_calibration_without_repeats_stores_the_views_noise(tmp_path):
+def test_a_calibration_without_repeats_stores_the_views_noise(one_frame_each):
     """One frame per exposure: the calibration stores the mean of every view's
     neighbouring-exposure line. Over six seeds its gains were within 8.6 % rms of the
     camera's (at most 14 %); view 0's line alone, weighted by its bins' own scatter, read
     them 20-59 % low (54 % on green here), which the stored uncertainty then carried."""
-    camera = known_camera()
-    manifest = write_capture_set(
-        tmp_path / "set",
-        camera,
-        shape=SHAPE,
-        n_repeats=1,
-        n_views=3,
-        seed=3,
-        dark_frames=4,
-        dark_subtraction=True,
-    )
-    record = calibrate_manifest(manifest).parameters["noise"]
+    camera, _, model = one_frame_each
+    record = model.parameters["noise"]
     assert record is not None and record["source"] == "neighbouring exposures"
     gain = np.asarray(record["gain_dn_per_e"])
     assert np.all(np.abs(gain / true_values(camera)["gain"] - 1) < 0.25), gain
