@@ -53,8 +53,13 @@ Neighbouring exposures
     median per pair is removed) and variance
     ``K ȳ (1 + 1/r) + σ_r² (1 + 1/r²)`` with ``ȳ = (y_k + y_{k+1}/r)/2``;
     binned variances of ``d`` (less quantisation) are fitted by weighted
-    least squares. PRNU cancels in ``d``; the fit's covariance gives the
-    uncertainties.
+    least squares (:func:`~photoquant.merge.noise_aware.estimate_noise_from_exposures`).
+    PRNU cancels in ``d``. Each view gives a line; their mean is the value
+    and the scatter between them its uncertainty (``n − 1`` degrees of
+    freedom; one view: its fit's covariance). Only the views: the response
+    was recovered from their pairs, and a frame set bracketed at other time
+    ratios (a test scene) or at few levels (a uniform field) reads the
+    response's own level errors as noise.
 
 References
 ----------

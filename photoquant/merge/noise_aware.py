@@ -391,13 +391,14 @@ def _grid_step(height: int, width: int, max_pixels: int) -> int:
 
 
 class _LinearScale:
-    """``y(c)`` and ``dy/dc`` of one channel: table lookups for integer values (the same
-    numbers as the interpolation, computed once per level), the interpolation otherwise."""
+    """``y(c)`` and ``dy/dc`` of one channel: table lookups for unsigned integer values of
+    up to 16 bits (the same numbers as the interpolation, computed once per level), the
+    interpolation otherwise."""
 
     def __init__(self, scale: _Scale, ch: int, dtype: np.dtype) -> None:
         self.scale, self.ch = scale, ch
         self.tables: tuple[np.ndarray, np.ndarray] | None = None
-        if np.issubdtype(dtype, np.integer) and np.iinfo(dtype).bits <= 16:
+        if np.issubdtype(dtype, np.unsignedinteger) and np.iinfo(dtype).bits <= 16:
             codes = np.arange(int(np.iinfo(dtype).max) + 1, dtype=np.float64)
             self.tables = (self._y(codes), _dy_dc(scale, codes, ch))
 
@@ -479,7 +480,7 @@ def _channel_line(
     Gaussian differences): weights from the bins' own scatter favour the bins whose
     variance came out low, and through a recovered response, whose slope ripples with
     the bracket's step, the variance alternates from bin to bin; the views of a 12-bit
-    linear camera (one frame per exposure) read gains 20-50 % low with them.
+    linear camera (one frame per exposure) read gains 20-59 % low with them.
     """
     x, y, s, level, count = _binned_curve(data, n_bins)
     fit = _weighted_line(x, y, s)
@@ -521,8 +522,10 @@ def estimate_noise_from_exposures(
     1/r²)`` with ``ȳ = (y_k + y_{k+1}/r)/2``; PRNU cancels in ``d``. The
     mean of ``d²`` less its quantisation variance (``1/12`` through each
     value's ``dy/dc``) in up to ``n_bins`` quantile bins of ``ȳ`` is fitted
-    by weighted least squares, the weights the bins' standard errors; the
-    fit's covariance is scaled by its reduced χ² where that exceeds 1. Bins
+    by weighted least squares, each bin's standard error the one the line
+    predicts for it (``√(2/n)`` times its variance: not the bin's own scatter,
+    which favours the bins whose variance came out low); the fit's
+    covariance is scaled by its reduced χ² where that exceeds 1. Bins
     whose ``ȳ`` lies within 3 fitted standard deviations of the lowest
     trusted level (the response's ``valid_min``) are left out and the line
     refitted: there the values are truncated (clipped, or refused below the
