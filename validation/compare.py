@@ -30,6 +30,7 @@ References
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from pathlib import Path
 from typing import Any
 
@@ -151,6 +152,33 @@ def _white_chart_truth(manifest: Any, truth: Any) -> np.ndarray:
     return np.median(roi, axis=0)
 
 
+_FLOORS: weakref.WeakKeyDictionary[Any, dict[bool, np.ndarray]] = weakref.WeakKeyDictionary()
+"""The scene floors computed for a truth (a :class:`pqsim.synth_camera.truth.TruthSet`),
+kept while it lives: every calibration compared with one truth has the same floor."""
+
+
+def scene_noise_floor(truth: Any, removes_glare: bool) -> np.ndarray:
+    """The test scene's expected eq. 8 error per pixel from the camera's noise alone.
+
+    :func:`validation.noise_model.predicted_log_error` (with glare removed from the
+    merge where the camera model removes it,
+    :func:`~validation.noise_model.predicted_log_error_with_glare`) drawn by
+    :func:`~validation.noise_model.predicted_relative_error` (seed 0). It depends on the
+    truth alone: computed once per truth object and reused (read-only) by every
+    comparison with it (the ablation and the leaderboard compare many calibrations with
+    one truth).
+    """
+    cached = _FLOORS.setdefault(truth, {})
+    if removes_glare not in cached:
+        cam, scene = truth.camera, truth.captures["scene"]
+        noise = predicted_log_error_with_glare if removes_glare else predicted_log_error
+        bias, var = noise(cam, scene.l, scene.exposure_s, scene.n_repeats)
+        floor = predicted_relative_error(scene.l, var, np.random.default_rng(0), log_bias=bias)
+        floor.setflags(write=False)
+        cached[removes_glare] = floor
+    return cached[removes_glare]
+
+
 def compare_with_truth(
     manifest: str | Path | Any,
     model: CameraModel,
@@ -253,9 +281,7 @@ def compare_with_truth(
     # with veiling glare that the camera model removes, the floor of the glare-free scene
     # is held to the noise of the light the sensor received (veil included)
     removes_glare = model.glare is not None and not model.glare.is_identity
-    noise = predicted_log_error_with_glare if removes_glare else predicted_log_error
-    bias, var = noise(cam, scene.l, scene.exposure_s, scene.n_repeats)
-    floor = predicted_relative_error(scene.l, var, np.random.default_rng(0), log_bias=bias)
+    floor = scene_noise_floor(truth, removes_glare)
     ok = np.isfinite(e) & np.isfinite(floor)
     out["scene"] = {
         "error": stats,

@@ -102,3 +102,25 @@ def test_a_camera_of_another_size_is_refused(capture, tmp_path):
         compare_with_truth(manifest, model)
     with pytest.raises(InputError, match="`model` must be a CameraModel"):
         compare_with_truth(manifest, str(tmp_path))
+
+
+def test_the_scene_floor_is_computed_once_per_truth_and_is_the_same(capture, monkeypatch):
+    """Every comparison with one truth has the same noise floor: the second comparison
+    reuses the first's (no new Monte Carlo), and a fresh truth object gives equal bits."""
+    import validation.compare as compare
+    from validation.compare import scene_noise_floor
+
+    manifest, _ = capture
+    truth = load_truth(manifest.parent / "truth")
+    model = calibrate_manifest(manifest)
+    first = compare_with_truth(manifest, model, truth)["scene"]["noise_floor_mean"]
+    calls = []
+    real = compare.predicted_relative_error
+    monkeypatch.setattr(
+        compare, "predicted_relative_error", lambda *a, **k: calls.append(1) or real(*a, **k)
+    )
+    again = compare_with_truth(manifest, model, truth)["scene"]["noise_floor_mean"]
+    assert again == first and calls == []
+    fresh = scene_noise_floor(load_truth(manifest.parent / "truth"), False)
+    np.testing.assert_array_equal(fresh, scene_noise_floor(truth, False))
+    assert len(calls) == 1 and not fresh.flags.writeable
