@@ -74,6 +74,7 @@ from photoquant.merge.noise_aware import (
     combine_photon_transfer_fits,
     estimate_noise,
     estimate_noise_from_exposures,
+    estimate_noise_parameters,
 )
 from photoquant.merge.uncertainty import log_variance_Debevec1997, noise_record
 from photoquant.methods import Method, StepFit, options_to_dict, resolve_method
@@ -1086,7 +1087,7 @@ def _noise_record(views: Sequence[ExposureStack], response: ResponseModel) -> di
     fixes every gain to :data:`~photoquant.merge.noise_aware.MAX_GAIN_ERROR`; ``None``
     where neither fixes it."""
     if views[0].n_repeats >= 2:
-        fitted = estimate_noise(views[0], response, name="views[0]")
+        fitted = estimate_noise_parameters(views[0], response)
     else:
         fits = [
             fit

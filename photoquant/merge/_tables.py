@@ -17,10 +17,17 @@ import numpy as np
 
 from photoquant.stack import ExposureStack
 
-__all__ = ["ValueTables"]
+__all__ = ["ValueTables", "fits_tables"]
 
 MAX_TABLE_SIZE = 1 << 22
 """Largest integer sum (per channel) for which look-up tables are used."""
+
+
+def fits_tables(stack: ExposureStack) -> bool:
+    """Whether every possible sum of ``stack``'s repeats has a table entry (the sums lie
+    below :data:`MAX_TABLE_SIZE`): :class:`ValueTables` then tabulates."""
+    return stack.n_repeats * stack.c_max < MAX_TABLE_SIZE
+
 
 ValueFunction = Callable[[np.ndarray, int], np.ndarray]
 """``fn(mean_values, channel) -> per-value quantity`` (same shape)."""
@@ -39,7 +46,7 @@ class ValueTables:
         self.n_channels = stack.n_channels
         self.n_exposures = stack.n_exposures
         top = stack.n_repeats * stack.c_max
-        self.tabulated = top < MAX_TABLE_SIZE
+        self.tabulated = fits_tables(stack)
         self._stack = stack
         self._index: dict[int, np.ndarray] = {}
         if self.tabulated:

@@ -43,7 +43,7 @@ import numpy as np
 from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant._threads import even_spans, thread_map
 from photoquant.errors import InputError
-from photoquant.merge._tables import MAX_TABLE_SIZE, ValueTables
+from photoquant.merge._tables import ValueTables, fits_tables
 from photoquant.merge.debevec1997 import DebevecMergeOptions, _check_inputs
 from photoquant.merge.noise_aware import NoiseParameters, _log_variance, _Scale
 from photoquant.response.model import ResponseModel
@@ -176,7 +176,7 @@ def compiled_passes_apply(stack: ExposureStack) -> bool:
     (numba installed, the values on :class:`~photoquant.merge._tables.ValueTables`): they
     then look the merge's weights up themselves, and precomputed
     :func:`merge_weights_Debevec1997` would only cost time."""
-    return HAVE_NUMBA and stack.n_repeats * stack.c_max < MAX_TABLE_SIZE
+    return HAVE_NUMBA and fits_tables(stack)
 
 
 def _weight_setup(
@@ -260,6 +260,12 @@ def _fused_log_variance(
     return out.reshape(_value_shape(stack))
 
 
+def _interpolated_table(tables: ValueTables, levels: np.ndarray, rows: np.ndarray) -> Any:
+    """``rows`` (C, L), given at the response's ``levels``, on the stack's value tables,
+    interpolated as ``g`` is (the function itself where the stack has no tables)."""
+    return tables.table(lambda v, ch: np.interp(v, levels, rows[ch]))
+
+
 def _fused_response_variance(
     stack: ExposureStack,
     setup: tuple[ValueTables, Any, Any],
@@ -270,13 +276,9 @@ def _fused_response_variance(
     """:func:`log_variance_response_Debevec1997` in one compiled pass (tabulated stacks):
     the factor's columns and the rest of the diagonal tabulated as ``g`` is interpolated."""
     tables, weight_table, _ = setup
-
-    def tabulated(rows: np.ndarray) -> np.ndarray:
-        table = tables.table(lambda v, ch: np.interp(v, levels, rows[ch]))
-        assert isinstance(table, np.ndarray)
-        return table
-
-    factor_tables = np.stack([tabulated(factor[:, r]) for r in range(factor.shape[1])])
+    factor_tables = np.stack(
+        [_interpolated_table(tables, levels, factor[:, r]) for r in range(factor.shape[1])]
+    )
     values, sat, dark, out = _fused_arguments(stack, setup)
     size = tables.grid.size
     _run_in_spans(
@@ -288,7 +290,7 @@ def _fused_response_variance(
         size,
         weight_table,
         factor_tables.reshape(-1, size * stack.n_channels),
-        tabulated(rest),
+        _interpolated_table(tables, levels, rest),
     )
     return out.reshape(_value_shape(stack))
 
@@ -463,9 +465,6 @@ def log_variance_response_Debevec1997(
             return _fused_response_variance(stack, setup, levels, factor, rest)
     tables, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
 
-    def tabulated(rows: np.ndarray) -> Any:
-        return tables.table(lambda v, ch: np.interp(v, levels, rows[ch]))
-
     def at_level(rows: np.ndarray) -> np.ndarray:
         """``rows`` (C, L) at ``held_out_level`` (H, W, C), as ``g`` is interpolated."""
         assert held_out_level is not None
@@ -478,12 +477,12 @@ def log_variance_response_Debevec1997(
         inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), np.nan)
         total = np.zeros_like(den)
         for r in range(factor.shape[1]):
-            table = tabulated(factor[:, r])
+            table = _interpolated_table(tables, levels, factor[:, r])
             moved = sum(w * tables.take(table, k) for k, w in enumerate(per_exposure)) * inv
             if held_out_level is not None:
                 moved = moved - at_level(factor[:, r])
             total += moved**2
-        table = tabulated(rest)
+        table = _interpolated_table(tables, levels, rest)
         total += sum(w * w * tables.take(table, k) for k, w in enumerate(per_exposure)) * inv**2
         if held_out_level is not None:
             total += at_level(rest)
