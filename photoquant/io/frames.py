@@ -429,7 +429,7 @@ def load_dark_stack(
     n_ch = len(manifest.channels)
     return ExposureStack(
         frames,
-        np.asarray(order, dtype=np.float64),
+        order,
         bit_depth=manifest.bit_depth,
         channels=manifest.channels,
         black_level=np.zeros(n_ch),
