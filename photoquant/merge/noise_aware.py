@@ -81,6 +81,7 @@ from typing import Any
 
 import numpy as np
 
+from photoquant._checks import check_int
 from photoquant.errors import InputError
 from photoquant.merge._base import MergeResult
 from photoquant.merge._tables import ValueTables
@@ -554,6 +555,7 @@ def estimate_noise_from_exposures(
         values pair up, the bins do not separate gain from read noise, or
         the fitted gain is not positive.
     """
+    max_pixels = check_int(max_pixels, "max_pixels", 1)
     scale = _Scale(response)
     sat = np.asarray(response.saturation_level, dtype=np.float64)
     lo = np.asarray(response.valid_min, dtype=np.float64)

@@ -244,6 +244,22 @@ def test_neighbouring_exposures_on_a_grid_give_the_same_line(max_pixels):
     assert se > np.sqrt(whole.covariance[0, 0, 0])  # fewer values, a wider line
 
 
+def test_bad_arguments_of_the_neighbouring_exposure_fit_are_named():
+    """A grid of no pixels, or no fits to combine: one clear error each."""
+    from photoquant.merge.noise_aware import (
+        combine_photon_transfer_fits,
+        estimate_noise_from_exposures,
+    )
+    from photoquant.stack import ExposureStack
+
+    stack = ExposureStack(np.zeros((1, 2, 8, 8, 1), np.uint8), [0.1, 0.2], channels=("Y",))
+    for bad in (0, -3, 2.5):
+        with pytest.raises(InputError, match="`max_pixels`"):
+            estimate_noise_from_exposures(stack, _linear_8bit_response(), max_pixels=bad)
+    with pytest.raises(InputError, match="no photon-transfer fits to combine"):
+        combine_photon_transfer_fits([])
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     st.lists(st.integers(0, 6), min_size=1, max_size=300),
