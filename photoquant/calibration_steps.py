@@ -629,6 +629,9 @@ def _refine_glare_capture(
     capture's are used only where the test rejects its labels, or asked for.
     """
     glare_ref: ExposureRefinement | None = None
+    # mostly dark: the defects' demosaiced neighbours, which link its exposures at a ratio
+    # near 1 as the defects do, could outnumber the lit pixels
+    defects = None if defects is None else defects.neighbourhood()
     try:
         glare_ref = _refine_against(glare, response, seed, defects)
         decision = judge_exposure_times(glare_ref, floor_log=floor)

@@ -40,6 +40,9 @@ References
 .. [EMVA] EMVA Standard 1288, release 4.0 (2021) (defect pixels: hot,
    dead and stuck pixels, found from dark and flat images).
 .. [PQ] The photoquantity paper: eq. 1, §5.2 (merge).
+.. [Malvar2004] Malvar, H. S., He, L.-W., & Cutler, R. (2004). High-quality
+   linear interpolation for demosaicing of Bayer-patterned color images.
+   ICASSP 2004, iii-485. doi:10.1109/ICASSP.2004.1326587
 """
 
 from __future__ import annotations
@@ -52,14 +55,23 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from photoquant._checks import default_workers
+from photoquant._checks import check_int, default_workers
 from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant._threads import thread_map
 from photoquant.errors import InputError
 from photoquant.stack import ExposureStack, _compare_per_channel
 from photoquant.utils import check_positive
 
-__all__ = ["DefectMap", "detect_defects", "exclude_defects", "hide_defects"]
+__all__ = [
+    "DEMOSAIC_RADIUS_PX",
+    "DefectMap",
+    "detect_defects",
+    "exclude_defects",
+    "hide_defects",
+]
+
+DEMOSAIC_RADIUS_PX = 2
+"""How far a demosaicing carries a pixel's value into its neighbours (Malvar–He–Cutler's 5 × 5)."""
 
 _RING = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], dtype=bool)
 """The 8 neighbours of a pixel."""
@@ -82,6 +94,26 @@ class DefectMap:
     def mask(self) -> np.ndarray:
         """``(H, W, C)`` bool: hot or stuck."""
         return self.hot | self.stuck
+
+    def neighbourhood(self, radius: int = DEMOSAIC_RADIUS_PX) -> DefectMap:
+        """The defects with every pixel within ``radius`` of one, in every channel, as stuck.
+
+        In a demosaiced image a defect's value is carried into its neighbours
+        of every channel (bilinear interpolation: 1 pixel; Malvar, He &
+        Cutler's: 2 [Malvar2004]_). On a frame set that is mostly dark (a
+        glare capture) such pixels, which do not scale with the exposure
+        either, can outnumber the lit ones.
+        """
+        from scipy.ndimage import binary_dilation
+
+        check_int(radius, "radius", 0)
+        any_channel = np.asarray(self.mask.any(axis=-1), dtype=bool)
+        if radius > 0:
+            any_channel = np.asarray(
+                binary_dilation(any_channel, np.ones((3, 3), bool), iterations=radius), dtype=bool
+            )
+        spread = np.broadcast_to(any_channel[:, :, None], self.mask.shape)
+        return DefectMap(self.hot.copy(), spread & ~self.hot)
 
     def report(self) -> dict[str, Any]:
         """Counts for a calibration report (JSON-ready)."""

@@ -406,3 +406,23 @@ def test_below_clip_from_the_integer_sums_is_the_mean_comparison(n, bit_depth, s
     assert not stack._mean  # the integer path was the one under test (no means made)
     for k in range(2):
         np.testing.assert_array_equal(got[k], stack.mean()[k] < sat - 0.5)
+
+
+def test_a_defects_neighbourhood_covers_its_demosaicing_footprint_in_every_channel():
+    from photoquant.defects import DEMOSAIC_RADIUS_PX, DefectMap
+
+    hot = np.zeros((9, 9, 3), bool)
+    hot[4, 4, 0] = True  # one hot red site
+    stuck = np.zeros_like(hot)
+    stuck[0, 8, 2] = True
+    near = DefectMap(hot, stuck).neighbourhood()
+    r = DEMOSAIC_RADIUS_PX
+    assert near.hot[4, 4, 0] and near.hot.sum() == 1  # the hot pixel stays hot
+    assert not (near.hot & near.stuck).any()
+    expected = np.zeros((9, 9), bool)
+    expected[4 - r : 5 + r, 4 - r : 5 + r] = True
+    expected[0 : 1 + r, 8 - r : 9] = True
+    np.testing.assert_array_equal(near.mask, np.repeat(expected[..., None], 3, axis=-1))
+    np.testing.assert_array_equal(
+        DefectMap(hot, stuck).neighbourhood(0).mask.any(-1), hot.any(-1) | stuck.any(-1)
+    )
