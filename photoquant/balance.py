@@ -6,9 +6,19 @@ green-referenced balance factors are ``a_r = G_w/R_w``, ``a_g = 1``,
 makes the chart neutral; equivalently ``ln a_λ`` is added to ``g_λ``
 ("folded into the response").
 
+The factors are measured from the chart's pixels, whose noise gives them a
+standard uncertainty (:func:`balance_log_variance`), a part of every
+corrected photoquantity's calibration uncertainty [GUM]_.
+
 References
 ----------
 .. [PQ] The photoquantity paper, §5.3.
+.. [GUM] JCGM 100:2008, Evaluation of measurement data — Guide to the
+   expression of uncertainty in measurement, §4.2 (type A evaluation) and
+   §5.1.2 (propagation).
+.. [Carlstein1986] Carlstein, E. (1986). The use of subseries values for
+   estimating the variance of a general statistic from a stationary
+   sequence. Ann. Statist. 14(3), 1171-1179. doi:10.1214/aos/1176350057
 """
 
 from __future__ import annotations
@@ -26,6 +36,7 @@ from photoquant.methods import REGISTRIES, Method, StepFit, options_from_mapping
 __all__ = [
     "check_roi",
     "white_chart_colour",
+    "balance_log_variance",
     "colour_balance_WhiteChart",
     "colour_balance_none",
     "BalanceModel",
@@ -80,6 +91,109 @@ def white_chart_colour(
     return colour
 
 
+CHART_TILE_PX = 8
+"""Side in pixels of the tiles whose medians state the chart colour's uncertainty."""
+
+_MIN_TILES = 16
+"""Fewest tiles per channel: below, the tiles shrink (down to single pixels)."""
+
+
+def _chart_patch(
+    linear: np.ndarray, roi: Sequence[int], mask: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The chart's pixels ``(h, w, C)`` and which are valid (finite, positive, not masked)."""
+    x0, y0, x1, y1 = check_roi(roi, linear.shape[:2])
+    patch = linear[y0:y1, x0:x1]
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(patch) & (patch > 0)
+    if mask is not None:
+        ok &= ~np.asarray(mask, dtype=bool)[y0:y1, x0:x1]
+    return patch, ok
+
+
+def _tile_medians(values: np.ndarray, ok: np.ndarray, side: int) -> np.ndarray:
+    """The median of the valid values of each ``side`` × ``side`` tile of a ``(h, w)``
+    array holding at least half of its values valid, shape ``(tiles,)``."""
+    h, w = values.shape
+    th, tw = h // side, w // side
+    if th == 0 or tw == 0:
+        return np.empty(0)
+
+    def tiled(a: np.ndarray) -> np.ndarray:
+        return (
+            a[: th * side, : tw * side]
+            .reshape(th, side, tw, side)
+            .swapaxes(1, 2)
+            .reshape(th * tw, side * side)
+        )
+
+    v, valid = tiled(values), tiled(ok)
+    enough = valid.sum(axis=-1) * 2 >= side * side
+    if not enough.any():
+        return np.empty(0)
+    return np.nanmedian(np.where(valid[enough], v[enough], np.nan), axis=-1)
+
+
+def balance_log_variance(
+    linear: np.ndarray,
+    roi: Sequence[int],
+    mask: np.ndarray | None = None,
+    reference_channel: int = 1,
+) -> np.ndarray:
+    """Variance ``(C,)`` of ``ln a_λ`` (:func:`colour_balance_WhiteChart`) from the chart's noise.
+
+    ``ln a_λ`` is the median over the chart's pixels of ``ln W_ref − ln W_λ``.
+    A type A evaluation [GUM]_ from the chart's own pixels, by subseries
+    [Carlstein1986]_: the chart is cut into tiles of :data:`CHART_TILE_PX`
+    pixels a side, the median of each tile's ``ln W_ref − ln W_λ`` taken, and
+    the variance of ``ln a_λ`` is that of the mean of the ``m`` tiles'
+    medians, ``s² / m``, ``s`` their robust spread (1.4826 × the median
+    absolute deviation). Noise correlated between neighbouring pixels or
+    between channels (a demosaiced image) is in the tiles' spread, where a
+    per-pixel formula would miss it; a shading of the chart's light common
+    to the channels is in no pixel's ratio.
+    Where fewer than 16 tiles fit, they shrink, to single pixels, whose
+    median has ``π/2`` times the variance of their mean (Gaussian noise).
+
+    The reference channel's factor is 1 by definition (the one scale a
+    photoquantity is measured up to): its variance is 0, as is a monochrome
+    camera's. NaN for a channel with fewer than two tiles valid in both.
+    """
+    linear = check_array(linear, "linear", ndim=3, kind="f")
+    n_ch = linear.shape[2]
+    if n_ch == 1:
+        return np.zeros(1)
+    if not 0 <= reference_channel < n_ch:
+        raise InputError(
+            f"the white chart's reference channel {reference_channel} is not one of the "
+            f"camera's {n_ch} channels"
+        )
+    patch, ok = _chart_patch(linear, roi, mask)
+    out = np.zeros(n_ch)
+    for ch in range(n_ch):
+        if ch == reference_channel:
+            continue
+        both = ok[..., ch] & ok[..., reference_channel]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.log(np.where(both, patch[..., reference_channel], 1.0)) - np.log(
+                np.where(both, patch[..., ch], 1.0)
+            )
+        side = CHART_TILE_PX
+        while True:
+            medians = _tile_medians(ratio, both, side)
+            if medians.size >= _MIN_TILES or side == 1:
+                break
+            side //= 2
+        if medians.size < 2:
+            out[ch] = np.nan
+            continue
+        spread = 1.4826 * float(np.median(np.abs(medians - np.median(medians))))
+        if spread == 0.0:  # quantised tiles: their plain standard deviation
+            spread = float(np.std(medians, ddof=1))
+        out[ch] = spread**2 / medians.size * (np.pi / 2 if side == 1 else 1.0)
+    return out
+
+
 def colour_balance_WhiteChart(
     linear: np.ndarray,
     roi: Sequence[int],
@@ -105,9 +219,11 @@ def colour_balance_WhiteChart(
     Returns
     -------
     ndarray, shape (C,)
-        ``a_λ = W_ref / W_λ``.
+        ``a_λ = W_ref / W_λ``, the median over the chart's pixels (valid in
+        both channels) of their ratio: a chart lit unevenly, the same in
+        every channel, changes no pixel's ratio.
     """
-    colour = white_chart_colour(linear, roi, mask)
+    colour = white_chart_colour(linear, roi, mask)  # every channel has valid pixels
     if colour.size == 1:
         return np.ones(1)  # a monochrome camera: its one channel is its own reference
     if not 0 <= reference_channel < colour.size:
@@ -116,7 +232,20 @@ def colour_balance_WhiteChart(
             f"camera's {colour.size} channels; give --option "
             f"balance.reference_channel=0..{colour.size - 1}"
         )
-    return colour[reference_channel] / colour
+    patch, ok = _chart_patch(linear, roi, mask)
+    factors = np.ones(colour.size)
+    for ch in range(colour.size):
+        if ch == reference_channel:
+            continue
+        both = ok[..., ch] & ok[..., reference_channel]
+        if not both.any():
+            raise CalibrationError(
+                f"the white chart region {list(roi)} has no pixel validly exposed in both "
+                f"channel {ch} and the reference channel {reference_channel}"
+            )
+        ratio = np.log(patch[..., reference_channel][both]) - np.log(patch[..., ch][both])
+        factors[ch] = np.exp(np.median(ratio))
+    return factors
 
 
 def colour_balance_none(linear: np.ndarray, roi: Any = None, **_kwargs: Any) -> np.ndarray:  # noqa: ARG001
@@ -141,11 +270,15 @@ class BalanceModel:
         Positive, finite factors; the corrected value is ``a_λ`` times the linear one.
     params : dict
         The method's own parameters (for the record).
+    log_variance : ndarray, shape (C,), optional
+        Variance of ``ln a_λ`` from the measurement's noise
+        (:func:`balance_log_variance`); ``None``: not stated.
     """
 
     method: str
     factors: np.ndarray
     params: dict[str, Any] = field(default_factory=dict)
+    log_variance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         a = check_array(self.factors, "balance factors", ndim=1, kind="iuf", finite=True)
@@ -154,6 +287,13 @@ class BalanceModel:
             raise InputError(f"balance factors must be positive, got {a.tolist()}")
         object.__setattr__(self, "factors", a)
         object.__setattr__(self, "params", dict(self.params))
+        if self.log_variance is not None:
+            v = check_array(
+                self.log_variance, "balance log_variance", shape=a.shape, kind="iuf", finite=True
+            ).astype(np.float64)
+            if np.any(v < 0):
+                raise InputError(f"balance log_variance must be non-negative, got {v.tolist()}")
+            object.__setattr__(self, "log_variance", v)
 
     @classmethod
     def identity(cls, n_channels: int) -> BalanceModel:
@@ -165,7 +305,10 @@ class BalanceModel:
         return np.asarray(linear) * self.factors
 
     def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        return {"factors": self.factors.tolist(), "method_params": self.params}, {}
+        params: dict[str, Any] = {"factors": self.factors.tolist(), "method_params": self.params}
+        if self.log_variance is not None:
+            params["log_variance"] = self.log_variance.tolist()
+        return params, {}
 
     @classmethod
     def from_params(
@@ -177,8 +320,17 @@ class BalanceModel:
             isinstance(v, int | float) and not isinstance(v, bool) for v in factors
         ):
             raise InputError(f"balance `factors` must be a list of numbers, got {factors!r}")
+        variance = params.get("log_variance")
+        if variance is not None and (
+            not isinstance(variance, list)
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in variance)
+        ):
+            raise InputError(f"balance `log_variance` must be a list of numbers, got {variance!r}")
         return cls(
-            method, np.asarray(factors, dtype=np.float64), dict(params.get("method_params") or {})
+            method,
+            np.asarray(factors, dtype=np.float64),
+            dict(params.get("method_params") or {}),
+            None if variance is None else np.asarray(variance, dtype=np.float64),
         )
 
 
@@ -235,11 +387,18 @@ def characterise_balance_WhiteChart(
     factors = colour_balance_WhiteChart(
         linear, data.roi, mask=data.mask, reference_channel=opts.reference_channel
     )
-    model = BalanceModel("White Chart", factors)
-    return StepFit(
-        model,
-        {"stage": opts.stage, "white_colour": white_chart_colour(linear, data.roi, data.mask)},
+    variance = balance_log_variance(
+        linear, data.roi, data.mask, min(opts.reference_channel, factors.size - 1)
     )
+    stated = bool(np.all(np.isfinite(variance)))
+    model = BalanceModel("White Chart", factors, log_variance=variance if stated else None)
+    report: dict[str, Any] = {
+        "stage": opts.stage,
+        "white_colour": white_chart_colour(linear, data.roi, data.mask),
+    }
+    if stated:
+        report["log_std"] = np.sqrt(variance).tolist()
+    return StepFit(model, report)
 
 
 def characterise_balance_None(data: BalanceData, options: None = None) -> StepFit[BalanceModel]:

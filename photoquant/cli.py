@@ -186,6 +186,8 @@ def _uncertainty_summary(model: Any) -> dict[str, Any]:
         out["vignetting_param_std"] = np.sqrt(
             np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None)
         ).tolist()
+    if model.balance.log_variance is not None:
+        out["balance_log_std"] = np.sqrt(model.balance.log_variance).tolist()
     return out
 
 
@@ -216,7 +218,10 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
             "response uncertainty: std of g (ln, median/largest over the measured levels, "
             "relative to mid-range) " + " ".join(f"{m:.2g}/{x:.2g}" for m, x in pairs)
         )
-    lines.append(f"balance: {_fmt(model.balance.factors)}")
+    line = f"balance: {_fmt(model.balance.factors)}"
+    if "balance_log_std" in stated:
+        line += f", uncertainty of ln a (white chart's noise) {_fmt(stated['balance_log_std'])}"
+    lines.append(line)
     noise = model.parameters.get("noise")
     if isinstance(noise, dict) and "gain_dn_per_e" in noise:
         lines.append(
@@ -382,6 +387,7 @@ def _cmd_correct(args: argparse.Namespace) -> int:
                 ("response", result.log_sigma_response),
                 ("sensor LUT", result.log_sigma_sensor_lut),
                 ("vignetting", result.log_sigma_vignetting),
+                ("balance", result.log_sigma_balance),
             )
             if part is not None
         ]

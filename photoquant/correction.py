@@ -111,6 +111,12 @@ class Correction:
         standard uncertainty of ``ln l`` from the irradiance scene's noise in
         ``u`` (:attr:`~photoquant.sensor_lut.SensorLUTModel.log_variance`), a
         calibration component; NaN where ``mask`` is set.
+    log_sigma_balance : ndarray, shape (H, W, C), float32, optional
+        With ``uncertainty=True`` and a balance that states its noise: the
+        standard uncertainty of ``ln l`` from the white chart's noise in the
+        factors ``a_λ`` (:func:`~photoquant.balance.balance_log_variance`), a
+        calibration component, one value per channel (0 in the reference
+        channel); NaN where ``mask`` is set.
     """
 
     photoquantity: np.ndarray
@@ -126,13 +132,17 @@ class Correction:
     log_sigma_vignetting: np.ndarray | None = None
     log_sigma_sensor_lut: np.ndarray | None = None
     log_sigma_exposure: np.ndarray | None = None
+    log_sigma_balance: np.ndarray | None = None
 
     @property
     def log_sigma_calibration(self) -> np.ndarray | None:
-        """The calibration's components stated (response, sensor LUT, vignetting),
-        combined in quadrature (independent fits); ``None``: none stated."""
+        """The calibration's components stated (response, sensor LUT, vignetting,
+        balance), combined in quadrature (independent fits); ``None``: none stated."""
         return _quadrature(
-            self.log_sigma_response, self.log_sigma_sensor_lut, self.log_sigma_vignetting
+            self.log_sigma_response,
+            self.log_sigma_sensor_lut,
+            self.log_sigma_vignetting,
+            self.log_sigma_balance,
         )
 
     @property
@@ -433,6 +443,16 @@ def _stated_uncertainty(
         notes.append(
             f"uncertainty: the vignetting ({model.vignetting.method}) states no covariance; "
             "its part of the calibration uncertainty is not included"
+        )
+    balance_variance = model.balance.log_variance
+    if balance_variance is not None:
+        out["log_sigma_balance"] = _sigma(
+            np.broadcast_to(balance_variance, (*stack.image_shape, balance_variance.size)), mask
+        )
+    elif model.balance.method != "None":
+        notes.append(
+            f"uncertainty: the balance ({model.balance.method}) states no noise; its part of "
+            "the calibration uncertainty is not included"
         )
     return out
 

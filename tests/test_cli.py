@@ -55,7 +55,10 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     assert "scene exposures: " in text and "from the refined exposure times" in text
     assert np.all(total[ok] ** 2 >= (noise[ok] ** 2 + calibration[ok] ** 2) * (1 - 1e-5))
     assert "uncertainty of ln l from noise" in text
-    assert "uncertainty of ln l from the calibration (response, sensor LUT and vignetting)" in text
+    assert (
+        "uncertainty of ln l from the calibration (response, sensor LUT, vignetting and balance)"
+        in text
+    )
     # --uncertainty asks for the same (and would fail where it cannot be stated)
     exr3 = tmp_path / "scene-required.exr"
     args = ["correct", str(capture), "--camera", str(cam), "-o", str(exr3), "-q", "--uncertainty"]
@@ -72,6 +75,7 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     assert "noise: gain [" in text and "DN/e-, read noise [" in text
     assert "response uncertainty: std of g (ln, median/largest" in text
     assert "noise of u (ln, median) [" in text
+    assert "uncertainty of ln a (white chart's noise) [" in text
     # every vignetting parameter with its standard uncertainty
     assert re.search(r"  R: Extended Goldman-Chen \[[^]]+\] ± \[[^]]+\]", text), text
     assert "views' exposure times: nominal times kept: likelihood ratio" in text
@@ -84,6 +88,8 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     assert all(0 < m <= x for m, x in zip(*stated["response_log_std"].values(), strict=True))
     assert len(stated["sensor_lut_log_std_median"]) == 3
     assert np.asarray(stated["vignetting_param_std"]).shape == (3, 6)
+    balance = stated["balance_log_std"]  # the reference channel's factor is 1 by definition
+    assert balance[1] == 0.0 and balance[0] > 0 and balance[2] > 0
     merge = info["parameters"]["steps"]["merge"]
     assert merge["options"]["weighting"] == "hat-quantisation" and merge["method"] == "Debevec 1997"
     assert info["steps"]["vignetting"] == "Extended Goldman-Chen"

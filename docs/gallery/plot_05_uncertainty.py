@@ -45,7 +45,8 @@ parts = {
     "response": result.log_sigma_response,
     "sensor LUT": result.log_sigma_sensor_lut,
     "vignetting": result.log_sigma_vignetting,
-    "calibration (the three)": result.log_sigma_calibration,
+    "balance": result.log_sigma_balance,
+    "calibration (these four)": result.log_sigma_calibration,
     "total": result.log_sigma,
 }
 for name, sigma in parts.items():

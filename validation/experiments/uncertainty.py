@@ -11,7 +11,9 @@ capture set's HDR test scene is corrected with the calibrated camera and
 
 is formed per pixel and channel, ``ŝ_λ`` the inverse-variance weighted mean
 of ``ln l̂ − ln l`` of channel ``λ`` (the photoquantity is measured up to one
-scale per channel: the gauge, one number fitted to tens of thousands). Where
+scale per channel: the gauge, one number fitted to tens of thousands; the
+balance's part of the stated uncertainty, one constant per channel that the
+gauge removes with it, is left out of ``σ`` here). Where
 the stated uncertainty is the actual one, ``z`` is a standard normal
 variate: its spread is 1, and the central interval of nominal level ``p``
 (``|z| < Φ⁻¹((1 + p)/2)``) holds a share ``p`` of the values. Reported per
@@ -113,7 +115,10 @@ def run(
             continue
         truth = cal.truth.captures["scene"].l
         series = []
-        for part, sigma in (("stated", result.log_sigma), ("noise", result.log_sigma_noise)):
+        stated = result.log_sigma
+        if result.log_sigma_balance is not None:  # a per-channel constant: in the gauge
+            stated = np.sqrt(np.maximum(stated**2 - result.log_sigma_balance**2, 0.0))
+        for part, sigma in (("stated", stated), ("noise", result.log_sigma_noise)):
             z = normalised_errors(result.photoquantity, truth, sigma)
             shares = interval_shares(z)
             spread = float(z.std()) if z.size else None
@@ -144,6 +149,7 @@ def run(
                 ("sensor LUT", result.log_sigma_sensor_lut),
                 ("vignetting", result.log_sigma_vignetting),
                 ("exposure times", result.log_sigma_exposure),
+                ("balance", result.log_sigma_balance),
             )
             if value is not None
         ]
