@@ -55,7 +55,12 @@ def test_lut_noise_saved_with_the_camera_and_used_by_correct(tmp_path):
         back.sensor_lut.log_variance[ok],
         rtol=1e-5,
     )
-    parts = [result.log_sigma_response, result.log_sigma_sensor_lut, result.log_sigma_vignetting]
+    parts = [
+        result.log_sigma_response,
+        result.log_sigma_sensor_lut,
+        result.log_sigma_vignetting,
+        result.log_sigma_balance,
+    ]
     expected = np.sqrt(sum(p[ok].astype(np.float64) ** 2 for p in parts))
     np.testing.assert_allclose(result.log_sigma_calibration[ok], expected, rtol=1e-5)
 

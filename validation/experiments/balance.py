@@ -14,6 +14,12 @@ End to end, the HDR test scene is corrected and each channel's median ratio
 to the true photoquantity is compared with green's
 (:func:`validation.metrics.channel_scale_ratios`): a balanced camera gives 1.
 
+The factors' stated standard uncertainty (the white chart's noise,
+:func:`photoquant.balance.balance_log_variance`) is shown beside their
+error: the error against the truth-implied factor also holds the recovered
+response's error between the chart's level and the gauge's mean over the
+levels, which that part does not state.
+
 The paper gives no accuracy for the balance (only its time, 1 ms).
 
 References
@@ -105,6 +111,28 @@ def run(
             "–",
             f"test scene channel error {lbl}: {_signed_pct(ratios[others] - 1)}",
         )
+        variance = model.balance.log_variance
+        if variance is not None:
+            std = np.sqrt(np.asarray(variance, dtype=np.float64))
+            for ch in others:
+                res.metric(
+                    f"{preset}.factor_log_std.{names[ch]}",
+                    float(std[ch]),
+                    unit="ln",
+                    better="both",
+                    check=False,
+                    description=f"stated standard uncertainty of ln a_{names[ch]} (chart noise)",
+                )
+            res.row(
+                f"{preset}: stated uncertainty of ln a {lbl} (the chart's noise)",
+                " / ".join(f"{100 * std[ch]:.3f} %" for ch in others),
+                "–",
+                "error / stated: "
+                + " / ".join(
+                    f"{np.log1p(err[ch]) / std[ch]:+.1f}" if std[ch] > 0 else "–" for ch in others
+                ),
+                detail=True,
+            )
         res.notes.append(
             f"{preset}: in-camera balance of the simulator a = "
             + " / ".join(f"{v:g}" for v in cam.balance)
