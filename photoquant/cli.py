@@ -191,6 +191,48 @@ def _uncertainty_summary(model: Any) -> dict[str, Any]:
     return out
 
 
+def _selection_line(record: Any) -> str | None:
+    """The response model's selection (``report["response"]["selection"]``) in one line:
+    the choice, the rule, and every candidate's held-out score; ``None`` where the
+    record is absent or unreadable (a camera's report is untrusted)."""
+    if not isinstance(record, dict) or not isinstance(record.get("chosen"), dict):
+        return None
+
+    def label(entry: Any) -> str:
+        if not isinstance(entry, dict):
+            return "?"
+        options = entry.get("options")
+        opts = (
+            ", ".join(
+                f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in options.items()
+            )
+            if isinstance(options, dict)
+            else ""
+        )
+        name = str(entry.get("method", "?"))[:60]
+        return f"{name} ({opts})" if opts else name
+
+    def score(entry: Any) -> str:
+        if not isinstance(entry, dict):
+            return "?"
+        value, se = entry.get("score_dn"), entry.get("difference_se_dn")
+        if entry.get("error") is not None or not isinstance(value, int | float):
+            return "failed"
+        spread = f" ± {se:.2g}" if isinstance(se, int | float) and se > 0 else ""
+        return f"{value:.3g}{spread} DN"
+
+    candidates = record.get("candidates")
+    scored = (
+        "; ".join(f"{label(c)} {score(c)}" for c in candidates)
+        if isinstance(candidates, list) and candidates
+        else "none scored"
+    )
+    return (
+        f"response model chosen: {label(record['chosen'])}, by the {record.get('rule', '?')} "
+        f"rule (held-out systematic error, ± its standard error against the best: {scored})"
+    )
+
+
 def _print_summary(model: Any, where: Path | None = None) -> None:
     """What a camera holds, from its models and (defensively) its report."""
     rep = model.report if isinstance(model.report, dict) else {}
@@ -211,6 +253,9 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     if "residual_rms" in resp:
         line += f", residual rms (ln) {_fmt(resp['residual_rms'])}"
     lines.append(line)
+    selection = _selection_line(resp.get("selection"))
+    if selection is not None:
+        lines.append(selection)
     stated = _uncertainty_summary(model)
     if "response_log_std" in stated:
         pairs = zip(*stated["response_log_std"].values(), strict=True)

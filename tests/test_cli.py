@@ -362,3 +362,29 @@ def test_a_monochrome_camera_with_a_white_chart_calibrates_and_corrects(tmp_path
     # the photoquantity, then its stated uncertainty's layers
     assert names[0] == "Y" and "sigma_ln.Y" in names and image.shape[-1] == len(names)
     assert np.isfinite(image[..., 0]).any()
+
+
+def test_info_shows_the_response_models_selection(capture, tmp_path, capsys):
+    cam = tmp_path / "selected"
+    args = [
+        "calibrate",
+        str(capture),
+        "-o",
+        str(cam),
+        "-q",
+        "--method",
+        "response=Hold-out Selection",
+    ]
+    assert main(args) == 0
+    capsys.readouterr()
+    record = load_camera(cam).report["response"]["selection"]
+    assert main(["info", str(cam)]) == 0
+    text = capsys.readouterr().out
+    line = next(x for x in text.splitlines() if x.startswith("response model chosen: "))
+    chosen = record["chosen"]["method"]
+    assert line.startswith(f"response model chosen: {chosen}") and "by the hold-out rule" in line
+    # every candidate with its score, in the order tried
+    for c in record["candidates"]:
+        assert f"{c['score_dn']:.3g}" in line
+    scores = line.split("(held-out", 1)[1]
+    assert scores.count("Debevec 1997 (smoothness=") == 3 and scores.count("Debevec 1997") == 4
