@@ -53,14 +53,15 @@ smoothest to the least smooth (β = 10⁵, 10⁴, 10³, the profile's default, a
 and whose smoothness is what the real brackets disagree on (the bracket's
 own exposures can say how much of the curve's shape the data support).
 
-Measured (2026-12-03, ``photoquant crossval`` on the user's path, the
-selection nested in every fold): Memorial 2.23 DN against 2.37 with the
-profile's default response, the St. Louis Arch 13.2 against 16.9, the 12-bit
-machine-vision bracket 95.4 against 95.8 (92.4 with ``("EMoR 2004",
-{"n_components": 5})`` as the first candidate); frobisher (3 frames: each
-crossval fold keeps two, with nothing to hold out) unchanged. On the simulator's presets at
-3.8-stop steps (``K = 4``) it can prefer a response that predicts the held-out
-frames best but lies further from the true ``g`` than the default's
+Measured (2026-12-04, ``photoquant crossval`` on the user's path, the
+selection nested in every fold): Memorial 2.14 DN against 2.29 with the
+profile's default response, the St. Louis Arch 11.03 against 11.14, the
+12-bit machine-vision bracket 92.41 against 94.62 with ``("EMoR 2004",
+{"n_components": n})``, n = 3, 5, 7, among the candidates; frobisher (3
+frames: each crossval fold keeps two, with nothing to hold out) unchanged.
+On the simulator's presets at 3.8-stop steps (``K = 4``) it can prefer a
+response that predicts the held-out frame best but lies further from the
+true ``g`` than the default's
 (1.4–1.7× the default's ``g`` error on the ``ccd`` and ``emor`` presets;
 0.2× on ``ccd`` at ``K = 8``): with one exposure held out, such a bracket's
 gap is 7.6 stops, and the fold is a harder problem than the full bracket.
