@@ -150,6 +150,7 @@ def test_steps_too_wide_to_hold_out_take_the_short_bracket_model(rng):
         ),
         ({"max_folds": 0}, "max_folds"),
         ({"max_pixels": 10}, "max_pixels"),
+        ({"folds": "frames"}, "`folds` must be one of exposures, pixels"),
     ],
 )
 def test_bad_options_are_named(options, message):
@@ -194,3 +195,47 @@ def test_crossval_of_the_selection_is_nested(rng, monkeypatch):
     )
     assert seen[1] == first[1]
     assert seen[0] != first[0]  # the other folds do see the frame: the spy would notice
+
+
+def test_pixel_folds_fit_one_half_and_score_every_exposure_of_the_other(rng, monkeypatch):
+    """No exposure is held out: each candidate is fitted once, on half of the pixels
+    (interleaved column strips), with every exposure, and every inner exposure of the
+    other half is predicted from its others; the wrong model still loses."""
+    stack = _exp_shoulder_stack(rng)
+    fitted = []
+    real = selection_module.fit_response
+
+    def spy(sub, spec, rng=0):
+        fitted.append((sub.frames.shape, spec[0]))
+        return real(sub, spec, rng=rng)
+
+    monkeypatch.setattr(selection_module, "fit_response", spy)
+    result = select_response(stack, SelectionOptions(candidates=GAMMA_FIRST, folds="pixels"))
+    assert result.folds == "pixels" and result.as_dict()["folds"] == "pixels"
+    assert result.held_out == tuple(range(1, stack.n_exposures - 1))
+    # one fit per candidate, on the even strips of 8 columns: 32 of the 64
+    assert [f[1] for f in fitted] == ["Gamma", "Debevec 1997"]
+    assert all(shape == (1, 6, 48, 32, 3) for shape, _ in fitted)
+    gamma, debevec = result.candidates
+    assert result.chosen[0] == "Debevec 1997" and debevec.score_dn < 1.0
+    assert gamma.score_dn > debevec.score_dn + 3 * gamma.difference_se_dn
+    assert "half of the pixels" in result.describe()
+
+
+def test_pixel_folds_score_a_two_exposure_bracket(rng):
+    """With nothing to hold out of two exposures, the pixels still are."""
+    scene = log_uniform_scene(rng, (48, 64, 3), decades=2.0)
+    times = np.array([1.0, 8.0])
+    frames = np.clip(
+        np.round(
+            255.0
+            * (1.0 - np.exp(-4.0 * np.clip(scene[None] * times[:, None, None, None] / 8.0, 0, 1)))
+            / (1.0 - np.exp(-4.0))
+        ),
+        0,
+        255,
+    )
+    stack = ExposureStack(frames.astype(np.uint8)[None], times)
+    result = select_response(stack, SelectionOptions(candidates=GAMMA_FIRST, folds="pixels"))
+    assert result.rule == "hold-out" and result.held_out == (0, 1)
+    assert result.chosen[0] == "Debevec 1997"
