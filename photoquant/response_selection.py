@@ -105,6 +105,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -342,6 +343,19 @@ class ResponseSelection:
         )
 
 
+def _scoring_spec(spec: tuple[str, dict[str, Any]]) -> tuple[str, dict[str, Any]]:
+    """``spec`` for a fold's fit: without the covariance of ``g`` where the method states
+    one (the score needs ``g`` only, the same either way; the chosen model's refit on
+    every exposure keeps it)."""
+    name, options = spec
+    fields = RESPONSE_METHODS[name].options
+    if dataclasses.is_dataclass(fields) and "uncertainty" in {
+        f.name for f in dataclasses.fields(fields)
+    }:
+        return name, {**options, "uncertainty": False}
+    return spec
+
+
 def _grid_stack(stack: ExposureStack, exposures: Sequence[int], stride: int) -> ExposureStack:
     """``stack`` at ``exposures`` on every ``stride``-th pixel, its levels kept."""
     pick = list(exposures)
@@ -508,7 +522,8 @@ def select_response(
     others = {k: _grid_stack(grid, [i for i in range(k_count) if i != k], 1) for k in folds}
     tallies: list[tuple[np.ndarray, np.ndarray, float] | None] = []
     errors: list[str | None] = []
-    for spec in opts.candidates:
+    for candidate in opts.candidates:
+        spec = _scoring_spec(candidate)
         try:
             if pixel_folds:
                 response = fit_response(fit_half, spec, rng=seed).model

@@ -239,3 +239,24 @@ def test_pixel_folds_score_a_two_exposure_bracket(rng):
     result = select_response(stack, SelectionOptions(candidates=GAMMA_FIRST, folds="pixels"))
     assert result.rule == "hold-out" and result.held_out == (0, 1)
     assert result.chosen[0] == "Debevec 1997"
+
+
+@pytest.mark.parametrize("folds", ["exposures", "pixels"])
+def test_fold_fits_without_the_covariance_score_the_same(rng, monkeypatch, folds):
+    """The folds fit g without its covariance (the score needs g only): every score is the
+    one the full fits give, to the bit, and the chosen model's refit keeps it."""
+    stack = _exp_shoulder_stack(rng)
+    assert selection_module._scoring_spec(("Debevec 1997", {}))[1] == {"uncertainty": False}
+    assert selection_module._scoring_spec(("Gamma", {})) == ("Gamma", {})
+    options = SelectionOptions(folds=folds)
+    fast = select_response(stack, options)
+    monkeypatch.setattr(selection_module, "_scoring_spec", lambda spec: spec)
+    full = select_response(stack, options)
+    assert [c.score_dn for c in fast.candidates] == [c.score_dn for c in full.candidates]
+    assert [c.difference_se_dn for c in fast.candidates] == [
+        c.difference_se_dn for c in full.candidates
+    ]
+    assert fast.chosen == full.chosen
+    monkeypatch.undo()
+    camera = pq.calibrate([stack], response=SELECTION_METHOD)
+    assert camera.response.covariance_factor is not None
