@@ -65,6 +65,33 @@ def check_roi(roi: Sequence[int], image_shape: tuple[int, int], name: str = "whi
     return x0, y0, x1, y1
 
 
+def _chart_patch(
+    linear: np.ndarray, roi: Sequence[int], mask: np.ndarray | None
+) -> tuple[tuple[int, int, int, int], np.ndarray, np.ndarray]:
+    """The chart's box, its pixels ``(h, w, C)`` and which are valid (finite, positive,
+    not masked)."""
+    box = check_roi(roi, linear.shape[:2])
+    x0, y0, x1, y1 = box
+    patch = linear[y0:y1, x0:x1]
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(patch) & (patch > 0)
+    if mask is not None:
+        ok &= ~np.asarray(mask, dtype=bool)[y0:y1, x0:x1]
+    return box, patch, ok
+
+
+def _log_ratio(
+    patch: np.ndarray, ok: np.ndarray, reference: int, ch: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """``ln W_ref − ln W_λ`` of every chart pixel ``(h, w)`` (0 where not valid in both
+    channels), and where it is valid in both."""
+    both = ok[..., ch] & ok[..., reference]
+    ratio = np.log(np.where(both, patch[..., reference], 1.0)) - np.log(
+        np.where(both, patch[..., ch], 1.0)
+    )
+    return ratio, both
+
+
 def white_chart_colour(
     linear: np.ndarray, roi: Sequence[int], mask: np.ndarray | None = None
 ) -> np.ndarray:
@@ -74,17 +101,13 @@ def white_chart_colour(
     Raises :class:`CalibrationError` when a channel has no valid pixel there.
     """
     linear = check_array(linear, "linear", ndim=3, kind="f")
-    x0, y0, x1, y1 = check_roi(roi, linear.shape[:2])
-    patch = linear[y0:y1, x0:x1].reshape(-1, linear.shape[2])
-    ok = np.isfinite(patch) & (patch > 0)
-    if mask is not None:
-        ok &= ~np.asarray(mask, dtype=bool)[y0:y1, x0:x1].reshape(patch.shape)
-    colour = np.empty(patch.shape[1])
-    for ch in range(patch.shape[1]):
-        good = patch[ok[:, ch], ch]
+    box, patch, ok = _chart_patch(linear, roi, mask)
+    colour = np.empty(patch.shape[-1])
+    for ch in range(patch.shape[-1]):
+        good = patch[..., ch][ok[..., ch]]
         if good.size == 0:
             raise CalibrationError(
-                f"the white chart region {[x0, y0, x1, y1]} has no validly exposed pixel in "
+                f"the white chart region {list(box)} has no validly exposed pixel in "
                 f"channel {ch}: every exposure is saturated or dark there"
             )
         colour[ch] = np.median(good)
@@ -96,19 +119,6 @@ CHART_TILE_PX = 8
 
 _MIN_TILES = 16
 """Fewest tiles per channel: below, the tiles shrink (down to single pixels)."""
-
-
-def _chart_patch(
-    linear: np.ndarray, roi: Sequence[int], mask: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """The chart's pixels ``(h, w, C)`` and which are valid (finite, positive, not masked)."""
-    x0, y0, x1, y1 = check_roi(roi, linear.shape[:2])
-    patch = linear[y0:y1, x0:x1]
-    with np.errstate(invalid="ignore"):
-        ok = np.isfinite(patch) & (patch > 0)
-    if mask is not None:
-        ok &= ~np.asarray(mask, dtype=bool)[y0:y1, x0:x1]
-    return patch, ok
 
 
 def _tile_medians(values: np.ndarray, ok: np.ndarray, side: int) -> np.ndarray:
@@ -168,16 +178,12 @@ def balance_log_variance(
             f"the white chart's reference channel {reference_channel} is not one of the "
             f"camera's {n_ch} channels"
         )
-    patch, ok = _chart_patch(linear, roi, mask)
+    _, patch, ok = _chart_patch(linear, roi, mask)
     out = np.zeros(n_ch)
     for ch in range(n_ch):
         if ch == reference_channel:
             continue
-        both = ok[..., ch] & ok[..., reference_channel]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.log(np.where(both, patch[..., reference_channel], 1.0)) - np.log(
-                np.where(both, patch[..., ch], 1.0)
-            )
+        ratio, both = _log_ratio(patch, ok, reference_channel, ch)
         side = CHART_TILE_PX
         while True:
             medians = _tile_medians(ratio, both, side)
@@ -232,19 +238,18 @@ def colour_balance_WhiteChart(
             f"camera's {colour.size} channels; give --option "
             f"balance.reference_channel=0..{colour.size - 1}"
         )
-    patch, ok = _chart_patch(linear, roi, mask)
+    box, patch, ok = _chart_patch(linear, roi, mask)
     factors = np.ones(colour.size)
     for ch in range(colour.size):
         if ch == reference_channel:
             continue
-        both = ok[..., ch] & ok[..., reference_channel]
+        ratio, both = _log_ratio(patch, ok, reference_channel, ch)
         if not both.any():
             raise CalibrationError(
-                f"the white chart region {list(roi)} has no pixel validly exposed in both "
+                f"the white chart region {list(box)} has no pixel validly exposed in both "
                 f"channel {ch} and the reference channel {reference_channel}"
             )
-        ratio = np.log(patch[..., reference_channel][both]) - np.log(patch[..., ch][both])
-        factors[ch] = np.exp(np.median(ratio))
+        factors[ch] = np.exp(np.median(ratio[both]))
     return factors
 
 
@@ -387,9 +392,7 @@ def characterise_balance_WhiteChart(
     factors = colour_balance_WhiteChart(
         linear, data.roi, mask=data.mask, reference_channel=opts.reference_channel
     )
-    variance = balance_log_variance(
-        linear, data.roi, data.mask, min(opts.reference_channel, factors.size - 1)
-    )
+    variance = balance_log_variance(linear, data.roi, data.mask, opts.reference_channel)
     stated = bool(np.all(np.isfinite(variance)))
     model = BalanceModel("White Chart", factors, log_variance=variance if stated else None)
     report: dict[str, Any] = {
