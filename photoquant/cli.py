@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -199,18 +200,14 @@ def _selection_line(record: Any) -> str | None:
         return None
 
     def label(entry: Any) -> str:
+        from photoquant.response_selection import CandidateScore
+
         if not isinstance(entry, dict):
             return "?"
         options = entry.get("options")
-        opts = (
-            ", ".join(
-                f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in options.items()
-            )
-            if isinstance(options, dict)
-            else ""
-        )
         name = str(entry.get("method", "?"))[:60]
-        return f"{name} ({opts})" if opts else name
+        opts = options if isinstance(options, dict) else {}
+        return CandidateScore(name, opts, math.nan, math.nan, 0).label
 
     def score(entry: Any) -> str:
         if not isinstance(entry, dict):
