@@ -80,7 +80,7 @@ from photoquant.merge.uncertainty import log_variance_Debevec1997, noise_record
 from photoquant.methods import Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
 from photoquant.profiles import DEFAULT_PROFILE, profile_setting, profile_steps
-from photoquant.response import fit_response
+from photoquant.response import fit_response, without_covariance
 from photoquant.response.model import ResponseModel
 from photoquant.response_selection import SELECTION_METHOD, select_response
 from photoquant.sensor_lut import SensorLUTModel
@@ -469,14 +469,7 @@ def _recover_with_view_times(
     """
     fits: list[StepFit[Any]] = []
     # the rounds' fits need g only: the covariance is the final fit's (same g either way)
-    method, options = spec
-    rounds_spec = spec
-    if (
-        dataclasses.is_dataclass(options)
-        and not isinstance(options, type)
-        and "uncertainty" in {f.name for f in dataclasses.fields(options)}
-    ):
-        rounds_spec = (method, dataclasses.replace(options, uncertainty=False))
+    rounds_spec = without_covariance(spec)
 
     def fitter(chosen: Spec) -> Callable[[ExposureStack], tuple[np.ndarray, ...]]:
         def recover(stack: ExposureStack) -> tuple[np.ndarray, ...]:

@@ -105,7 +105,6 @@ References
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -118,7 +117,7 @@ from photoquant.errors import CalibrationError, InputError
 from photoquant.holdout import fill_unmerged, predict_held_out, score_range
 from photoquant.merge import MergeModel
 from photoquant.methods import Method, StepFit, resolve_method
-from photoquant.response import RESPONSE_METHODS, fit_response
+from photoquant.response import RESPONSE_METHODS, fit_response, without_covariance
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
@@ -343,19 +342,6 @@ class ResponseSelection:
         )
 
 
-def _scoring_spec(spec: tuple[str, dict[str, Any]]) -> tuple[str, dict[str, Any]]:
-    """``spec`` for a fold's fit: without the covariance of ``g`` where the method states
-    one (the score needs ``g`` only, the same either way; the chosen model's refit on
-    every exposure keeps it)."""
-    name, options = spec
-    fields = RESPONSE_METHODS[name].options
-    if dataclasses.is_dataclass(fields) and "uncertainty" in {
-        f.name for f in dataclasses.fields(fields)
-    }:
-        return name, {**options, "uncertainty": False}
-    return spec
-
-
 def _grid_stack(stack: ExposureStack, exposures: Sequence[int], stride: int) -> ExposureStack:
     """``stack`` at ``exposures`` on every ``stride``-th pixel, its levels kept."""
     pick = list(exposures)
@@ -523,7 +509,8 @@ def select_response(
     tallies: list[tuple[np.ndarray, np.ndarray, float] | None] = []
     errors: list[str | None] = []
     for candidate in opts.candidates:
-        spec = _scoring_spec(candidate)
+        # the score needs g only; the chosen model's refit on every exposure keeps its covariance
+        spec = without_covariance(candidate)
         try:
             if pixel_folds:
                 response = fit_response(fit_half, spec, rng=seed).model

@@ -17,6 +17,8 @@ Methods
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -68,6 +70,7 @@ __all__ = [
     "characterise_response_Robertson2003",
     "recover_response",
     "fit_response",
+    "without_covariance",
     "response_levels",
     "select_samples_histogram",
     "select_samples_random",
@@ -154,6 +157,24 @@ def fit_response(
             f"got {type(fit).__name__}"
         )
     return fit
+
+
+def without_covariance(spec: Any) -> Any:
+    """``spec`` with its method's estimate of the covariance of ``g`` turned off where it
+    has one (option ``uncertainty``), in the form given (``(name, options)`` or a
+    resolved ``(Method, options)``): for fits that need ``g`` only, which is the same
+    either way. A spec whose method has no such option is returned as it is."""
+    method, options = resolve_method("response", spec, ("Debevec 1997", {}))
+    fields = (
+        {f.name for f in dataclasses.fields(options)}
+        if dataclasses.is_dataclass(options)
+        else set()
+    )
+    if "uncertainty" not in fields:
+        return spec
+    if isinstance(spec, tuple) and len(spec) == 2 and isinstance(spec[1], Mapping):
+        return spec[0], {**spec[1], "uncertainty": False}
+    return method, dataclasses.replace(options, uncertainty=False)
 
 
 def recover_response(

@@ -246,11 +246,13 @@ def test_fold_fits_without_the_covariance_score_the_same(rng, monkeypatch, folds
     """The folds fit g without its covariance (the score needs g only): every score is the
     one the full fits give, to the bit, and the chosen model's refit keeps it."""
     stack = _exp_shoulder_stack(rng)
-    assert selection_module._scoring_spec(("Debevec 1997", {}))[1] == {"uncertainty": False}
-    assert selection_module._scoring_spec(("Gamma", {})) == ("Gamma", {})
+    from photoquant.response import without_covariance
+
+    assert without_covariance(("Debevec 1997", {}))[1] == {"uncertainty": False}
+    assert without_covariance(("Gamma", {})) == ("Gamma", {})
     options = SelectionOptions(folds=folds)
     fast = select_response(stack, options)
-    monkeypatch.setattr(selection_module, "_scoring_spec", lambda spec: spec)
+    monkeypatch.setattr(selection_module, "without_covariance", lambda spec: spec)
     full = select_response(stack, options)
     assert [c.score_dn for c in fast.candidates] == [c.score_dn for c in full.candidates]
     assert [c.difference_se_dn for c in fast.candidates] == [
