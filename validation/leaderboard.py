@@ -90,6 +90,7 @@ __all__ = [
     "find_real_sets",
     "default_real_dir",
     "check_steps",
+    "is_peer_method",
     "run_leaderboard",
     "format_leaderboard",
     "format_markdown",
@@ -789,6 +790,11 @@ def _unavailable(method: Any) -> str | None:
     return None
 
 
+def is_peer_method(method: Any) -> bool:
+    """True for a peer's method: an adapter of :mod:`photoquant.peers` to another implementation."""
+    return str(getattr(method.function, "__module__", "")).startswith("photoquant.peers")
+
+
 def _methods_of(step: str, names: Sequence[str] | None) -> list[Any]:
     from photoquant.methods import registry
 
@@ -835,6 +841,7 @@ def run_leaderboard(
     manifests: Sequence[str | Path] | None = None,
     allow_outside: bool = False,
     methods: Sequence[str] | None = None,
+    peers: bool = True,
     presets: Sequence[str] | None = None,
     config: ValidationConfig = QUICK,
     seed: int = 0,
@@ -860,6 +867,10 @@ def run_leaderboard(
     methods : sequence of str, optional
         Only these methods (names of any of the steps; unknown names are an
         error listing the registered ones).
+    peers : bool
+        Rank the peers' methods (:mod:`photoquant.peers`: OpenCV, colour-hdri,
+        Hugin, pfstools) beside photoquant's and the plug-ins' (default);
+        ``False`` leaves them out.
     presets : sequence of str, optional
         Camera presets; by default :data:`DEFAULT_CAMERAS`, or the shared
         run's ``config.presets`` when ``shared`` is given.
@@ -952,6 +963,8 @@ def run_leaderboard(
             lb.manifests = {c.preset: str(c.manifest) for c in captures}
         for step in chosen:
             selected = _methods_of(step, methods)
+            if not peers:
+                selected = [m for m in selected if not is_peer_method(m)]
             if methods is not None and not selected:
                 continue  # --methods names none of this step's
             floors: dict[str, float] = {}

@@ -308,6 +308,20 @@ def test_deterministic_for_a_seed(registered, tmp_path):
     assert other["boards"][0]["entries"][0]["scores"]["ccd"]["g_rms"] != a
 
 
+def test_peers_can_be_left_out():
+    """``peers=False`` ranks photoquant's and the plug-ins' methods only."""
+    from photoquant.methods import registry
+    from validation.leaderboard import is_peer_method
+
+    assert is_peer_method(registry("response")["OpenCV Debevec"])
+    assert not is_peer_method(registry("response")["Debevec 1997"])
+    lb = run_leaderboard(
+        "response", methods=["Debevec 1997", "OpenCV Debevec"], peers=False, presets=["ccd"],
+        config=TINY, repeats=1, progress=_quiet,
+    )  # fmt: skip
+    assert [e.method for e in lb.boards[0].entries] == ["Debevec 1997"]
+
+
 def test_report_folder(board, tmp_path):
     lb, _ = board
     folder = write_report(lb, tmp_path / "report")

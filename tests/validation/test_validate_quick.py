@@ -86,6 +86,23 @@ def test_report_files(quick):
 
 
 @pytest.mark.slow
+def test_quick_board_ranks_photoquants_methods_and_names_where_the_peers_are(quick):
+    """The peers' own solvers and programs are the full job's and ``photoquant leaderboard``'s."""
+    from photoquant.methods import registry
+    from validation.leaderboard import is_peer_method
+
+    run, _, _ = quick
+    rows = " ".join(row.quantity for row in run.experiments["leaderboard"].rows)
+    for step in ("response", "vignetting"):
+        for name in registry(step):
+            method = registry(step)[name]
+            if name.casefold() == "none":
+                continue
+            assert (f" {method.name}" in rows) != is_peer_method(method), (step, name)
+    assert any("photoquant leaderboard" in note for note in run.experiments["leaderboard"].notes)
+
+
+@pytest.mark.slow
 def test_quick_numbers_are_physical(quick):
     """Sanity of the headline numbers, with bounds from the physics, not from a run."""
     run, _, _ = quick

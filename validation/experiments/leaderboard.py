@@ -8,9 +8,13 @@ scored against the truth (the step's own error, the test scene's eq. 8
 error beside its noise floor, the sensor LUT's error and Table 1's
 ColorChecker correlation) and timed.
 
-The quick job ranks the response and vignetting steps only, with one timed
-calibration per method (a few seconds per method on two cores); ``--full``
-(configuration ``full``) ranks the merge step as well, and ranks the
+The quick job ranks the response and vignetting steps only, photoquant's
+methods and the plug-ins', with one timed calibration per method (one to
+two seconds each on two cores); the peers' methods (OpenCV, colour-hdri,
+Hugin, pfstools: most of them run their own iterative solvers or programs,
+5–30 s a calibration at 320×240) would take two minutes of it.
+``--full`` (configuration ``full``) ranks the peers and the merge step as
+well, and ranks the
 response methods also on cameras outside the presets (:data:`EXTRA_CAMERAS`:
 two with responses drawn from the EMoR space of real ones, one film-like;
 about 4 minutes on 2 cores at 160×120 for the eleven response methods, so
@@ -33,7 +37,7 @@ from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, fmt_pct
 from validation.experiments.shared import Shared
 
-__all__ = ["run", "TITLE", "steps_for", "extra_cameras_for", "EXTRA_CAMERAS"]
+__all__ = ["run", "TITLE", "steps_for", "peers_for", "extra_cameras_for", "EXTRA_CAMERAS"]
 
 EXTRA_CAMERAS: tuple[str, ...] = ("emor", "emor-1", "film")
 """Cameras beside the presets on the response board of the full job (pqsim presets)."""
@@ -46,6 +50,11 @@ def steps_for(config: ValidationConfig) -> tuple[str, ...]:
     if config.name == "full":
         return ("response", "merge", "vignetting")
     return ("response", "vignetting")
+
+
+def peers_for(config: ValidationConfig) -> bool:
+    """Whether the peers' methods are ranked at ``config``: in the full job only."""
+    return config.name == "full"
 
 
 def extra_cameras_for(config: ValidationConfig) -> tuple[str, ...]:
@@ -69,6 +78,7 @@ def run(
     res = ExperimentResult("leaderboard", TITLE, "validation.leaderboard")
     lb = run_leaderboard(
         steps_for(config),
+        peers=peers_for(config),
         presets=config.presets,
         config=config,
         seed=seed,
@@ -82,6 +92,7 @@ def run(
         runs.append(
             run_leaderboard(
                 ("response",),
+                peers=peers_for(config),
                 presets=extra,
                 config=config,
                 seed=seed,
@@ -100,6 +111,12 @@ def run(
         "truth, with the corrected test scene's eq. 8 e_mean and the calibration time. "
         "Failed methods are ranked last with their reason; methods whose inputs the synthetic "
         "sets lack (a flat field) are n/a. Reported, not baseline-checked. "
+        + (
+            ""
+            if peers_for(config)
+            else "The peers' methods (OpenCV, colour-hdri, Hugin, pfstools) are ranked in the "
+            "full job (--full) and by `photoquant leaderboard`. "
+        )
         + (
             "The merge step is ranked in the full job only."
             if "merge" not in steps_for(config)
