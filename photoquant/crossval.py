@@ -677,6 +677,7 @@ def prediction_sigma_dn(
         estimate_noise_parameters,
     )
     from photoquant.merge.uncertainty import (
+        compiled_passes_apply,
         log_variance_Debevec1997,
         log_variance_exposure_Debevec1997,
         log_variance_response_Debevec1997,
@@ -695,7 +696,12 @@ def prediction_sigma_dn(
     if noise is None:
         return None
     options = model.merge.options
-    weights = merge_weights_Debevec1997(stack, response, options)
+    # compiled passes look the weights up themselves (computed here, they only cost time)
+    weights = (
+        None
+        if compiled_passes_apply(stack)
+        else merge_weights_Debevec1997(stack, response, options)
+    )
     var = log_variance_Debevec1997(stack, response, noise, options, weights=weights)
     level = np.where(np.isfinite(predicted), predicted, float(response.levels[0]))
     var = var + log_variance_response_Debevec1997(

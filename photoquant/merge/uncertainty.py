@@ -40,6 +40,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from photoquant._interp import interp
 from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant._threads import even_spans, thread_map
 from photoquant.errors import InputError
@@ -272,27 +273,52 @@ def _fused_response_variance(
     levels: np.ndarray,
     factor: np.ndarray,
     rest: np.ndarray,
+    held_out_level: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`log_variance_response_Debevec1997` in one compiled pass (tabulated stacks):
-    the factor's columns and the rest of the diagonal tabulated as ``g`` is interpolated."""
+    the factor's columns and the rest of the diagonal tabulated as ``g`` is interpolated;
+    with ``held_out_level``, each span's read-back terms interpolated at its levels first
+    (as the numpy path's, a span at a time: no ``(R, H, W, C)`` array)."""
     tables, weight_table, _ = setup
     factor_tables = np.stack(
         [_interpolated_table(tables, levels, factor[:, r]) for r in range(factor.shape[1])]
     )
     values, sat, dark, out = _fused_arguments(stack, setup)
     size = tables.grid.size
-    _run_in_spans(
-        _response_variance_nb,
-        values,
-        sat,
-        dark,
-        out,
-        size,
-        weight_table,
-        factor_tables.reshape(-1, size * stack.n_channels),
-        _interpolated_table(tables, levels, rest),
-    )
+    f_tables = factor_tables.reshape(-1, size * stack.n_channels)
+    d_table = _interpolated_table(tables, levels, rest)
+    n_ch = stack.n_channels
+    flat_level = None if held_out_level is None else held_out_level.reshape(-1, n_ch)
+    empty = np.zeros((0, 0, 0)), np.zeros((0, 0))
+
+    def span(part: slice) -> None:
+        held_f, held_d = empty
+        if flat_level is not None:
+            lv = flat_level[part]
+            held_f = np.stack([_rows_at(lv, levels, factor[:, r]) for r in range(factor.shape[1])])
+            held_d = _rows_at(lv, levels, rest)
+        _response_variance_nb(
+            values[:, part],
+            size,
+            weight_table,
+            f_tables,
+            d_table,
+            held_f,
+            held_d,
+            sat[:, part] if sat.size else sat,
+            dark[:, part] if dark.size else dark,
+            out[part],
+        )
+
+    thread_map(span, even_spans(values.shape[1], 4 * (os.cpu_count() or 1)))
     return out.reshape(_value_shape(stack))
+
+
+def _rows_at(level: np.ndarray, levels: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``rows`` (C, L), given at ``levels``, at ``level`` (..., C), as ``g`` is interpolated."""
+    return np.stack(
+        [interp(level[..., ch], levels, rows[ch]) for ch in range(rows.shape[0])], axis=-1
+    )
 
 
 def _weighted_variance_py(  # pragma: no cover - compiled by numba
@@ -344,13 +370,19 @@ def _response_variance_py(  # pragma: no cover - compiled by numba
     w_table: Any,
     f_tables: Any,
     d_table: Any,
+    held_f: Any,
+    held_d: Any,
     sat: Any,
     dark: Any,
     out: Any,
 ) -> None:
-    """numba body: ``Σ_r (Σ_k w_k F_r(c̄_k) / Σ_k w_k)² + Σ_k w_k² D(c̄_k) / (Σ_k w_k)²``
-    per value, in the order of :func:`log_variance_response_Debevec1997`'s numpy path."""
+    """numba body: ``Σ_r (Σ_k w_k F_r(c̄_k) / Σ_k w_k − F_r(ẑ))² + Σ_k w_k² D(c̄_k) /
+    (Σ_k w_k)² + D(ẑ)`` per value, in the order of
+    :func:`log_variance_response_Debevec1997`'s numpy path; ``held_f (R, P, C)`` and
+    ``held_d (P, C)`` are ``F_r`` and ``D`` at the held-out levels ``ẑ``, or empty (no
+    read-back: the terms at ``ẑ`` left out)."""
     n_k, n_p, n_c = values.shape
+    held = held_f.size > 0
     wk = np.empty(n_k)
     idx = np.empty(n_k, dtype=np.intp)
     for p in range(n_p):
@@ -368,11 +400,16 @@ def _response_variance_py(  # pragma: no cover - compiled by numba
                 for k in range(n_k):
                     acc += wk[k] * f_tables[r, idx[k]]
                 moved = acc * inv
+                if held:
+                    moved = moved - held_f[r, p, c]
                 total += moved * moved
             acc = 0.0
             for k in range(n_k):
                 acc += wk[k] * wk[k] * d_table[idx[k]]
-            out[p, c] = total + acc * (inv * inv)
+            total = total + acc * (inv * inv)
+            if held:
+                total = total + held_d[p, c]
+            out[p, c] = total
 
 
 def _exposure_variance_py(  # pragma: no cover - compiled by numba
@@ -459,19 +496,16 @@ def log_variance_response_Debevec1997(
         )
     levels = response.levels
     rest = np.clip(diagonal - np.sum(factor**2, axis=1), 0.0, None)
-    if weights is None and held_out_level is None and _response_variance_nb is not None:
+    if weights is None and _response_variance_nb is not None:
         setup = _weight_setup(stack, response, options)
         if setup[0].tabulated:  # one compiled pass over the values, the same arithmetic
-            return _fused_response_variance(stack, setup, levels, factor, rest)
+            return _fused_response_variance(stack, setup, levels, factor, rest, held_out_level)
     tables, per_exposure, den = weights or merge_weights_Debevec1997(stack, response, options)
 
     def at_level(rows: np.ndarray) -> np.ndarray:
         """``rows`` (C, L) at ``held_out_level`` (H, W, C), as ``g`` is interpolated."""
         assert held_out_level is not None
-        return np.stack(
-            [np.interp(held_out_level[..., ch], levels, rows[ch]) for ch in range(rows.shape[0])],
-            axis=-1,
-        )
+        return _rows_at(held_out_level, levels, rows)
 
     with np.errstate(invalid="ignore", divide="ignore"):
         inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), np.nan)

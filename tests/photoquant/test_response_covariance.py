@@ -293,11 +293,12 @@ def test_correct_states_the_refined_times_component():
     assert kept.exposures is None and kept.log_sigma_exposure is None
 
 
-@pytest.mark.parametrize("part", ["response", "exposure"])
+@pytest.mark.parametrize("part", ["response", "response read back", "exposure"])
 def test_the_compiled_calibration_parts_give_the_numpy_bits(monkeypatch, part):
     """The response's and the exposure times' parts, computed in compiled passes over the
     values, equal the numpy path over the merge's weights to the bit (clipped and dark
-    values, a value clipped in every exposure, N = 3 repeats, three channels)."""
+    values, a value clipped in every exposure, N = 3 repeats, three channels), the
+    response's also with a held-out read-back level per value (cross-validation's)."""
     import photoquant.merge.uncertainty as uncertainty
     from photoquant.merge.uncertainty import (
         log_variance_exposure_Debevec1997,
@@ -325,14 +326,20 @@ def test_the_compiled_calibration_parts_give_the_numpy_bits(monkeypatch, part):
     log_cov = a @ a.T
     log_cov[2] = log_cov[:, 2] = np.nan  # an exposure kept at its label
 
+    # read-back levels between and at the response's levels, and beyond its ends
+    held = rng.uniform(-3.0, 258.0, size=(12, 10, 3))
+    held[0, 0] = [0.0, 17.0, 255.0]
+
     def variance(**kw):
         if part == "response":
             return log_variance_response_Debevec1997(stack, response, **kw)
+        if part == "response read back":
+            return log_variance_response_Debevec1997(stack, response, held_out_level=held, **kw)
         return log_variance_exposure_Debevec1997(stack, response, log_cov, **kw)
 
     fused = variance()
     plain = variance(weights=merge_weights_Debevec1997(stack, response))
-    monkeypatch.setattr(uncertainty, f"_{part}_variance_nb", None)
+    monkeypatch.setattr(uncertainty, f"_{part.split()[0]}_variance_nb", None)
     again = variance()
     np.testing.assert_array_equal(fused, plain)
     np.testing.assert_array_equal(fused, again)
