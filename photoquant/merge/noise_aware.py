@@ -709,7 +709,7 @@ def estimate_noise_parameters(
     clipped = stack.saturated(response.saturation_level) | stack.dark_clipped()
     h, w = stack.image_shape
     stride = max(1, (h * w) // _FIT_MAX_PIXELS)
-    means: list[list[np.ndarray]] = [[] for _ in range(n_ch)]
+    sums: list[list[np.ndarray]] = [[] for _ in range(n_ch)]
     variances: list[list[np.ndarray]] = [[] for _ in range(n_ch)]
     for k in range(stack.n_exposures):  # one exposure at a time, every stride-th pixel
         f = stack.frames[:, k].reshape(n, h * w, n_ch)[:, ::stride].astype(np.int64)
@@ -719,19 +719,17 @@ def estimate_noise_parameters(
         m = s1 / n
         ok = ~clipped[k].reshape(h * w, n_ch)[::stride] & (m >= lo) & (m < sat)
         for ch in range(n_ch):
-            means[ch].append(m[:, ch][ok[:, ch]])
+            sums[ch].append(s1[:, ch][ok[:, ch]])
             variances[ch].append(s2[:, ch][ok[:, ch]])
     gains, reads, bins_used = np.zeros(n_ch), np.zeros(n_ch), []
     for ch in range(n_ch):
-        c = np.concatenate(means[ch])
+        j = np.concatenate(sums[ch])
         var_c = np.concatenate(variances[ch])
-        if c.size < 2 * _FIT_MIN_COUNT:
+        if j.size < 2 * _FIT_MIN_COUNT:
             return None
-        y = scale.linear(scale.log_inverse(c, ch), ch)
-        dy_dc = y * scale.slope(c, ch)
+        y, dy_dc, order = _linear_signal_in_order(j, n, scale, ch, n * stack.c_max)
         var_y = (var_c - _QUANTISATION) * dy_dc * dy_dc
-        order = np.argsort(y, kind="stable")
-        groups = np.array_split(order, min(n_bins, max(1, c.size // _FIT_MIN_COUNT)))
+        groups = np.array_split(order, min(n_bins, max(1, j.size // _FIT_MIN_COUNT)))
         xs, vs, ses = [], [], []
         for idx in groups:
             if idx.size < _FIT_MIN_COUNT or var_c[idx].mean() < _FIT_MIN_VARIANCE:
@@ -753,6 +751,34 @@ def estimate_noise_parameters(
         bins_used.append(len(xs))
     source = "estimated" if gain is None and read_noise is None else "given+estimated"
     return NoiseParameters(gains, reads, source, bins_used)
+
+
+_RADIX_KEYS = 1 << 16
+"""Grids of at most this many means take :func:`_linear_signal_in_order`'s tables."""
+
+
+def _linear_signal_in_order(
+    sums: np.ndarray, n: int, scale: _Scale, ch: int, top: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of each mean ``sums / n`` (``sums`` the exact integer sums of ``n`` repeats, at most
+    ``top``): the linear signal ``y``, ``y·g'`` and the stable order of ``y``.
+
+    ``y = linear(g(c))`` and ``y·g'(c)``, then ``np.argsort(y, kind="stable")``. Where
+    the grid ``j / n`` (``j ≤ top``) has at most :data:`_RADIX_KEYS` points and fewer
+    than the values, the same bits through tables: both evaluated once per grid point
+    (the same floats as per value) and gathered, and the order a stable radix sort of
+    each value's dense rank of ``y`` on the grid (equal ``y``, equal rank: ties keep the
+    values' order, as the stable sort of ``y`` does), instead of a comparison sort.
+    """
+    if top >= _RADIX_KEYS or sums.size <= top:
+        c = sums / n
+        y = scale.linear(scale.log_inverse(c, ch), ch)
+        return y, y * scale.slope(c, ch), np.argsort(y, kind="stable")
+    grid = np.arange(top + 1, dtype=np.float64) / n
+    y_grid = scale.linear(scale.log_inverse(grid, ch), ch)
+    dy_grid = y_grid * scale.slope(grid, ch)
+    rank = np.unique(y_grid, return_inverse=True)[1].astype(np.uint16)
+    return y_grid[sums], dy_grid[sums], np.argsort(rank[sums], kind="stable")
 
 
 def _robust_line(

@@ -196,6 +196,35 @@ def test_photon_transfer_estimate_recovers_gain_and_read_noise(noisy):
     assert held.gain[0] == GAIN and abs(held.read_noise[0] / READ_DN - 1.0) < 0.10
 
 
+def test_photon_transfer_tables_give_the_per_value_bits(monkeypatch, noisy):
+    """The photon-transfer fit's tables and radix order (grids of at most 2¹⁶ means) give
+    the per-value evaluation's and the comparison sort's bits: a response with a plateau
+    (equal signal at different means: ties kept in the values' order), three channels."""
+    import photoquant.merge.noise_aware as noise_aware
+
+    rng = np.random.default_rng(7)
+    rate = rng.uniform(20.0, 400.0, size=(60, 70, 3))
+    stack = _stack(_linear_camera(rng, rate, T_NOISY, 3), T_NOISY)
+    g = np.log(np.maximum(LEVELS, 0.5))
+    g[40:48] = g[40]  # a flat stretch: y ties across means
+    response = ResponseModel("plateau", LEVELS, np.tile(g, (3, 1)), np.full(3, 255.0))
+    sums = stack.frames.astype(np.int64).sum(axis=0)[1, ..., 0].ravel()
+    scale = noise_aware._Scale(response)
+    fast = noise_aware._linear_signal_in_order(sums, 3, scale, 0, 3 * 255)
+    slow = noise_aware._linear_signal_in_order(sums, 3, scale, 0, 1 << 16)  # per value
+    assert (g[np.unique(sums) // 3] == g[40]).sum() > 1  # the sample holds the plateau's ties
+    for a, b in zip(fast, slow, strict=True):
+        np.testing.assert_array_equal(a, b)
+    for data, model in ((stack, response), (noisy, _linear_response())):
+        tabulated = estimate_noise_parameters(data, model)
+        monkeypatch.setattr(noise_aware, "_RADIX_KEYS", 0)
+        per_value = estimate_noise_parameters(data, model)
+        monkeypatch.undo()
+        assert tabulated is not None and per_value is not None
+        np.testing.assert_array_equal(tabulated.gain, per_value.gain)
+        np.testing.assert_array_equal(tabulated.read_noise, per_value.read_noise)
+
+
 def test_single_repeat_without_noise_parameters_falls_back_and_says_so(noisy):
     one = _stack(noisy.frames[:1], T_NOISY)
     res = merge_stack_NoiseAware(one, _linear_response())
