@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from validation.config import ValidationError
+from validation.config import NOT_CONDITIONS, ValidationError
 
 __all__ = [
     "BASELINE_FORMAT",
@@ -284,17 +284,8 @@ def _conditions(results: Mapping[str, Any]) -> dict[str, Any]:
     return cfg
 
 
-_NOT_CONDITIONS = (
-    "name",
-    "presets",
-    "calibrate_kwargs",
-    "skip_vignetting",
-    "render_cache",
-    "rendered_capture",
-    "preset_files",
-    "robustness",
-)
-"""The fields :meth:`ValidationConfig.conditions` leaves out (a test keeps them in step)."""
+_NOT_CONDITIONS = NOT_CONDITIONS
+"""The fields :meth:`ValidationConfig.conditions` leaves out."""
 
 
 _BETTER = ("lower", "higher", "both")

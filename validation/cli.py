@@ -116,6 +116,12 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also calibrate each preset from a Mitsuba-rendered capture set (--full does)",
     )
+    parser.add_argument(
+        "--peers",
+        action="store_true",
+        help="also rank and score the peers' methods (OpenCV, colour-hdri, Hugin, pfstools) "
+        "in the leaderboard and the noise experiment's merge table (--full does)",
+    )
     from photoquant.profiles import PROFILES
 
     parser.add_argument(
@@ -190,6 +196,7 @@ def run_configuration(args: argparse.Namespace) -> Any:
         presets=tuple(args.preset or ()),
         chart=args.chart,
         rendered_capture=bool(args.rendered_capture),
+        peers=bool(args.peers),
         experiments=None if args.experiments is None else tuple(args.experiments),
         cache_dir=args.cache_dir,
     )

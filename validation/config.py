@@ -47,6 +47,7 @@ from photoquant.utils import check_int
 __all__ = [
     "ValidationError",
     "ValidationConfig",
+    "NOT_CONDITIONS",
     "CONFIGS",
     "QUICK",
     "FULL",
@@ -63,6 +64,20 @@ CHART_SOURCES = ("analytic", "rendered")
 
 PAPER_EXPOSURES_S: tuple[float, ...] = tuple(float(t) for t in np.geomspace(1e-3, 0.2, 8))
 """The calibration exposures of §6.1 of [PQ]: 1 ms to 200 ms, ``K = 8`` (geometric)."""
+
+
+NOT_CONDITIONS: tuple[str, ...] = (
+    "name",
+    "presets",
+    "calibrate_kwargs",
+    "skip_vignetting",
+    "render_cache",
+    "rendered_capture",
+    "preset_files",
+    "robustness",
+    "peers",
+)
+"""The fields :meth:`ValidationConfig.conditions` leaves out (the reasons there)."""
 
 
 class ValidationError(PhotoquantError):
@@ -150,6 +165,13 @@ class ValidationConfig:
         Include the ``robustness`` experiment in a default run (each real-camera
         disturbance alone and all together; :mod:`validation.experiments.robustness`).
         Left out of :meth:`conditions`: its metrics are reported, never checked.
+    peers : bool
+        Rank and score the peers' methods (:mod:`photoquant.peers`: OpenCV,
+        colour-hdri, Hugin, pfstools) in the leaderboard and in the noise
+        experiment's merge table, beside photoquant's and the plug-ins' (their
+        own solvers and programs: most of the quick job's time when on). Table
+        1's peer rows run either way. Left out of :meth:`conditions`: those
+        metrics are reported, never checked.
     """
 
     name: str = "quick"
@@ -177,6 +199,7 @@ class ValidationConfig:
     rendered_capture: bool = False
     preset_files: tuple[tuple[str, str], ...] = ()
     robustness: bool = False
+    peers: bool = False
 
     def __post_init__(self) -> None:
         h, w = (int(v) for v in self.shape)
@@ -246,16 +269,7 @@ class ValidationConfig:
         :mod:`validation.regression`).
         """
         d = self.as_dict()
-        for key in (
-            "name",
-            "presets",
-            "calibrate_kwargs",
-            "skip_vignetting",
-            "render_cache",
-            "rendered_capture",
-            "preset_files",
-            "robustness",
-        ):
+        for key in NOT_CONDITIONS:
             d.pop(key)
         return d
 
@@ -284,8 +298,10 @@ FULL = ValidationConfig(
     chart="rendered",
     rendered_capture=True,
     robustness=True,
+    peers=True,
 )
-"""The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``; rendered chart and captures."""
+"""The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``; rendered chart and captures,
+the peers ranked."""
 
 TINY = ValidationConfig(
     name="tiny",

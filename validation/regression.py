@@ -154,6 +154,9 @@ class RunConfiguration:
         The ColorChecker's source (the mode's when ``None``).
     rendered_capture : bool
         Add the rendered-capture experiment.
+    peers : bool
+        Rank and score the peers' methods too
+        (:attr:`~validation.config.ValidationConfig.peers`; the full mode does).
     experiments : sequence of str, optional
         Run only these (:data:`validation.experiments.EXPERIMENTS`).
     cache_dir : str, optional
@@ -166,6 +169,7 @@ class RunConfiguration:
     presets: tuple[str, ...] = ()
     chart: str | None = None
     rendered_capture: bool = False
+    peers: bool = False
     experiments: tuple[str, ...] | None = None
     cache_dir: str | None = None
 
@@ -199,6 +203,8 @@ class RunConfiguration:
             changes["chart"] = self.chart
         if self.rendered_capture:
             changes["rendered_capture"] = True
+        if self.peers:
+            changes["peers"] = True
         if self.cache_dir is not None:
             changes["render_cache"] = str(Path(self.cache_dir).expanduser())
         kwargs: dict[str, Any] = dict(config.calibrate_kwargs)
@@ -661,7 +667,7 @@ def check_against_baseline(
         Also write a JUnit XML report there.
     **configuration
         The fields of :class:`RunConfiguration`: ``mode``, ``profile``,
-        ``methods``, ``presets``, ``chart``, ``rendered_capture``,
+        ``methods``, ``presets``, ``chart``, ``rendered_capture``, ``peers``,
         ``experiments``, ``cache_dir``.
 
     Returns

@@ -580,3 +580,21 @@ def test_an_opt_in_experiment_needs_no_baseline_but_another_does(sealed):
     cfg = dict(TEST_CONFIG, experiments=["response", "noise"])
     with pytest.raises(ValidationError, match="noise are not in the baseline"):
         prepare_check(RunConfiguration(methods={"response": PLUGIN}, **cfg), doc)
+
+
+def test_the_peers_flag_reaches_the_configuration_and_is_not_a_condition():
+    """``--peers`` ranks the peers in a quick run (the full mode always does); their metrics
+    are reported only, so a baseline applies with or without them."""
+    import argparse
+
+    from validation.cli import add_validate_arguments, run_configuration
+    from validation.config import FULL, QUICK
+    from validation.regression import RunConfiguration
+
+    parser = argparse.ArgumentParser()
+    add_validate_arguments(parser)
+    assert run_configuration(parser.parse_args(["--peers"])).validation_config().peers
+    assert not run_configuration(parser.parse_args([])).validation_config().peers
+    assert FULL.peers and not QUICK.peers
+    on = RunConfiguration(peers=True).validation_config()
+    assert on.conditions() == QUICK.conditions()

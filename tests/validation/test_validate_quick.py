@@ -100,6 +100,13 @@ def test_quick_board_ranks_photoquants_methods_and_names_where_the_peers_are(qui
                 continue
             assert (f" {method.name}" in rows) != is_peer_method(method), (step, name)
     assert any("photoquant leaderboard" in note for note in run.experiments["leaderboard"].notes)
+    # the noise experiment's merge table likewise
+    rows = " ".join(row.quantity for row in run.experiments["noise"].rows)
+    for name in registry("merge"):
+        method = registry("merge")[name]
+        if name.casefold() != "none":
+            assert (f"merge {method.name}" in rows) != is_peer_method(method), name
+    assert any("--peers" in note for note in run.experiments["noise"].notes)
 
 
 @pytest.mark.slow

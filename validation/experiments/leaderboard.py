@@ -12,9 +12,9 @@ The quick job ranks the response and vignetting steps only, photoquant's
 methods and the plug-ins', with one timed calibration per method (one to
 two seconds each on two cores); the peers' methods (OpenCV, colour-hdri,
 Hugin, pfstools: most of them run their own iterative solvers or programs,
-5–30 s a calibration at 320×240) would take two minutes of it.
-``--full`` (configuration ``full``) ranks the peers and the merge step as
-well, and ranks the
+5–30 s a calibration at 320×240) would take two minutes of it
+(``--peers`` ranks them). ``--full`` (configuration ``full``) ranks the
+peers and the merge step as well, and ranks the
 response methods also on cameras outside the presets (:data:`EXTRA_CAMERAS`:
 two with responses drawn from the EMoR space of real ones, one film-like;
 about 4 minutes on 2 cores at 160×120 for the eleven response methods, so
@@ -53,8 +53,9 @@ def steps_for(config: ValidationConfig) -> tuple[str, ...]:
 
 
 def peers_for(config: ValidationConfig) -> bool:
-    """Whether the peers' methods are ranked at ``config``: in the full job only."""
-    return config.name == "full"
+    """Whether the peers' methods are ranked at ``config`` (:attr:`ValidationConfig.peers`:
+    the full job, ``--peers``)."""
+    return config.peers
 
 
 def extra_cameras_for(config: ValidationConfig) -> tuple[str, ...]:
@@ -114,8 +115,8 @@ def run(
         + (
             ""
             if peers_for(config)
-            else "The peers' methods (OpenCV, colour-hdri, Hugin, pfstools) are ranked in the "
-            "full job (--full) and by `photoquant leaderboard`. "
+            else "The peers' methods (OpenCV, colour-hdri, Hugin, pfstools) are ranked with "
+            "--peers, in the full job (--full) and by `photoquant leaderboard`. "
         )
         + (
             "The merge step is ranked in the full job only."

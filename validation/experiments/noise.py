@@ -11,10 +11,11 @@ daylight), captured with the calibration exposures:
    (:func:`validation.truth_model.camera_model_from_truth`).
 2. ``N = 1`` against ``N = 10`` (paper: 4.9 %, 0.8 %, 0.4 %, Fig. 8): two
    independent captures, the ``N = 10`` result taken as the reference ``c_p``.
-   Every registered merge method (:data:`photoquant.merge.MERGE_METHODS`)
-   is scored on the same ``N = 4`` frames, with the calibrated and with the
-   true camera model, beside the physics floor (reported, not
-   baseline-checked).
+   Every registered merge method (:data:`photoquant.merge.MERGE_METHODS`;
+   the peers' with :attr:`~validation.config.ValidationConfig.peers`: the
+   full job, ``--peers``) is scored on the same ``N = 4`` frames, with the
+   calibrated and with the true camera model, beside the physics floor
+   (reported, not baseline-checked).
 3. The ``1/√N`` law of appendix A on the measured standard deviation: for
    ``N`` in the configured set, two independent captures ``A``, ``B``; the
    temporal standard deviation is ``std(x_A − x_B)/√2`` over the pixels valid
@@ -50,7 +51,7 @@ from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, FigureSpec, fmt_num, fmt_pct
 from validation.experiments.shared import Shared, have_colour_science
 
-__all__ = ["run", "PAPER", "TITLE", "power_law_exponent"]
+__all__ = ["run", "PAPER", "TITLE", "merge_methods_for", "power_law_exponent"]
 
 TITLE = "Noise (§6.3, eq. 8, appendix A)"
 
@@ -64,6 +65,20 @@ PAPER = {
 def _slug(name: str) -> str:
     """A method name as a metric key part (``"Noise-Aware"`` → ``noise_aware``)."""
     return "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")
+
+
+def merge_methods_for(config: ValidationConfig) -> list[str]:
+    """The merge methods scored: every registered one, the peers' only with
+    :attr:`~validation.config.ValidationConfig.peers` (the full job, ``--peers``)."""
+    from photoquant.merge import MERGE_METHODS
+    from photoquant.methods import registry
+    from validation.leaderboard import is_peer_method
+
+    return [
+        name
+        for name in MERGE_METHODS
+        if config.peers or not is_peer_method(registry("merge")[name])
+    ]
 
 
 def power_law_exponent(n: np.ndarray, sigma: np.ndarray) -> float:
@@ -176,9 +191,8 @@ def run(
         )
         # 1b. every registered merge method on the same N = 4 frames, calibrated and true model
         from photoquant.errors import PhotoquantError
-        from photoquant.merge import MERGE_METHODS
 
-        for name in MERGE_METHODS:
+        for name in merge_methods_for(config):
             cells = []
             for label, cam_model in (("calibrated", model), ("true model", true_model)):
                 try:
@@ -361,4 +375,9 @@ def run(
             {"panels": law_panels},
         )
     )
+    if not config.peers:
+        res.notes.append(
+            "The merge table (report.md) scores photoquant's merge methods and the plug-ins'; "
+            "the peers' (OpenCV, colour-hdri, pfstools) with --peers and in the full job (--full)."
+        )
     return res
