@@ -510,24 +510,20 @@ def _labels(paths: Sequence[str | Path]) -> list[str]:
 
 
 def _load_capture(shared: Any, preset: str) -> _Capture:
-    from photoquant.io import load_manifest, load_stack
+    from validation.experiments.shared import load_calibration_inputs
 
     cal = shared.calibration(preset)
-    manifest = load_manifest(cal.manifest)
-    views = [load_stack(v, manifest) for v in manifest.views]
-    if shared.config.skip_vignetting:
-        views = views[:1]
-    irradiance = load_stack(manifest.irradiance, manifest) if manifest.irradiance else None
-    tracks = list(manifest.correspondences) if manifest.correspondences else None
+    loaded = load_calibration_inputs(cal.manifest)
+    views = loaded.views[:1] if shared.config.skip_vignetting else loaded.views
     inputs = {"tracks"} if len(views) >= 2 else set()
     return _Capture(
         preset=preset,
         manifest=Path(cal.manifest),
         truth=cal.truth,
         views=views,
-        irradiance=irradiance,
-        white_roi=manifest.white_roi,
-        tracks=None if len(views) < 2 else tracks,
+        irradiance=loaded.irradiance,
+        white_roi=loaded.white_roi,
+        tracks=None if len(views) < 2 else loaded.tracks,
         calibrate_seed=cal.calibrate_seed,
         inputs=frozenset(inputs),
         chart=_table1_chart(shared, preset),

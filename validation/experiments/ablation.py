@@ -58,7 +58,6 @@ def run(
     config: ValidationConfig, seed: int, workdir: Path, *, shared: Shared | None = None
 ) -> ExperimentResult:
     """Calibrate each preset with the paper's profile, each deviation alone and photoquant's."""
-    from photoquant.calibration import calibrate_manifest
     from photoquant.errors import PhotoquantError
     from photoquant.profiles import DEVIATIONS
     from validation.compare import compare_with_truth
@@ -72,7 +71,9 @@ def run(
         for key, label, kwargs in variants():
             shared.say(f"  {preset}: {label}")
             try:
-                model = calibrate_manifest(cal.manifest, seed=cal.calibrate_seed, **kwargs)
+                # the set read once for every variant (calibrate_manifest's inputs)
+                inputs = shared.calibration_inputs(preset)
+                model = inputs.calibrate(seed=cal.calibrate_seed, **kwargs)
                 rep = compare_with_truth(cal.manifest, model, cal.truth)
             except PhotoquantError as exc:
                 res.row(f"{preset}: {label}", f"refused: {exc}", detail=False)

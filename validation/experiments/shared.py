@@ -15,6 +15,7 @@ before :func:`photoquant.calibration.calibrate` runs.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from collections.abc import Callable
@@ -28,6 +29,8 @@ from validation.config import ValidationConfig, stream_seed
 
 __all__ = [
     "Calibration",
+    "CalibrationInputs",
+    "load_calibration_inputs",
     "PIPELINE_QUANTITIES",
     "Shared",
     "calibrate_arguments",
@@ -90,6 +93,48 @@ def calibrate_arguments(cfg: ValidationConfig, seed: int, **overrides: Any) -> d
             else:
                 kwargs[key] = value
     return kwargs
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationInputs:
+    """What :func:`photoquant.calibrate` reads from a capture set: the views, the irradiance
+    scene, the white chart's box and the correspondences (:func:`load_calibration_inputs`).
+
+    The experiments that calibrate one capture set several ways (the ablation, Table 1's
+    pipelines, the leaderboard) read it once: :meth:`calibrate` is
+    :func:`photoquant.calibrate_manifest` on the set without reading its files again (a
+    synthetic set has no dark, flat-field or glare frames).
+    """
+
+    views: list[Any]
+    irradiance: Any
+    white_roi: Any
+    tracks: list[np.ndarray] | None
+
+    def calibrate(self, **kwargs: Any) -> Any:
+        """:func:`photoquant.calibrate` of these inputs with ``kwargs``."""
+        from photoquant.calibration import calibrate
+
+        return calibrate(
+            self.views,
+            irradiance=self.irradiance,
+            white_roi=self.white_roi,
+            correspondences=self.tracks,
+            **kwargs,
+        )
+
+
+def load_calibration_inputs(manifest_path: str | Path) -> CalibrationInputs:
+    """The :class:`CalibrationInputs` of a synthetic capture set's manifest."""
+    from photoquant.io import load_manifest, load_stack
+
+    manifest = load_manifest(manifest_path)
+    return CalibrationInputs(
+        views=[load_stack(v, manifest) for v in manifest.views],
+        irradiance=load_stack(manifest.irradiance, manifest) if manifest.irradiance else None,
+        white_roi=manifest.white_roi,
+        tracks=list(manifest.correspondences) if manifest.correspondences else None,
+    )
 
 
 @dataclass(eq=False)
@@ -191,8 +236,6 @@ class Shared:
         return self._calibrations[preset]
 
     def _calibrate(self, preset: str) -> Calibration:
-        from photoquant.calibration import calibrate
-        from photoquant.io import load_manifest, load_stack
         from pqsim.capture_set import write_capture_set
         from pqsim.synth_camera.presets import camera_from_preset
         from pqsim.synth_camera.truth import load_truth
@@ -220,22 +263,17 @@ class Shared:
         )
         simulate_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        manifest = load_manifest(manifest_path)
-        views = [load_stack(v, manifest) for v in manifest.views]
-        irradiance = load_stack(manifest.irradiance, manifest) if manifest.irradiance else None
-        tracks = list(manifest.correspondences) if manifest.correspondences else None
+        inputs = load_calibration_inputs(manifest_path)
+        views, tracks = inputs.views, inputs.tracks
         truth = load_truth(folder / "truth")
         load_s = time.perf_counter() - t0
         if cfg.skip_vignetting:
             self.say("validate: (degraded on purpose) calibrating from view 0 only: no vignetting")
+            inputs = dataclasses.replace(inputs, views=views[:1], tracks=None)
         kwargs = calibrate_arguments(cfg, calibrate_seed)
         self.say(f"validate: calibrating '{preset}' ...")
         t0 = time.perf_counter()
-        result = calibrate(
-            views[:1] if cfg.skip_vignetting else views,
-            irradiance=irradiance,
-            white_roi=manifest.white_roi,
-            correspondences=None if cfg.skip_vignetting else tracks,
+        result = inputs.calibrate(
             progress=lambda step: self.say(f"  {preset}: {step}"),
             return_intermediates=True,
             **kwargs,
@@ -259,6 +297,17 @@ class Shared:
             cal.uniform_views = result.intermediates.uniform_views
             cal.tracks = result.intermediates.tracks
         return cal
+
+    def calibration_inputs(self, preset: str) -> CalibrationInputs:
+        """The capture set of ``preset`` as :func:`photoquant.calibrate` reads it (all its
+        views), for calibrating it other ways; the last preset's is kept (one set's frames
+        in memory: the experiments go through the presets in turn)."""
+        cal = self.calibration(preset)
+        kept = self.cache.get("calibration-inputs")
+        if kept is None or kept[0] != preset:
+            kept = (preset, load_calibration_inputs(cal.manifest))
+            self.cache["calibration-inputs"] = kept
+        return kept[1]
 
     # ------------------------------------------------------------------ scenes
 

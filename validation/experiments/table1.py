@@ -43,6 +43,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -205,29 +206,18 @@ def pipeline_measurements(
     """
     import time
 
-    from photoquant.calibration import calibrate
-    from photoquant.io import load_manifest, load_stack
-
     key = ("chart-pipeline", row, preset, label)
     if key in shared.cache:
         return shared.cache[key]
     cal = shared.calibration(preset)
     model_key = ("pipeline-model", row, preset)
     if model_key not in shared.cache:
-        manifest = load_manifest(cal.manifest)
-        views = [load_stack(v, manifest) for v in manifest.views]
-        tracks = list(manifest.correspondences) if manifest.correspondences else None
+        inputs = shared.calibration_inputs(preset)
         t0 = time.perf_counter()
         # a pipeline without a sensor LUT (Hugin) does not read the irradiance scene
-        use_irradiance = manifest.irradiance and str(steps.get("sensor_lut", "")) != "None"
-        result = calibrate(
-            views,
-            irradiance=load_stack(manifest.irradiance, manifest) if use_irradiance else None,
-            white_roi=manifest.white_roi,
-            correspondences=tracks,
-            seed=cal.calibrate_seed,
-            **steps,
-        )
+        if str(steps.get("sensor_lut", "")) == "None":
+            inputs = dataclasses.replace(inputs, irradiance=None)
+        result = inputs.calibrate(seed=cal.calibrate_seed, **steps)
         shared.cache[model_key] = (result, time.perf_counter() - t0)
     model, calibrate_s = shared.cache[model_key]
     chart = shared.chart(illuminant, preset)
