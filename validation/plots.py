@@ -185,15 +185,20 @@ def figure_error_vs_time(
     drawn = [p for p in panels if _drawable(p)] or list(panels[:1])
     fig, axes = plt.subplots(1, len(drawn), figsize=(5.2 * len(drawn), 4.2), squeeze=False)
     for ax, p in zip(axes[0], drawn, strict=True):
+        times = []
         for i, (label, t, e) in enumerate(p["points"]):
             if t is None or e is None or not (t > 0 and e > 0 and math.isfinite(e)):
                 continue
+            times.append(t)
             ax.scatter([t], [e], color=f"C{i % 10}", s=28, zorder=3)
             ax.annotate(label, (t, e), fontsize=7, xytext=(3, 3), textcoords="offset points")
         if p.get("floor"):
             ax.axhline(p["floor"], ls="--", color="k", lw=0.8, label="noise floor")
             ax.legend(fontsize=7)
-        ax.set_xscale("log")
+        # times within a factor 3 of each other: a linear axis (a log axis spanning less than
+        # half a decade labels every minor tick, and they overlap)
+        if times and max(times) > 3 * min(times):
+            ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_title(p["title"])
         ax.set_xlabel(p.get("xlabel", "calibration time (s)"), fontsize=8)
