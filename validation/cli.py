@@ -168,6 +168,14 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="with --check: also write a JUnit XML report, one test case per metric",
     )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        choices=(1, 2),
+        help="processes: 2 runs the leaderboard and the noise experiment beside the others "
+        "(the default where the machine has two CPUs; the same metrics), 1 runs everything "
+        "in one",
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
 
 
@@ -308,7 +316,12 @@ def run_validate(args: argparse.Namespace) -> int:
     else:
         seed = args.seed
         run = run_validation(
-            config, seed, experiments=rc.experiments, workdir=args.workdir, progress=say
+            config,
+            seed,
+            experiments=rc.experiments,
+            workdir=args.workdir,
+            progress=say,
+            workers=args.workers,
         )
     check = None
     if prepared is not None:

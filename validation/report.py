@@ -417,6 +417,26 @@ def draw_figure(spec: FigureSpec, path: str | os.PathLike[str]) -> Path:
     return Path(path)
 
 
+def _draw_figures(jobs: list[tuple[FigureSpec, Path]]) -> None:
+    """:func:`draw_figure` of each ``(spec, path)``, on two forked processes where the
+    machine has two CPUs (:func:`validation.experiments._default_workers`; the same
+    files: each figure is drawn alone from its spec)."""
+    from validation.experiments import _default_workers
+
+    if len(jobs) < 2 or _default_workers() < 2:
+        for spec, path in jobs:
+            draw_figure(spec, path)
+        return
+    import multiprocessing
+
+    from validation.experiments import ignore_interrupts
+
+    _plt()  # imported once, before the fork
+    # an interrupt is this process's to handle (one line): leaving the pool ends the workers
+    with multiprocessing.get_context("fork").Pool(2, initializer=ignore_interrupts) as pool:
+        pool.starmap(draw_figure, jobs, chunksize=1)
+
+
 def _have_matplotlib() -> bool:
     try:
         import matplotlib  # noqa: F401
@@ -453,16 +473,18 @@ def write_report(
         figures = tmp / "figures"
         figures.mkdir()
         draw = _have_matplotlib()
+        jobs = []
         for res in run.experiments.values():
             res.figure_paths = []
             if not draw:
                 continue
             for spec in res.figures:
-                if progress is not None:
-                    progress(f"validate: drawing {spec.name}.png ...")
                 rel = f"figures/{spec.name}.png"
-                draw_figure(spec, tmp / rel)
+                jobs.append((spec, tmp / rel))
                 res.figure_paths.append(rel)
+        if jobs and progress is not None:
+            progress(f"validate: drawing {len(jobs)} figures ...")
+        _draw_figures(jobs)
         write_text_atomic(tmp / "results.json", results_json(run, check))
         write_text_atomic(tmp / "report.md", render_markdown(run, check))
     return target

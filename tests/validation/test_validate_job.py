@@ -48,7 +48,8 @@ made from the whole job's. Its determinism is the board's own
 
 @pytest.fixture(scope="module")
 def tiny_results():
-    return _results(run_validation(TINY, 0, experiments=JOB, progress=_quiet))
+    """:data:`JOB` in one process (the command line's run below uses two where it can)."""
+    return _results(run_validation(TINY, 0, experiments=JOB, progress=_quiet, workers=1))
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +72,8 @@ def cli_job(tmp_path_factory):
 
 def test_same_seed_same_metrics(tiny_results, cli_job):
     # every experiment of JOB run twice, in two runs with their own capture sets
-    # (the second through the command line: its results.json)
+    # (the second through the command line: its results.json), in one process and,
+    # where the machine has two CPUs, with the noise experiment in a second one
     again = json.loads((cli_job[0] / "results.json").read_text(encoding="utf-8"))
     other = _results(run_validation(TINY, 1, experiments=["response"], progress=_quiet))
 
@@ -343,3 +345,67 @@ def test_ablation_compares_every_deviation_and_reuses_the_pipeline(tmp_path):
     assert not all(
         res.metrics[f"ablation.ccd.paper.{q}"] == own[q] for q, _, _ in ablation.QUANTITIES
     ), "the paper's profile gave the photoquant profile's results: the profile was not applied"
+
+
+def test_an_error_in_the_second_process_is_one_line(tmp_path, monkeypatch):
+    """An experiment that crashes in the forked process (not a refusal of the calibrator,
+    which is its result) stops the run with one line naming the error."""
+    from validation.experiments import _default_workers, noise
+
+    if _default_workers() < 2:
+        pytest.skip("one CPU or no fork: no second process")
+
+    def crash(*args, **kwargs):
+        raise RuntimeError("deliberately broken")
+
+    monkeypatch.setattr(noise, "run", crash)
+    config = TINY.replace(presets=("ccd",))
+    with pytest.raises(ValidationError, match="second process failed: RuntimeError: deliber"):
+        run_validation(config, 0, experiments=["response", "noise"], workdir=tmp_path / "w",
+                       progress=_quiet)  # fmt: skip
+
+
+@pytest.mark.parametrize(("sig", "status", "word"), [("SIGINT", 130, "interrupted"),
+                                                     ("SIGTERM", 143, "terminated")])  # fmt: skip
+def test_stopping_a_two_process_run_is_one_line_and_leaves_nothing(tmp_path, sig, status, word):
+    """Ctrl-C (SIGINT to the terminal's process group) or SIGTERM while the second process
+    ranks the leaderboard: one line, the status of the signal, no traceback from either
+    process, neither left running, no report and no scratch folder."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from validation.experiments import _default_workers
+
+    if _default_workers() < 2:
+        pytest.skip("one CPU or no fork: no second process")
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    env = os.environ | {"PYTHONPATH": os.pathsep.join(sys.path), "TMPDIR": str(scratch)}
+    out = tmp_path / "report"
+    code = "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); " \
+        "from photoquant.cli import main; sys.exit(main(sys.argv[1:]))"  # fmt: skip
+    argv = ["validate", "--tiny", "--experiments", "balance", "leaderboard", "-o", str(out)]
+    with subprocess.Popen(
+        [sys.executable, "-c", code, *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
+    ) as proc:
+        assert proc.stderr is not None
+        seen = []
+        for line in proc.stderr:  # the second process's progress: both are working
+            seen.append(line)
+            if "leaderboard: response /" in line:
+                break
+        os.killpg(proc.pid, getattr(signal, sig))
+        err = "".join(seen) + proc.stderr.read()
+        proc.wait(timeout=60)
+    assert proc.returncode == status, err
+    assert err.rstrip().splitlines()[-1] == f"photoquant: {word}" and "Traceback" not in err
+    left = subprocess.run(["pgrep", "-g", str(proc.pid)], capture_output=True, text=True)
+    assert left.stdout.strip() == "", "a process of the run is left"
+    assert not out.exists() and list(scratch.iterdir()) == []

@@ -68,6 +68,10 @@ OPT_IN: dict[str, str] = {"robustness": "robustness", "robustness_pairs": "robus
 """Experiment key → the :class:`ValidationConfig` flag that includes it in a default run
 (a flag the configuration does not have: only when named)."""
 
+BESIDE: tuple[str, ...] = ("leaderboard", "noise")
+"""Experiments a run with two workers gives to a second process, beside the others there
+(:func:`run_validation`): about half of the quick job's time after the calibrations."""
+
 REPORTED_ONLY: frozenset[str] = frozenset({"uncertainty"})
 """Experiments whose metrics are reported, never checked by ``--check``: a baseline recorded
 before them need not have them."""
@@ -160,6 +164,7 @@ def run_validation(
     experiments: Sequence[str] | None = None,
     workdir: str | Path | None = None,
     progress: Callable[[str], None] | None = None,
+    workers: int | None = None,
 ) -> ValidationRun:
     """Run the selected experiments (all by default) and gather their results.
 
@@ -176,41 +181,174 @@ def run_validation(
         removed at the end, by default.
     progress : callable, optional
         Receives step messages (standard error by default).
+    workers : int, optional
+        Processes: with two (the default where the machine has two CPUs or
+        more and ``fork`` is available), the presets are simulated and
+        calibrated first, then the experiments of :data:`BESIDE` run in a
+        forked second process while this one runs the rest. Each experiment's
+        metrics depend on its seed streams only, not on the process (their
+        shared memos are recomputed there: the same values); the timings of
+        the calibrations in each process are taken beside the other's work.
+        ``1``: everything in this process, in order.
 
     Returns
     -------
     ValidationRun
     """
-    from photoquant.errors import PhotoquantError
     from photoquant.io.atomic import make_scratch_directory, remove_scratch_directory
+    from photoquant.utils import check_int
     from validation.experiments.shared import Shared
 
     names = _select(experiments, config)
+    n_workers = _default_workers() if workers is None else check_int(workers, "workers", 1)
     keep = workdir is not None
     root = Path(workdir) if keep else make_scratch_directory("photoquant-validate-")
     shared = Shared(config, seed, root, progress)
     t_start = time.perf_counter()
     results: dict[str, ExperimentResult] = {}
+    beside = [n for n in names if n in BESIDE] if n_workers > 1 else []
     try:
-        for i, name in enumerate(names, 1):
-            module = import_module(EXPERIMENTS[name])
-            shared.say(f"validate: [{i}/{len(names)}] {module.TITLE} ...")
-            t0 = time.perf_counter()
+        if beside and len(beside) < len(names):
+            for preset in config.presets:  # simulated and calibrated once, before the fork
+                _calibrate_or_remember(shared, preset)
+            other = _start_beside(beside, names, config, seed, root, shared)
             try:
-                res = module.run(config, seed, root, shared=shared)
-            except PhotoquantError as exc:
-                res = ExperimentResult(name, module.TITLE, "")
-                res.skipped = f"failed: {exc}"
-                shared.say(f"validate: {name} failed: {exc}")
-            res.elapsed_s = time.perf_counter() - t0
-            results[name] = res
+                for name in names:
+                    if name not in beside:
+                        results[name] = _run_one(name, names, config, seed, root, shared)
+                done, seeds = other.results()
+            finally:
+                other.stop()
+            results.update(done)
+            shared.seeds.update(seeds)
+        else:
+            for name in names:
+                results[name] = _run_one(name, names, config, seed, root, shared)
     finally:
         if not keep:
             remove_scratch_directory(root)
     return ValidationRun(
         config=config,
         seed=int(seed),
-        experiments=results,
+        experiments={n: results[n] for n in names},
         seeds=dict(shared.seeds),
         elapsed_s=time.perf_counter() - t_start,
     )
+
+
+def _default_workers() -> int:
+    """Two where the machine has two CPUs or more and ``fork`` starts processes, else one."""
+    import multiprocessing
+    import os
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return 2 if (cores or 1) >= 2 and "fork" in multiprocessing.get_all_start_methods() else 1
+
+
+def ignore_interrupts() -> None:
+    """In a worker process: SIGINT ignored and SIGTERM the system's default. The parent
+    reports an interrupt in one line and ends its workers with SIGTERM (a worker's own
+    ``KeyboardInterrupt``, or the command line's handler of SIGTERM inherited through
+    the fork, would print a traceback)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _calibrate_or_remember(shared: Any, preset: str) -> None:
+    """``shared.calibration(preset)``; a refusal is remembered there for the experiments."""
+    from photoquant.errors import PhotoquantError
+
+    try:
+        shared.calibration(preset)
+    except PhotoquantError:
+        pass  # each experiment that needs it reports it (Shared keeps the failure)
+
+
+def _run_one(
+    name: str,
+    names: Sequence[str],
+    config: ValidationConfig,
+    seed: int,
+    root: Path,
+    shared: Any,
+) -> ExperimentResult:
+    """One experiment, timed; a refusal of the calibrator is its result (skipped, with why)."""
+    from photoquant.errors import PhotoquantError
+
+    module = import_module(EXPERIMENTS[name])
+    shared.say(f"validate: [{names.index(name) + 1}/{len(names)}] {module.TITLE} ...")
+    t0 = time.perf_counter()
+    try:
+        res = module.run(config, seed, root, shared=shared)
+    except PhotoquantError as exc:
+        res = ExperimentResult(name, module.TITLE, "")
+        res.skipped = f"failed: {exc}"
+        shared.say(f"validate: {name} failed: {exc}")
+    res.elapsed_s = time.perf_counter() - t0
+    return res
+
+
+@dataclass
+class _Beside:
+    """A forked process running some experiments; its results come back through a pipe."""
+
+    process: Any
+    connection: Any
+
+    def results(self) -> tuple[dict[str, ExperimentResult], dict[str, int]]:
+        """The experiments' results and the seed streams they drew (waits for them)."""
+        try:
+            status, payload, seeds = self.connection.recv()
+        except EOFError:
+            raise ValidationError(
+                "validate: the second process ended without its results (exit status "
+                f"{self.process.exitcode}); run with one worker to see why"
+            ) from None
+        if status != "ok":
+            raise ValidationError(f"validate: the second process failed: {payload}")
+        return payload, seeds
+
+    def stop(self) -> None:
+        """Ends the process (at once when interrupted) and waits for it."""
+        if self.process.is_alive():
+            self.process.join(timeout=0.5)
+        if self.process.is_alive():
+            self.process.terminate()
+            self.process.join()
+        self.connection.close()
+
+
+def _start_beside(
+    beside: Sequence[str],
+    names: Sequence[str],
+    config: ValidationConfig,
+    seed: int,
+    root: Path,
+    shared: Any,
+) -> _Beside:
+    """Fork a process that runs ``beside`` on its copy of ``shared`` and sends back the
+    results and the seed streams drawn."""
+    import multiprocessing
+    import traceback
+
+    ctx = multiprocessing.get_context("fork")
+    receive, send = ctx.Pipe(duplex=False)
+
+    def work() -> None:
+        ignore_interrupts()  # the parent's to handle: it ends this process
+        receive.close()
+        try:
+            done = {n: _run_one(n, names, config, seed, root, shared) for n in beside}
+            send.send(("ok", done, dict(shared.seeds)))
+        except BaseException:  # noqa: BLE001 - reported by the parent, in one line
+            last = traceback.format_exc().strip().splitlines()[-1]
+            send.send(("error", last, {}))
+        finally:
+            send.close()
+
+    process = ctx.Process(target=work, name="photoquant-validate-beside", daemon=True)
+    process.start()
+    send.close()
+    return _Beside(process, receive)
