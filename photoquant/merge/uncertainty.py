@@ -36,6 +36,7 @@ References
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -232,14 +233,17 @@ def _run_in_spans(
     dark: np.ndarray,
     out: np.ndarray,
     *tables: Any,
+    per_span: Callable[[slice], tuple[Any, ...]] | None = None,
 ) -> None:
-    """``kernel(values, *tables, sat, dark, out)`` over spans of the pixels on every CPU
-    (the kernels release the GIL; each value's result depends on that value alone)."""
+    """``kernel(values, *tables, *per_span(part), sat, dark, out)`` over spans ``part`` of
+    the pixels on every CPU (the kernels release the GIL; each value's result depends on
+    that value alone); ``per_span`` gives a span's own arguments (none by default)."""
 
     def span(part: slice) -> None:
         kernel(
             values[:, part],
             *tables,
+            *(per_span(part) if per_span is not None else ()),
             sat[:, part] if sat.size else sat,
             dark[:, part] if dark.size else dark,
             out[part],
@@ -285,32 +289,30 @@ def _fused_response_variance(
     )
     values, sat, dark, out = _fused_arguments(stack, setup)
     size = tables.grid.size
-    f_tables = factor_tables.reshape(-1, size * stack.n_channels)
-    d_table = _interpolated_table(tables, levels, rest)
     n_ch = stack.n_channels
     flat_level = None if held_out_level is None else held_out_level.reshape(-1, n_ch)
-    empty = np.zeros((0, 0, 0)), np.zeros((0, 0))
 
-    def span(part: slice) -> None:
-        held_f, held_d = empty
-        if flat_level is not None:
-            lv = flat_level[part]
-            held_f = np.stack([_rows_at(lv, levels, factor[:, r]) for r in range(factor.shape[1])])
-            held_d = _rows_at(lv, levels, rest)
-        _response_variance_nb(
-            values[:, part],
-            size,
-            weight_table,
-            f_tables,
-            d_table,
-            held_f,
-            held_d,
-            sat[:, part] if sat.size else sat,
-            dark[:, part] if dark.size else dark,
-            out[part],
+    def held_out_terms(part: slice) -> tuple[np.ndarray, np.ndarray]:
+        if flat_level is None:
+            return np.zeros((0, 0, 0)), np.zeros((0, 0))
+        lv = flat_level[part]
+        return (
+            np.stack([_rows_at(lv, levels, factor[:, r]) for r in range(factor.shape[1])]),
+            _rows_at(lv, levels, rest),
         )
 
-    thread_map(span, even_spans(values.shape[1], 4 * (os.cpu_count() or 1)))
+    _run_in_spans(
+        _response_variance_nb,
+        values,
+        sat,
+        dark,
+        out,
+        size,
+        weight_table,
+        factor_tables.reshape(-1, size * n_ch),
+        _interpolated_table(tables, levels, rest),
+        per_span=held_out_terms,
+    )
     return out.reshape(_value_shape(stack))
 
 
