@@ -279,13 +279,9 @@ def make_baseline(
 def _conditions(results: Mapping[str, Any]) -> dict[str, Any]:
     """The run's conditions (:meth:`validation.config.ValidationConfig.conditions`) from its results dict."""
     cfg = dict(results["config"])
-    for key in _NOT_CONDITIONS:
+    for key in NOT_CONDITIONS:
         cfg.pop(key, None)
     return cfg
-
-
-_NOT_CONDITIONS = NOT_CONDITIONS
-"""The fields :meth:`ValidationConfig.conditions` leaves out."""
 
 
 _BETTER = ("lower", "higher", "both")

@@ -17,13 +17,19 @@ import pytest
 
 from photoquant.cli import main
 from validation.baseline import (
-    _NOT_CONDITIONS,
     DEFAULT_BASELINE,
     check_results,
     load_baseline,
     make_baseline,
 )
-from validation.config import QUICK, TINY, ValidationConfig, ValidationError, stream_seed
+from validation.config import (
+    NOT_CONDITIONS,
+    QUICK,
+    TINY,
+    ValidationConfig,
+    ValidationError,
+    stream_seed,
+)
 from validation.experiments import EXPERIMENTS, OPT_IN, run_validation
 from validation.headlines import MAX_LINES
 from validation.report import results_json, write_report
@@ -169,7 +175,7 @@ def test_stored_baseline_documents_its_tolerances():
 
 
 def test_conditions_leave_out_exactly_the_knobs():
-    assert set(_NOT_CONDITIONS) == set(QUICK.as_dict()) - set(QUICK.conditions())
+    assert set(NOT_CONDITIONS) == set(QUICK.as_dict()) - set(QUICK.conditions())
 
 
 def test_config_checks_and_seed_streams():

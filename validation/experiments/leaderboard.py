@@ -37,7 +37,7 @@ from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, fmt_pct
 from validation.experiments.shared import Shared
 
-__all__ = ["run", "TITLE", "steps_for", "peers_for", "extra_cameras_for", "EXTRA_CAMERAS"]
+__all__ = ["run", "TITLE", "steps_for", "extra_cameras_for", "EXTRA_CAMERAS"]
 
 EXTRA_CAMERAS: tuple[str, ...] = ("emor", "emor-1", "film")
 """Cameras beside the presets on the response board of the full job (pqsim presets)."""
@@ -50,12 +50,6 @@ def steps_for(config: ValidationConfig) -> tuple[str, ...]:
     if config.name == "full":
         return ("response", "merge", "vignetting")
     return ("response", "vignetting")
-
-
-def peers_for(config: ValidationConfig) -> bool:
-    """Whether the peers' methods are ranked at ``config`` (:attr:`ValidationConfig.peers`:
-    the full job, ``--peers``)."""
-    return config.peers
 
 
 def extra_cameras_for(config: ValidationConfig) -> tuple[str, ...]:
@@ -79,7 +73,7 @@ def run(
     res = ExperimentResult("leaderboard", TITLE, "validation.leaderboard")
     lb = run_leaderboard(
         steps_for(config),
-        peers=peers_for(config),
+        peers=config.peers,
         presets=config.presets,
         config=config,
         seed=seed,
@@ -93,7 +87,7 @@ def run(
         runs.append(
             run_leaderboard(
                 ("response",),
-                peers=peers_for(config),
+                peers=config.peers,
                 presets=extra,
                 config=config,
                 seed=seed,
@@ -114,7 +108,7 @@ def run(
         "sets lack (a flat field) are n/a. Reported, not baseline-checked. "
         + (
             ""
-            if peers_for(config)
+            if config.peers
             else "The peers' methods (OpenCV, colour-hdri, Hugin, pfstools) are ranked with "
             "--peers, in the full job (--full) and by `photoquant leaderboard`. "
         )
