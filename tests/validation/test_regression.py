@@ -598,3 +598,18 @@ def test_the_peers_flag_reaches_the_configuration_and_is_not_a_condition():
     assert FULL.peers and not QUICK.peers
     on = RunConfiguration(peers=True).validation_config()
     assert on.conditions() == QUICK.conditions()
+
+
+def test_a_bad_number_of_workers_is_refused_by_the_parser(capsys):
+    """``--workers`` takes 1 or 2 (argparse's choice error, as ``--chart``'s and
+    ``--profile``'s: status 2, the option named); the API's ``workers`` below 1 is one line."""
+    from photoquant.errors import InputError
+    from validation.config import TINY
+    from validation.experiments import run_validation
+
+    with pytest.raises(SystemExit) as stop:
+        main(["validate", "--workers", "3"])
+    assert stop.value.code == 2
+    assert "argument --workers: invalid choice: 3" in capsys.readouterr().err
+    with pytest.raises(InputError, match="`workers` must be an integer >= 1, got 0"):
+        run_validation(TINY, 0, workers=0)
