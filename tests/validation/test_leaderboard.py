@@ -1,8 +1,11 @@
 """The leaderboard (``photoquant leaderboard``, :mod:`validation.leaderboard`).
 
 One board on the ``tiny`` configuration (96×72, both presets, the response
-and vignetting steps) is shared by the module; two methods are registered
-for it by the test: a deliberately wrong response (``g = 2.2 ln z``, a gamma
+and vignetting steps, photoquant's methods and the plug-ins') is shared by
+the module, and one of the peers' methods on the ``ccd`` preset beside it
+(the same capture set; a peer's fit on a second preset adds time, not
+coverage: ``test_peers`` runs each peer on its own); three methods are
+registered for them by the test: a deliberately wrong response (``g = 2.2 ln z``, a gamma
 that neither preset has) and one that always fails. The command is run
 in-process through :func:`photoquant.cli.main` with its entry point
 (``tests/_commands.py`` declares it when the installed metadata predates it).
@@ -81,30 +84,50 @@ def registered():
 
 
 @pytest.fixture(scope="module")
-def board(registered, tmp_path_factory):
-    shared = Shared(TINY, 0, tmp_path_factory.mktemp("board"), _quiet)
+def shared_run(tmp_path_factory):
+    return Shared(TINY, 0, tmp_path_factory.mktemp("board"), _quiet)
+
+
+@pytest.fixture(scope="module")
+def board(registered, shared_run):
     lb = run_leaderboard(
-        ("response", "vignetting"), config=TINY, repeats=1, shared=shared, progress=_quiet
-    )
-    return lb, shared
+        ("response", "vignetting"), peers=False, config=TINY, repeats=1, shared=shared_run,
+        progress=_quiet,
+    )  # fmt: skip
+    return lb, shared_run
 
 
-def _registered(step: str) -> set[str]:
-    return {n for n in pq.registry(step) if n.casefold() != "none"}
+@pytest.fixture(scope="module")
+def peer_board(registered, shared_run):
+    lb = run_leaderboard(
+        ("response", "vignetting"), methods=sorted(_registered("response", peers=True)
+        | _registered("vignetting", peers=True)), presets=["ccd"], config=TINY, repeats=1,
+        shared=shared_run, progress=_quiet,
+    )  # fmt: skip
+    return lb, shared_run
 
 
-def test_every_registered_method_is_on_its_board(board):
-    lb, _ = board
-    assert [b.step for b in lb.boards] == ["response", "vignetting"]
-    for b in lb.boards:
-        assert {e.method for e in b.entries} == _registered(b.step)
-        assert set(b.noise_floor) == {"ccd", "cmos"} and all(
-            0 < v < 0.1 for v in b.noise_floor.values()
-        )
+def _registered(step: str, *, peers: bool) -> set[str]:
+    from validation.leaderboard import is_peer_method
+
+    reg = pq.registry(step)
+    return {n for n in reg if n.casefold() != "none" and is_peer_method(reg[n]) == peers}
 
 
-def test_ranks_follow_the_steps_own_error_failed_last_na_unranked(board):
-    lb, _ = board
+def test_every_registered_method_is_on_its_board(board, peer_board):
+    for (lb, _), presets, peers in ((board, {"ccd", "cmos"}, False), (peer_board, {"ccd"}, True)):
+        assert [b.step for b in lb.boards] == ["response", "vignetting"]
+        for b in lb.boards:
+            assert {e.method for e in b.entries} == _registered(b.step, peers=peers)
+            assert set(b.noise_floor) == presets and all(
+                0 < v < 0.1 for v in b.noise_floor.values()
+            )
+    assert _registered("response", peers=True) and _registered("vignetting", peers=True)
+
+
+@pytest.mark.parametrize("which", ["board", "peer_board"])
+def test_ranks_follow_the_steps_own_error_failed_last_na_unranked(which, request):
+    lb, _ = request.getfixturevalue(which)
     for b in lb.boards:
         ok = [e for e in b.entries if e.status == "ok"]
         assert ok, b.step
