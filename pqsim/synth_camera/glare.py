@@ -59,7 +59,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.signal import fftconvolve
 
 from photoquant.errors import InputError
 from photoquant.utils import check_array, check_positive
@@ -216,6 +215,9 @@ class GlareSpread:
         -------
         ndarray, shape (H, W, C), float64
         """
+        # imported here: scipy.signal takes ~0.5 s to import, and most cameras have no glare
+        from scipy.signal import fftconvolve
+
         arr = check_array(light, "light", ndim=3, kind="iuf", finite=True).astype(np.float64)
         self.check_channels(arr.shape[2])
         out = np.empty_like(arr)

@@ -156,3 +156,22 @@ def test_rendered_cells_share_their_renders_through_the_cache(cli, tmp_path):
     spec_path.write_text(spec_path.read_text().replace("[4.0, 8.0]", "[16.0]"))
     assert cli(["sweep", str(spec_path), "-o", str(again), "--workers", "1", "-q"]) == 0
     assert sorted(p.name for p in cache.rglob("*.exr")) == cached  # nothing rendered anew
+
+
+def test_local_workers_keep_the_allocators_default_trimming():
+    """Dask's nanny sets ``MALLOC_TRIM_THRESHOLD_``, which makes glibc map every array
+    above 128 KiB afresh (a cell's pages faulted in again at each allocation); the
+    local cluster's workers run without it, with Dask's thread limits kept."""
+    import os
+
+    from validation.sweep.engine import _client, _close, _worker_environment
+
+    env = _worker_environment()["distributed.nanny.pre-spawn-environ"]
+    assert "MALLOC_TRIM_THRESHOLD_" not in env and str(env["OMP_NUM_THREADS"]) == "1"
+    client, cluster = _client(None, 1)
+    try:
+        [worker_env] = client.run(lambda: dict(os.environ)).values()
+    finally:
+        _close(client, cluster)
+    assert "MALLOC_TRIM_THRESHOLD_" not in worker_env
+    assert worker_env["OMP_NUM_THREADS"] == "1"

@@ -235,7 +235,20 @@ def _html(
     return "\n".join(out) + "\n"
 
 
-def write_summary(spec: Any, output: str | Path, table: Any, columns: Sequence[str]) -> Path:
+def summary_images(spec: Any, table: Any) -> dict[str, bytes]:
+    """The summary's PNG of each axis (of the ``ok`` cells' rows of ``table``)."""
+    rows = _ok_metric_rows(table)
+    axes = list(spec.axes)
+    return {axis: _axis_png(rows, axes, axis) for axis in axes} if rows else {}
+
+
+def write_summary(
+    spec: Any,
+    output: str | Path,
+    table: Any,
+    columns: Sequence[str],
+    images: dict[str, bytes] | None = None,
+) -> Path:
     """Write ``output/summary/`` (one PNG per axis, ``index.html``), replacing an older one.
 
     Parameters
@@ -248,15 +261,14 @@ def write_summary(spec: Any, output: str | Path, table: Any, columns: Sequence[s
         Its consolidated results.
     columns : sequence of str
         The parameter columns (:func:`validation.sweep.engine.cell_columns`).
+    images : dict, optional
+        :func:`summary_images` of ``table`` (drawn here when not given).
     """
     from photoquant.io.atomic import atomic_directory
 
     rows = _ok_metric_rows(table)
-    axes = list(spec.axes)
-    images = {}
-    if rows:
-        for axis in axes:
-            images[axis] = _axis_png(rows, axes, axis)
+    if images is None:
+        images = summary_images(spec, table)
     target = Path(output) / "summary"
     with atomic_directory(
         target, overwrite=True, empty_ok=True, replaceable=summary_folder_problem
