@@ -6,7 +6,8 @@
 * ``_generated/changelog.rst.inc``: ``CHANGELOG.md`` in reStructuredText.
 * ``_generated/benchmarks.rst.inc``: the stored benchmark run
   (``benchmarks/results/results.json``).
-* ``_generated/validation.rst.inc``: the paper's tables as measured, from the
+* ``_generated/validation-run.rst.inc`` and ``_generated/validation.rst.inc``: the
+  stored run's description and the paper's tables as measured, from the
   stored report ``docs/_data/validation-quick.json``.
 
 Only the Markdown that ``CHANGELOG.md`` uses is converted (headings, bullets,
@@ -343,6 +344,19 @@ def generate_benchmarks() -> None:
 def generate_validation() -> None:
     path = DOCS / "_data" / "validation-quick.json"
     data = json.loads(path.read_text(encoding="utf-8"))
+    # the run's description, from the stored run itself (never a second copy to go stale)
+    run = [
+        "* **run**: ``photoquant validate`` (the quick job, the default: presets ``ccd`` and",
+        "  ``cmos``, 320×240, K = 8 exposures from 1 to 200 ms, N = 4, V = 3, seed 0);",
+        f"* **date and machine**: {data['date']}, {data['machine']}; it took "
+        f"{data['elapsed_s']} s;",
+        "* **stored as**: ``docs/_data/validation-quick.json`` (every experiment's main",
+        "  rows; the report's ``results.json`` has every metric). These figures are",
+        "  regenerated with each release; a run on your machine gives the same",
+        "  accuracies for the same seed (timings aside).",
+        "",
+    ]
+    _write_if_changed(GENERATED / "validation-run.rst.inc", "\n".join(run))
     out = []
     for exp in data["experiments"]:
         out += [_heading(exp["title"], "~"), ""]
