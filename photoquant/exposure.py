@@ -1214,21 +1214,10 @@ def _neighbouring_pairs(
         z_perm, chan_all
     )
     ok_all = ~clipped[:, order].transpose(2, 1, 0) & np.isfinite(y_all) & (seg_ok > 0)
-    z_rows, y_rows, entries, pixels = [], [], [], []
-    n_rows = 0
-    for ch in range(n_ch):
-        z, y, ok = z_perm[ch], y_all[ch], ok_all[ch]
-        pair = ok[:, :-1] & ok[:, 1:]
-        pair &= np.cumsum(pair, axis=0) <= quota
-        keep = np.flatnonzero(pair.any(axis=1))
-        z_rows.append(z[keep])
-        y_rows.append(y[keep])
-        pixels.append(order[keep])
-        r, j = np.nonzero(pair[keep])
-        entries.append(np.stack([r + n_rows, j, np.full(r.size, ch)]))
-        n_rows += keep.size
-    z_obs, y_obs = np.concatenate(z_rows), np.concatenate(y_rows)
-    row, step, chan = np.concatenate(entries, axis=1)
+    keep_c, keep_p, row, step, chan = _selected_pairs(ok_all, quota)
+    z_obs, y_obs = z_perm[keep_c, keep_p], y_all[keep_c, keep_p]
+    pixels = [order[keep_p[keep_c == ch]] for ch in range(n_ch)]
+    n_rows = keep_p.size
     return _Pairs(
         row,
         step,
@@ -1240,6 +1229,67 @@ def _neighbouring_pairs(
         pixels,
         n_rows,
     )
+
+
+def _selected_pairs(ok: np.ndarray, quota: int) -> tuple[np.ndarray, ...]:
+    """The pairs :func:`_neighbouring_pairs` keeps: per channel, the first ``quota`` pairs
+    of each step in the rows' (random) order whose two values are ``ok`` ``(C, P, K)``.
+
+    Returns ``(keep_c, keep_p, row, step, chan)``: the channel and pixel of each row
+    kept (a row: a pixel in one channel with a pair kept; channel by channel, pixels
+    in order), and per pair its row, step and channel (rows in order, steps ascending).
+    """
+    if _select_pairs_nb is not None:  # the same selection, one pass without temporaries
+        n_ch, n_pix, n_k = ok.shape
+        keep = np.empty((2, n_ch * n_pix), dtype=np.intp)
+        entries = np.empty((3, n_ch * n_pix * max(n_k - 1, 0)), dtype=np.intp)
+        n_rows, n_pairs = _select_pairs_nb(np.ascontiguousarray(ok), quota, keep, entries)
+        return (*keep[:, :n_rows], *entries[:, :n_pairs])
+    keeps, entries_ch = [], []
+    n_rows = 0
+    for ch in range(ok.shape[0]):
+        pair = ok[ch, :, :-1] & ok[ch, :, 1:]
+        pair &= np.cumsum(pair, axis=0) <= quota
+        keep = np.flatnonzero(pair.any(axis=1))
+        keeps.append(np.stack([np.full(keep.size, ch), keep]))
+        r, j = np.nonzero(pair[keep])
+        entries_ch.append(np.stack([r + n_rows, j, np.full(r.size, ch)]))
+        n_rows += keep.size
+    keep_c, keep_p = np.concatenate(keeps, axis=1)
+    row, step, chan = np.concatenate(entries_ch, axis=1)
+    return keep_c, keep_p, row, step, chan
+
+
+def _select_pairs_py(
+    ok: Any, quota: int, keep: Any, entries: Any
+) -> tuple[int, int]:  # pragma: no cover - numba
+    """numba body of :func:`_selected_pairs` (its numpy branch's selection, value by value):
+    writes the rows kept into ``keep`` and the pairs into ``entries``, returns their counts."""
+    n_ch, n_pix, n_k = ok.shape
+    count = np.zeros(max(n_k - 1, 1), dtype=np.int64)
+    n_rows = 0
+    n_pairs = 0
+    for ch in range(n_ch):
+        count[:] = 0
+        for p in range(n_pix):
+            kept = False
+            for j in range(n_k - 1):
+                if ok[ch, p, j] and ok[ch, p, j + 1]:
+                    count[j] += 1  # a cumulative count over the rows: the quota's first
+                    if count[j] <= quota:
+                        if not kept:
+                            keep[0, n_rows] = ch
+                            keep[1, n_rows] = p
+                            n_rows += 1
+                            kept = True
+                        entries[0, n_pairs] = n_rows - 1
+                        entries[1, n_pairs] = j
+                        entries[2, n_pairs] = ch
+                        n_pairs += 1
+    return n_rows, n_pairs
+
+
+_select_pairs_nb: Any = compile_kernel(_select_pairs_py) if HAVE_NUMBA else None
 
 
 def _repeat_noise_line(sample: ExposureStack, pairs: _Pairs) -> np.ndarray:

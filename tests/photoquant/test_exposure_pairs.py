@@ -89,7 +89,7 @@ def test_compiled_kernels_give_the_numpy_bits_and_the_draw_is_seeded(capture, mo
     again = refine_by_pairs(stack, model.response, seed=3)
     np.testing.assert_array_equal(first.exposure_s, again.exposure_s)
     np.testing.assert_array_equal(first.log_cov, again.log_cov)
-    for kernel in ("_pair_pass_nb", "_tables_at_nb", "_huber_iterations_nb"):
+    for kernel in ("_pair_pass_nb", "_tables_at_nb", "_huber_iterations_nb", "_select_pairs_nb"):
         monkeypatch.setattr(exposure, kernel, None)
     plain = refine_by_pairs(stack, model.response, seed=3)
     np.testing.assert_array_equal(first.exposure_s, plain.exposure_s)
