@@ -48,7 +48,7 @@ def _child(impl: str):
 
 
 def cases(config: Config) -> list[Case]:
-    """The large-image row (issue 14): peak extra memory / input and time, one run each."""
+    """The large-image row: peak extra memory / input and time, one run each."""
     size = "800×600" if config.quick else "8000×6000"
     return [
         Case(

@@ -126,7 +126,7 @@ def _ours_pipeline(ctx: dict[str, Any]) -> np.ndarray:
 
 
 def cases(config: Config) -> list[Case]:
-    """The merge rows (issue 14): the hat merge beside its peers and floors, the pipeline's merge."""
+    """The merge rows: the hat merge beside its peers and floors, the pipeline's merge."""
     del config
     return [
         Case(

@@ -45,7 +45,7 @@ def _accuracy(ctx: dict[str, Any], name: str, out: Any) -> dict[str, float]:
 
 
 def cases(config: Config) -> list[Case]:
-    """The stack-building row (issue 14: "building the stacks (saturation detection)")."""
+    """The stack-building row: building the stacks (saturation detection)."""
     n = 2 if config.quick else 10
     return [
         Case(

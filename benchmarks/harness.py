@@ -1,6 +1,6 @@
 """The benchmark case API: a case builds its data once, times each implementation interleaved.
 
-A :class:`Case` is one row of the benchmark table (issue 14): a name, a
+A :class:`Case` is one row of the benchmark table: a name, a
 ``setup`` that builds the inputs deterministically (seeded synthetic camera)
 and returns a context object, one callable per implementation (ours and the
 peers, each ``fn(ctx) -> output``) and an ``accuracy`` function
