@@ -94,3 +94,83 @@ def test_covariance_persisted_and_checked():
         ExtendedGoldmanChenVignetting("given", DARKENING[None], cov)  # 2 channels for 1
     with pytest.raises(InputError, match="non-negative"):
         ExtendedGoldmanChenVignetting("given", DARKENING[None], -cov[:1])
+
+
+WINDOW_SHAPE = (48, 64)
+WINDOW_SHIFTS = ((0, 0), (-6, 10), (-6, -10))  # pqsim's pan circle at this size
+
+
+def _window_sampled_fits(sample_radius_told: int, seeds: int = 30):
+    """Fits of tracks 2 px apart whose values are 3 × 3 window means of images with
+    independent 1 % noise per pixel (as calibration reads its correspondences): the
+    windows of neighbouring tracks share pixels. Returns (log maps, stated variances)."""
+    from photoquant.correspondences import sample_image
+
+    from .test_vignetting import world_radiance
+
+    h, w = WINDOW_SHAPE
+    v = vignetting_map(DARKENING, WINDOW_SHAPE)[..., 0]
+    ys, xs = np.mgrid[0:h, 0:w]
+    world_x, world_y = np.meshgrid(np.arange(0, w, 2), np.arange(0, h, 2))
+    maps, variances = [], []
+    for seed in range(seeds):
+        rng = np.random.default_rng(seed)
+        values, xy, view, track = [], [], [], []
+        for k, (dx, dy) in enumerate(WINDOW_SHIFTS):
+            image = world_radiance(xs + dx + 40, ys + dy + 40) * v
+            image = image * (1.0 + 0.01 * rng.standard_normal(image.shape))
+            px, py = world_x.ravel() - dx, world_y.ravel() - dy  # the world points in view k
+            inside = (px >= 1) & (px <= w - 2) & (py >= 1) & (py <= h - 2)
+            pts = np.c_[px[inside], py[inside]].astype(np.float64)
+            values.append(sample_image(image[..., None], pts, radius=1))
+            xy.append(pts)
+            view.append(np.full(pts.shape[0], k))
+            track.append(np.flatnonzero(inside))
+        fit = fit_vignetting_ExtendedGoldmanChen(
+            np.concatenate(values), np.concatenate(xy), np.concatenate(view),
+            np.concatenate(track), WINDOW_SHAPE, sample_radius=sample_radius_told,
+        )  # fmt: skip
+        assert fit.converged.all(), fit.message
+        model = ExtendedGoldmanChenVignetting("fit", fit.params, fit.param_covariance)
+        maps.append(np.log(model.map(WINDOW_SHAPE))[::6, ::8, 0])
+        variances.append(model.log_map_variance(WINDOW_SHAPE)[::6, ::8, 0])
+    return np.array(maps), np.array(variances)
+
+
+def test_tracks_whose_sampling_windows_overlap_are_counted_correlated():
+    """Told the windows' radius, the stated map uncertainty matches the maps' scatter;
+    treating the tracks as independent (radius 0) under-states it."""
+    maps, variances = _window_sampled_fits(sample_radius_told=1)
+    ratio = np.sqrt(np.sum(maps.var(axis=0, ddof=1)) / np.sum(variances.mean(axis=0)))
+    # 30 fits: a variance to ±26 % (√(2/29)), its square root to ±13 %
+    assert abs(ratio - 1.0) < 0.2, ratio
+    maps0, variances0 = _window_sampled_fits(sample_radius_told=0)
+    np.testing.assert_array_equal(maps0, maps)  # the estimate itself does not change
+    ratio0 = np.sqrt(np.sum(maps0.var(axis=0, ddof=1)) / np.sum(variances0.mean(axis=0)))
+    assert ratio0 > 1.25, ratio0
+
+
+def test_overlapping_tracks_are_those_whose_windows_share_pixels_in_a_view():
+    from photoquant.vignetting.extended_goldman_chen import (
+        _overlapping_tracks,
+        _paired_observations,
+    )
+
+    # four tracks seen in two views (view 1 shifted by 20 px); in each view the windows
+    # (3 x 3 at r = 1) of points 2 px apart share a column, 3 px apart share none
+    x0 = np.array([10.0, 12.0, 13.0, 30.0])
+    y0 = np.array([10.0, 10.0, 10.0, 30.0])
+    xy = np.r_[np.c_[x0, y0], np.c_[x0 + 20.0, y0]]
+    view = np.r_[np.zeros(4, int), np.ones(4, int)]
+    track = np.r_[np.arange(4), np.arange(4)]
+    pairs = _paired_observations(np.ones((8, 1)), xy, view, track, (64, 64))
+    got = {tuple(p) for p in _overlapping_tracks(pairs, (64, 64), 1).tolist()}
+    assert got == {(0, 1), (1, 2)}
+    assert _overlapping_tracks(pairs, (64, 64), 0).size == 0  # single samples share nothing
+    assert {tuple(p) for p in _overlapping_tracks(pairs, (64, 64), 2).tolist()} == {
+        (0, 1), (0, 2), (1, 2)
+    }  # fmt: skip
+    # between pixel centres a bilinear sample reads the next pixel too: 3.5 px apart overlap
+    shifted = _paired_observations(np.ones((8, 1)), xy + [0.5, 0.0], view, track, (64, 64))
+    got = {tuple(p) for p in _overlapping_tracks(shifted, (64, 64), 1).tolist()}
+    assert got == {(0, 1), (0, 2), (1, 2)}
