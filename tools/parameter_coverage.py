@@ -7,7 +7,11 @@ stated uncertainty is then compared with the truth as
     z = (ln estimate − ln truth) / σ_stated
 
 for the sensor LUT (per pixel, one scale per channel removed: the LUT's
-gauge) and the vignetting map (on a grid of points). An honest uncertainty
+gauge), the vignetting map (on a grid of points) and the colour balance
+(each channel's scale of the corrected test scene against the truth, green
+referenced, as :func:`validation.compare.compare_with_truth` measures it,
+against the balance's stated uncertainty: the white chart's noise; the
+response's part of a channel's scale is not in it). An honest uncertainty
 gives ``z`` a spread of 1 and 68.3 % / 95.4 % of the values within 1 and
 1.96. ``--true-response`` calibrates with the camera's true ``g`` (a
 registered response method returning it), to separate the response's error
@@ -31,6 +35,7 @@ import numpy as np
 import photoquant as pq
 from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera.presets import camera_from_preset
+from validation.compare import compare_with_truth
 
 TRUE_RESPONSE = "True response (coverage tool)"
 
@@ -89,7 +94,7 @@ def main() -> None:
         _register_true_response(truth)
         kwargs["response"] = TRUE_RESPONSE
     step = max(1, min(shape) // 6)
-    z_lut, z_vig = [], []
+    z_lut, z_vig, z_bal = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.seeds):
             manifest = write_capture_set(
@@ -106,12 +111,18 @@ def main() -> None:
             if vig_var is not None:
                 d = np.log(model.vignetting_map()) - np.log(truth.vignetting)
                 z_vig.append((d / np.sqrt(vig_var))[::step, ::step].ravel())
+            bal_var = model.balance.log_variance
+            if bal_var is not None:
+                error = np.asarray(compare_with_truth(manifest, model)["balance"]["channel_error"])
+                stated = np.asarray(bal_var) > 0  # the reference channel states none
+                z_bal.append(np.log1p(error[stated]) / np.sqrt(np.asarray(bal_var)[stated]))
     print(
         f"{args.preset}, {shape[1]}x{shape[0]}, N = {args.repeats}, V = {args.views}, "
         f"{args.seeds} seeds{', true response' if args.true_response else ''}"
     )
     print(_summary("sensor LUT (pixels)", np.concatenate(z_lut) if z_lut else np.empty(0)))
     print(_summary("vignetting (grid)", np.concatenate(z_vig) if z_vig else np.empty(0)))
+    print(_summary("balance (channels)", np.concatenate(z_bal) if z_bal else np.empty(0)))
 
 
 if __name__ == "__main__":
