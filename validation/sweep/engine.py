@@ -527,6 +527,17 @@ def _close(client: Any, cluster: Any) -> None:
                 cluster.close(timeout=NETWORK_TIMEOUT_S)
 
 
+def _close_and_clean(client: Any, cluster: Any) -> None:
+    """:func:`_close`, then, for a local cluster, the scratch its workers left (they are
+    gone: nothing of theirs runs any more)."""
+    _close(client, cluster)
+    if cluster is not None:
+        from photoquant.io.atomic import clean_stale_scratch
+        from validation.sweep.cells import SCRATCH_PREFIX
+
+        clean_stale_scratch(SCRATCH_PREFIX)
+
+
 @contextlib.contextmanager
 def _quiet_dask() -> Iterator[None]:
     """Dask's loggers silent in the block (a closing cluster reports its interrupted tasks)."""
@@ -633,12 +644,12 @@ def run_sweep(
         )
         _run_pending(client, pending, output, schema, len(cells), len(done), quiet)
     except BaseException:
-        _close(client, cluster)
-        if cluster is not None:
-            clean_stale_scratch(SCRATCH_PREFIX)  # the local workers are gone: nothing of theirs
+        _close_and_clean(client, cluster)
         raise
     # the cluster closes (~1 s of waiting on its processes) while the summary is drawn
-    closing = threading.Thread(target=_close, args=(client, cluster), name="close-cluster")
+    closing = threading.Thread(
+        target=_close_and_clean, args=(client, cluster), name="close-cluster"
+    )
     closing.start()
     try:
         outcome = _consolidate(spec, output, cells, schema)
@@ -646,8 +657,6 @@ def run_sweep(
         images = summary_images(spec, results)
     finally:
         closing.join()
-        if cluster is not None:
-            clean_stale_scratch(SCRATCH_PREFIX)  # the local workers are gone: nothing of theirs
     outcome.skipped, outcome.computed = len(done), len(pending)
     write_summary(spec, output, results, columns, images)
     return outcome
