@@ -2,11 +2,12 @@
 
 One board on the ``tiny`` configuration (96×72, both presets, the response
 and vignetting steps, photoquant's methods and the plug-ins') is shared by
-the module, and one of the peers' methods on the ``ccd`` preset beside it
-(the same capture set; a peer's fit on a second preset adds time, not
-coverage: ``test_peers`` runs each peer on its own); three methods are
-registered for them by the test: a deliberately wrong response (``g = 2.2 ln z``, a gamma
-that neither preset has) and one that always fails. The command is run
+the module, and a board of the peers' methods on the ``ccd`` preset beside
+it (the same capture set; a peer's fit on a second preset adds time, not
+coverage: ``test_peers`` runs each peer on its own). Three methods are
+registered for them by the test: a deliberately wrong response (``g = 2.2
+ln z``, a gamma that neither preset has), one that always fails, and one
+whose program is not installed. The command is run
 in-process through :func:`photoquant.cli.main` with its entry point
 (``tests/_commands.py`` declares it when the installed metadata predates it).
 """
