@@ -174,3 +174,15 @@ def test_overlapping_tracks_are_those_whose_windows_share_pixels_in_a_view():
     shifted = _paired_observations(np.ones((8, 1)), xy + [0.5, 0.0], view, track, (64, 64))
     got = {tuple(p) for p in _overlapping_tracks(shifted, (64, 64), 1).tolist()}
     assert got == {(0, 1), (0, 2), (1, 2)}
+
+
+@pytest.mark.parametrize("bad", [-1, 65, 1.5, "1", True])
+def test_a_malformed_sample_radius_is_one_line_naming_it(bad):
+    from .test_vignetting import observe
+
+    obs = observe(DARKENING, ((0, 0), (16, 0), (0, 12)), 50, np.random.default_rng(0))
+    with pytest.raises(InputError, match="sample_radius") as err:
+        fit_vignetting_ExtendedGoldmanChen(
+            obs.values, obs.xy, obs.view, obs.track, IMAGE_SHAPE, sample_radius=bad
+        )
+    assert "\n" not in str(err.value)
