@@ -260,14 +260,11 @@ def write_project(
 
 def write_points(path: Path, pairs: np.ndarray) -> None:
     """Write point pairs for ``vig_optimize -i``: rows ``(img1, img2, x1, y1, x2, y2, i1 (3), i2 (3))``."""
-    rows = np.asarray(pairs, dtype=np.float64)
+    rows = np.asarray(pairs, dtype=np.float64).reshape(-1, 12)
+    # one %-format per row (the formats of the f-strings this replaced: the same text)
+    line = "%d %d %.3f %.3f %.3f %.3f " + " ".join(["%.8f"] * 6) + " 0 0 0 0\n"
     with open(path, "w") as f:
-        for r in rows:
-            f.write(
-                f"{int(r[0])} {int(r[1])} {r[2]:.3f} {r[3]:.3f} {r[4]:.3f} {r[5]:.3f} "
-                + " ".join(f"{v:.8f}" for v in r[6:12])
-                + " 0 0 0 0\n"
-            )
+        f.write("".join(line % tuple(r) for r in rows.tolist()))
 
 
 _I_LINE_VAR = re.compile(r"\b(Ra|Rb|Rc|Rd|Re|Va|Vb|Vc|Vd|Vx|Vy|Eev|Er|Eb)(-?[0-9.eE+-]+)(?=\s|$)")
@@ -332,19 +329,25 @@ def run_vig_optimize(
 
 
 def _response_pairs(stack: ExposureStack, n_points: int, rng: np.random.Generator) -> np.ndarray:
-    """Pairs of the same pixel in adjacent usable exposures, values in ``[0, 1]``."""
+    """Pairs of the same pixel in adjacent usable exposures, values in ``[0, 1]``.
+
+    Rows ``(a, b, x, y, x, y, values at a (3), values at b (3))`` for every
+    sampled pixel (in the order drawn) and every two consecutive exposures in
+    which all its channels are usable.
+    """
     values = stack.mean() / stack.c_max  # (K, H, W, C)
     usable = ~(stack.saturated() | stack.dark_clipped())  # (K, H, W, C)
     usable_px = np.all(usable, axis=-1)  # Hugin's pairs carry all three channels
     h, w = stack.image_shape
     idx = rng.choice(h * w, size=min(n_points, h * w), replace=False)
     ys, xs = np.divmod(idx, w)
-    rows = []
-    for y, x in zip(ys, xs, strict=True):
-        ks = np.nonzero(usable_px[:, y, x])[0]
-        for a, b in zip(ks[:-1], ks[1:], strict=True):
-            rows.append([a, b, x, y, x, y, *values[a, y, x], *values[b, y, x]])
-    return np.asarray(rows, dtype=np.float64).reshape(-1, 12)
+    # (pixel, exposure) of every usable sample, pixel-major, exposures ascending
+    pix, k = np.nonzero(usable_px[:, ys, xs].T)
+    nxt = np.nonzero(pix[1:] == pix[:-1])[0]  # a sample and the next usable one of its pixel
+    a, b, p = k[nxt], k[nxt + 1], pix[nxt]
+    y, x = ys[p], xs[p]
+    cols = [a, b, x, y, x, y, *values[a, y, x].T, *values[b, y, x].T]
+    return np.stack(cols, axis=1).astype(np.float64).reshape(-1, 12)
 
 
 def _grey(pairs: np.ndarray, channel: int) -> np.ndarray:
@@ -434,17 +437,31 @@ def characterise_response_HuginEMoR(
 def _vignetting_pairs(
     data: VignettingData, opts: HuginVignettingOptions, rng: np.random.Generator
 ) -> np.ndarray:
+    """Every two observations of a track in different views, at most ``opts.max_pairs``.
+
+    Rows ``(view a, view b, xy a, xy b, values a (3), values b (3))``, tracks
+    ascending, and within a track the observations' pairs in their order.
+    """
     values, xy, view, track = sample_tracks(data, opts.sample_radius)
-    good = np.all(np.isfinite(values) & (values > 0), axis=1)
-    rows = []
-    for t in np.unique(track[good]):
-        sel = np.nonzero(good & (track == t))[0]
-        for i in range(sel.size):
-            for j in range(i + 1, sel.size):
-                a, b = sel[i], sel[j]
-                if view[a] != view[b]:
-                    rows.append([view[a], view[b], *xy[a], *xy[b], *values[a], *values[b]])
-    pairs = np.asarray(rows, dtype=np.float64).reshape(-1, 12)
+    good = np.nonzero(np.all(np.isfinite(values) & (values > 0), axis=1))[0]
+    obs = good[np.argsort(track[good], kind="stable")]  # tracks ascending, order kept within
+    tr = track[obs]
+    starts = np.concatenate([[0], np.nonzero(tr[1:] != tr[:-1])[0] + 1])
+    longest = int(np.max(np.diff(np.append(starts, tr.size)))) if tr.size else 0
+    first, second = [], []
+    for d in range(1, longest):  # every d-th next observation of the same track
+        i = np.nonzero(tr[d:] == tr[:-d])[0]
+        first.append(i)
+        second.append(i + d)
+    i = np.concatenate(first) if first else np.zeros(0, dtype=np.intp)
+    j = np.concatenate(second) if second else np.zeros(0, dtype=np.intp)
+    order = np.lexsort((j, i))  # pairs (i, j) in the order of a double loop
+    a, b = obs[i[order]], obs[j[order]]
+    keep = view[a] != view[b]
+    a, b = a[keep], b[keep]
+    pairs = np.concatenate(
+        [view[a, None], view[b, None], xy[a], xy[b], values[a], values[b]], axis=1
+    ).astype(np.float64)
     if len(pairs) > opts.max_pairs:
         pairs = pairs[rng.choice(len(pairs), opts.max_pairs, replace=False)]
     return pairs

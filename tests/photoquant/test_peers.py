@@ -287,6 +287,65 @@ def test_hugin_vignetting_needs_pairs():
         hugin.characterise_vignetting_Hugin(few)
 
 
+def _response_pairs_by_loops(stack, n_points, rng):
+    """The adapter's response pairs written as the double loop they are defined by."""
+    values = stack.mean() / stack.c_max
+    usable = np.all(~(stack.saturated() | stack.dark_clipped()), axis=-1)
+    h, w = stack.image_shape
+    idx = rng.choice(h * w, size=min(n_points, h * w), replace=False)
+    rows = []
+    for y, x in zip(*np.divmod(idx, w), strict=True):
+        ks = np.nonzero(usable[:, y, x])[0]
+        for a, b in zip(ks[:-1], ks[1:], strict=True):
+            rows.append([a, b, x, y, x, y, *values[a, y, x], *values[b, y, x]])
+    return np.asarray(rows, dtype=np.float64).reshape(-1, 12)
+
+
+def test_hugin_response_pairs_are_every_pixels_consecutive_usable_exposures(bracket):
+    stack = bracket[0]
+    got = hugin._response_pairs(stack, 500, np.random.default_rng(5))
+    want = _response_pairs_by_loops(stack, 500, np.random.default_rng(5))
+    assert got.shape[0] > 500  # pixels usable in several exposures give several pairs
+    np.testing.assert_array_equal(got, want)
+
+
+def test_hugin_vignetting_pairs_are_every_two_views_of_a_track(monkeypatch):
+    rng = np.random.default_rng(3)
+    m = 400
+    track = rng.integers(0, 90, m)  # tracks of 0 to ~10 observations, views repeated
+    view = rng.integers(0, 3, m)
+    xy = rng.uniform(0, 50, (m, 2))
+    values = rng.uniform(0.1, 1.0, (m, 3))
+    values[rng.uniform(size=m) < 0.1, 1] = np.nan  # unusable observations
+    values[rng.uniform(size=m) < 0.05, 2] = 0.0
+    monkeypatch.setattr(hugin, "sample_tracks", lambda data, radius: (values, xy, view, track))
+    good = np.all(np.isfinite(values) & (values > 0), axis=1)
+    want = []
+    for t in np.unique(track[good]):
+        sel = np.nonzero(good & (track == t))[0]
+        for i in range(sel.size):
+            for j in range(i + 1, sel.size):
+                a, b = sel[i], sel[j]
+                if view[a] != view[b]:
+                    want.append([view[a], view[b], *xy[a], *xy[b], *values[a], *values[b]])
+    for max_pairs in (10_000, 50):
+        opts = hugin.HuginVignettingOptions(max_pairs=max_pairs)
+        got = hugin._vignetting_pairs(None, opts, np.random.default_rng(0))
+        expect = np.asarray(want)
+        if len(expect) > max_pairs:
+            expect = expect[np.random.default_rng(0).choice(len(expect), max_pairs, replace=False)]
+        np.testing.assert_array_equal(got, expect)
+
+
+def test_hugin_points_file_has_the_fixed_decimals_vig_optimize_reads(tmp_path):
+    pairs = np.array([[0, 2, 1.23456, -0.0, 3.0, 4.5, 0.1, 0.2, 0.3, 1 / 3, 0.5, 2 / 3]])
+    hugin.write_points(tmp_path / "p.txt", pairs)
+    assert (tmp_path / "p.txt").read_text() == (
+        "0 2 1.235 -0.000 3.000 4.500 0.10000000 0.20000000 0.30000000 "
+        "0.33333333 0.50000000 0.66666667 0 0 0 0\n"
+    )
+
+
 def test_hugin_pipeline_through_calibrate_and_the_cli(tmp_path, capsys):
     """A synthetic capture set: calibrate --method response=... vignetting=Hugin, save, load, correct."""
     _skip_unless(hugin)
