@@ -486,8 +486,14 @@ def check_baseline_applies(
         diff = sorted(k for k in set(cond) | set(ref) if cond.get(k) != ref.get(k))
         raise ValidationError(
             f"{name} was made for configuration {baseline.get('config_name')!r} and differs "
-            f"from this run in {', '.join(diff)}"
+            f"from this run in {_condition_names(diff)}"
         )
+
+
+def _condition_names(names: list[str]) -> str:
+    """The conditions' names on one line (a name a baseline file gives with a line
+    break or another unprintable character is shown quoted, escaped)."""
+    return ", ".join(k if k.isprintable() else repr(k) for k in names)
 
 
 def _expected(key: str, results: Mapping[str, Any], baseline: Mapping[str, Any]) -> bool:
@@ -532,7 +538,7 @@ def check_results(
         )
         raise ValidationError(
             f"{name} was made for configuration {baseline.get('config_name')!r} and differs "
-            f"from this run ({results['config']['name']!r}) in {', '.join(diff)}"
+            f"from this run ({results['config']['name']!r}) in {_condition_names(diff)}"
         )
     out = CheckResult(baseline=name)
     metrics = results["metrics"]

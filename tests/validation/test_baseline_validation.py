@@ -186,6 +186,17 @@ def test_the_stored_baseline_passes_a_run_that_reproduces_it():
     assert result.ok and result.compared == len(STORED["metrics"])
 
 
+def test_a_condition_named_with_a_line_break_is_refused_on_one_line():
+    """A baseline whose conditions name a key with a line break (found by the property
+    below): the refusal names it escaped, on one line."""
+    doc = copy.deepcopy(STORED)
+    doc["conditions"] = {**doc["conditions"], "a\nb": False}
+    base = validate_baseline(json.loads(json.dumps(doc)), "baseline b.json")
+    with pytest.raises(ValidationError) as info:
+        check_results(_results_matching(STORED), base)
+    assert "\n" not in str(info.value) and "'a\\nb'" in str(info.value)
+
+
 @settings(max_examples=200, deadline=None)
 @given(doc=_mutated_baseline())
 def test_a_baseline_is_refused_on_load_or_checks_without_crashing(doc):
