@@ -278,12 +278,23 @@ class BalanceModel:
     log_variance : ndarray, shape (C,), optional
         Variance of ``ln a_λ`` from the measurement's noise
         (:func:`balance_log_variance`); ``None``: not stated.
+    chart_roi : tuple of 4 int, optional
+        The white chart's box ``[x0, y0, x1, y1]`` the factors were read
+        from, where a chart set them: the balanced photoquantity's scale is
+        the chart's, and the calibration's errors at the chart are stated
+        relative to it (:func:`photoquant.correct`).
+    chart_stage : {"uniformised", "linearised"}, optional
+        Whether the chart was read after ``÷ u·v`` (the sensor LUT's and the
+        vignetting's errors at the chart then enter the factors) or before.
+        Given with ``chart_roi``.
     """
 
     method: str
     factors: np.ndarray
     params: dict[str, Any] = field(default_factory=dict)
     log_variance: np.ndarray | None = None
+    chart_roi: tuple[int, int, int, int] | None = None
+    chart_stage: str | None = None
 
     def __post_init__(self) -> None:
         a = check_array(self.factors, "balance factors", ndim=1, kind="iuf", finite=True)
@@ -299,6 +310,25 @@ class BalanceModel:
             if np.any(v < 0):
                 raise InputError(f"balance log_variance must be non-negative, got {v.tolist()}")
             object.__setattr__(self, "log_variance", v)
+        if (self.chart_roi is None) != (self.chart_stage is None):
+            raise InputError("a balance's `chart_roi` and `chart_stage` go together")
+        if self.chart_roi is not None:
+            if self.chart_stage not in ("uniformised", "linearised"):
+                raise InputError(
+                    "a balance's `chart_stage` must be 'uniformised' or 'linearised', "
+                    f"got {self.chart_stage!r}"
+                )
+            box = self.chart_roi
+            if (
+                not isinstance(box, Sequence)
+                or len(box) != 4
+                or not all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in box)
+                or not (0 <= box[0] < box[2] and 0 <= box[1] < box[3])
+            ):
+                raise InputError(
+                    f"a balance's `chart_roi` must be four integers [x0, y0, x1, y1], got {box!r}"
+                )
+            object.__setattr__(self, "chart_roi", tuple(int(v) for v in box))
 
     @classmethod
     def identity(cls, n_channels: int) -> BalanceModel:
@@ -313,6 +343,9 @@ class BalanceModel:
         params: dict[str, Any] = {"factors": self.factors.tolist(), "method_params": self.params}
         if self.log_variance is not None:
             params["log_variance"] = self.log_variance.tolist()
+        if self.chart_roi is not None:
+            params["chart_roi"] = list(self.chart_roi)
+            params["chart_stage"] = self.chart_stage
         return params, {}
 
     @classmethod
@@ -336,6 +369,8 @@ class BalanceModel:
             np.asarray(factors, dtype=np.float64),
             dict(params.get("method_params") or {}),
             None if variance is None else np.asarray(variance, dtype=np.float64),
+            chart_roi=params.get("chart_roi"),
+            chart_stage=params.get("chart_stage"),
         )
 
 
@@ -394,7 +429,13 @@ def characterise_balance_WhiteChart(
     )
     variance = balance_log_variance(linear, data.roi, data.mask, opts.reference_channel)
     stated = bool(np.all(np.isfinite(variance)))
-    model = BalanceModel("White Chart", factors, log_variance=variance if stated else None)
+    model = BalanceModel(
+        "White Chart",
+        factors,
+        log_variance=variance if stated else None,
+        chart_roi=check_roi(data.roi, linear.shape[:2]),
+        chart_stage=opts.stage,
+    )
     report: dict[str, Any] = {
         "stage": opts.stage,
         "white_colour": white_chart_colour(linear, data.roi, data.mask),

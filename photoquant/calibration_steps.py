@@ -76,7 +76,11 @@ from photoquant.merge.noise_aware import (
     estimate_noise_from_exposures,
     estimate_noise_parameters,
 )
-from photoquant.merge.uncertainty import log_variance_Debevec1997, noise_record
+from photoquant.merge.uncertainty import (
+    log_variance_Debevec1997,
+    noise_record,
+    response_error_of_merge_Debevec1997,
+)
 from photoquant.methods import Method, StepFit, options_to_dict, resolve_method
 from photoquant.model import CameraModel
 from photoquant.profiles import DEFAULT_PROFILE, profile_setting, profile_steps
@@ -958,7 +962,7 @@ def assemble_camera(
         image_shape=(height, width),
         channels=ref.channels,
         bit_depth=ref.bit_depth,
-        response=response.model,
+        response=_response_relative_to_chart(response.model, ref, merge, balance.model, log),
         merge=merge.model,
         balance=balance.model,
         sensor_lut=sensor_lut.model,
@@ -968,6 +972,44 @@ def assemble_camera(
         glare=glare.model,
         defects=merge.defects,
     )
+
+
+def _response_relative_to_chart(
+    response: ResponseModel,
+    view0: ExposureStack,
+    merge: MergeStage,
+    balance: BalanceModel,
+    log: CalibrationLog,
+) -> ResponseModel:
+    """The response with its covariance relative to the white chart's merged value, where
+    a chart set the balance (``balance.chart_roi``) and the response states a covariance.
+
+    The balance makes the chart neutral: ``ln a_λ`` takes ``g_λ`` at the chart's
+    levels away, so a balanced photoquantity carries ``g``'s error *relative to
+    the chart* (``δg(z) − δg(chart)``), whatever level the fit fixed its gauge
+    at. The chart's pixels of view 0 (defects hidden) are merged as the views
+    were and their mean loadings on ``g``'s error removed
+    (:meth:`ResponseModel.covariance_relative_to`,
+    :func:`photoquant.merge.uncertainty.response_error_of_merge_Debevec1997`).
+    Unchanged otherwise (no chart, no covariance, another merge).
+    """
+    if (
+        balance.chart_roi is None
+        or response.covariance_factor is None
+        or merge.model.method != "Debevec 1997"
+    ):
+        return response
+    x0, y0, x1, y1 = balance.chart_roi
+    hidden = hide_defects(view0, merge.defects)  # no weight: not in the chart's mean
+    chart = hidden.with_frames(hidden.frames[:, :, y0:y1, x0:x1])
+    loadings, rest = response_error_of_merge_Debevec1997(chart, response, merge.model.options)
+    if not (np.all(np.isfinite(loadings)) and np.all(np.isfinite(rest))):
+        log.note(
+            "uncertainty: the white chart has no merged value in some channel; the "
+            "response's uncertainty stays relative to its gauge level"
+        )
+        return response
+    return response.covariance_relative_to(loadings, rest, "the white chart's merged value")
 
 
 def _spec_record(method: Method, options: Any) -> dict[str, Any]:

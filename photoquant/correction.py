@@ -94,12 +94,15 @@ class Correction:
         response's own (statistical) error
         (:func:`~photoquant.merge.uncertainty.log_variance_response_Debevec1997`),
         a *calibration* component common to every scene corrected with the
-        camera; NaN where ``mask`` is set.
+        camera; NaN where ``mask`` is set. Where a white chart set the balance,
+        relative to the chart (the balance takes ``g`` at the chart's levels
+        away: :meth:`~photoquant.ResponseModel.covariance_relative_to`).
     log_sigma_vignetting : ndarray, shape (H, W, C), float32, optional
         With ``uncertainty=True`` and a vignetting that states its parameters'
         covariance: the standard uncertainty of ``ln l`` from the vignetting
         fit's statistical error (:meth:`~photoquant.vignetting.base.VignettingModel.log_map_variance`),
-        a calibration component; NaN where ``mask`` is set.
+        a calibration component; NaN where ``mask`` is set. Relative to the
+        white chart's centre where the balance read the chart after ``÷ u·v``.
     log_sigma_exposure : ndarray, shape (H, W, C), float32, optional
         With ``uncertainty=True`` and refined scene times: the standard
         uncertainty of ``ln l`` from the refined times' own statistical error
@@ -436,7 +439,9 @@ def _stated_uncertainty(
             "uncertainty: the sensor LUT states no noise; its part of the calibration "
             "uncertainty is not included"
         )
-    vignetting_variance = model.vignetting.log_map_variance(stack.image_shape)
+    vignetting_variance = model.vignetting.log_map_variance(
+        stack.image_shape, relative_to=_chart_centre(model)
+    )
     if vignetting_variance is not None:
         out["log_sigma_vignetting"] = _sigma(vignetting_variance, mask)
     elif not _is_identity_vignetting(model):
@@ -455,6 +460,16 @@ def _stated_uncertainty(
             "the calibration uncertainty is not included"
         )
     return out
+
+
+def _chart_centre(model: CameraModel) -> tuple[float, float] | None:
+    """The white chart's centre ``(x, y)`` in pixels where the balance read it after
+    ``÷ u·v`` (the vignetting's error there is in the factors, so the map's is stated
+    relative to it); ``None`` otherwise."""
+    if model.balance.chart_roi is None or model.balance.chart_stage != "uniformised":
+        return None
+    x0, y0, x1, y1 = model.balance.chart_roi
+    return 0.5 * (x0 + x1), 0.5 * (y0 + y1)
 
 
 def _sigma(variance: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -10,8 +10,9 @@ for the sensor LUT (per pixel, one scale per channel removed: the LUT's
 gauge), the vignetting map (on a grid of points) and the colour balance
 (each channel's scale of the corrected test scene against the truth, green
 referenced, as :func:`validation.compare.compare_with_truth` measures it,
-against the balance's stated uncertainty: the white chart's noise; the
-response's part of a channel's scale is not in it). An honest uncertainty
+against the stated uncertainty of that scale: the white chart's noise in the
+factor, and the response's and the vignetting's errors, relative to the
+chart, averaged over the scene, in both channels). An honest uncertainty
 gives ``z`` a spread of 1 and 68.3 % / 95.4 % of the values within 1 and
 1.96. ``--true-response`` calibrates with the camera's true ``g`` (a
 registered response method returning it), to separate the response's error
@@ -33,9 +34,10 @@ from pathlib import Path
 import numpy as np
 
 import photoquant as pq
+from photoquant.io import load_manifest, load_stack
 from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera.presets import camera_from_preset
-from validation.compare import compare_with_truth
+from validation.compare import channel_scale_variance, compare_with_truth
 
 TRUE_RESPONSE = "True response (coverage tool)"
 
@@ -114,8 +116,12 @@ def main() -> None:
             bal_var = model.balance.log_variance
             if bal_var is not None:
                 error = np.asarray(compare_with_truth(manifest, model)["balance"]["channel_error"])
+                loaded = load_manifest(manifest)
+                scene = load_stack(loaded.scene, loaded)
+                mask = pq.correct(scene, model, refine_exposures=False).mask
+                ratio_var = channel_scale_variance(scene, model, mask)
                 stated = np.asarray(bal_var) > 0  # the reference channel states none
-                z_bal.append(np.log1p(error[stated]) / np.sqrt(np.asarray(bal_var)[stated]))
+                z_bal.append(np.log1p(error[stated]) / np.sqrt(ratio_var[stated]))
     print(
         f"{args.preset}, {shape[1]}x{shape[0]}, N = {args.repeats}, V = {args.views}, "
         f"{args.seeds} seeds{', true response' if args.true_response else ''}"

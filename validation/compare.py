@@ -57,12 +57,50 @@ from validation.noise_model import (
 from validation.truth_model import white_reference
 
 __all__ = [
+    "channel_scale_variance",
     "compare_with_truth",
     "format_comparison",
     "comparison_json",
     "comparison_figures",
     "write_comparison_figures",
 ]
+
+
+def channel_scale_variance(stack: Any, model: CameraModel, mask: np.ndarray) -> np.ndarray | None:
+    """The stated variance of each channel's scale on a corrected scene against the
+    reference channel's (``ln`` of :func:`validation.metrics.channel_scale_ratios`), ``(C,)``.
+
+    The scale is a mean over the scene's pixels (``~mask``), so the calibration's
+    errors that are correlated from pixel to pixel stay in it: the response's
+    (:func:`photoquant.merge.uncertainty.response_error_of_merge_Debevec1997`: the
+    merge's loadings on ``g``'s error averaged over the scene, with the camera's
+    covariance, relative to the white chart) and the vignetting's (the scene's
+    mean of ``ln v`` less the chart centre's where the balance read the chart
+    after ``÷ u·v``, :meth:`~photoquant.vignetting.base.VignettingModel.log_mean_variance`),
+    in the channel and in the reference channel, and the balance's chart noise:
+    each where the camera states it. The sensor LUT's error, independent from
+    pixel to pixel, averages out. ``None`` where the balance states no uncertainty.
+    """
+    from photoquant.merge.uncertainty import response_error_of_merge_Debevec1997
+
+    response = model.balanced_response()
+    balance = model.balance.log_variance
+    if balance is None:
+        return None
+    var = np.zeros(balance.size)
+    if response.covariance_factor is not None and model.merge.method == "Debevec 1997":
+        loadings, rest = response_error_of_merge_Debevec1997(stack, response, model.merge.options)
+        var = var + np.sum(loadings**2, axis=1) + rest
+    centre = None
+    if model.balance.chart_roi is not None and model.balance.chart_stage == "uniformised":
+        x0, y0, x1, y1 = model.balance.chart_roi
+        centre = (0.5 * (x0 + x1), 0.5 * (y0 + y1))
+    weights = (~np.asarray(mask, dtype=bool)).astype(np.float64)
+    vignetting = model.vignetting.log_mean_variance(stack.image_shape, weights, centre)
+    if vignetting is not None:
+        var = var + vignetting
+    ref = 1 if var.size > 1 else 0
+    return np.where(np.arange(var.size) == ref, 0.0, var + var[ref] + balance)
 
 
 def _colour_checker(manifest: Any, model: CameraModel, truth: Any, allow_outside: bool) -> dict:

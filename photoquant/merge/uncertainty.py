@@ -58,6 +58,7 @@ __all__ = [
     "log_variance_Debevec1997",
     "log_variance_exposure_Debevec1997",
     "log_variance_response_Debevec1997",
+    "response_error_of_merge_Debevec1997",
     "noise_parameters_from_record",
     "noise_record",
 ]
@@ -523,6 +524,62 @@ def log_variance_response_Debevec1997(
         if held_out_level is not None:
             total += at_level(rest)
     return np.where(den > 0, total, np.nan)
+
+
+def response_error_of_merge_Debevec1997(
+    stack: ExposureStack,
+    response: ResponseModel,
+    options: DebevecMergeOptions | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """How the response's error moves the ``"Debevec 1997"`` merge of ``stack``, on average
+    over its pixels: the reference a covariance of ``g`` can be made relative to.
+
+    With ``Cov(g) = Fᵀ F + D`` (:func:`log_variance_response_Debevec1997`) the
+    merged ``ln Ê`` of a pixel moves by ``Σ_r ξ_r Σ_k a_k F_r(c̄_k) + η``
+    (``ξ_r`` independent standard variates, ``η`` the uncorrelated rest, of
+    variance ``Σ_k a_k² D(c̄_k)``). Averaged over the stack's pixels with a
+    weight (a uniform target, e.g. the white chart the balance reads): the
+    mean loadings ``B_r`` and the mean variance of ``η``.
+
+    Returns
+    -------
+    loadings : ndarray, shape (C, R)
+    rest : ndarray, shape (C,)
+        NaN for a channel where no pixel has weight.
+
+    Raises
+    ------
+    InputError
+        If the response carries no covariance.
+    """
+    factor, diagonal = response.covariance_factor, response.covariance_diagonal
+    if factor is None or diagonal is None:
+        raise InputError(
+            f"the response ({response.method!r}) carries no covariance: its method does not "
+            "estimate one"
+        )
+    levels = response.levels
+    tables, per_exposure, den = merge_weights_Debevec1997(stack, response, options)
+    weighted = (den > 0).reshape(-1, den.shape[-1])
+    n_ch, n_rows = factor.shape[0], factor.shape[1]
+
+    def pixel_mean(values: np.ndarray) -> np.ndarray:
+        flat = values.reshape(-1, n_ch)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(weighted, flat, 0.0).sum(axis=0) / weighted.sum(axis=0)
+
+    loadings = np.full((n_ch, n_rows), np.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
+        for r in range(n_rows):
+            table = _interpolated_table(tables, levels, factor[:, r])
+            moved = sum(w * tables.take(table, k) for k, w in enumerate(per_exposure)) * inv
+            loadings[:, r] = pixel_mean(moved)
+        rest_table = _interpolated_table(
+            tables, levels, np.clip(diagonal - np.sum(factor**2, axis=1), 0.0, None)
+        )
+        rest = sum(w * w * tables.take(rest_table, k) for k, w in enumerate(per_exposure))
+    return loadings, pixel_mean(rest * inv**2)
 
 
 def log_variance_exposure_Debevec1997(

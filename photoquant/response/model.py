@@ -18,6 +18,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, cast
 
@@ -67,6 +68,11 @@ class ResponseModel:
         ``Var(g)`` at each level in full (``Fᵀ F`` keeps the leading part of
         the covariance; the rest of its diagonal is treated as uncorrelated
         between levels). Given with ``covariance_factor``.
+    covariance_reference : str, optional
+        What the covariance is relative to: ``None``, the level where the fit
+        fixed its gauge; otherwise a description of the reference whose
+        error was removed (:meth:`covariance_relative_to`, e.g. the white
+        chart's merged value).
     """
 
     method: str
@@ -78,6 +84,7 @@ class ResponseModel:
     params: dict[str, Any] = field(default_factory=dict)
     covariance_factor: np.ndarray | None = None
     covariance_diagonal: np.ndarray | None = None
+    covariance_reference: str | None = None
 
     def __post_init__(self) -> None:
         levels = check_array(self.levels, "levels", ndim=1, kind="iuf", finite=True).astype(
@@ -154,6 +161,13 @@ class ResponseModel:
             if np.any(diag < 0):
                 raise InputError("`covariance_diagonal` must be non-negative (variances)")
             object.__setattr__(self, "covariance_diagonal", diag)
+        if self.covariance_reference is not None and (
+            not isinstance(self.covariance_reference, str) or self.covariance_factor is None
+        ):
+            raise InputError(
+                "`covariance_reference` must be a description (str) of a covariance's reference, "
+                f"given with the covariance; got {self.covariance_reference!r}"
+            )
         for name, value in [
             ("levels", levels),
             ("log_inverse_response", g),
@@ -223,6 +237,40 @@ class ResponseModel:
             params=self.params,
             covariance_factor=self.covariance_factor,
             covariance_diagonal=self.covariance_diagonal,
+            covariance_reference=self.covariance_reference,
+        )
+
+    def covariance_relative_to(
+        self, loadings: np.ndarray, rest: np.ndarray, reference: str
+    ) -> ResponseModel:
+        """The response with the covariance of ``g − g_ref``: ``g``'s error less a
+        reference's, the same error of ``g`` entering both.
+
+        ``g_ref``'s error is ``Σ_r B_r ξ_r + η_ref`` in terms of the factor's
+        independent variates ``ξ_r`` (``loadings`` ``B``, shape ``(C, R)``) and
+        an uncorrelated rest of variance ``rest`` ``(C,)`` — e.g. the merge of
+        the white chart that sets the colour balance
+        (:func:`photoquant.merge.uncertainty.response_error_of_merge_Debevec1997`).
+        The factor becomes ``F_r − B_r`` and gains one row, ``√rest`` at every
+        level (the reference's own rest, common to all of them); the
+        uncorrelated part of the diagonal is kept. ``g`` itself is unchanged:
+        only the gauge of its uncertainty moves, to the reference.
+        """
+        if self.covariance_factor is None or self.covariance_diagonal is None:
+            raise InputError(f"the response ({self.method!r}) carries no covariance")
+        n_ch, n_rows, n_lv = self.covariance_factor.shape
+        b = check_array(loadings, "loadings", shape=(n_ch, n_rows), kind="f", finite=True)
+        v = check_array(rest, "rest", shape=(n_ch,), kind="f", finite=True)
+        if np.any(v < 0):
+            raise InputError(f"`rest` must be non-negative (variances), got {v.tolist()}")
+        own = np.clip(self.covariance_diagonal - np.sum(self.covariance_factor**2, axis=1), 0, None)
+        common = np.broadcast_to(np.sqrt(v)[:, None, None], (n_ch, 1, n_lv))
+        factor = np.concatenate([self.covariance_factor - b[:, :, None], common], axis=1)
+        return dataclasses.replace(
+            self,
+            covariance_factor=factor,
+            covariance_diagonal=own + np.sum(factor**2, axis=1),
+            covariance_reference=str(reference),
         )
 
     def log_inverse_std(self) -> np.ndarray | None:
@@ -239,8 +287,11 @@ class ResponseModel:
             extra["covariance_factor"] = self.covariance_factor.tolist()
             extra["covariance_diagonal"] = cast(np.ndarray, self.covariance_diagonal).tolist()
             extra["covariance_factor_quantity"] = (
-                "F per channel (C, R, L): Cov(g) = F^T F at levels, relative to the gauge level"
+                "F per channel (C, R, L): Cov(g) = F^T F at levels, relative to "
+                + (self.covariance_reference or "the gauge level")
             )
+            if self.covariance_reference is not None:
+                extra["covariance_reference"] = self.covariance_reference
         return (
             {
                 "quantity": "g = ln f^-1 (natural log, without balance), linear between levels",
@@ -277,7 +328,16 @@ class ResponseModel:
             params=dict(params.get("method_params") or {}),
             covariance_factor=optional("covariance_factor"),
             covariance_diagonal=optional("covariance_diagonal"),
+            covariance_reference=_optional_text(params, "covariance_reference"),
         )
+
+
+def _optional_text(params: dict[str, Any], name: str) -> str | None:
+    """``params[name]`` where it is a string, ``None`` where absent; else an error naming it."""
+    value = params.get(name)
+    if value is not None and not isinstance(value, str):
+        raise InputError(f"`{name}` must be a string, got {type(value).__name__}")
+    return value
 
 
 def _float_array(value: Any, name: str) -> np.ndarray:

@@ -42,10 +42,29 @@ class VignettingModel:
     def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         raise NotImplementedError
 
-    def log_map_variance(self, image_shape: tuple[int, int]) -> np.ndarray | None:
+    def log_map_variance(
+        self, image_shape: tuple[int, int], relative_to: tuple[float, float] | None = None
+    ) -> np.ndarray | None:
         """``Var(ln v)`` on the pixel grid, ``(H, W, C)``, from the fit's parameter
-        covariance; ``None`` where the model states none (the default)."""
-        del image_shape
+        covariance; ``None`` where the model states none (the default).
+        ``relative_to`` (a point ``(x, y)`` in pixels, pixel ``i`` spanning
+        ``[i, i + 1)``): ``Var(ln v − ln v(x, y))`` instead, the map's error less
+        its error there."""
+        del image_shape, relative_to
+        return None
+
+    def log_mean_variance(
+        self,
+        image_shape: tuple[int, int],
+        weights: np.ndarray,
+        relative_to: tuple[float, float] | None = None,
+    ) -> np.ndarray | None:
+        """``Var`` of the weighted mean of ``ln v`` over the image, per channel ``(C,)``
+        (``weights`` ``(H, W, C)``, e.g. a region's pixels): the map's errors are
+        correlated from pixel to pixel, so a region's mean keeps them where the
+        per-pixel variance's mean would not say how much. ``relative_to`` as
+        :meth:`log_map_variance`. ``None`` where the model states no covariance."""
+        del image_shape, weights, relative_to
         return None
 
     @classmethod

@@ -1539,21 +1539,72 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
     def map(self, image_shape: tuple[int, int]) -> np.ndarray:
         return vignetting_map(self.params, image_shape)
 
-    def log_map_variance(self, image_shape: tuple[int, int]) -> np.ndarray | None:
-        """``Var(ln v) = gᵀ Cov(p) g / v²`` at every pixel centre, ``g = ∂v/∂p`` (first
+    def log_map_variance(
+        self, image_shape: tuple[int, int], relative_to: tuple[float, float] | None = None
+    ) -> np.ndarray | None:
+        """``Var(ln v) = gᵀ Cov(p) g`` at every pixel centre, ``g = ∂ln v/∂p`` (first
         order, the law of propagation of uncertainty, GUM §5.1.2); ``None`` without a
-        covariance."""
+        covariance. ``relative_to`` (a point ``(x, y)`` in pixels, e.g. the white
+        chart's centre): ``g = ∂(ln v − ln v(x, y))/∂p``, the map's error less its
+        error there (zero at the point)."""
         if self.param_covariance is None:
             return None
         h, w = _check_image_shape(image_shape)
         x_n = np.tile((np.arange(w, dtype=np.float64) + 0.5) / w, h)
         y_n = np.repeat((np.arange(h, dtype=np.float64) + 0.5) / h, w)
+        at = None
+        if relative_to is not None:
+            x_r, y_r = (float(c) for c in relative_to)
+            if not (np.isfinite(x_r) and np.isfinite(y_r)):
+                raise InputError(
+                    f"`relative_to` must be a finite point (x, y), got {relative_to!r}"
+                )
+            at = (np.array([x_r / w]), np.array([y_r / h]))
         out = np.empty((h, w, self.params.shape[0]))
         for ch, (p, cov) in enumerate(zip(self.params, self.param_covariance, strict=True)):
             v, rows = _model_and_jacobian_rows(x_n, y_n, p)  # (6, N)
-            # gᵀ Cov g per pixel as Σ_j g_j (Cov g)_j: one matrix product, one reduction
-            var = np.einsum("jn,jn->n", rows, cov @ rows) / (v * v)
+            if at is None:
+                # gᵀ Cov g per pixel as Σ_j g_j (Cov g)_j: one matrix product, one reduction
+                var = np.einsum("jn,jn->n", rows, cov @ rows) / (v * v)
+            else:
+                v_r, rows_r = _model_and_jacobian_rows(*at, p)
+                rows = rows / v - rows_r / v_r
+                var = np.einsum("jn,jn->n", rows, cov @ rows)
             out[..., ch] = np.maximum(var, 0.0).reshape(h, w)
+        return out
+
+    def log_mean_variance(
+        self,
+        image_shape: tuple[int, int],
+        weights: np.ndarray,
+        relative_to: tuple[float, float] | None = None,
+    ) -> np.ndarray | None:
+        """``ḡᵀ Cov(p) ḡ`` per channel, ``ḡ`` the weighted mean over the pixel centres of
+        ``∂ln v/∂p`` (less its value at ``relative_to``): the variance of a region's
+        mean of ``ln v`` (first order); ``None`` without a covariance."""
+        if self.param_covariance is None:
+            return None
+        h, w = _check_image_shape(image_shape)
+        n_ch = self.params.shape[0]
+        wts = np.asarray(weights, dtype=np.float64)
+        if wts.shape != (h, w, n_ch) or not np.all(np.isfinite(wts)) or np.any(wts < 0):
+            raise InputError(
+                f"`weights` must be finite non-negative ({h}, {w}, {n_ch}), got shape {wts.shape}"
+            )
+        x_n = np.tile((np.arange(w, dtype=np.float64) + 0.5) / w, h)
+        y_n = np.repeat((np.arange(h, dtype=np.float64) + 0.5) / h, w)
+        out = np.full(n_ch, np.nan)
+        for ch, (p, cov) in enumerate(zip(self.params, self.param_covariance, strict=True)):
+            total = float(wts[..., ch].sum())
+            if total <= 0:
+                continue
+            v, rows = _model_and_jacobian_rows(x_n, y_n, p)
+            mean = (rows / v) @ wts[..., ch].ravel() / total
+            if relative_to is not None:
+                x_r, y_r = (float(c) for c in relative_to)
+                v_r, rows_r = _model_and_jacobian_rows(np.array([x_r / w]), np.array([y_r / h]), p)
+                mean = mean - rows_r[:, 0] / v_r[0]
+            out[ch] = max(float(mean @ cov @ mean), 0.0)
         return out
 
     def to_params(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:

@@ -18,7 +18,10 @@ The factors' stated standard uncertainty (the white chart's noise,
 :func:`photoquant.balance.balance_log_variance`) is shown beside their
 error: the error against the truth-implied factor also holds the recovered
 response's error between the chart's level and the gauge's mean over the
-levels, which that part does not state.
+levels, which that part does not state. The test scene's channel scale has
+its own stated uncertainty (:func:`validation.compare.channel_scale_variance`):
+the chart's noise, and the response's and the vignetting's errors relative to
+the chart, averaged over the scene, in the channel and in green.
 
 The paper gives no accuracy for the balance (only its time, 1 ms).
 
@@ -31,6 +34,7 @@ References
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -46,6 +50,45 @@ TITLE = "Colour balance factors (§5.3)"
 
 def _signed_pct(values) -> str:
     return " / ".join(f"{100 * v:+.2f} %" for v in values)
+
+
+def _scene_scale_row(
+    res: ExperimentResult,
+    preset: str,
+    shared: Shared,
+    model: Any,
+    ratios: np.ndarray,
+    names: list[str],
+    others: list[int],
+) -> None:
+    """The test scene's channel scales: their stated uncertainty and error / stated."""
+    from photoquant.io import load_manifest, load_stack
+    from validation.compare import channel_scale_variance
+
+    corr = shared.scene_correction(preset)
+    manifest = load_manifest(shared.calibration(preset).manifest)
+    variance = channel_scale_variance(load_stack(manifest.scene, manifest), model, corr.mask)
+    if variance is None:
+        return
+    std = np.sqrt(variance)
+    z = np.log(ratios) / np.where(std > 0, std, np.nan)
+    for ch in others:
+        res.metric(
+            f"{preset}.scene_scale_log_std.{names[ch]}",
+            float(std[ch]),
+            unit="ln",
+            better="both",
+            check=False,
+            description=f"stated standard uncertainty of the test scene's {names[ch]}/G scale",
+        )
+    lbl = "/".join(names[ch] for ch in others)
+    res.row(
+        f"{preset}: stated uncertainty of the test scene's scale {lbl}",
+        " / ".join(f"{100 * std[ch]:.3f} %" for ch in others),
+        "–",
+        "error / stated: " + " / ".join(f"{z[ch]:+.1f}" for ch in others),
+        detail=True,
+    )
 
 
 def run(
@@ -133,6 +176,7 @@ def run(
                 ),
                 detail=True,
             )
+        _scene_scale_row(res, preset, shared, model, ratios, names, others)
         res.notes.append(
             f"{preset}: in-camera balance of the simulator a = "
             + " / ".join(f"{v:g}" for v in cam.balance)
