@@ -13,7 +13,7 @@ referenced, as :func:`validation.compare.compare_with_truth` measures it,
 against the stated uncertainty of that scale: the white chart's noise in the
 factor, and the response's and the vignetting's errors, relative to the
 chart, averaged over the scene, in both channels). An honest uncertainty
-gives ``z`` a spread of 1 and 68.3 % / 95.4 % of the values within 1 and
+gives ``z`` a spread of 1 and 68.3 % / 95.0 % of the values within 1 and
 1.96. ``--true-response`` calibrates with the camera's true ``g`` (a
 registered response method returning it), to separate the response's error
 from the other steps'. Seeds are independent draws of the world, the noise

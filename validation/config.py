@@ -76,6 +76,7 @@ NOT_CONDITIONS: tuple[str, ...] = (
     "preset_files",
     "robustness",
     "peers",
+    "coverage_seeds",
 )
 """The fields :meth:`ValidationConfig.conditions` leaves out (the reasons there)."""
 
@@ -172,6 +173,11 @@ class ValidationConfig:
         own solvers and programs: most of the quick job's time when on). Table
         1's peer rows run either way. Left out of :meth:`conditions`: those
         metrics are reported, never checked.
+    coverage_seeds : int
+        Capture sets per preset of the ``coverage`` experiment (the calibrated
+        parameters' stated uncertainty over seeds,
+        :mod:`validation.experiments.coverage`); ``0`` leaves it out of a default
+        run. Left out of :meth:`conditions`: its metrics are reported, never checked.
     """
 
     name: str = "quick"
@@ -200,6 +206,7 @@ class ValidationConfig:
     preset_files: tuple[tuple[str, str], ...] = ()
     robustness: bool = False
     peers: bool = False
+    coverage_seeds: int = 0
 
     def __post_init__(self) -> None:
         h, w = (int(v) for v in self.shape)
@@ -218,6 +225,9 @@ class ValidationConfig:
             "chart_spp",
         ):
             object.__setattr__(self, name, _check_int(getattr(self, name), name, 1))
+        object.__setattr__(
+            self, "coverage_seeds", _check_int(self.coverage_seeds, "coverage_seeds", 0)
+        )
         missing = {1, 4, 10} - set(self.noise_repeats)
         if missing:
             raise ValidationError(
@@ -299,6 +309,7 @@ FULL = ValidationConfig(
     rendered_capture=True,
     robustness=True,
     peers=True,
+    coverage_seeds=50,
 )
 """The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``; rendered chart and captures,
 the peers ranked."""

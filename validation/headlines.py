@@ -142,6 +142,17 @@ def _uncertainty(m: _Metrics) -> list[Headline]:
     ]
 
 
+def _coverage(m: _Metrics) -> list[Headline]:
+    out = []
+    for key, label in (("lut", "sensor LUT"), ("vignetting", "vignetting"), ("balance", "balance")):
+        pattern = f"coverage.{{p}}.{key}"
+        if m.has(pattern + ".spread"):
+            spread = m.join(pattern + ".spread", lambda v: _num(v, ".2f"))
+            within = m.join(pattern + ".within_95", lambda v: _num(v and 100 * v, ".1f"))
+            out.append((f"{label} z spread; in 95 %", f"{spread}; {within} %", "–", "1; 95 %"))
+    return out
+
+
 def _fig7(m: _Metrics) -> list[Headline]:
     p = m.presets[0]
     key = f"fig7.{p}.outdoor.corrected.cie"
@@ -190,6 +201,7 @@ SHORT = {
     "rendered": "rendered set",
     "ablation": "ablation",
     "leaderboard": "leaderboard",
+    "coverage": "coverage over seeds",
     "robustness": "robustness",
     "robustness_pairs": "robustness (pairs)",
 }
@@ -202,6 +214,7 @@ HEADLINES: dict[str, Callable[[_Metrics], list[Headline]]] = {
     "vignetting": _vignetting,
     "noise": _noise,
     "uncertainty": _uncertainty,
+    "coverage": _coverage,
     "table1": _table1,
     "fig7": _fig7,
     "timings": _timings,

@@ -20,12 +20,13 @@ preset is simulated and calibrated once) and gathers every metric.
 | ``rendered`` | calibration from a Mitsuba-rendered capture set (``--full``) | §5, §6 |
 | ``ablation`` | the paper's profile, photoquant's, each deviation alone | §5, §6 |
 | ``leaderboard`` | every registered method ranked against the truth | §6 (beyond) |
+| ``coverage`` | calibrated parameters' stated uncertainty over seeds (``--full``) | GUM §6 (beyond) |
 | ``robustness`` | each real-camera disturbance alone and all together (``--full``) | §3.2 (beyond) |
 | ``robustness_pairs`` | every pair of the sensor and output disturbances (when named) | §3.2 (beyond) |
 
 Experiments in :data:`OPT_IN` run by default only when their configuration
-flag is on (``robustness``: :attr:`ValidationConfig.robustness`, set by
-``--full``); naming them in ``experiments`` runs them on any configuration.
+flag is on (``coverage``: :attr:`ValidationConfig.coverage_seeds`, ``robustness``:
+:attr:`ValidationConfig.robustness`, both set by ``--full``); naming them in ``experiments`` runs them on any configuration.
 """
 
 from __future__ import annotations
@@ -59,12 +60,17 @@ EXPERIMENTS: dict[str, str] = {
     "rendered": "validation.experiments.rendered",
     "ablation": "validation.experiments.ablation",
     "leaderboard": "validation.experiments.leaderboard",
+    "coverage": "validation.experiments.coverage",
     "robustness": "validation.experiments.robustness",
     "robustness_pairs": "validation.experiments.robustness_pairs",
 }
 """Experiment key → module, in the order of the report (the paper's §6)."""
 
-OPT_IN: dict[str, str] = {"robustness": "robustness", "robustness_pairs": "robustness_pairs"}
+OPT_IN: dict[str, str] = {
+    "coverage": "coverage_seeds",
+    "robustness": "robustness",
+    "robustness_pairs": "robustness_pairs",
+}
 """Experiment key → the :class:`ValidationConfig` flag that includes it in a default run
 (a flag the configuration does not have: only when named)."""
 
@@ -72,7 +78,7 @@ BESIDE: tuple[str, ...] = ("leaderboard", "noise")
 """Experiments a run with two workers gives to a second process, beside the others there
 (:func:`run_validation`): about half of the quick job's time after the calibrations."""
 
-REPORTED_ONLY: frozenset[str] = frozenset({"uncertainty"})
+REPORTED_ONLY: frozenset[str] = frozenset({"uncertainty", "coverage"})
 """Experiments whose metrics are reported, never checked by ``--check``: a baseline recorded
 before them need not have them."""
 
