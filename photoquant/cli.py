@@ -258,7 +258,8 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
         pairs = zip(*stated["response_log_std"].values(), strict=True)
         lines.append(
             "response uncertainty: std of g (ln, median/largest over the measured levels, "
-            "relative to mid-range) " + " ".join(f"{m:.2g}/{x:.2g}" for m, x in pairs)
+            f"relative to {model.response.covariance_reference or 'mid-range'}) "
+            + " ".join(f"{m:.2g}/{x:.2g}" for m, x in pairs)
         )
     line = f"balance: {_fmt(model.balance.factors)}"
     if "balance_log_std" in stated:
