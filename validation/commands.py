@@ -58,7 +58,9 @@ def _cmd_compare(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
         )
     model = load_camera(args.camera)
-    rep = compare_with_truth(args.manifest, model, allow_outside=args.allow_outside)
+    rep = compare_with_truth(
+        args.manifest, model, allow_outside=args.allow_outside, uncertainty=True
+    )
     if args.figures is not None:
         paths = write_comparison_figures(
             rep, model.channels, args.figures, overwrite=args.overwrite

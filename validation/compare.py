@@ -48,6 +48,7 @@ from validation.metrics import (
     map_relative_error,
     relative_error_eq8,
     response_error,
+    uncertainty_coverage,
 )
 from validation.noise_model import (
     predicted_log_error,
@@ -59,11 +60,28 @@ from validation.truth_model import white_reference
 __all__ = [
     "channel_scale_variance",
     "compare_with_truth",
+    "stated_uncertainty_coverage",
     "format_comparison",
     "comparison_json",
     "comparison_figures",
     "write_comparison_figures",
 ]
+
+
+def stated_uncertainty_coverage(result: Any, truth_l: np.ndarray) -> dict[str, float] | None:
+    """How a correction's stated uncertainty covers the truth
+    (:func:`validation.metrics.uncertainty_coverage`, one gauge per channel removed).
+
+    The balance's part is one constant per channel, which the gauge removes with
+    it: it is left out of ``σ`` (as :mod:`validation.experiments.uncertainty` does).
+    ``None`` where the correction states no uncertainty.
+    """
+    stated = result.log_sigma
+    if stated is None:
+        return None
+    if result.log_sigma_balance is not None:
+        stated = np.sqrt(np.maximum(stated**2 - result.log_sigma_balance**2, 0.0))
+    return uncertainty_coverage(result.photoquantity, truth_l, stated)
 
 
 def channel_scale_variance(stack: Any, model: CameraModel, mask: np.ndarray) -> np.ndarray | None:
@@ -223,6 +241,7 @@ def compare_with_truth(
     truth: Any = None,
     *,
     allow_outside: bool = False,
+    uncertainty: bool = False,
 ) -> dict[str, Any]:
     """Compare a calibrated camera and its corrections with a capture set's ground truth.
 
@@ -239,6 +258,9 @@ def compare_with_truth(
         manifest's ``truth`` entry when not given.
     allow_outside : bool
         Allow the manifest's files (and its truth) outside its folder.
+    uncertainty : bool
+        Also correct the scene with its stated uncertainty and score it against
+        the truth (``uncertainty``, :func:`stated_uncertainty_coverage`).
 
     Returns
     -------
@@ -248,7 +270,9 @@ def compare_with_truth(
         (``error``, ``params``, ``true_params``), ``scene`` (``error``,
         ``noise_floor_mean``, ``flagged``, ``photoquantity``) and, when the set
         has a ColorChecker, ``colorchecker`` (``error``, ``r_camera``,
-        ``r_cie_rgb``). Errors are :class:`validation.metrics.ErrorStats`.
+        ``r_cie_rgb``); with ``uncertainty``, ``uncertainty`` (``z_spread``,
+        ``within_68``, ``within_95``, ``n``; ``None`` where the camera states
+        none). Errors are :class:`validation.metrics.ErrorStats`.
 
     Raises
     ------
@@ -289,7 +313,9 @@ def compare_with_truth(
             np.where(w >= 0.05, w, 0.0),
         )
         out["response"].append({"rms": rms, "max": worst})
-    res = correct_manifest(manifest, model, allow_outside=allow_outside)
+    res = correct_manifest(
+        manifest, model, allow_outside=allow_outside, uncertainty="auto" if uncertainty else False
+    )
     scene = truth.captures["scene"]
     # A calibrated camera makes the white chart neutral: it measures l_λ / W_λ,
     # W the chart's true photoquantity (neutral for pqsim's analytic chart, the
@@ -314,6 +340,8 @@ def compare_with_truth(
         "params": getattr(model.vignetting, "params", None),
         "true_params": None if cam.vignetting_params is None else np.asarray(cam.vignetting_params),
     }
+    if uncertainty:
+        out["uncertainty"] = stated_uncertainty_coverage(res, scene_l)
     e, stats, _ = relative_error_eq8(scene_l, res.photoquantity, res.mask)
     out["maps"]["scene"] = e
     # with veiling glare that the camera model removes, the floor of the glare-free scene
@@ -378,6 +406,17 @@ def format_comparison(rep: dict[str, Any], model: CameraModel, title: str) -> st
         f"e_max {100 * sc['error'].e_max:.2f} %; noise floor {100 * sc['noise_floor_mean']:.3f} %; "
         f"flagged {100 * sc['flagged']:.2f} %"
     )
+    if "uncertainty" in rep:
+        cov = rep["uncertainty"]
+        lines.append(
+            "stated uncertainty (test scene) "
+            + (
+                "not stated by the camera"
+                if cov is None
+                else f"z spread {cov['z_spread']:.2f} (1: honest); within the nominal 68 % / "
+                f"95 %: {100 * cov['within_68']:.1f} / {100 * cov['within_95']:.1f} %"
+            )
+        )
     if "colorchecker" in rep:
         cc = rep["colorchecker"]
         cie = f", r vs CIE RGB (D65) {cc['r_cie_rgb']:.4f}" if "r_cie_rgb" in cc else ""

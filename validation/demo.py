@@ -99,7 +99,7 @@ def run_demo(
         _say("demo: correcting the test scene and comparing with the truth ...")
         t0 = time.perf_counter()
         truth = load_truth(root / "capture" / "truth")
-        rep = compare_with_truth(manifest, model, truth)
+        rep = compare_with_truth(manifest, model, truth, uncertainty=True)
         timings["correct + compare"] = time.perf_counter() - t0
         with atomic_output_file(
             root / "scene.exr", overwrite=overwrite, replaceable=EXR_IMAGE.problem

@@ -127,13 +127,18 @@ SCORES: tuple[tuple[str, str, str], ...] = (
     ("scene", "test scene e_mean", "fraction"),
     ("cc_r", "ColorChecker r (camera truth)", "r"),
     ("cc_r_cie", "ColorChecker r (CIE RGB)", "r"),
+    ("z_spread", "stated uncertainty's z spread on the test scene (1: honest)", "ratio"),
 )
 """Every score kept per preset (key, label, unit); the noise floor is per preset.
 ``cc_r`` / ``cc_r_cie``: Pearson's correlation of the corrected ColorChecker's 24
 patch means (balanced on the white patch) with the camera's true photoquantity and
 with the chart maker's CIE RGB under D65, as Table 1 computes them
 (:mod:`validation.experiments.table1`, the outdoor chart); ``None`` where the
-capture has no chart (colour-science missing, or a user's set without one)."""
+capture has no chart (colour-science missing, or a user's set without one).
+``z_spread``: the spread of the corrected test scene's error over the
+uncertainty the correction states (:func:`validation.compare.stated_uncertainty_coverage`;
+1 when the uncertainty is honest, above 1 when it understates the error);
+``None`` where the camera states none (a method that gives no covariance)."""
 
 _STEP_TIMING = {"response": "response", "merge": "merge_per_view", "vignetting": "vignetting"}
 """The key of the step's own time in ``CameraModel.report["timings_s"]``."""
@@ -581,6 +586,7 @@ def _scores(rep: dict[str, Any], cap: _Capture, model: Any) -> dict[str, float |
         "scene": float(rep["scene"]["error"].e_mean),
         "cc_r": None,
         "cc_r_cie": None,
+        "z_spread": None if rep.get("uncertainty") is None else rep["uncertainty"]["z_spread"],
     }
     if "colorchecker" in rep:  # a user's set with its own chart
         out["cc_r"] = float(rep["colorchecker"]["r_camera"])
@@ -654,7 +660,7 @@ def _run_entry(
                 if len(times) >= repeats or times[-1] > repeat_below_s:
                     break
             rep = compare_with_truth(
-                cap.manifest, model, cap.truth, allow_outside=cap.allow_outside
+                cap.manifest, model, cap.truth, allow_outside=cap.allow_outside, uncertainty=True
             )
         except Exception as exc:  # noqa: BLE001 - a method must not crash the board
             partial = _response_alone(step, cap, kwargs, exc) if model is None else None
@@ -708,7 +714,9 @@ def _response_alone(
         return None
     try:
         model = _calibrate_capture(cap, {**kwargs, "vignetting": "None"})
-        rep = compare_with_truth(cap.manifest, model, cap.truth, allow_outside=cap.allow_outside)
+        rep = compare_with_truth(
+            cap.manifest, model, cap.truth, allow_outside=cap.allow_outside, uncertainty=True
+        )
     except Exception:  # noqa: BLE001 - then the entry fails with the first error
         return None
     return model, rep
@@ -1052,7 +1060,7 @@ def _columns(board: Board, lb: Leaderboard) -> tuple[list[str], list[tuple[list[
     crossval = board.step == "response" and bool(lb.real_sets)
     if crossval:
         head += [f"crossval {s} (DN)" for s in lb.real_sets]
-    head += ["LUT (mean)", "CC r (mean)", "step s", "calib. s", "reference"]
+    head += ["LUT (mean)", "CC r (mean)", "z spread (mean)", "step s", "calib. s", "reference"]
     rows: list[tuple[list[str], str]] = []
     for e in board.entries:
         cells = ["n/a" if e.rank is None else str(e.rank), e.method]
@@ -1067,6 +1075,7 @@ def _columns(board: Board, lb: Leaderboard) -> tuple[list[str], list[tuple[list[
         if crossval:
             cells += [_fmt(e.crossval.get(s), "") for s in lb.real_sets]
         cells += [_fmt(e.mean("lut"), "fraction"), _fmt(e.mean("cc_r"), "r")]
+        cells += [_fmt(e.mean("z_spread"), "")]
         cells += [_fmt(e.step_time_median_s, "s"), _fmt(e.time_median_s, "s"), e.reference]
         rows.append((cells, ""))
     if board.noise_floor:

@@ -31,6 +31,10 @@ __all__ = [
     "response_error",
     "map_relative_error",
     "correlation",
+    "NOMINAL_LEVELS",
+    "normalised_errors",
+    "interval_shares",
+    "uncertainty_coverage",
 ]
 
 
@@ -163,3 +167,55 @@ def correlation(x: np.ndarray, y: np.ndarray) -> float:
     y = np.asarray(y, dtype=np.float64).ravel()
     ok = np.isfinite(x) & np.isfinite(y)
     return float(np.corrcoef(x[ok], y[ok])[0, 1])
+
+
+NOMINAL_LEVELS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.68, 0.8, 0.9, 0.95, 0.99)
+"""Levels of the central intervals of the reliability diagram."""
+
+
+def normalised_errors(estimate: np.ndarray, truth: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """``z = (ln l̂ − ln l − ŝ_λ)/σ`` of every value with a finite estimate, truth and
+    ``σ > 0`` (channels last; ``ŝ_λ`` per channel: the gauge, see
+    :mod:`validation.experiments.uncertainty`), as one flat array."""
+    out = []
+    for ch in range(estimate.shape[-1]):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d = np.log(estimate[..., ch].astype(np.float64)) - np.log(
+                truth[..., ch].astype(np.float64)
+            )
+        s = sigma[..., ch].astype(np.float64)
+        ok = np.isfinite(d) & np.isfinite(s) & (s > 0)
+        if not np.any(ok):
+            continue
+        w = 1.0 / s[ok] ** 2
+        d_ok = d[ok] - float(np.sum(w * d[ok]) / np.sum(w))
+        out.append(d_ok / s[ok])
+    return np.concatenate(out) if out else np.empty(0)
+
+
+def interval_shares(z: np.ndarray, levels: tuple[float, ...] = NOMINAL_LEVELS) -> np.ndarray:
+    """The share of ``z`` inside each central interval of nominal level ``p``."""
+    from scipy.special import ndtri
+
+    bounds = ndtri(0.5 + 0.5 * np.asarray(levels, dtype=np.float64))
+    if z.size == 0:
+        return np.full(len(levels), np.nan)
+    return np.array([float(np.mean(np.abs(z) < b)) for b in bounds])
+
+
+def uncertainty_coverage(
+    estimate: np.ndarray, truth: np.ndarray, sigma: np.ndarray
+) -> dict[str, float] | None:
+    """How well a stated uncertainty covers the truth: ``z_spread`` (1: honest),
+    ``within_68`` and ``within_95`` (the shares inside the nominal intervals) and
+    ``n``, of :func:`normalised_errors`; ``None`` where no value has one."""
+    z = normalised_errors(estimate, truth, sigma)
+    if z.size == 0:
+        return None
+    shares = interval_shares(z, (0.68, 0.95))
+    return {
+        "z_spread": float(z.std()),
+        "within_68": float(shares[0]),
+        "within_95": float(shares[1]),
+        "n": int(z.size),
+    }

@@ -295,8 +295,14 @@ def test_json_output(board):
         "scene",
         "cc_r",
         "cc_r_cie",
+        "z_spread",
     }
     assert by_name["Debevec 1997"]["time_s"]["ccd"] > 0
+    # the stated uncertainty against the truth: near 1 for the default, far above it for a
+    # response that is wrong (a gamma neither preset has) and states only the noise
+    honest = by_name["Debevec 1997"]["scores"]["ccd"]["z_spread"]
+    lying = by_name[BAD]["scores"]["ccd"]["z_spread"]
+    assert 0.5 < honest < 2.0 and lying > 3 * honest, (honest, lying)
 
 
 def _without_timings(value):

@@ -142,6 +142,7 @@ def test_a_preset_file_is_read_relative_to_the_spec(tmp_path):
         ),
         ({"axes": {"responses.*": [{"kind": "cubic", "params": {}}]}}, "'cubic'"),
         ({"axes": {"renderer": ["povray"]}}, "`renderer` must be one of"),
+        ({"sweep": {"uncertainty": "yes"}, "axes": {"n_repeats": [1]}}, "`uncertainty` must be"),
     ],
 )
 def test_bad_specs_are_one_line_errors_naming_the_problem(doc, needle):
@@ -338,3 +339,22 @@ def test_a_cell_hash_changes_with_the_code(monkeypatch):
     other = dict(config, code=dict(config["code"], source="0" * 16))
     assert cells.cell_id(other) != before
     assert len(cells.source_digest()) == 16 and cells.source_digest() == cells.source_digest()
+
+
+def test_a_sweep_can_score_the_stated_uncertainty():
+    """``uncertainty = true``: the cell also scores the correction's stated uncertainty
+    against the truth (its metrics beside the others); off, the cell has none of them."""
+    from validation.sweep.cells import run_cell
+
+    doc = {
+        "sweep": {"resolution": [64, 48], "n_exposures": 5, "n_repeats": 2, "seeds": [1]},
+        "axes": {"uncertainty": [False, True]},
+    }
+    cells = list(parse_spec(doc).cells())
+    assert [c["settings"]["uncertainty"] for c in cells] == [False, True]
+    assert cells[0]["cell_id"] != cells[1]["cell_id"]
+    plain, scored = (dict(run_cell(c)["metrics"]) for c in cells)
+    assert not any(k.startswith("uncertainty_") for k in plain)
+    assert 0.5 < scored["uncertainty_z_spread"] < 3.0  # measured 1.1-1.3 on the presets
+    assert 0 < scored["uncertainty_within_68"] <= scored["uncertainty_within_95"] <= 1
+    assert scored["scene_e_mean"] == plain["scene_e_mean"]  # the same correction

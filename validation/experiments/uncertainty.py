@@ -47,42 +47,11 @@ import numpy as np
 from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, FigureSpec, fmt_num, fmt_pct
 from validation.experiments.shared import Shared
+from validation.metrics import NOMINAL_LEVELS, interval_shares, normalised_errors
 
 __all__ = ["run", "TITLE", "NOMINAL_LEVELS", "normalised_errors", "interval_shares"]
 
 TITLE = "Stated uncertainty against the truth"
-
-NOMINAL_LEVELS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.68, 0.8, 0.9, 0.95, 0.99)
-"""Levels of the central intervals of the reliability diagram."""
-
-
-def normalised_errors(estimate: np.ndarray, truth: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """``z = (ln l̂ − ln l − ŝ_λ)/σ`` of every value with a finite estimate, truth and
-    ``σ > 0`` (channels last; ``ŝ_λ`` per channel, module notes), as one flat array."""
-    out = []
-    for ch in range(estimate.shape[-1]):
-        with np.errstate(invalid="ignore", divide="ignore"):
-            d = np.log(estimate[..., ch].astype(np.float64)) - np.log(
-                truth[..., ch].astype(np.float64)
-            )
-        s = sigma[..., ch].astype(np.float64)
-        ok = np.isfinite(d) & np.isfinite(s) & (s > 0)
-        if not np.any(ok):
-            continue
-        w = 1.0 / s[ok] ** 2
-        d_ok = d[ok] - float(np.sum(w * d[ok]) / np.sum(w))
-        out.append(d_ok / s[ok])
-    return np.concatenate(out) if out else np.empty(0)
-
-
-def interval_shares(z: np.ndarray, levels: tuple[float, ...] = NOMINAL_LEVELS) -> np.ndarray:
-    """The share of ``z`` inside each central interval of nominal level ``p``."""
-    from scipy.special import ndtri
-
-    bounds = ndtri(0.5 + 0.5 * np.asarray(levels, dtype=np.float64))
-    if z.size == 0:
-        return np.full(len(levels), np.nan)
-    return np.array([float(np.mean(np.abs(z) < b)) for b in bounds])
 
 
 def _stated(shared: Shared, preset: str) -> Any:

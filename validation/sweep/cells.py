@@ -33,7 +33,10 @@ channel; unsuffixed: the largest magnitude, unsigned), ``lut_e_mean``, ``lut_e_m
 scene), ``scene_noise_floor`` (its physics floor,
 :mod:`validation.noise_model`), ``scene_flagged`` (fraction of pixels with no
 valid exposure), ``colorchecker_e_mean`` and ``colorchecker_r`` (rendered
-sets), and the times ``time_simulate_s``, ``time_calibrate_s``,
+sets), with the setting ``uncertainty = true`` ``uncertainty_z_spread``,
+``uncertainty_within_68`` and ``uncertainty_within_95`` (the correction's
+stated uncertainty against the truth,
+:func:`validation.compare.stated_uncertainty_coverage`), and the times ``time_simulate_s``, ``time_calibrate_s``,
 ``time_correct_compare_s`` and ``time_<step>_s`` of the calibration's steps.
 
 References
@@ -213,7 +216,7 @@ def _compute(config: Mapping[str, Any]) -> list[tuple[str, float]]:
         )
         times["calibrate"] = time.perf_counter() - t
         t = time.perf_counter()
-        rep = compare_with_truth(manifest, model)
+        rep = compare_with_truth(manifest, model, uncertainty=bool(s.get("uncertainty", False)))
         times["correct_compare"] = time.perf_counter() - t
     return _metrics(rep, model, times)
 
@@ -252,6 +255,9 @@ def _metrics(
     if "colorchecker" in rep:
         cc = rep["colorchecker"]
         rows += [("colorchecker_e_mean", cc["error"].e_mean), ("colorchecker_r", cc["r_camera"])]
+    if rep.get("uncertainty") is not None:
+        cov = rep["uncertainty"]
+        rows += [(f"uncertainty_{k}", cov[k]) for k in ("z_spread", "within_68", "within_95")]
     rows += [(f"time_{k}_s", v) for k, v in times.items()]
     step_times = (getattr(model, "report", None) or {}).get("timings_s", {})
     rows += [(f"time_{k}_s", float(v)) for k, v in sorted(step_times.items())]

@@ -37,6 +37,10 @@ Settings (:data:`SETTINGS`), each usable fixed or as an axis:
   table ``{STEP = NAME, ...}`` whose ``NAME`` may be a table
   ``{name = NAME, OPTION = VALUE, ...}``; any registered method, plug-ins
   included (:func:`photoquant.methods.load_plugins`);
+* ``uncertainty``: ``true`` also scores the correction's stated uncertainty
+  against the truth (the metrics ``uncertainty_z_spread``,
+  ``uncertainty_within_68``, ``uncertainty_within_95``; off by default: it
+  adds the uncertainty's computation to every cell);
 * ``renderer``: ``"numpy"`` (the analytic scenes, default) or ``"mitsuba"``
   (:func:`pqsim.rendered_capture.write_rendered_capture_set`, ``pip install
   '.[render]'``), with ``spp``, ``illuminant`` and ``cache_dir`` (renders
@@ -104,7 +108,7 @@ DEFAULTS: Mapping[str, Any] = {
     "illuminant": "D65",
 }
 #: Named settings (besides dotted preset paths), fixed or as axes.
-SETTINGS = (*DEFAULTS, "bit_depth")
+SETTINGS = (*DEFAULTS, "bit_depth", "uncertainty")
 #: Keys of ``[sweep]`` that are not settings.
 _SWEEP_ONLY = ("seeds", "cache_dir")
 _RENDERERS = ("numpy", "mitsuba")
@@ -241,6 +245,10 @@ def _check_setting(key: str, v: Any) -> Any:
         return _check_int_value(key, v, 1, 1 << 16)
     if key == "bit_depth":
         return _check_int_value(key, v, 8, 16)
+    if key == "uncertainty":
+        if not isinstance(v, bool):
+            raise _fail(f"`uncertainty` must be true or false, got {_label(v)}")
+        return v
     if key == "exposure_range":
         if (
             not isinstance(v, list)
