@@ -263,6 +263,10 @@ def colour_balance_none(linear: np.ndarray, roi: Any = None, **_kwargs: Any) -> 
 # ---------------------------------------------------------------------------
 
 
+_MAX_SIDE = 1 << 20
+"""Largest image side a balance's chart box may name (a camera file is untrusted)."""
+
+
 @dataclass(frozen=True, eq=False)
 class BalanceModel:
     """Colour balance factors ``a_λ`` (one per channel), the result of every balance method.
@@ -323,7 +327,7 @@ class BalanceModel:
                 not isinstance(box, Sequence)
                 or len(box) != 4
                 or not all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in box)
-                or not (0 <= box[0] < box[2] and 0 <= box[1] < box[3])
+                or not (0 <= box[0] < box[2] <= _MAX_SIDE and 0 <= box[1] < box[3] <= _MAX_SIDE)
             ):
                 raise InputError(
                     f"a balance's `chart_roi` must be four integers [x0, y0, x1, y1], got {box!r}"

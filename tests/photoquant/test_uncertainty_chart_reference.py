@@ -172,7 +172,12 @@ def test_the_balance_keeps_where_it_read_the_chart():
     assert back.chart_roi == (2, 3, 10, 12) and back.chart_stage == "linearised"
     old = {"factors": [1.0, 1.0, 1.0], "method_params": {}}  # a camera written before
     assert BalanceModel.from_params("White Chart", old, {}).chart_roi is None
-    for bad in ({"chart_roi": [2, 3, 10]}, {"chart_roi": [2, 3, 1, 12]}, {"chart_roi": "box"}):
+    for bad in (
+        {"chart_roi": [2, 3, 10]},
+        {"chart_roi": [2, 3, 1, 12]},
+        {"chart_roi": "box"},
+        {"chart_roi": [0, 0, 10**30, 4]},
+    ):
         with pytest.raises(InputError, match="chart_roi"):
             BalanceModel.from_params("White Chart", {**params, **bad}, {})
     with pytest.raises(InputError, match="chart_stage"):
