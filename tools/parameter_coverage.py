@@ -1,8 +1,12 @@
 """Coverage over seeds of the calibrated parameters' stated uncertainty, against pqsim's truth.
 
-For each seed a pqsim capture set is written (``write_capture_set``: V views,
-N repeats, small frames) and calibrated with the default pipeline; each
-stated uncertainty is then compared with the truth as
+The ``coverage`` experiment of the validation job
+(:mod:`validation.experiments.coverage`) with every knob open: the preset,
+the image size, N, V, the seeds, and the camera's true response. For each
+seed a pqsim capture set is written (``write_capture_set``: V views, N
+repeats, small frames) and calibrated with the default pipeline; each stated
+uncertainty is then compared with the truth
+(:func:`validation.experiments.coverage.coverage_z`) as
 
     z = (ln estimate − ln truth) / σ_stated
 
@@ -34,10 +38,9 @@ from pathlib import Path
 import numpy as np
 
 import photoquant as pq
-from photoquant.io import load_manifest, load_stack
 from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera.presets import camera_from_preset
-from validation.compare import channel_scale_variance, compare_with_truth
+from validation.experiments.coverage import PARAMETERS, coverage_z
 
 TRUE_RESPONSE = "True response (coverage tool)"
 
@@ -71,9 +74,9 @@ def _register_true_response(truth: object) -> None:
 def _summary(name: str, z: np.ndarray) -> str:
     z = z[np.isfinite(z)]
     if not z.size:
-        return f"{name:24s} no stated uncertainty"
+        return f"{name:38s} no stated uncertainty"
     return (
-        f"{name:24s} n {z.size:7d}  spread {z.std():.2f}  mean {z.mean():+.2f}  "
+        f"{name:38s} n {z.size:7d}  spread {z.std():.2f}  mean {z.mean():+.2f}  "
         f"within 1: {100 * np.mean(np.abs(z) <= 1):.1f} %  within 1.96: "
         f"{100 * np.mean(np.abs(z) <= 1.96):.1f} %"
     )
@@ -95,8 +98,7 @@ def main() -> None:
     if args.true_response:
         _register_true_response(truth)
         kwargs["response"] = TRUE_RESPONSE
-    step = max(1, min(shape) // 6)
-    z_lut, z_vig, z_bal = [], [], []
+    found: dict[str, list[np.ndarray]] = {"lut": [], "vignetting": [], "balance": []}
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.seeds):
             manifest = write_capture_set(
@@ -104,31 +106,14 @@ def main() -> None:
                 n_views=args.views, seed=seed,
             )  # fmt: skip
             model = pq.calibrate_manifest(manifest, **kwargs)
-            lut_var = model.sensor_lut.log_variance
-            if lut_var is not None:
-                d = np.log(model.sensor_lut.lut) - np.log(truth.sensor_lut)
-                d -= np.nanmean(d, axis=(0, 1))
-                z_lut.append((d / np.sqrt(lut_var)).ravel())
-            vig_var = model.vignetting.log_map_variance(shape)
-            if vig_var is not None:
-                d = np.log(model.vignetting_map()) - np.log(truth.vignetting)
-                z_vig.append((d / np.sqrt(vig_var))[::step, ::step].ravel())
-            bal_var = model.balance.log_variance
-            if bal_var is not None:
-                error = np.asarray(compare_with_truth(manifest, model)["balance"]["channel_error"])
-                loaded = load_manifest(manifest)
-                scene = load_stack(loaded.scene, loaded)
-                mask = pq.correct(scene, model, refine_exposures=False).mask
-                ratio_var = channel_scale_variance(scene, model, mask)
-                stated = np.asarray(bal_var) > 0  # the reference channel states none
-                z_bal.append(np.log1p(error[stated]) / np.sqrt(ratio_var[stated]))
+            for key, z in coverage_z(manifest, truth, model).items():
+                found[key].append(z)
     print(
         f"{args.preset}, {shape[1]}x{shape[0]}, N = {args.repeats}, V = {args.views}, "
         f"{args.seeds} seeds{', true response' if args.true_response else ''}"
     )
-    print(_summary("sensor LUT (pixels)", np.concatenate(z_lut) if z_lut else np.empty(0)))
-    print(_summary("vignetting (grid)", np.concatenate(z_vig) if z_vig else np.empty(0)))
-    print(_summary("balance (channels)", np.concatenate(z_bal) if z_bal else np.empty(0)))
+    for key, label in PARAMETERS:
+        print(_summary(label, np.concatenate(found[key]) if found[key] else np.empty(0)))
 
 
 if __name__ == "__main__":
