@@ -66,8 +66,12 @@ def test_cli_compare_and_its_errors(capture, tmp_path, capsys):
     capsys.readouterr()
     assert main(["compare", str(manifest), "--camera", str(cam), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert set(doc) >= {"response", "balance", "lut", "vignetting", "scene"}
+    assert set(doc) >= {"response", "balance", "lut", "vignetting", "scene", "uncertainty"}
     assert np.isfinite(doc["scene"]["error"]["e_mean"])
+    # the correction's stated uncertainty against the truth (48x64, N = 2: near honest)
+    stated = doc["uncertainty"]
+    assert 0.5 < stated["z_spread"] < 2.0 and 0 < stated["within_68"] < stated["within_95"] < 1
+    assert stated["n"] > 0.9 * 48 * 64 * 3
     # error maps as PNGs, in a new folder (an existing one needs --overwrite)
     figs = tmp_path / "figs"
     argv = ["compare", str(manifest), "--camera", str(cam), "--figures", str(figs)]
@@ -78,7 +82,7 @@ def test_cli_compare_and_its_errors(capture, tmp_path, capsys):
     capsys.readouterr()
     assert main(argv) == 2 and "already exists" in capsys.readouterr().err
     assert main([*argv, "--overwrite"]) == 0
-    capsys.readouterr()
+    assert "stated uncertainty (test scene) z spread" in capsys.readouterr().out
     # a manifest without a truth entry: one line, exit 2
     data = json.loads(manifest.read_text())
     data.pop("truth")
