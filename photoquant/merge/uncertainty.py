@@ -491,14 +491,8 @@ def log_variance_response_Debevec1997(
     InputError
         If the response carries no covariance.
     """
-    factor, diagonal = response.covariance_factor, response.covariance_diagonal
-    if factor is None or diagonal is None:
-        raise InputError(
-            f"the response ({response.method!r}) carries no covariance: its method does not "
-            "estimate one"
-        )
+    factor, rest = response.covariance_parts()
     levels = response.levels
-    rest = np.clip(diagonal - np.sum(factor**2, axis=1), 0.0, None)
     if weights is None and _response_variance_nb is not None:
         setup = _weight_setup(stack, response, options)
         if setup[0].tabulated:  # one compiled pass over the values, the same arithmetic
@@ -552,12 +546,7 @@ def response_error_of_merge_Debevec1997(
     InputError
         If the response carries no covariance.
     """
-    factor, diagonal = response.covariance_factor, response.covariance_diagonal
-    if factor is None or diagonal is None:
-        raise InputError(
-            f"the response ({response.method!r}) carries no covariance: its method does not "
-            "estimate one"
-        )
+    factor, rest_of_diagonal = response.covariance_parts()
     levels = response.levels
     tables, per_exposure, den = merge_weights_Debevec1997(stack, response, options)
     weighted = (den > 0).reshape(-1, den.shape[-1])
@@ -575,9 +564,7 @@ def response_error_of_merge_Debevec1997(
             table = _interpolated_table(tables, levels, factor[:, r])
             moved = sum(w * tables.take(table, k) for k, w in enumerate(per_exposure)) * inv
             loadings[:, r] = pixel_mean(moved)
-        rest_table = _interpolated_table(
-            tables, levels, np.clip(diagonal - np.sum(factor**2, axis=1), 0.0, None)
-        )
+        rest_table = _interpolated_table(tables, levels, rest_of_diagonal)
         rest = sum(w * w * tables.take(rest_table, k) for k, w in enumerate(per_exposure))
     return loadings, pixel_mean(rest * inv**2)
 

@@ -240,6 +240,23 @@ class ResponseModel:
             covariance_reference=self.covariance_reference,
         )
 
+    def covariance_parts(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(F, D)``: the covariance's factor ``(C, R, L)`` and the rest of its diagonal
+        ``(C, L)``, uncorrelated between levels (``Cov(g) = Fᵀ F + diag(D)``).
+
+        Raises
+        ------
+        InputError
+            If the response carries no covariance.
+        """
+        if self.covariance_factor is None or self.covariance_diagonal is None:
+            raise InputError(
+                f"the response ({self.method!r}) carries no covariance: its method does not "
+                "estimate one"
+            )
+        factor = self.covariance_factor
+        return factor, np.clip(self.covariance_diagonal - np.sum(factor**2, axis=1), 0.0, None)
+
     def covariance_relative_to(
         self, loadings: np.ndarray, rest: np.ndarray, reference: str
     ) -> ResponseModel:
@@ -256,16 +273,14 @@ class ResponseModel:
         uncorrelated part of the diagonal is kept. ``g`` itself is unchanged:
         only the gauge of its uncertainty moves, to the reference.
         """
-        if self.covariance_factor is None or self.covariance_diagonal is None:
-            raise InputError(f"the response ({self.method!r}) carries no covariance")
-        n_ch, n_rows, n_lv = self.covariance_factor.shape
+        old, own = self.covariance_parts()
+        n_ch, n_rows, n_lv = old.shape
         b = check_array(loadings, "loadings", shape=(n_ch, n_rows), kind="f", finite=True)
         v = check_array(rest, "rest", shape=(n_ch,), kind="f", finite=True)
         if np.any(v < 0):
             raise InputError(f"`rest` must be non-negative (variances), got {v.tolist()}")
-        own = np.clip(self.covariance_diagonal - np.sum(self.covariance_factor**2, axis=1), 0, None)
         common = np.broadcast_to(np.sqrt(v)[:, None, None], (n_ch, 1, n_lv))
-        factor = np.concatenate([self.covariance_factor - b[:, :, None], common], axis=1)
+        factor = np.concatenate([old - b[:, :, None], common], axis=1)
         return dataclasses.replace(
             self,
             covariance_factor=factor,
