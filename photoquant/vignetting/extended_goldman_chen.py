@@ -203,6 +203,32 @@ def _as_channel_params(params: Any, name: str = "params") -> np.ndarray:
     return params
 
 
+def _pixel_centres(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(x_n, y_n)`` of every pixel centre in raster order, ``((x + 0.5)/W, (y + 0.5)/H)``."""
+    x_n = np.tile((np.arange(w, dtype=np.float64) + 0.5) / w, h)
+    y_n = np.repeat((np.arange(h, dtype=np.float64) + 0.5) / h, w)
+    return x_n, y_n
+
+
+def _normalised_point(
+    point: tuple[float, float] | None, h: int, w: int
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """A point ``(x, y)`` in pixels as one-element ``(x_n, y_n)`` arrays (``None`` stays);
+    a point that is not finite is an error naming ``relative_to``."""
+    if point is None:
+        return None
+    x_r, y_r = (float(c) for c in point)
+    if not (np.isfinite(x_r) and np.isfinite(y_r)):
+        raise InputError(f"`relative_to` must be a finite point (x, y), got {point!r}")
+    return np.array([x_r / w]), np.array([y_r / h])
+
+
+def _log_gradient_at(at: tuple[np.ndarray, np.ndarray], params: np.ndarray) -> np.ndarray:
+    """``∂ln v/∂p`` at one normalised point, shape ``(6,)``."""
+    v, rows = _model_and_jacobian_rows(*at, params)
+    return rows[:, 0] / v[0]
+
+
 def vignetting_map(params: Any, image_shape: tuple[int, int]) -> np.ndarray:
     """Evaluate the vignetting model at every pixel centre of an image.
 
@@ -1550,16 +1576,8 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
         if self.param_covariance is None:
             return None
         h, w = _check_image_shape(image_shape)
-        x_n = np.tile((np.arange(w, dtype=np.float64) + 0.5) / w, h)
-        y_n = np.repeat((np.arange(h, dtype=np.float64) + 0.5) / h, w)
-        at = None
-        if relative_to is not None:
-            x_r, y_r = (float(c) for c in relative_to)
-            if not (np.isfinite(x_r) and np.isfinite(y_r)):
-                raise InputError(
-                    f"`relative_to` must be a finite point (x, y), got {relative_to!r}"
-                )
-            at = (np.array([x_r / w]), np.array([y_r / h]))
+        x_n, y_n = _pixel_centres(h, w)
+        at = _normalised_point(relative_to, h, w)
         out = np.empty((h, w, self.params.shape[0]))
         for ch, (p, cov) in enumerate(zip(self.params, self.param_covariance, strict=True)):
             v, rows = _model_and_jacobian_rows(x_n, y_n, p)  # (6, N)
@@ -1567,8 +1585,7 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
                 # gᵀ Cov g per pixel as Σ_j g_j (Cov g)_j: one matrix product, one reduction
                 var = np.einsum("jn,jn->n", rows, cov @ rows) / (v * v)
             else:
-                v_r, rows_r = _model_and_jacobian_rows(*at, p)
-                rows = rows / v - rows_r / v_r
+                rows = rows / v - _log_gradient_at(at, p)[:, None]
                 var = np.einsum("jn,jn->n", rows, cov @ rows)
             out[..., ch] = np.maximum(var, 0.0).reshape(h, w)
         return out
@@ -1591,8 +1608,8 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
             raise InputError(
                 f"`weights` must be finite non-negative ({h}, {w}, {n_ch}), got shape {wts.shape}"
             )
-        x_n = np.tile((np.arange(w, dtype=np.float64) + 0.5) / w, h)
-        y_n = np.repeat((np.arange(h, dtype=np.float64) + 0.5) / h, w)
+        x_n, y_n = _pixel_centres(h, w)
+        at = _normalised_point(relative_to, h, w)
         out = np.full(n_ch, np.nan)
         for ch, (p, cov) in enumerate(zip(self.params, self.param_covariance, strict=True)):
             total = float(wts[..., ch].sum())
@@ -1600,10 +1617,8 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
                 continue
             v, rows = _model_and_jacobian_rows(x_n, y_n, p)
             mean = (rows / v) @ wts[..., ch].ravel() / total
-            if relative_to is not None:
-                x_r, y_r = (float(c) for c in relative_to)
-                v_r, rows_r = _model_and_jacobian_rows(np.array([x_r / w]), np.array([y_r / h]), p)
-                mean = mean - rows_r[:, 0] / v_r[0]
+            if at is not None:
+                mean = mean - _log_gradient_at(at, p)
             out[ch] = max(float(mean @ cov @ mean), 0.0)
         return out
 

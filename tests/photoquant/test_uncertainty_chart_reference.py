@@ -161,6 +161,16 @@ def test_relative_map_variance_is_the_difference_of_the_gradients():
     assert got.min() < 1e-3 * plain.max()  # nothing left at the point itself
     with pytest.raises(InputError, match="relative_to"):
         model.log_map_variance(IMAGE_SHAPE, relative_to=(np.nan, 1.0))
+    everywhere = np.ones((*IMAGE_SHAPE, 1))
+    with pytest.raises(InputError, match="relative_to"):
+        model.log_mean_variance(IMAGE_SHAPE, everywhere, relative_to=(1.0, np.inf))
+    # a region mean relative to a point: the mean gradient less the point's, through Cov
+    mean_grad = grads.reshape(-1, 6).mean(axis=0)
+    np.testing.assert_allclose(
+        model.log_mean_variance(IMAGE_SHAPE, everywhere, relative_to=point)[0],
+        mean_grad @ cov[0] @ mean_grad,
+        rtol=1e-5,
+    )
 
 
 def test_the_balance_keeps_where_it_read_the_chart():
