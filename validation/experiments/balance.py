@@ -70,23 +70,46 @@ def _scene_scale_row(
     variance = channel_scale_variance(load_stack(manifest.scene, manifest), model, corr.mask)
     if variance is None:
         return
-    std = np.sqrt(variance)
-    z = np.log(ratios) / np.where(std > 0, std, np.nan)
+    _stated_std_rows(
+        res,
+        f"{preset}.scene_scale_log_std",
+        "stated standard uncertainty of the test scene's {name}/G scale",
+        f"{preset}: stated uncertainty of the test scene's scale {{channels}}",
+        np.sqrt(variance),
+        np.log(ratios),
+        names,
+        others,
+    )
+
+
+def _stated_std_rows(
+    res: ExperimentResult,
+    key: str,
+    description: str,
+    label: str,
+    std: np.ndarray,
+    log_error: np.ndarray,
+    names: list[str],
+    others: list[int],
+) -> None:
+    """A stated standard uncertainty per channel (metrics ``key.<channel>``, reported only)
+    and its detail row (``label`` with ``{channels}``) beside the error in units of it
+    (``–`` where none is stated)."""
     for ch in others:
         res.metric(
-            f"{preset}.scene_scale_log_std.{names[ch]}",
+            f"{key}.{names[ch]}",
             float(std[ch]),
             unit="ln",
             better="both",
             check=False,
-            description=f"stated standard uncertainty of the test scene's {names[ch]}/G scale",
+            description=description.format(name=names[ch]),
         )
-    lbl = "/".join(names[ch] for ch in others)
     res.row(
-        f"{preset}: stated uncertainty of the test scene's scale {lbl}",
+        label.format(channels="/".join(names[ch] for ch in others)),
         " / ".join(f"{100 * std[ch]:.3f} %" for ch in others),
         "–",
-        "error / stated: " + " / ".join(f"{z[ch]:+.1f}" for ch in others),
+        "error / stated: "
+        + " / ".join(f"{log_error[ch] / std[ch]:+.1f}" if std[ch] > 0 else "–" for ch in others),
         detail=True,
     )
 
@@ -156,25 +179,15 @@ def run(
         )
         variance = model.balance.log_variance
         if variance is not None:
-            std = np.sqrt(np.asarray(variance, dtype=np.float64))
-            for ch in others:
-                res.metric(
-                    f"{preset}.factor_log_std.{names[ch]}",
-                    float(std[ch]),
-                    unit="ln",
-                    better="both",
-                    check=False,
-                    description=f"stated standard uncertainty of ln a_{names[ch]} (chart noise)",
-                )
-            res.row(
-                f"{preset}: stated uncertainty of ln a {lbl} (the chart's noise)",
-                " / ".join(f"{100 * std[ch]:.3f} %" for ch in others),
-                "–",
-                "error / stated: "
-                + " / ".join(
-                    f"{np.log1p(err[ch]) / std[ch]:+.1f}" if std[ch] > 0 else "–" for ch in others
-                ),
-                detail=True,
+            _stated_std_rows(
+                res,
+                f"{preset}.factor_log_std",
+                "stated standard uncertainty of ln a_{name} (chart noise)",
+                f"{preset}: stated uncertainty of ln a {{channels}} (the chart's noise)",
+                np.sqrt(np.asarray(variance, dtype=np.float64)),
+                np.log1p(err),
+                names,
+                others,
             )
         _scene_scale_row(res, preset, shared, model, ratios, names, others)
         res.notes.append(
