@@ -85,6 +85,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from photoquant import _pair_kernels
 from photoquant._checks import check_array
 from photoquant._interp import interp
 from photoquant._numba import HAVE_NUMBA, compile_kernel
@@ -1034,6 +1035,10 @@ from its pixel draw, at most: the test's statistical error is then far below its
 floor (see its Notes)."""
 
 
+_screen_kernels: Any = _pair_kernels if HAVE_NUMBA else None
+"""The exposure screen's compiled kernels (``None``: its numpy twins run)."""
+
+
 def refine_by_pairs(
     stack: ExposureStack,
     response: Any,
@@ -1151,9 +1156,9 @@ def refine_by_pairs(
     floor_level = np.maximum(black, lo)
 
     rng = np.random.default_rng(seed)
-    sample = stack if max_pixels is None else _pixel_sample(stack, int(max_pixels), rng)
-    pairs = _neighbouring_pairs(sample, levels, g, sat, pair_rows, rng)
-    line = _repeat_noise_line(sample, pairs)
+    values = _sample_values(stack, max_pixels, rng)
+    pairs = _neighbouring_pairs(values, black, levels, g, sat, pair_rows, rng)
+    line = _repeat_noise_line(values, pairs)
     nominal = stack.exposure_s.copy()
     x, cov, counts, run, scale, iterations = _pair_passes(
         pairs,
@@ -1191,44 +1196,70 @@ class _Pairs:
     n_rows: int
 
 
+def _sample_values(
+    stack: ExposureStack, max_pixels: int | None, rng: np.random.Generator
+) -> np.ndarray:
+    """The values :func:`refine_by_pairs` reads, ``(N, K, P, C)``: at most ``max_pixels``
+    pixels drawn at random (the draw of :func:`_pixel_sample`), every pixel for ``None``."""
+    n_rep, n_k, n_ch = stack.n_repeats, stack.n_exposures, stack.n_channels
+    n_pix = stack.image_shape[0] * stack.image_shape[1]
+    if max_pixels is None or n_pix <= int(max_pixels):
+        return stack.frames.reshape(n_rep, n_k, n_pix, n_ch)
+    return _take_pixels(stack, np.sort(rng.choice(n_pix, int(max_pixels), replace=False)))
+
+
 def _neighbouring_pairs(
-    sample: ExposureStack,
+    values: np.ndarray,
+    black_level: np.ndarray,
     levels: np.ndarray,
     g: np.ndarray,
     sat: np.ndarray,
     pair_rows: int,
     rng: np.random.Generator,
 ) -> _Pairs:
-    """The pairs of :func:`refine_by_pairs`: (row, step) where both exposures of the
-    step are valid, at most a quota per step, rows taken in random order."""
-    n_k, n_ch = sample.n_exposures, sample.n_channels
-    n_pix = sample.image_shape[0] * sample.image_shape[1]
-    z_all = sample.mean().reshape(n_k, n_pix, n_ch)
-    clipped = (sample.saturated(sat) | sample.dark_clipped()).reshape(n_k, n_pix, n_ch)
+    """The pairs of :func:`refine_by_pairs` from its drawn ``values`` ``(N, K, P, C)``:
+    (row, step) where both exposures of the step are valid, at most a quota per step,
+    rows taken in random order.
+
+    A value is valid where no repeat is clipped (at or above the channel's ``sat``,
+    at or below its black level: :meth:`ExposureStack.saturated`,
+    :meth:`ExposureStack.dark_clipped`), ``g`` is finite at its mean over the
+    repeats and ``g``'s segment there rises.
+    """
+    n_rep, n_k, n_pix, n_ch = values.shape
     order = rng.permutation(n_pix)  # the quota takes pairs in random order, not by row
     step_slope = np.diff(g, axis=1) / np.diff(levels)
     quota = max(pair_rows // n_ch, 1)
-    z_perm = z_all[:, order].transpose(2, 1, 0)  # (C, P, K), random order
-    chan_all = np.arange(n_ch)[:, None, None]
-    y_all, seg_ok = _Tables(levels, np.stack([g, np.c_[step_slope, step_slope[:, -1:]]])).at(
-        z_perm, chan_all
-    )
-    ok_all = ~clipped[:, order].transpose(2, 1, 0) & np.isfinite(y_all) & (seg_ok > 0)
-    keep_c, keep_p, row, step, chan = _selected_pairs(ok_all, quota)
-    z_obs, y_obs = z_perm[keep_c, keep_p], y_all[keep_c, keep_p]
+    tables = _Tables(levels, np.stack([g, np.c_[step_slope, step_slope[:, -1:]]]))
+    sat_thr = np.ceil(sat).astype(np.int64)  # integer frames: c ≥ ⌈level⌉
+    dark_thr = np.floor(np.broadcast_to(black_level, (n_ch,))).astype(np.int64)
+    if _screen_kernels is not None:  # the same pairs, one pass over the drawn values
+        keep = np.empty((2, n_ch * n_pix), dtype=np.intp)
+        entries = np.empty((3, n_ch * n_pix * max(n_k - 1, 0)), dtype=np.intp)
+        ends = np.empty((4, entries.shape[1]))
+        n_rows, n_pairs = _screen_kernels.pairs_of_values(
+            values, order, sat_thr, dark_thr, tables.flat, levels, tables.even,
+            tables.inv_step, quota, keep, entries, ends,
+        )  # fmt: skip
+        keep_c, keep_p = keep[:, :n_rows]
+        row, step, chan = entries[:, :n_pairs]
+        y_lo, y_hi, z_lo, z_hi = ends[:, :n_pairs]
+    else:
+        if n_rep == 1:  # the repeats' mean and extremes, as ExposureStack.mean / _mask
+            z_all, lowest, highest = values[0].astype(np.float64), values[0], values[0]
+        else:
+            z_all = values.sum(axis=0, dtype=np.int64) / n_rep
+            lowest, highest = values.min(axis=0), values.max(axis=0)
+        clipped = (highest >= sat_thr) | (lowest <= dark_thr)
+        z_perm = z_all[:, order].transpose(2, 1, 0)  # (C, P, K), random order
+        y_all, seg_ok = tables.at(z_perm, np.arange(n_ch)[:, None, None])
+        ok_all = ~clipped[:, order].transpose(2, 1, 0) & np.isfinite(y_all) & (seg_ok > 0)
+        keep_c, keep_p, row, step, chan = _selected_pairs(ok_all, quota)
+        z_obs, y_obs = z_perm[keep_c, keep_p], y_all[keep_c, keep_p]
+        y_lo, y_hi = y_obs[row, step], y_obs[row, step + 1]
+        z_lo, z_hi = z_obs[row, step], z_obs[row, step + 1]
     pixels = [order[keep_p[keep_c == ch]] for ch in range(n_ch)]
-    n_rows = keep_p.size
-    return _Pairs(
-        row,
-        step,
-        chan,
-        y_obs[row, step],
-        y_obs[row, step + 1],
-        z_obs[row, step],
-        z_obs[row, step + 1],
-        pixels,
-        n_rows,
-    )
+    return _Pairs(row, step, chan, y_lo, y_hi, z_lo, z_hi, pixels, keep_p.size)
 
 
 def _selected_pairs(ok: np.ndarray, quota: int) -> tuple[np.ndarray, ...]:
@@ -1239,12 +1270,6 @@ def _selected_pairs(ok: np.ndarray, quota: int) -> tuple[np.ndarray, ...]:
     kept (a row: a pixel in one channel with a pair kept; channel by channel, pixels
     in order), and per pair its row, step and channel (rows in order, steps ascending).
     """
-    if _select_pairs_nb is not None:  # the same selection, one pass without temporaries
-        n_ch, n_pix, n_k = ok.shape
-        keep = np.empty((2, n_ch * n_pix), dtype=np.intp)
-        entries = np.empty((3, n_ch * n_pix * max(n_k - 1, 0)), dtype=np.intp)
-        n_rows, n_pairs = _select_pairs_nb(np.ascontiguousarray(ok), quota, keep, entries)
-        return (*keep[:, :n_rows], *entries[:, :n_pairs])
     keeps, entries_ch = [], []
     n_rows = 0
     for ch in range(ok.shape[0]):
@@ -1260,49 +1285,16 @@ def _selected_pairs(ok: np.ndarray, quota: int) -> tuple[np.ndarray, ...]:
     return keep_c, keep_p, row, step, chan
 
 
-def _select_pairs_py(
-    ok: Any, quota: int, keep: Any, entries: Any
-) -> tuple[int, int]:  # pragma: no cover - numba
-    """numba body of :func:`_selected_pairs` (its numpy branch's selection, value by value):
-    writes the rows kept into ``keep`` and the pairs into ``entries``, returns their counts."""
-    n_ch, n_pix, n_k = ok.shape
-    count = np.zeros(max(n_k - 1, 1), dtype=np.int64)
-    n_rows = 0
-    n_pairs = 0
-    for ch in range(n_ch):
-        count[:] = 0
-        for p in range(n_pix):
-            kept = False
-            for j in range(n_k - 1):
-                if ok[ch, p, j] and ok[ch, p, j + 1]:
-                    count[j] += 1  # a cumulative count over the rows: the quota's first
-                    if count[j] <= quota:
-                        if not kept:
-                            keep[0, n_rows] = ch
-                            keep[1, n_rows] = p
-                            n_rows += 1
-                            kept = True
-                        entries[0, n_pairs] = n_rows - 1
-                        entries[1, n_pairs] = j
-                        entries[2, n_pairs] = ch
-                        n_pairs += 1
-    return n_rows, n_pairs
-
-
-_select_pairs_nb: Any = compile_kernel(_select_pairs_py) if HAVE_NUMBA else None
-
-
-def _repeat_noise_line(sample: ExposureStack, pairs: _Pairs) -> np.ndarray:
+def _repeat_noise_line(values: np.ndarray, pairs: _Pairs) -> np.ndarray:
     """The noise of one repeat, ``a + b·z`` per channel (DN²), fitted to the pairs'
-    values' variance over the repeats (``N ≥ 2``); ``(1, 0)`` with one repeat (the
-    passes fit it to the pairs' residuals then)."""
-    n_rep, n_k, n_ch = sample.n_repeats, sample.n_exposures, sample.n_channels
+    values' variance over the repeats (``N ≥ 2``) of the drawn ``values``
+    ``(N, K, P, C)``; ``(1, 0)`` with one repeat (the passes fit it to the pairs'
+    residuals then)."""
+    n_rep, n_ch = values.shape[0], values.shape[-1]
     line = np.zeros((n_ch, 2))
     line[:, 0] = 1.0
     if n_rep < 2:
         return line
-    n_pix = sample.image_shape[0] * sample.image_shape[1]
-    frames = sample.frames.reshape(n_rep, n_k, n_pix, n_ch)
     row, step, chan = pairs.row, pairs.step, pairs.chan
     for ch in range(n_ch):
         mine = chan == ch
@@ -1310,7 +1302,7 @@ def _repeat_noise_line(sample: ExposureStack, pairs: _Pairs) -> np.ndarray:
         if rows_ch.size < 2:
             continue
         pix = pairs.pixels[ch]
-        vals = frames[:, :, pix, ch].astype(np.float64)  # (N, K, rows)
+        vals = values[:, :, pix, ch].astype(np.float64)  # (N, K, rows)
         var = vals.var(axis=0, ddof=1)
         s = step[mine]
         level = np.r_[pairs.z_lo[mine], pairs.z_hi[mine]]
@@ -1339,7 +1331,11 @@ def _pair_passes(
     """The passes of :func:`refine_by_pairs`: each end of a pair predicted from the
     other at the current times (bias-corrected), the values to use and their weights,
     the steps' Huber locations; ``(ln t, Cov(steps), counts, run, scale, iterations)``.
-    ``line`` (the noise of one repeat) is refitted to the residuals where ``N = 1``."""
+    ``line`` (the noise of one repeat) is refitted to the residuals where ``N = 1``.
+
+    Compiled where numba is (:func:`photoquant._pair_kernels.screen_passes`, equal
+    to rounding); below, its readable numpy twin.
+    """
     n_ch = line.shape[0]
     row, step, chan, y_lo, y_hi = pairs.row, pairs.step, pairs.chan, pairs.y_lo, pairs.y_hi
     z_lo, z_hi = pairs.z_lo.copy(), pairs.z_hi.copy()  # evaluated there, then at predictions
@@ -1349,6 +1345,22 @@ def _pair_passes(
         levels, np.stack([np.nan_to_num(d1), np.nan_to_num(np.gradient(d1, levels, axis=1))])
     )
     g_mono = np.maximum.accumulate(np.where(np.isfinite(g), g, -1e300), axis=1)
+    n_rows = pairs.n_rows
+    n_steps = x_nom.size - 1
+    rtable = _rounding_table()[1]
+    if _screen_kernels is not None:
+        x = np.empty_like(x_nom)
+        cov = np.empty((n_steps, n_steps))
+        counts = np.empty(n_steps, dtype=np.int64)
+        start, stop, scale, iterations = _screen_kernels.screen_passes(
+            y_lo, y_hi, z_lo, z_hi, chan, step, row, n_rows, x_nom, line, n_rep, levels,
+            tables.even, tables.inv_step, tables.flat[0].reshape(n_ch, -1),
+            tables.flat[1].reshape(n_ch, -1), g_mono, floor_level, sat, float(margin_sigma),
+            float(max_bend), rtable, float(huber_k), int(max_iterations), int(min_overlap),
+            gauge == "geometric mean", int(passes), x, cov, counts,
+        )  # fmt: skip
+        _check_run(slice(start, stop), counts, min_overlap)
+        return x, cov, counts, slice(start, stop), scale, iterations
 
     def one_repeat(zz: np.ndarray) -> np.ndarray:
         return np.maximum(line[chan, 0] + line[chan, 1] * zz, 1 / 12)
@@ -1365,9 +1377,7 @@ def _pair_passes(
             out[mine] = np.interp(values[mine], g_mono[ch], levels)
         return out
 
-    n_rows = pairs.n_rows
     x = x_nom.copy()
-    n_steps = x_nom.size - 1
     theta = np.zeros(n_steps)
     cov = np.zeros((n_steps, n_steps))
     counts = np.zeros(n_steps, dtype=np.int64)
@@ -1377,56 +1387,40 @@ def _pair_passes(
     bottom = floor_level[chan]
     s2_lo = tables.at(z_lo, chan)[1]
     s2_hi = tables.at(z_hi, chan)[1]
-    compiled = _pair_pass_nb is not None and tables.even
-    rtable = _rounding_table()[1]
-    for _ in range(max(int(passes), 1)):
-        dx = np.diff(x)
-        if compiled:  # the same arithmetic, one loop over the pairs (no temporaries)
-            use = np.empty(row.size, dtype=bool)
-            w, resid, g2_lo, g2_hi = (np.empty(row.size) for _ in range(4))
-            _pair_pass_nb(
-                y_lo, y_hi, z_lo, z_hi, s2_lo, s2_hi, chan, step, dx, np.diff(x_nom),
-                line, n_rep, levels, tables.flat[0].reshape(n_ch, -1),
-                tables.flat[1].reshape(n_ch, -1), g_mono, floor_level, sat,
-                float(margin_sigma), float(max_bend), rtable, use, w, resid, g2_lo, g2_hi,
-            )  # fmt: skip
-        else:
-            # g(z̄) less its bias at the current levels, then each end predicted from the other
-            dxe = dx[step]
-            c_lo = y_lo - 0.5 * s2_lo * mean_variance(one_repeat(z_lo))
-            c_hi = y_hi - 0.5 * s2_hi * mean_variance(one_repeat(z_hi))
-            z_lo, z_hi = inverse_g(c_hi - dxe), inverse_g(c_lo + dxe)
-            use = np.ones(row.size, dtype=bool)
-            ends = []
-            for zz, yy in ((z_lo, y_lo), (z_hi, y_hi)):
-                s1, s2 = tables.at(zz, chan)
-                v_one = one_repeat(zz)
-                v_mean = mean_variance(v_one)
-                sigma = np.sqrt(v_one + rounding_variance(np.sqrt(np.maximum(v_one - 1 / 12, 0.0))))
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    bend = np.abs(s2) * sigma / s1
-                use &= (zz >= bottom + margin_sigma * sigma) & (zz <= top - margin_sigma * sigma)
-                use &= (s1 > 0) & (bend <= max_bend)
-                ends.append((yy - 0.5 * s2 * v_mean, s1 * s1, s2, v_mean))
-            (c_lo, g2_lo, s2_lo, v_lo), (c_hi, g2_hi, s2_hi, v_hi) = ends
+    n_passes = max(int(passes), 1)
+    for pass_no in range(n_passes):
+        # g(z̄) less its bias at the current levels, then each end predicted from the other
+        dxe = np.diff(x)[step]
+        c_lo = y_lo - 0.5 * s2_lo * mean_variance(one_repeat(z_lo))
+        c_hi = y_hi - 0.5 * s2_hi * mean_variance(one_repeat(z_hi))
+        z_lo, z_hi = inverse_g(c_hi - dxe), inverse_g(c_lo + dxe)
+        use = np.ones(row.size, dtype=bool)
+        ends = []
+        for zz, yy in ((z_lo, y_lo), (z_hi, y_hi)):
+            s1, s2 = tables.at(zz, chan)
+            v_one = one_repeat(zz)
+            v_mean = mean_variance(v_one)
+            sigma = np.sqrt(v_one + rounding_variance(np.sqrt(np.maximum(v_one - 1 / 12, 0.0))))
             with np.errstate(invalid="ignore", divide="ignore"):
-                w = 1.0 / (g2_lo * v_lo + g2_hi * v_hi)
-            use &= np.isfinite(w) & (w > 0)
-            w = np.where(use, w, 0.0)
-            resid = np.where(use, c_hi - c_lo - np.diff(x_nom)[step], 0.0)
+                bend = np.abs(s2) * sigma / s1
+            use &= (zz >= bottom + margin_sigma * sigma) & (zz <= top - margin_sigma * sigma)
+            use &= (s1 > 0) & (bend <= max_bend)
+            ends.append((yy - 0.5 * s2 * v_mean, s1 * s1, s2, v_mean))
+        (c_lo, g2_lo, s2_lo, v_lo), (c_hi, g2_hi, s2_hi, v_hi) = ends
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = 1.0 / (g2_lo * v_lo + g2_hi * v_hi)
+        use &= np.isfinite(w) & (w > 0)
+        w = np.where(use, w, 0.0)
+        resid = np.where(use, c_hi - c_lo - np.diff(x_nom)[step], 0.0)
         theta, cov, h, scale, iterations = _pair_offsets(
             resid, w, use, step, row, n_rows, n_steps, huber_k, max_iterations
         )
         counts = np.bincount(step[use], minlength=n_steps)
         run = _longest_run(counts >= min_overlap, counts)
-        if run.stop <= run.start:
-            raise CalibrationError(
-                f"exposure refinement: no two neighbouring exposures share {min_overlap} "
-                f"values (per pair of exposures: {counts.tolist()}); the data do not "
-                "relate the exposure times"
-            )
+        _check_run(run, counts, min_overlap)
         x = _chain(x_nom, theta, run, gauge)
-        if n_rep == 1:  # the noise line from the residuals: E r² = Σ g'² v(z) over both ends
+        if n_rep == 1 and pass_no < n_passes - 1:  # the noise line for the next pass, from
+            # the residuals: E r² = Σ g'² v(z) over both ends
             inl = use & (h >= 1.0)
             r2 = (resid - theta[step]) ** 2
             for ch in range(n_ch):
@@ -1439,6 +1433,16 @@ def _pair_passes(
                     if coef is not None:
                         line[ch] = coef
     return x, cov, counts, run, scale, iterations
+
+
+def _check_run(run: slice, counts: np.ndarray, min_overlap: int) -> None:
+    """Raise where no step of the pair screen has ``min_overlap`` values."""
+    if run.stop <= run.start:
+        raise CalibrationError(
+            f"exposure refinement: no two neighbouring exposures share {min_overlap} "
+            f"values (per pair of exposures: {counts.tolist()}); the data do not "
+            "relate the exposure times"
+        )
 
 
 def _pair_refinement(
@@ -1499,109 +1503,6 @@ def _refinement_of(
     )
 
 
-def _pair_pass_py(  # pragma: no cover - compiled by numba
-    y_lo: Any, y_hi: Any, z_lo: Any, z_hi: Any, s2_lo: Any, s2_hi: Any, chan: Any, step: Any,
-    dx: Any, dx_nom: Any, line: Any, n_rep: int, levels: Any, d1: Any, d2: Any, g_mono: Any,
-    bottom: Any, top: Any, margin: float, max_bend: float, rtable: Any,
-    use: Any, w: Any, resid: Any, g2_lo: Any, g2_hi: Any,
-) -> None:  # fmt: skip
-    """numba body of one pass of :func:`refine_by_pairs` (its numpy branch, value by value, the
-    same operations in the same order): updates ``z_lo, z_hi, s2_lo, s2_hi`` (the ends'
-    levels and ``g''`` there), writes ``use, w, resid`` and ``g'²`` at both ends."""
-    n_lv = levels.size
-    lv0 = levels[0]
-    lv_last = levels[n_lv - 1]
-    n_tab = rtable.size - 1
-    inv_step = 1.0 / ((lv_last - lv0) / (n_lv - 1))
-    for e in range(y_lo.size):
-        c = chan[e]
-        s = step[e]
-        cy_lo = 0.0
-        cy_hi = 0.0
-        for end in range(2):
-            zz = z_lo[e] if end == 0 else z_hi[e]
-            v = max(line[c, 0] + line[c, 1] * zz, 1.0 / 12.0)
-            if n_rep != 1:
-                v = v / n_rep + _rounding_at(np.sqrt(max(v - 1.0 / 12.0, 0.0)), rtable, n_tab)
-            if end == 0:
-                cy_lo = y_lo[e] - 0.5 * s2_lo[e] * v
-            else:
-                cy_hi = y_hi[e] - 0.5 * s2_hi[e] * v
-        zl = _interp_one(cy_hi - dx[s], g_mono[c], levels)
-        zh = _interp_one(cy_lo + dx[s], g_mono[c], levels)
-        z_lo[e] = zl
-        z_hi[e] = zh
-        ok = True
-        var_sum = 0.0
-        for end in range(2):
-            zz = zl if end == 0 else zh
-            zc = lv0 if np.isnan(zz) else min(max(zz, lv0), lv_last)
-            i = min(int((zc - lv0) * inv_step), n_lv - 2)
-            frac = (zc - levels[i]) / (levels[i + 1] - levels[i])
-            s1 = d1[c, i] + frac * (d1[c, i + 1] - d1[c, i])
-            s2 = d2[c, i] + frac * (d2[c, i + 1] - d2[c, i])
-            v_one = max(line[c, 0] + line[c, 1] * zz, 1.0 / 12.0)
-            r_one = _rounding_at(np.sqrt(max(v_one - 1.0 / 12.0, 0.0)), rtable, n_tab)
-            v_mean = v_one if n_rep == 1 else v_one / n_rep + r_one
-            sigma = np.sqrt(v_one + r_one)
-            bend = np.abs(s2) * sigma / s1
-            inside = zz >= bottom[c] + margin * sigma and zz <= top[c] - margin * sigma
-            ok = ok and inside and s1 > 0 and bend <= max_bend
-            var_sum += s1 * s1 * v_mean
-            if end == 0:
-                cy_lo = y_lo[e] - 0.5 * s2 * v_mean
-                s2_lo[e] = s2
-                g2_lo[e] = s1 * s1
-            else:
-                cy_hi = y_hi[e] - 0.5 * s2 * v_mean
-                s2_hi[e] = s2
-                g2_hi[e] = s1 * s1
-        weight = 1.0 / var_sum
-        ok = ok and np.isfinite(weight) and weight > 0
-        use[e] = ok
-        w[e] = weight if ok else 0.0
-        resid[e] = cy_hi - cy_lo - dx_nom[s] if ok else 0.0
-
-
-def _rounding_at(sigma: float, table: Any, n: int) -> float:  # pragma: no cover - numba
-    """:func:`rounding_variance` of one value (the table's linear interpolation)."""
-    u = sigma * float(n)
-    if np.isnan(sigma):
-        return np.nan
-    if not u <= n:
-        return 0.0
-    i = min(int(u), n - 1)
-    return table[i] + (u - i) * (table[i + 1] - table[i])
-
-
-def _interp_one(x: float, xp: Any, fp: Any) -> float:  # pragma: no cover - numba
-    """``np.interp`` of one value (``xp`` non-decreasing): the interval ``xp[j] <= x < xp[j+1]``."""
-    n = xp.size
-    if np.isnan(x):
-        return x
-    if x >= xp[n - 1]:
-        return fp[n - 1]
-    if x < xp[0]:
-        return fp[0]
-    lo, hi = 0, n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if xp[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
-    return slope * (x - xp[lo]) + fp[lo]
-
-
-if HAVE_NUMBA:  # pragma: no cover - depends on the environment
-    _rounding_at = compile_kernel(_rounding_at)
-    _interp_one = compile_kernel(_interp_one)
-    _pair_pass_nb: Any = compile_kernel(_pair_pass_py, error_model="numpy")
-else:  # pragma: no cover
-    _pair_pass_nb = None
-
-
 class _Tables:
     """Per-channel tables on ``levels`` looked up together: one interval search, linear
     interpolation (ends held, as ``np.interp``)."""
@@ -1615,18 +1516,10 @@ class _Tables:
         self.inv_step = 1.0 / float(step.mean())
 
     def at(self, z: np.ndarray, chan: np.ndarray) -> np.ndarray:
-        """The tables at levels ``z`` of channels ``chan`` (broadcast), shape ``(T, *z.shape)``."""
-        if _tables_at_nb is not None:  # the same arithmetic, one pass without temporaries
-            shape = np.broadcast_shapes(np.shape(z), np.shape(chan))
-            z_flat = np.ascontiguousarray(np.broadcast_to(z, shape), dtype=np.float64).ravel()
-            c_flat = np.ascontiguousarray(np.broadcast_to(chan, shape), dtype=np.intp).ravel()
-            out = np.empty((self.flat.shape[0], z_flat.size))
-            _tables_at_nb(self.flat, self.levels, self.even, self.inv_step, z_flat, c_flat, out)
-            return out.reshape((self.flat.shape[0], *shape))
-        return self._at_numpy(z, chan)
+        """The tables at levels ``z`` of channels ``chan`` (broadcast), shape ``(T, *z.shape)``.
 
-    def _at_numpy(self, z: np.ndarray, chan: np.ndarray) -> np.ndarray:
-        """:meth:`at` in numpy (the kernel's readable twin)."""
+        :func:`photoquant._pair_kernels.table_index` is the compiled screen's twin.
+        """
         lv = self.levels
         zc = np.clip(np.nan_to_num(z, nan=lv[0]), lv[0], lv[-1])
         if self.even:
@@ -1638,33 +1531,6 @@ class _Tables:
         a = self.flat[:, base]
         b = self.flat[:, base + 1]
         return a + frac * (b - a)
-
-
-def _tables_at_py(  # pragma: no cover - compiled by numba
-    flat: Any, levels: Any, even: bool, inv_step: float, z: Any, chan: Any, out: Any
-) -> None:
-    """numba body of :meth:`_Tables.at` (its numpy twin's operations, value by value)."""
-    n = levels.size
-    lv0 = levels[0]
-    lv_last = levels[n - 1]
-    for e in range(z.size):
-        zz = z[e]
-        if np.isnan(zz):
-            zc = lv0
-        else:
-            zc = min(max(zz, lv0), lv_last)
-        if even:
-            i = min(int((zc - lv0) * inv_step), n - 2)
-        else:
-            i = min(max(np.searchsorted(levels, zc, side="right") - 1, 0), n - 2)
-        frac = (zc - levels[i]) / (levels[i + 1] - levels[i])
-        base = chan[e] * n + i
-        for t in range(flat.shape[0]):
-            a = flat[t, base]
-            out[t, e] = a + frac * (flat[t, base + 1] - a)
-
-
-_tables_at_nb: Any = compile_kernel(_tables_at_py) if HAVE_NUMBA else None
 
 
 def _line_fit(level: np.ndarray, var: np.ndarray) -> np.ndarray:
@@ -1720,21 +1586,14 @@ def _pair_offsets(
     scale = scale or 1.0
     h = np.ones_like(w)
     iterations = 0
-    if _huber_iterations_nb is not None:  # the same arithmetic, without temporaries
-        theta, u_last = theta.copy(), np.empty_like(w)
-        iterations = _huber_iterations_nb(
-            resid, w, sqrt_w, step, scale, huber_k, max_iterations, theta, h, u_last
-        )
-        u = u_last if iterations else u
-    else:
-        for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported
-            u = np.abs(resid - theta[step]) * sqrt_w / scale
-            h = np.where(u <= huber_k, 1.0, huber_k / np.maximum(u, 1e-300))
-            new = location(w * h)
-            done = float(np.max(np.abs(new - theta))) < 1e-6
-            theta = new
-            if done:
-                break
+    for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported
+        u = np.abs(resid - theta[step]) * sqrt_w / scale
+        h = np.where(u <= huber_k, 1.0, huber_k / np.maximum(u, 1e-300))
+        new = location(w * h)
+        done = float(np.max(np.abs(new - theta))) < 1e-6
+        theta = new
+        if done:
+            break
     r = np.where(use, resid - theta[step], 0.0)
     psi = np.zeros((n_rows, n_steps))
     psi[row, step] = w * h * r
@@ -1742,43 +1601,6 @@ def _pair_offsets(
     slope = np.where(slope > 0, slope, np.inf)
     cov = (psi.T @ psi) / np.outer(slope, slope)
     return theta, cov, h, scale, iterations
-
-
-def _huber_iterations_py(  # pragma: no cover - compiled by numba
-    resid: Any, w: Any, sqrt_w: Any, step: Any, scale: float, huber_k: float,
-    max_iterations: int, theta: Any, h: Any, u_last: Any,
-) -> int:  # fmt: skip
-    """numba body of :func:`_pair_offsets`' iterations (its numpy branch's operations in
-    order): updates ``theta`` in place, writes the last iteration's ``h`` and scaled
-    residuals ``u_last``, returns the iterations run."""
-    n_steps = theta.size
-    total = np.empty(n_steps)
-    moment = np.empty(n_steps)
-    iterations = 0
-    for it in range(1, max_iterations + 1):
-        iterations = it
-        total[:] = 0.0
-        moment[:] = 0.0
-        for e in range(resid.size):
-            s = step[e]
-            u = np.abs(resid[e] - theta[s]) * sqrt_w[e] / scale
-            he = 1.0 if u <= huber_k else huber_k / max(u, 1e-300)
-            u_last[e] = u
-            h[e] = he
-            wh = w[e] * he
-            total[s] += wh
-            moment[s] += wh * resid[e]
-        change = 0.0
-        for s in range(n_steps):
-            new = moment[s] / (total[s] if total[s] > 0 else 1.0)
-            change = max(change, np.abs(new - theta[s]))
-            theta[s] = new
-        if change < 1e-6:
-            break
-    return iterations
-
-
-_huber_iterations_nb: Any = compile_kernel(_huber_iterations_py) if HAVE_NUMBA else None
 
 
 def _longest_run(good: np.ndarray, counts: np.ndarray) -> slice:

@@ -10,7 +10,9 @@ answers:
   of :func:`judge_exposure_times` decides alike from both, and the refined
   log-time ratios agree within their stated standard errors;
 * the jittered times move towards the actual ones;
-* the compiled kernels give the numpy twins' bits, the draw is seeded;
+* the compiled screen is its numpy twin (the pairs to the bit, the times and
+  their covariance to rounding), with repeats and unevenly spaced levels; the
+  draw is seeded;
 * ``correct`` decides with it and, where it rejects the labels, takes its
   times; a draw that relates no two exposures goes to the full refinement.
 """
@@ -83,18 +85,91 @@ def test_pairs_decide_as_the_full_refinement_and_agree_within_errors(capture):
         assert np.abs(got - act).max() < 0.5 * np.abs(nom - act).max()
 
 
-def test_compiled_kernels_give_the_numpy_bits_and_the_draw_is_seeded(capture, monkeypatch):
+def test_compiled_screen_is_its_numpy_twin_and_the_draw_is_seeded(capture, monkeypatch):
     _, stack, model, _ = capture
     first = refine_by_pairs(stack, model.response, seed=3)
     again = refine_by_pairs(stack, model.response, seed=3)
     np.testing.assert_array_equal(first.exposure_s, again.exposure_s)
     np.testing.assert_array_equal(first.log_cov, again.log_cov)
-    for kernel in ("_pair_pass_nb", "_tables_at_nb", "_huber_iterations_nb", "_select_pairs_nb"):
-        monkeypatch.setattr(exposure, kernel, None)
+    monkeypatch.setattr(exposure, "_screen_kernels", None)
     plain = refine_by_pairs(stack, model.response, seed=3)
-    np.testing.assert_array_equal(first.exposure_s, plain.exposure_s)
-    np.testing.assert_array_equal(first.log_cov, plain.log_cov)
+    # the same pairs, selections and weights; the sandwich's and the noise line's sums
+    # add in another order (BLAS in the twin): equal to rounding, not to the bit
     np.testing.assert_array_equal(first.n_values, plain.n_values)
+    np.testing.assert_array_equal(first.refined, plain.refined)
+    np.testing.assert_allclose(first.exposure_s, plain.exposure_s, rtol=1e-12)
+    np.testing.assert_allclose(first.log_cov, plain.log_cov, rtol=1e-9, atol=1e-20)
+    assert first.iterations == plain.iterations
+    assert first.residual_rms == pytest.approx(plain.residual_rms, rel=1e-12)
+
+
+def _repeated_stack(n_rep, black):
+    """A K = 5, N = ``n_rep`` 10-bit bracket with a pedestal, clipped at both ends."""
+    rng = np.random.default_rng(5)
+    radiance = np.exp(rng.uniform(-3.0, 3.0, (40, 50, 3)))
+    t = 2.0 ** np.arange(5) / 16
+    signal = 300 * (radiance[None, None] * t[None, :, None, None, None]) ** 0.6 + black
+    frames = np.clip(np.round(signal + rng.normal(0, 3, (n_rep, 5, 40, 50, 3))), 0, 1023)
+    return ExposureStack(
+        frames.astype(np.uint16),
+        t,
+        bit_depth=10,
+        saturation_level=[1000] * 3,
+        black_level=[black] * 3,
+    )
+
+
+@pytest.mark.parametrize("n_rep", [1, 3])
+@pytest.mark.parametrize("spacing", ["even", "uneven"])
+def test_compiled_pairs_and_passes_are_the_twins_with_repeats_and_uneven_levels(
+    n_rep, spacing, monkeypatch
+):
+    stack = _repeated_stack(n_rep, black=20.0)
+    if spacing == "even":
+        levels = np.arange(0.0, 1024.0)
+    else:  # a response tabulated on unevenly spaced levels (the search, not the step)
+        levels = np.unique(np.r_[0.0, np.cumsum(np.random.default_rng(6).uniform(0.5, 2, 700))])
+        levels = levels[levels <= 1023]
+    z = np.clip(levels - 20.0, 1e-3, None) / 300
+    g = np.tile(np.log(z) / 0.6, (3, 1))
+    g[:, levels < 24] = np.nan  # no light: not finite there
+    sat = np.full(3, 1000.0)
+    values = exposure._sample_values(stack, 1500, np.random.default_rng(0))
+    args = (values, stack.black_level, levels, g, sat, 900)
+    fast = exposure._neighbouring_pairs(*args, np.random.default_rng(1))
+    monkeypatch.setattr(exposure, "_screen_kernels", None)
+    slow = exposure._neighbouring_pairs(*args, np.random.default_rng(1))
+    for name in ("row", "step", "chan", "y_lo", "y_hi", "z_lo", "z_hi"):  # the same bits
+        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
+    assert fast.n_rows == slow.n_rows and fast.row.size > 1000
+    for a, b in zip(fast.pixels, slow.pixels, strict=True):
+        np.testing.assert_array_equal(a, b)
+    out = {}
+    for kernels in (exposure._pair_kernels, None):
+        monkeypatch.setattr(exposure, "_screen_kernels", kernels)
+        line = exposure._repeat_noise_line(values, fast)
+        out[kernels is None] = exposure._pair_passes(
+            fast, levels, g, line, n_rep, np.full(3, 20.0), sat, np.log(stack.exposure_s),
+            gauge="geometric mean", margin_sigma=3.0, min_overlap=50, huber_k=2.5,
+            max_iterations=10, max_bend=0.1, passes=3,
+        )  # fmt: skip
+    (x_a, cov_a, counts_a, run_a, scale_a, it_a), (x_b, cov_b, counts_b, run_b, scale_b, it_b) = (
+        out[False],
+        out[True],
+    )
+    np.testing.assert_array_equal(counts_a, counts_b)
+    assert run_a == run_b and run_a.stop - run_a.start == 4 and it_a == it_b
+    np.testing.assert_allclose(x_a, x_b, rtol=0, atol=1e-12)  # ln t: rounding
+    np.testing.assert_allclose(cov_a, cov_b, rtol=1e-9)
+    assert scale_a == pytest.approx(scale_b, rel=1e-12)
+
+
+def test_the_compiled_screen_names_steps_without_pairs(capture, monkeypatch):
+    _, stack, model, _ = capture
+    for kernels in (exposure._pair_kernels, None):
+        monkeypatch.setattr(exposure, "_screen_kernels", kernels)
+        with pytest.raises(CalibrationError, match=r"no two neighbouring exposures share 10000"):
+            refine_by_pairs(stack, model.response, min_overlap=10_000)
 
 
 def test_correct_uses_the_pairs_and_its_decision(capture):
