@@ -256,9 +256,12 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     stated = _uncertainty_summary(model)
     if "response_log_std" in stated:
         pairs = zip(*stated["response_log_std"].values(), strict=True)
+        how = resp.get("covariance")
         lines.append(
             "response uncertainty: std of g (ln, median/largest over the measured levels, "
-            f"relative to {model.response.covariance_reference or 'mid-range'}) "
+            f"relative to {model.response.covariance_reference or 'mid-range'}"
+            + (f"; {how}" if isinstance(how, str) else "")
+            + ") "
             + " ".join(f"{m:.2g}/{x:.2g}" for m, x in pairs)
         )
     line = f"balance: {_fmt(model.balance.factors)}"

@@ -8,7 +8,10 @@ not cover: Debevec's estimate carries a bias from noise and quantisation
 (a ripple with the bracket's step, the one shape of ``g`` that the pixels'
 ratios cannot see, and a drift that grows with the noise), relative to the
 gauge level 2.9 standard deviations on average at 2 DN noise and 1.4 at
-0.7 DN; that test is an expected failure until the bias is modelled.
+0.7 DN; that test is an expected failure until the bias is modelled. The
+method's other covariance, the exposure jackknife (the spread of ``g`` over
+the fits that each leave one exposure out), states most of that error and is
+checked against the truth the same way.
 """
 
 from __future__ import annotations
@@ -21,8 +24,16 @@ import pytest
 from photoquant.errors import InputError
 from photoquant.merge import DebevecMergeOptions, MergeModel
 from photoquant.merge.uncertainty import log_variance_response_Debevec1997
-from photoquant.response.covariance import low_rank_factor
-from photoquant.response.debevec1997 import camera_response_Debevec1997
+from photoquant.response.covariance import (
+    MIN_JACKKNIFE_EXPOSURES,
+    exposure_jackknife_factor,
+    low_rank_factor,
+)
+from photoquant.response.debevec1997 import (
+    DebevecResponseOptions,
+    camera_response_Debevec1997,
+    characterise_response_Debevec1997,
+)
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
@@ -94,6 +105,101 @@ def test_stated_uncertainty_covers_the_truth(fits):
     )
     inside = np.abs(g - truth[None]) / sd < 1.96
     assert inside.mean() > 0.93
+
+
+def _method_fits(n_captures: int, noise_dn: float, covariance: str):
+    """As :func:`_repeated_fits`, through the ``"Debevec 1997"`` method with its defaults and
+    the given ``covariance``; ``g`` relative to the gauge level (the truth's reference)."""
+    g, sd = [], []
+    options = DebevecResponseOptions(covariance=covariance)
+    for seed in range(n_captures):
+        rng = np.random.default_rng(seed)
+        frames = capture(
+            log_uniform_scene(rng, (60, 80, 3)),
+            EXPOSURES,
+            balance=WHITE,
+            noise_dn=noise_dn,
+            rng=rng,
+        )
+        stack = ExposureStack(frames, EXPOSURES, bit_depth=8, saturation_level=[255] * 3)
+        model = characterise_response_Debevec1997(stack, options, seed).model
+        rel = (
+            model.log_inverse_response
+            - model.log_inverse_response[:, GAUGE_LEVEL : GAUGE_LEVEL + 1]
+        )
+        g.append(rel[:, LEVELS])
+        sd.append(np.sqrt(model.covariance_diagonal[:, LEVELS]))
+    return np.array(g), np.array(sd)
+
+
+@pytest.mark.parametrize("noise_dn", [0.7, 2.0])
+def test_the_exposure_jackknife_states_what_the_sandwich_misses(noise_dn):
+    """Against the truth, over independent captures (K = 8): the jackknife's stated σ
+    covers the recovered ``g``'s error, bias included, far better than the sandwich's.
+
+    Measured (10 captures, 240 values each, strongly correlated within a capture: the
+    bias is one pattern): at 0.7 DN the sandwich puts 70 % inside 1.96 σ, the
+    jackknife 96 % (rms z 1.73 and 0.94); at 2 DN 30 % and 74 % (rms z 3.17 and 1.70).
+    """
+    truth = np.stack(
+        [true_g(LEVELS, c, balance=WHITE) - true_g(GAUGE_LEVEL, c, balance=WHITE) for c in range(3)]
+    )
+    shares, rms = {}, {}
+    for covariance in ("sandwich", "exposure jackknife"):
+        g, sd = _method_fits(10, noise_dn, covariance)
+        z = (g - truth[None]) / sd
+        shares[covariance] = np.mean(np.abs(z) < 1.96)
+        rms[covariance] = np.sqrt(np.mean(z**2))
+    assert shares["exposure jackknife"] > shares["sandwich"] + 0.15, shares
+    if noise_dn < 1:  # the bias small beside the noise: the jackknife covers (conservatively)
+        assert shares["exposure jackknife"] > 0.9 and 0.6 < rms["exposure jackknife"] < 1.3, (
+            shares,
+            rms,
+        )
+    else:  # the bias dominates: most of it carried
+        assert rms["exposure jackknife"] < 0.7 * rms["sandwich"], rms
+
+
+def test_exposure_jackknife_factor_is_the_delete_one_jackknife():
+    rng = np.random.default_rng(3)
+    g = rng.normal(size=(5, 2, 7))
+    factor = exposure_jackknife_factor(g)
+    assert factor.shape == (2, 5, 7)
+    for c in range(2):
+        dev = g[:, c] - g[:, c].mean(axis=0)
+        expected = 4 / 5 * dev.T @ dev
+        np.testing.assert_allclose(factor[c].T @ factor[c], expected, rtol=1e-12, atol=1e-15)
+    with pytest.raises(InputError, match="K ≥ 2"):
+        exposure_jackknife_factor(g[:1])
+    g[2, 1, 3] = np.nan
+    with pytest.raises(InputError, match="finite"):
+        exposure_jackknife_factor(g)
+
+
+def test_the_method_keeps_its_g_and_says_which_covariance():
+    rng = np.random.default_rng(4)
+    frames = capture(log_uniform_scene(rng, (30, 40, 3)), EXPOSURES, noise_dn=1.0, rng=rng)
+    stack = ExposureStack(frames, EXPOSURES, bit_depth=8, saturation_level=[255] * 3)
+    jack = characterise_response_Debevec1997(
+        stack, DebevecResponseOptions(covariance="exposure jackknife"), 0
+    )
+    plain = characterise_response_Debevec1997(stack, DebevecResponseOptions(), 0)
+    # the covariance is a by-product: the same g either way
+    np.testing.assert_array_equal(jack.model.log_inverse_response, plain.model.log_inverse_response)
+    assert jack.report["covariance"] == "exposure jackknife"
+    assert plain.report["covariance"] == "sandwich"
+    assert jack.model.covariance_factor.shape[1] == EXPOSURES.size  # one row per fit
+    np.testing.assert_allclose(jack.model.covariance_factor.sum(axis=1), 0.0, atol=1e-12)
+    # too few exposures to leave one out: the sandwich, said so
+    short = stack.with_frames(frames[:, :3], EXPOSURES[:3])
+    fit = characterise_response_Debevec1997(
+        short, DebevecResponseOptions(covariance="exposure jackknife"), 0
+    )
+    assert fit.report["covariance"].startswith("sandwich")
+    assert str(MIN_JACKKNIFE_EXPOSURES) in fit.report["covariance"]
+    assert fit.model.covariance_factor is not None
+    with pytest.raises(InputError, match="covariance"):
+        DebevecResponseOptions(covariance="bootstrap")
 
 
 def test_uncertainty_is_relative_to_the_gauge_level():

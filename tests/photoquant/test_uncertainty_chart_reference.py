@@ -220,3 +220,30 @@ def test_a_calibrated_camera_states_its_uncertainty_relative_to_the_chart(tmp_pa
         at_chart = np.nanmedian(part[chart], axis=(0, 1))
         elsewhere = np.nanmedian(part[outside], axis=0)
         assert np.all(at_chart < 0.5 * elsewhere), (at_chart, elsewhere)
+
+
+def test_the_exposure_jackknife_travels_through_the_camera_and_info(tmp_path, capsys):
+    """The jackknife's K-row factor is re-gauged at the chart, saved, loaded, propagated
+    by ``correct`` and named by ``photoquant info``."""
+    from photoquant.cli import main
+    from photoquant.io import load_manifest, load_stack
+    from photoquant.model import load_camera
+    from pqsim.capture_set import write_capture_set
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    manifest = write_capture_set(
+        tmp_path / "set", camera_from_preset("ccd"), shape=(48, 64), n_repeats=2, seed=5
+    )
+    model = pq.calibrate_manifest(manifest, response={"covariance": "exposure jackknife"})
+    assert model.report["response"]["covariance"] == "exposure jackknife"
+    model.save(tmp_path / "cam")
+    model = load_camera(tmp_path / "cam")
+    loaded = load_manifest(manifest)
+    view0 = load_stack(loaded.views[0], loaded)
+    # the chart's reference adds one row to the K fits' rows
+    assert model.response.covariance_factor.shape[1] == view0.n_exposures + 1
+    assert model.response.covariance_reference == "the white chart's merged value"
+    result = pq.correct(view0, model, uncertainty=True)
+    assert np.nanmedian(result.log_sigma_response) > 0
+    assert main(["info", str(tmp_path / "cam")]) == 0
+    assert "exposure jackknife" in capsys.readouterr().out
