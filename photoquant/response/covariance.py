@@ -64,9 +64,11 @@ truth (2026-12-04):
 The same sample held (one solve per exposure left out, the robust rounds'
 row weights kept) states far less (at 2 DN 40 % within 1.96 σ): the
 jackknife's spread comes with each fit's own sample, robust weights and
-prior, not from the left-out exposure's rows alone. Its cost is ``K`` fits: at 1024×768 one
-view's calibration 0.25 → 0.69 s (K = 4) and 0.82 s (K = 8), hence not the
-default.
+prior, not from the left-out exposure's rows alone. Its cost is ``K``
+fits: at 1024×768 one view's calibration 0.25 → 0.69 s (K = 4) and
+0.82 s (K = 8), hence not the default. Where a fit without one exposure
+fails (a gap no pixel bridges), the sandwich is kept and the report says
+why.
 
 Low-rank factor
 ---------------

@@ -182,9 +182,9 @@ _HISTOGRAM_BINS = 64
 """Value bins per exposure of :func:`select_samples_histogram`."""
 
 TOE_MODES = ("continued", "solved")
+"""Treatments of the dark end of ``g`` (module notes, *Toe*)."""
 COVARIANCE_MODES = ("sandwich", "exposure jackknife")
 """How ``"Debevec 1997"`` states ``g``'s covariance (:class:`DebevecResponseOptions`)."""
-"""Treatments of the dark end of ``g`` (module notes, *Toe*)."""
 
 
 _BLAS: list[ThreadpoolController] = []
@@ -1573,7 +1573,9 @@ def characterise_response_Debevec1997(
         values = stack.frames[0] if stack.n_repeats == 1 else stack.mean()
         excluded = stack.saturated() | stack.dark_clipped()
 
-    def fit(keep: np.ndarray, rng: np.random.Generator, uncertainty: bool) -> ResponseRecovery:
+    def fit(
+        keep: slice | np.ndarray, rng: np.random.Generator, uncertainty: bool
+    ) -> ResponseRecovery:
         return camera_response_Debevec1997(
             values[keep],
             stack.exposure_s[keep],
@@ -1598,20 +1600,25 @@ def characterise_response_Debevec1997(
         )
 
     n_k = stack.n_exposures
-    rec = fit(np.ones(n_k, dtype=bool), rng, opts.uncertainty)
+    rec = fit(slice(None), rng, opts.uncertainty)
     factor, variance = rec.log_inverse_response_factor, rec.log_inverse_response_variance
     covariance = "sandwich" if opts.uncertainty else None
     if opts.uncertainty and opts.covariance == "exposure jackknife":
         if n_k >= MIN_JACKKNIFE_EXPOSURES:
             # drawn after the fit's own draws: its g is the same with either covariance
             seed = int(rng.integers(2**63))
-            left_out = [
-                fit(np.arange(n_k) != k, np.random.default_rng(seed), False).log_inverse_response
-                for k in range(n_k)
-            ]
-            factor = exposure_jackknife_factor(np.stack(left_out))
-            variance = np.sum(factor**2, axis=1)
-            covariance = "exposure jackknife"
+            try:
+                left_out = [
+                    fit(np.arange(n_k) != k, np.random.default_rng(seed), False) for k in range(n_k)
+                ]
+                factor = exposure_jackknife_factor(
+                    np.stack([r.log_inverse_response for r in left_out])
+                )
+            except (CalibrationError, InputError) as exc:  # e.g. a gap no pixel bridges
+                covariance = f"sandwich (the exposure jackknife failed: {exc})"
+            else:
+                variance = np.sum(factor**2, axis=1)
+                covariance = "exposure jackknife"
         else:
             covariance = (
                 f"sandwich (the exposure jackknife needs {MIN_JACKKNIFE_EXPOSURES} exposures, "

@@ -202,6 +202,25 @@ def test_the_method_keeps_its_g_and_says_which_covariance():
         DebevecResponseOptions(covariance="bootstrap")
 
 
+def test_a_jackknife_that_cannot_fit_keeps_the_sandwich_and_says_why(monkeypatch):
+    import photoquant.response.debevec1997 as debevec
+
+    def no_overlap(*args, **kwargs):
+        raise debevec.CalibrationError("the exposures do not overlap")
+
+    rng = np.random.default_rng(4)
+    frames = capture(log_uniform_scene(rng, (30, 40, 3)), EXPOSURES, noise_dn=1.0, rng=rng)
+    stack = ExposureStack(frames, EXPOSURES, bit_depth=8, saturation_level=[255] * 3)
+    plain = characterise_response_Debevec1997(stack, DebevecResponseOptions(), 0)
+    monkeypatch.setattr(debevec, "exposure_jackknife_factor", no_overlap)
+    fit = characterise_response_Debevec1997(
+        stack, DebevecResponseOptions(covariance="exposure jackknife"), 0
+    )
+    assert fit.report["covariance"].startswith("sandwich (the exposure jackknife failed")
+    assert "do not overlap" in fit.report["covariance"]
+    np.testing.assert_array_equal(fit.model.covariance_factor, plain.model.covariance_factor)
+
+
 def test_uncertainty_is_relative_to_the_gauge_level():
     rng = np.random.default_rng(0)
     frames = capture(log_uniform_scene(rng, (40, 50, 3)), EXPOSURES, noise_dn=1.0, rng=rng)
