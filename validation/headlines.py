@@ -144,7 +144,12 @@ def _uncertainty(m: _Metrics) -> list[Headline]:
 
 def _coverage(m: _Metrics) -> list[Headline]:
     out = []
-    for key, label in (("lut", "sensor LUT"), ("vignetting", "vignetting"), ("balance", "balance")):
+    for key, label in (
+        ("lut", "sensor LUT"),
+        ("vignetting", "vignetting"),
+        ("balance", "balance"),
+        ("balance_jackknife", "balance, jackknife g"),
+    ):
         pattern = f"coverage.{{p}}.{key}"
         if m.has(pattern + ".spread"):
             spread = m.join(pattern + ".spread", lambda v: _num(v, ".2f"))

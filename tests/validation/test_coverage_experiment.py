@@ -33,12 +33,18 @@ def test_it_runs_in_the_full_job_and_when_named_only():
 def test_the_sensor_luts_stated_noise_covers_its_error_over_seeds(tmp_path):
     """Three capture sets per preset: the LUT's ~27 000 per-pixel z have a spread within
     5 % of 1 (its sampling error ~0.5 %; measured 0.99 / 1.02 over 20 seeds); every
-    parameter gets its row and metrics."""
+    parameter gets its row and metrics, the balance a second one with the jackknife."""
     config = TINY.replace(coverage_seeds=3)
     res = run(config, 0, tmp_path)
     for preset in config.presets:
         assert abs(res.metrics[f"coverage.{preset}.lut.spread"] - 1.0) < 0.05
-        for key in ("vignetting", "balance"):
+        for key in ("vignetting", "balance", "balance_jackknife"):
             assert res.metrics[f"coverage.{preset}.{key}.spread"] > 0
-    assert len(res.rows) == 3 * len(config.presets)
+        # the same g, a wider statement of its error (measured over 50 seeds: 0.5 / 0.3 of
+        # the sandwich's spread on ccd / cmos)
+        assert (
+            res.metrics[f"coverage.{preset}.balance_jackknife.spread"]
+            < res.metrics[f"coverage.{preset}.balance.spread"]
+        )
+    assert len(res.rows) == 4 * len(config.presets)
     assert "3 capture sets per preset" in res.notes[0]

@@ -18,7 +18,13 @@ uncertainty is compared with the truth:
   against green's, as :func:`validation.compare.compare_with_truth` measures
   it, against its stated uncertainty
   (:func:`validation.compare.channel_scale_variance`: the chart's noise, and
-  the response's and the vignetting's errors relative to the chart).
+  the response's and the vignetting's errors relative to the chart);
+* the **balance again**, each capture set calibrated a second time with
+  ``g``'s covariance stated by the exposure jackknife
+  (``response.covariance = "exposure jackknife"``,
+  :func:`photoquant.response.covariance.exposure_jackknife_factor`): the
+  same ``g``, another statement of its error (where the run's calibration
+  keeps the default response method and options).
 
 The band an honest uncertainty falls in: the share within the nominal 95 %
 interval of ``n`` independent values has a standard error
@@ -30,7 +36,8 @@ response's own stated covariance is its statistical part only (its bias, a rippl
 bracket's step, is not in it: :doc:`/user-guide/correct`), which the
 balance's and the vignetting's rows inherit.
 
-The metrics are reported, not checked against a baseline. The experiment
+The jackknife's row shows what the other statement of ``g``'s error gives on
+the same capture sets. The metrics are reported, not checked against a baseline. The experiment
 runs in ``--full`` (``coverage_seeds = 50``) and when named.
 
 References
@@ -50,7 +57,7 @@ from validation.config import ValidationConfig
 from validation.experiments.base import ExperimentResult, fmt_num, fmt_pct
 from validation.experiments.shared import Shared
 
-__all__ = ["run", "TITLE", "SHAPE", "DEFAULT_SEEDS", "coverage_z", "summary"]
+__all__ = ["run", "TITLE", "SHAPE", "DEFAULT_SEEDS", "JACKKNIFE", "coverage_z", "summary"]
 
 TITLE = "Calibrated parameters' stated uncertainty over seeds"
 
@@ -65,6 +72,9 @@ PARAMETERS = (
     ("vignetting", "vignetting map (grid)"),
     ("balance", "balance (test scene's channel scale)"),
 )
+
+JACKKNIFE = ("balance_jackknife", "balance, g's covariance by the exposure jackknife")
+"""The balance row of the second calibration (``response.covariance = "exposure jackknife"``)."""
 
 
 def coverage_z(manifest: Path, truth: Any, model: Any) -> dict[str, np.ndarray]:
@@ -128,7 +138,8 @@ def _preset_z(
 
     camera = camera_from_preset(config.preset_source(preset))
     truth = camera.truth(SHAPE)
-    found: dict[str, list[np.ndarray]] = {key: [] for key, _ in PARAMETERS}
+    found: dict[str, list[np.ndarray]] = {key: [] for key, _ in (*PARAMETERS, JACKKNIFE)}
+    jackknife = not config.calibrate_kwargs  # the default response method and options
     for i in range(seeds):
         shared.say(f"  {preset}: coverage capture {i + 1}/{seeds}")
         manifest = write_capture_set(
@@ -142,6 +153,9 @@ def _preset_z(
         model = pq.calibrate_manifest(manifest, **config.calibrate_kwargs)
         for key, z in coverage_z(manifest, truth, model).items():
             found[key].append(z)
+        if jackknife:
+            other = pq.calibrate_manifest(manifest, response={"covariance": "exposure jackknife"})
+            found[JACKKNIFE[0]].append(coverage_z(manifest, truth, other)["balance"])
     return found
 
 
@@ -155,7 +169,9 @@ def run(
     channels = 3  # pqsim's cameras
     for preset in config.presets:
         found = _preset_z(config, shared, preset, seeds)
-        for key, label in PARAMETERS:
+        for key, label in (*PARAMETERS, JACKKNIFE):
+            if key == JACKKNIFE[0] and not found[key]:
+                continue  # a calibration other than the default's: no second one
             z = np.concatenate(found[key]) if found[key] else np.empty(0)
             independent = {"lut": z.size, "vignetting": seeds * channels}.get(key, z.size)
             stats = summary(z, independent)
