@@ -144,17 +144,17 @@ def _uncertainty(m: _Metrics) -> list[Headline]:
 
 def _coverage(m: _Metrics) -> list[Headline]:
     out = []
-    for key, label in (
-        ("lut", "sensor LUT"),
-        ("vignetting", "vignetting"),
-        ("balance", "balance"),
-        ("balance_jackknife", "balance, jackknife g"),
+    for key, quantity in (
+        ("lut", "sensor LUT z spread; in 95 %"),
+        ("vignetting", "vignetting z spread; in 95 %"),
+        ("balance", "balance z spread; in 95 %"),
+        ("balance_jackknife", "jackknife g: balance, the same"),
     ):
         pattern = f"coverage.{{p}}.{key}"
         if m.has(pattern + ".spread"):
             spread = m.join(pattern + ".spread", lambda v: _num(v, ".2f"))
             within = m.join(pattern + ".within_95", lambda v: _num(v and 100 * v, ".1f"))
-            out.append((f"{label} z spread; in 95 %", f"{spread}; {within} %", "–", "1; 95 %"))
+            out.append((quantity, f"{spread}; {within} %", "–", "1; 95 %"))
     return out
 
 
