@@ -17,13 +17,14 @@ Two kernels carry the whole screen once its pixels are drawn:
 
 The screen's numpy twin forms the sandwich's ``ψᵀψ`` and the noise line's
 normal equations by BLAS products, which add in another order than these
-loops: the two paths agree to rounding (relative ``1e-12`` on the times and
-their covariance, tested), not to the bit. Measured (1024×768×3, K = 4,
-N = 1, 4 000 pixels drawn, one thread, 2026-12-04 on the shared 2-core
-machine): the screen's pairs and passes 8.0 → 1.4 ms.
+loops: the two paths agree to rounding (relative ``1e-12`` on the times,
+``1e-9`` on their covariance, tested), not to the bit. Measured (1024×768×3,
+K = 4, N = 1, 4 000 pixels drawn, one thread, min of 1 000 calls,
+2026-12-04 on the shared 2-core machine): ``refine_by_pairs`` 8.5 → 2.85 ms,
+of which the pairs 0.35 ms and the passes 1.7–1.9 ms.
 
 The helpers (:func:`interp_near`, :func:`rounding_at`, :func:`table_index`,
-:func:`huber_iterations`) are compiled on their own and
+:func:`lerp_at`, :func:`huber_iterations`) are compiled on their own and
 called from the kernels; every name here is its plain-Python body when numba
 is not installed (the callers then take their numpy twins).
 """
@@ -39,6 +40,7 @@ from photoquant._numba import HAVE_NUMBA, compile_kernel
 __all__ = [
     "huber_iterations",
     "interp_near",
+    "lerp_at",
     "pair_pass",
     "pairs_of_values",
     "rounding_at",
@@ -95,6 +97,13 @@ def table_index(
     return i, (zc - levels[i]) / (levels[i + 1] - levels[i])
 
 
+def lerp_at(table: Any, i: int, frac: float) -> float:  # pragma: no cover - numba
+    """``table`` a fraction ``frac`` of the way from entry ``i`` to ``i + 1`` (with
+    :func:`table_index`: :meth:`photoquant.exposure._Tables.at`'s arithmetic)."""
+    a = table[i]
+    return a + frac * (table[i + 1] - a)
+
+
 def pairs_of_values(
     values: Any, order: Any, sat_thr: Any, dark_thr: Any, tabs: Any, levels: Any,
     even: bool, inv_step: float, quota: int, keep: Any, entries: Any, ends: Any,
@@ -108,8 +117,9 @@ def pairs_of_values(
     holds ``g`` and its segments' slopes on ``levels``. A value is valid where
     it is not clipped, ``g`` is finite there and its segment rises. Writes, as
     :func:`photoquant.exposure._selected_pairs` returns them, the rows kept
-    (channel, position in ``order``) and the pairs (row, step, channel), and each pair's ``g`` and values at its two
-    ends into ``ends`` ``(4, ·)``: ``y_lo, y_hi, z_lo, z_hi``.
+    (channel, position in ``order``) and the pairs (row, step, channel), and
+    each pair's ``g`` and values at its two ends into ``ends`` ``(4, ·)``:
+    ``y_lo, y_hi, z_lo, z_hi``.
     """
     n_rep, n_k, n_pix, n_ch = values.shape
     n_lv = levels.size
@@ -135,10 +145,8 @@ def pairs_of_values(
                 z[k] = float(total) if n_rep == 1 else total / n_rep
                 i, frac = table_index(z[k], levels, even, inv_step)
                 base = ch * n_lv + i
-                a = tabs[0, base]
-                y[k] = a + frac * (tabs[0, base + 1] - a)
-                b = tabs[1, base]
-                seg = b + frac * (tabs[1, base + 1] - b)
+                y[k] = lerp_at(tabs[0], base, frac)
+                seg = lerp_at(tabs[1], base, frac)
                 clipped = hi_v >= sat_thr[ch] or lo_v <= dark_thr[ch]
                 ok[k] = (not clipped) and np.isfinite(y[k]) and seg > 0
             kept = False
@@ -200,8 +208,8 @@ def pair_pass(
         for end in range(2):
             zz = zl if end == 0 else zh
             i, frac = table_index(zz, levels, even, inv_step)
-            s1 = d1[c, i] + frac * (d1[c, i + 1] - d1[c, i])
-            s2 = d2[c, i] + frac * (d2[c, i + 1] - d2[c, i])
+            s1 = lerp_at(d1[c], i, frac)
+            s2 = lerp_at(d2[c], i, frac)
             v_one = max(line[c, 0] + line[c, 1] * zz, 1.0 / 12.0)
             r_one = rounding_at(np.sqrt(max(v_one - 1.0 / 12.0, 0.0)), rtable, n_tab)
             v_mean = v_one if n_rep == 1 else v_one / n_rep + r_one
@@ -356,8 +364,7 @@ def screen_passes(
     for e in range(n_pairs):  # g'' at the observed values: the bias before any prediction
         for end in range(2):
             i, frac = table_index(z_lo[e] if end == 0 else z_hi[e], levels, even, inv_step)
-            b = d2[chan[e], i]
-            s2 = b + frac * (d2[chan[e], i + 1] - b)
+            s2 = lerp_at(d2[chan[e]], i, frac)
             if end == 0:
                 s2_lo[e] = s2
             else:
@@ -466,6 +473,7 @@ if HAVE_NUMBA:  # pragma: no cover - depends on the environment
     rounding_at = compile_kernel(rounding_at)
     interp_near = compile_kernel(interp_near)
     table_index = compile_kernel(table_index)
+    lerp_at = compile_kernel(lerp_at)
     pairs_of_values = compile_kernel(pairs_of_values)
     pair_pass = compile_kernel(pair_pass, error_model="numpy")
     huber_iterations = compile_kernel(huber_iterations)
