@@ -44,9 +44,8 @@ LEVELS = np.array([20, 40, 60, 90, 110, 160, 200, 230])
 WHITE = (1.0, 1.0, 1.0)
 
 
-def _repeated_fits(n_captures: int, noise_dn: float):
-    """``g`` and its stated standard deviation at LEVELS over independent captures."""
-    g, sd = [], []
+def _captures(n_captures: int, noise_dn: float):
+    """``(seed, frames (1, K, 60, 80, 3))``: independent captures of analytic scenes."""
     for seed in range(n_captures):
         rng = np.random.default_rng(seed)
         frames = capture(
@@ -56,6 +55,13 @@ def _repeated_fits(n_captures: int, noise_dn: float):
             noise_dn=noise_dn,
             rng=rng,
         )
+        yield seed, frames
+
+
+def _repeated_fits(n_captures: int, noise_dn: float):
+    """``g`` and its stated standard deviation at LEVELS over independent captures."""
+    g, sd = [], []
+    for seed, frames in _captures(n_captures, noise_dn):
         rec = camera_response_Debevec1997(
             frames[0], EXPOSURES, saturation_level=np.full(3, 255.0), uncertainty=True, rng=seed
         )
@@ -91,6 +97,13 @@ GAUGE_LEVEL = 127
 127 and 128), and where its stated variance is 0: the truth is compared relative to it."""
 
 
+def _true_g_at_levels() -> np.ndarray:
+    """The analytic camera's ``g`` at LEVELS relative to the gauge level, ``(3, levels)``."""
+    return np.stack(
+        [true_g(LEVELS, c, balance=WHITE) - true_g(GAUGE_LEVEL, c, balance=WHITE) for c in range(3)]
+    )
+
+
 @pytest.mark.xfail(
     strict=True,
     reason="Debevec's g is biased by noise and quantisation (a ripple with the bracket's "
@@ -100,9 +113,7 @@ GAUGE_LEVEL = 127
 )
 def test_stated_uncertainty_covers_the_truth(fits):
     g, sd = fits
-    truth = np.stack(
-        [true_g(LEVELS, c, balance=WHITE) - true_g(GAUGE_LEVEL, c, balance=WHITE) for c in range(3)]
-    )
+    truth = _true_g_at_levels()
     inside = np.abs(g - truth[None]) / sd < 1.96
     assert inside.mean() > 0.93
 
@@ -112,15 +123,7 @@ def _method_fits(n_captures: int, noise_dn: float, covariance: str):
     the given ``covariance``; ``g`` relative to the gauge level (the truth's reference)."""
     g, sd = [], []
     options = DebevecResponseOptions(covariance=covariance)
-    for seed in range(n_captures):
-        rng = np.random.default_rng(seed)
-        frames = capture(
-            log_uniform_scene(rng, (60, 80, 3)),
-            EXPOSURES,
-            balance=WHITE,
-            noise_dn=noise_dn,
-            rng=rng,
-        )
+    for seed, frames in _captures(n_captures, noise_dn):
         stack = ExposureStack(frames, EXPOSURES, bit_depth=8, saturation_level=[255] * 3)
         model = characterise_response_Debevec1997(stack, options, seed).model
         rel = (
@@ -141,9 +144,7 @@ def test_the_exposure_jackknife_states_what_the_sandwich_misses(noise_dn):
     bias is one pattern): at 0.7 DN the sandwich puts 70 % inside 1.96 σ, the
     jackknife 96 % (rms z 1.73 and 0.94); at 2 DN 30 % and 74 % (rms z 3.17 and 1.70).
     """
-    truth = np.stack(
-        [true_g(LEVELS, c, balance=WHITE) - true_g(GAUGE_LEVEL, c, balance=WHITE) for c in range(3)]
-    )
+    truth = _true_g_at_levels()
     shares, rms = {}, {}
     for covariance in ("sandwich", "exposure jackknife"):
         g, sd = _method_fits(10, noise_dn, covariance)
