@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -630,14 +631,15 @@ def write_capture_set(
         raise InputError("`dark_subtraction` needs `dark_frames` (how many at each exposure)")
     folder, non_empty = check_output_folder(folder, overwrite)
 
-    # -- simulate everything in memory first -----------------------------------------
+    # -- each capture simulated just before its frames are written (one set's frames in
+    # memory at a time); every capture draws from its own stream, so the order is free
     streams = np.random.SeedSequence(int(seed)).spawn(int(n_views) + 3)
     gens = [np.random.default_rng(s) for s in streams]
     world = scene_calibration_world((h, w), gens[0], margin=int(pan), channels=camera.n_channels)
     shifts = pan_shifts(int(n_views), int(pan))
     pv = views_by_pan(world, (h, w), shifts, stride=correspondence_stride, max_tracks=max_tracks)
     views = [
-        camera.capture(pv.l[i], t, n_repeats, gens[1 + i], workers=workers)
+        partial(camera.capture, pv.l[i], t, n_repeats, gens[1 + i], workers=workers)
         for i in range(int(n_views))
     ]
     l_irr = scene_irradiance(
@@ -647,15 +649,17 @@ def write_capture_set(
         channels=camera.n_channels,
         falloff=irradiance_falloff,
     )
-    irr = camera.capture(l_irr, t, n_repeats, gens[n_views + 1], optics=False, workers=workers)
-    test = camera.capture(l_scene, t_scene, n_repeats, gens[n_views + 2], workers=workers)
+    irr = partial(
+        camera.capture, l_irr, t, n_repeats, gens[n_views + 1], optics=False, workers=workers
+    )
+    test = partial(camera.capture, l_scene, t_scene, n_repeats, gens[n_views + 2], workers=workers)
     extra: dict[str, tuple[CaptureSource, Mapping[str, Any]]] = {}
     if glare_source is not None:
         # stream V + 3: spawn(V + 4)'s first V + 3 children are spawn(V + 3)'s
         glare_rng = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(n_views + 4)[-1])
         l_glare, t_glare = glare_source
         extra["glare"] = (
-            camera.capture(l_glare, t_glare, n_repeats, glare_rng, workers=workers),
+            partial(camera.capture, l_glare, t_glare, n_repeats, glare_rng, workers=workers),
             {},
         )
     if dark_frames:
@@ -665,8 +669,14 @@ def write_capture_set(
         t_dark = np.unique(np.concatenate(times))
         l_dark = np.zeros((h, w, camera.n_channels))
         extra["dark"] = (
-            camera.capture(
-                l_dark, t_dark, int(dark_frames), dark_rng, optics=False, workers=workers
+            partial(
+                camera.capture,
+                l_dark,
+                t_dark,
+                int(dark_frames),
+                dark_rng,
+                optics=False,
+                workers=workers,
             ),
             {},
         )

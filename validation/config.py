@@ -12,7 +12,9 @@ own tests). Three configurations are built in:
 ``full``
     The paper's settings (§6.1 of [PQ]): 1024×768, ``N = 10``, ``K = 8``
     (1–200 ms), ``V = 3``, the ColorChecker rendered by Mitsuba 3, and a
-    calibration from a whole Mitsuba-rendered capture set per preset.
+    calibration from a whole Mitsuba-rendered capture set per preset; the
+    studies beyond the paper (the leaderboard, the robustness table) on the
+    quick job's 320×240, ``N = 4`` capture sets.
 ``tiny``
     96×72, for the test suite only.
 
@@ -77,12 +79,25 @@ NOT_CONDITIONS: tuple[str, ...] = (
     "robustness",
     "peers",
     "coverage_seeds",
+    "study_shape",
+    "study_repeats",
 )
 """The fields :meth:`ValidationConfig.conditions` leaves out (the reasons there)."""
 
 
 class ValidationError(PhotoquantError):
     """The validation job was asked for something it cannot do (bad option, baseline mismatch)."""
+
+
+def _check_shape(value: Any, name: str) -> tuple[int, int]:
+    """An image size ``(H, W)`` of at least 48×64, as ints (a :class:`ValidationError` else)."""
+    try:
+        h, w = (int(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValidationError(f"`{name}` must be (H, W), got {value!r}") from None
+    if h < 48 or w < 64:
+        raise ValidationError(f"`{name}` must be at least (48, 64), got {value}")
+    return h, w
 
 
 def _check_int(value: Any, name: str, lo: int) -> int:
@@ -178,6 +193,13 @@ class ValidationConfig:
         parameters' stated uncertainty over seeds,
         :mod:`validation.experiments.coverage`); ``0`` leaves it out of a default
         run. Left out of :meth:`conditions`: its metrics are reported, never checked.
+    study_shape : (H, W) or None
+        Image size of the capture sets of the studies beyond the paper's
+        experiments (the ``leaderboard`` and the ``robustness`` tables,
+        :meth:`study_config`); ``None``: :attr:`shape`. Their metrics are
+        reported, never checked: not a condition.
+    study_repeats : int or None
+        ``N`` of those capture sets; ``None``: :attr:`n_repeats`.
     """
 
     name: str = "quick"
@@ -207,11 +229,17 @@ class ValidationConfig:
     robustness: bool = False
     peers: bool = False
     coverage_seeds: int = 0
+    study_shape: tuple[int, int] | None = None
+    study_repeats: int | None = None
 
     def __post_init__(self) -> None:
-        h, w = (int(v) for v in self.shape)
-        if h < 48 or w < 64:
-            raise ValidationError(f"`shape` must be at least (48, 64), got {self.shape}")
+        h, w = _check_shape(self.shape, "shape")
+        if self.study_shape is not None:
+            object.__setattr__(self, "study_shape", _check_shape(self.study_shape, "study_shape"))
+        if self.study_repeats is not None:
+            object.__setattr__(
+                self, "study_repeats", _check_int(self.study_repeats, "study_repeats", 1)
+            )
         if self.chart not in CHART_SOURCES:
             raise ValidationError(
                 f"`chart` must be one of {list(CHART_SOURCES)}, got {self.chart!r}"
@@ -240,6 +268,20 @@ class ValidationConfig:
         object.__setattr__(self, "calibrate_kwargs", dict(self.calibrate_kwargs))
         object.__setattr__(
             self, "preset_files", tuple((str(k), str(v)) for k, v in self.preset_files)
+        )
+
+    def study_config(self) -> ValidationConfig:
+        """The configuration of the studies beyond the paper's experiments (the
+        ``leaderboard``, ``robustness`` and ``robustness_pairs``): this one with
+        :attr:`study_shape` and :attr:`study_repeats` as its image size and ``N``
+        (itself when neither is set)."""
+        if self.study_shape is None and self.study_repeats is None:
+            return self
+        return self.replace(
+            shape=self.study_shape or self.shape,
+            n_repeats=self.study_repeats or self.n_repeats,
+            study_shape=None,
+            study_repeats=None,
         )
 
     def preset_source(self, preset: str) -> str:
@@ -310,9 +352,12 @@ FULL = ValidationConfig(
     robustness=True,
     peers=True,
     coverage_seeds=50,
+    study_shape=(240, 320),
+    study_repeats=4,
 )
 """The paper's settings (§6.1): 1024×768, ``N = 10, K = 8, V = 3``; rendered chart and captures,
-the peers ranked."""
+the peers ranked; the leaderboard and the robustness table on the quick job's 320×240,
+``N = 4`` capture sets (a calibration there costs a tenth of one at 1024×768, ``N = 10``)."""
 
 TINY = ValidationConfig(
     name="tiny",

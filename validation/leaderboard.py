@@ -592,9 +592,7 @@ def _scores(rep: dict[str, Any], cap: _Capture, model: Any) -> dict[str, float |
         out["cc_r"] = float(rep["colorchecker"]["r_camera"])
         out["cc_r_cie"] = _finite(rep["colorchecker"].get("r_cie_rgb"))
     elif cap.chart is not None:
-        if "leaderboard_chart" not in rep:  # once per calibration (the memo keeps rep)
-            rep["leaderboard_chart"] = cap.chart(model)
-        out.update(rep["leaderboard_chart"])
+        out.update(cap.chart(model))
     return out
 
 
@@ -620,11 +618,11 @@ def _run_entry(
     repeat_below_s: float,
     floors: dict[str, float],
     say: Progress,
-    memo: dict[tuple[int, str], Any],
+    memo: dict[tuple[int, str], _Scored],
 ) -> Entry:
     """Calibrate and score one method on every capture (or say why it is n/a / failed).
 
-    ``memo`` keeps each calibration by capture and keywords: the default
+    ``memo`` keeps each calibration's scores by capture and keywords: the default
     pipeline, on every board, is calibrated and scored once per capture.
     """
     from validation.compare import compare_with_truth
@@ -645,8 +643,7 @@ def _run_entry(
         kwargs = _calibrate_kwargs(cfg, step, method, cap.calibrate_seed)
         key = (id(cap), json.dumps(kwargs, sort_keys=True, default=repr))
         if key in memo:
-            model, times, rep = memo[key]
-            _score_into(entry, step, cap, model, times, rep, floors)
+            _record(entry, cap, memo[key], floors)
             continue
         times: list[float] = []
         try:
@@ -670,7 +667,7 @@ def _run_entry(
                 entry.scores.clear()
                 return entry
             model, rep = partial
-            _score_into(entry, step, cap, model, [], rep, floors, kept=_BEFORE_VIGNETTING)
+            _record(entry, cap, _scored(step, cap, model, [], rep, _BEFORE_VIGNETTING), floors)
             why = _one_line(exc)
             why = why if len(why) <= 120 else why[:119].rstrip() + "…"
             entry.notes[cap.preset] = (
@@ -678,8 +675,9 @@ def _run_entry(
                 "the sensor LUT's scores are kept"
             )
             continue
-        memo[key] = (model, times, rep)
-        _score_into(entry, step, cap, model, times, rep, floors)
+        # the scores only: a camera and its comparison maps hold ~100 MB at 1024x768
+        memo[key] = _scored(step, cap, model, times, rep)
+        _record(entry, cap, memo[key], floors)
     return entry
 
 
@@ -722,31 +720,54 @@ def _response_alone(
     return model, rep
 
 
-def _score_into(
-    entry: Entry,
+@dataclass(frozen=True, eq=False)
+class _Scored:
+    """What a board keeps of one calibration: its scores, times, the scene's noise floor
+    and (response step) the curves; ``floor`` is ``None`` where the pipeline was not the
+    entry's whole one."""
+
+    scores: dict[str, float | None]
+    time_s: float | None
+    step_time_s: float | None
+    floor: float | None
+    curves: dict[str, np.ndarray] | None
+
+
+def _scored(
     step: str,
     cap: _Capture,
     model: Any,
     times: list[float],
     rep: dict[str, Any],
-    floors: dict[str, float],
     kept: frozenset[str] | None = None,
-) -> None:
-    """Score one calibration into ``entry``; with ``kept``, only those scores (the rest
-    ``None``, no calibration time: the pipeline was not the entry's whole one)."""
+) -> _Scored:
+    """Score one calibration (``rep``: its comparison with the truth); with ``kept``, only
+    those scores (the rest ``None``, no calibration time: the pipeline was not the entry's
+    whole one)."""
     scores = _scores(rep, cap, model)
     if kept is not None:
         scores = {k: (v if k in kept else None) for k, v in scores.items()}
-    entry.scores[cap.preset] = scores
-    if times:
-        entry.time_s[cap.preset] = float(statistics.median(times))
     step_t = model.report.get("timings_s", {}).get(_STEP_TIMING[step])
-    if step_t is not None:
-        entry.step_time_s[cap.preset] = float(step_t)
-    if kept is None:
-        floors.setdefault(cap.preset, float(rep["scene"]["noise_floor_mean"]))
-    if step == "response":
-        entry.curves[cap.preset] = _curves(model, cap.truth.camera)
+    return _Scored(
+        scores=scores,
+        time_s=float(statistics.median(times)) if times else None,
+        step_time_s=None if step_t is None else float(step_t),
+        floor=float(rep["scene"]["noise_floor_mean"]) if kept is None else None,
+        curves=_curves(model, cap.truth.camera) if step == "response" else None,
+    )
+
+
+def _record(entry: Entry, cap: _Capture, scored: _Scored, floors: dict[str, float]) -> None:
+    """One capture's :class:`_Scored` into ``entry`` (and the board's noise floor)."""
+    entry.scores[cap.preset] = dict(scored.scores)
+    if scored.time_s is not None:
+        entry.time_s[cap.preset] = scored.time_s
+    if scored.step_time_s is not None:
+        entry.step_time_s[cap.preset] = scored.step_time_s
+    if scored.floor is not None:
+        floors.setdefault(cap.preset, scored.floor)
+    if scored.curves is not None:
+        entry.curves[cap.preset] = scored.curves
 
 
 def _curves(model: Any, cam: Any) -> dict[str, np.ndarray]:
@@ -905,6 +926,7 @@ def run_leaderboard(
     """
     from photoquant.errors import InputError
     from photoquant.utils import check_int
+    from validation._memory import return_free_memory
     from validation.experiments.shared import Shared
 
     say = progress or _stderr
@@ -961,7 +983,7 @@ def run_leaderboard(
                 "the ColorChecker column (CC r) is empty: the chart's spectral data need "
                 "colour-science (pip install colour-science)"
             )
-        memo: dict[tuple[int, str], Any] = {}
+        memo: dict[tuple[int, str], _Scored] = {}
         lb.describe = "; ".join(dict.fromkeys(c.describe() for c in captures))
         if given:
             lb.manifests = {c.preset: str(c.manifest) for c in captures}
@@ -972,10 +994,14 @@ def run_leaderboard(
             if methods is not None and not selected:
                 continue  # --methods names none of this step's
             floors: dict[str, float] = {}
-            entries = [
-                _run_entry(step, m, captures, config, repeats, repeat_below_s, floors, say, memo)
-                for m in selected
-            ]
+            entries = []
+            for m in selected:
+                entries.append(
+                    _run_entry(
+                        step, m, captures, config, repeats, repeat_below_s, floors, say, memo
+                    )
+                )
+                return_free_memory()
             board = Board(step, entries, floors)
             board.rank()
             lb.boards.append(board)

@@ -203,6 +203,7 @@ def run_validation(
     """
     from photoquant.io.atomic import make_scratch_directory, remove_scratch_directory
     from photoquant.utils import check_int
+    from validation._memory import return_free_memory
     from validation.experiments.shared import Shared
 
     names = _select(experiments, config)
@@ -217,6 +218,7 @@ def run_validation(
         if beside and len(beside) < len(names):
             for preset in config.presets:  # simulated and calibrated once, before the fork
                 _calibrate_or_remember(shared, preset)
+            return_free_memory()
             other = _start_beside(beside, names, config, seed, root, shared)
             try:
                 for name in names:
@@ -282,6 +284,7 @@ def _run_one(
 ) -> ExperimentResult:
     """One experiment, timed; a refusal of the calibrator is its result (skipped, with why)."""
     from photoquant.errors import PhotoquantError
+    from validation._memory import return_free_memory
 
     module = import_module(EXPERIMENTS[name])
     shared.say(f"validate: [{names.index(name) + 1}/{len(names)}] {module.TITLE} ...")
@@ -293,6 +296,8 @@ def _run_one(
         res.skipped = f"failed: {exc}"
         shared.say(f"validate: {name} failed: {exc}")
     res.elapsed_s = time.perf_counter() - t0
+    shared.release_frames()
+    return_free_memory()
     return res
 
 

@@ -66,10 +66,13 @@ def _slug(name: str) -> str:
 def run(
     config: ValidationConfig, seed: int, workdir: Path, *, shared: Shared | None = None
 ) -> ExperimentResult:
-    """Rank the registered methods of :func:`steps_for` on the run's capture sets."""
+    """Rank the registered methods of :func:`steps_for` on the run's capture sets (those of
+    its study configuration, :meth:`~validation.config.ValidationConfig.study_config`)."""
     from validation.leaderboard import PRIMARY, run_leaderboard
 
-    shared = shared or Shared(config, seed, workdir)
+    run_shared = shared or Shared(config, seed, workdir)
+    shared = run_shared.study()
+    config = shared.config
     res = ExperimentResult("leaderboard", TITLE, "validation.leaderboard")
     lb = run_leaderboard(
         steps_for(config),
@@ -96,9 +99,16 @@ def run(
                 progress=lambda msg: shared.say(f"  {msg}"),
             )
         )
+    run_shared.seeds.update(shared.seeds)
     for lb in runs:
         _report(res, lb, PRIMARY)
     _figures(res, runs)
+    if shared is not run_shared:
+        h, w = config.shape
+        res.notes.append(
+            f"Ranked on capture sets of {w}x{h}, N = {config.n_repeats} (the run's study size: "
+            "a method's calibration there costs a tenth of one at the paper's size)."
+        )
     res.notes.append(
         "Every registered method of each ranked step (plug-ins included; 'None' left out) "
         "calibrates the run's capture sets with the other steps at the photoquant profile's "

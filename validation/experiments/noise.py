@@ -145,8 +145,11 @@ def run(
                     lnc = np.log(c.photoquantity.astype(np.float64))
                 valid_ln &= ~c.mask & np.isfinite(lnc)
                 if tag == "A":
-                    raw_a[n], ln_a[n], corr_a[n] = fr.mean(axis=0), lnc, c
-                    captures_a[n] = cap
+                    raw_a[n], ln_a[n] = fr.mean(axis=0), lnc
+                    if n in (1, 4, 10):  # the studies below read these (frames: N = 4 only)
+                        corr_a[n] = c
+                    if n == 4:
+                        captures_a[n] = cap
                 else:
                     raw_b[n], ln_b[n] = fr.mean(axis=0), lnc
         # 1. N = 4 against the noise-free truth

@@ -338,6 +338,7 @@ def run(
     from photoquant.errors import PhotoquantError
 
     shared = shared or Shared(config, seed, workdir)
+    config = config.study_config()
     rows = list(DISTURBANCES if disturbances is None else disturbances)
     res = ExperimentResult(key, title, "McCann & Rizzi 2007")
     res.paper = {"levels": {d.key: d.label for d in rows}}
@@ -417,6 +418,6 @@ def run(
         "Every row has the clean camera's noise draw and is compared with the clean camera on "
         "the same test scene (the glare rows: the lamp scene); the default pipeline calibrates "
         "(exposure refinement on; a glare capture only where the row says). Reported, not "
-        "baseline-checked."
+        f"baseline-checked. Capture sets of {config.describe()}."
     )
     return res

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -213,6 +213,18 @@ class Shared:
         self.cache: dict[Any, Any] = {}
         """Memo for results several experiments share (keys name their owner)."""
 
+    def study(self) -> Shared:
+        """The shared state of the run's studies beyond the paper
+        (:meth:`~validation.config.ValidationConfig.study_config`): this one where the study
+        configuration is the run's, else one of its own (capture sets in ``study/``), made
+        once. Its seed streams are the run's (the same master seed and stream names)."""
+        study = self.config.study_config()
+        if study is self.config:
+            return self
+        if "study" not in self.cache:
+            self.cache["study"] = Shared(study, self.seed, self.workdir / "study", self.say)
+        return cast(Shared, self.cache["study"])
+
     def stream(self, *names: Any) -> int:
         """The seed of stream ``names`` (recorded in :attr:`seeds` for the report)."""
         s = stream_seed(self.seed, *names)
@@ -301,13 +313,19 @@ class Shared:
     def calibration_inputs(self, preset: str) -> CalibrationInputs:
         """The capture set of ``preset`` as :func:`photoquant.calibrate` reads it (all its
         views), for calibrating it other ways; the last preset's is kept (one set's frames
-        in memory: the experiments go through the presets in turn)."""
+        in memory: the experiments go through the presets in turn) until
+        :meth:`release_frames`."""
         cal = self.calibration(preset)
         kept = self.cache.get("calibration-inputs")
         if kept is None or kept[0] != preset:
             kept = (preset, load_calibration_inputs(cal.manifest))
             self.cache["calibration-inputs"] = kept
         return kept[1]
+
+    def release_frames(self) -> None:
+        """Drop the frames :meth:`calibration_inputs` keeps (~0.8 GB a capture set at
+        1024×768, N = 10): the run calls it after each experiment."""
+        self.cache.pop("calibration-inputs", None)
 
     # ------------------------------------------------------------------ scenes
 
