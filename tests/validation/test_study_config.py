@@ -84,3 +84,42 @@ def test_the_robustness_table_simulates_at_the_study_size(tmp_path) -> None:
     res = run(cfg, 0, tmp_path, disturbances=rows)
     assert res.metrics["robustness.ccd.defects.scene"] is not None
     assert any("64x48, N = 2" in note for note in res.notes)
+
+
+def test_the_second_process_runs_the_small_frame_studies_in_the_full_job() -> None:
+    from validation.experiments import BESIDE, STUDIES, beside_for
+
+    assert beside_for(QUICK) == BESIDE == ("leaderboard", "noise")
+    # --full: the paper-size experiments (noise included) in one process, the studies on
+    # small frames in the other
+    assert beside_for(FULL) == STUDIES and "noise" not in STUDIES
+    assert {"leaderboard", "robustness"} <= set(STUDIES)
+
+
+@pytest.mark.slow
+def test_a_run_with_its_studies_in_a_second_process_gives_the_same_metrics(
+    tmp_path, monkeypatch
+) -> None:
+    """The studies are forked before the presets are calibrated (their capture sets are
+    their own): the metrics are those of a run in one process."""
+    import validation.experiments.robustness as robustness
+    from validation.experiments import run_validation
+
+    monkeypatch.setattr(
+        robustness, "DISTURBANCES", [d for d in robustness.DISTURBANCES if d.key == "defects"]
+    )
+    cfg = TINY.replace(presets=("ccd",), study_shape=(48, 64), study_repeats=2)
+    runs = [
+        run_validation(
+            cfg,
+            3,
+            experiments=["balance", "robustness"],
+            workdir=tmp_path / str(workers),
+            progress=lambda _m: None,
+            workers=workers,
+        )
+        for workers in (1, 2)
+    ]
+    one, two = ({k: r.experiments[k].metrics for k in ("balance", "robustness")} for r in runs)
+    assert one == two and one["robustness"]["robustness.ccd.defects.scene"] is not None
+    assert runs[0].seeds == runs[1].seeds

@@ -78,6 +78,20 @@ BESIDE: tuple[str, ...] = ("leaderboard", "noise")
 """Experiments a run with two workers gives to a second process, beside the others there
 (:func:`run_validation`): about half of the quick job's time after the calibrations."""
 
+STUDIES: tuple[str, ...] = ("leaderboard", "robustness", "robustness_pairs")
+"""The studies beyond the paper on capture sets of the configuration's study size
+(:meth:`~validation.config.ValidationConfig.study_config`)."""
+
+
+def beside_for(config: ValidationConfig) -> tuple[str, ...]:
+    """The experiments a run with two workers gives to its second process: :data:`BESIDE`,
+    or, where the configuration's study size is not its own (``--full``), the
+    :data:`STUDIES` — small frames beside the paper-size experiments, so that the two
+    processes together hold about one paper-size capture set's memory (and about half of
+    the full job's time each, measured)."""
+    return STUDIES if config.study_config() is not config else BESIDE
+
+
 REPORTED_ONLY: frozenset[str] = frozenset({"uncertainty", "coverage"})
 """Experiments whose metrics are reported, never checked by ``--check``: a baseline recorded
 before them need not have them."""
@@ -190,8 +204,10 @@ def run_validation(
     workers : int, optional
         Processes: with two (the default where the machine has two CPUs or
         more and ``fork`` is available), the presets are simulated and
-        calibrated first, then the experiments of :data:`BESIDE` run in a
-        forked second process while this one runs the rest. Each experiment's
+        calibrated first, then the experiments of :func:`beside_for` run in a
+        forked second process while this one runs the rest (the studies of
+        ``--full``, which calibrate capture sets of their own, are forked
+        first). Each experiment's
         metrics depend on its seed streams only, not on the process (their
         shared memos are recomputed there: the same values); the timings of
         the calibrations in each process are taken beside the other's work.
@@ -213,20 +229,25 @@ def run_validation(
     shared = Shared(config, seed, root, progress)
     t_start = time.perf_counter()
     results: dict[str, ExperimentResult] = {}
-    beside = [n for n in names if n in BESIDE] if n_workers > 1 else []
+    beside = [n for n in names if n in beside_for(config)] if n_workers > 1 else []
     try:
         if beside and len(beside) < len(names):
-            for preset in config.presets:  # simulated and calibrated once, before the fork
-                _calibrate_or_remember(shared, preset)
-            return_free_memory()
-            other = _start_beside(beside, names, config, seed, root, shared)
-            try:
-                for name in names:
-                    if name not in beside:
-                        results[name] = _run_one(name, names, config, seed, root, shared)
-                done, seeds = other.results()
-            finally:
-                other.stop()
+            if beside_for(config) == BESIDE:
+                # simulated and calibrated once, before the fork: both processes read them
+                for preset in config.presets:
+                    _calibrate_or_remember(shared, preset)
+                return_free_memory()
+            # else the studies, on capture sets of their own: forked first, without the
+            # paper-size calibrations in its memory
+            with _one_blas_thread():  # in both processes (the fork inherits it)
+                other = _start_beside(beside, names, config, seed, root, shared)
+                try:
+                    for name in names:
+                        if name not in beside:
+                            results[name] = _run_one(name, names, config, seed, root, shared)
+                    done, seeds = other.results()
+                finally:
+                    other.stop()
             results.update(done)
             shared.seeds.update(seeds)
         else:
@@ -242,6 +263,16 @@ def run_validation(
         seeds=dict(shared.seeds),
         elapsed_s=time.perf_counter() - t_start,
     )
+
+
+def _one_blas_thread() -> Any:
+    """A context in which BLAS runs on one thread (threadpoolctl), for the two processes of
+    a run: OpenBLAS's threads wait for work by spinning, so two processes' pools on two
+    cores slow each other's solves several times over (a peer's dense least squares in
+    the leaderboard: 25 s a calibration alone, 115 s beside the other process, measured)."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def _default_workers() -> int:
