@@ -231,15 +231,16 @@ def run_validation(
     results: dict[str, ExperimentResult] = {}
     beside = [n for n in names if n in beside_for(config)] if n_workers > 1 else []
     try:
-        if beside and len(beside) < len(names):
-            if beside_for(config) == BESIDE:
-                # simulated and calibrated once, before the fork: both processes read them
-                for preset in config.presets:
-                    _calibrate_or_remember(shared, preset)
-                return_free_memory()
-            # else the studies, on capture sets of their own: forked first, without the
-            # paper-size calibrations in its memory
-            with _one_blas_thread():  # in both processes (the fork inherits it)
+        # BLAS on one thread whatever the number of processes: the same bits either way
+        with _one_blas_thread():
+            if beside and len(beside) < len(names):
+                if beside_for(config) == BESIDE:
+                    # simulated and calibrated once, before the fork: both processes read them
+                    for preset in config.presets:
+                        _calibrate_or_remember(shared, preset)
+                    return_free_memory()
+                # else the studies, on capture sets of their own: forked first, without
+                # the paper-size calibrations in its memory
                 other = _start_beside(beside, names, config, seed, root, shared)
                 try:
                     for name in names:
@@ -248,11 +249,11 @@ def run_validation(
                     done, seeds = other.results()
                 finally:
                     other.stop()
-            results.update(done)
-            shared.seeds.update(seeds)
-        else:
-            for name in names:
-                results[name] = _run_one(name, names, config, seed, root, shared)
+                results.update(done)
+                shared.seeds.update(seeds)
+            else:
+                for name in names:
+                    results[name] = _run_one(name, names, config, seed, root, shared)
     finally:
         if not keep:
             remove_scratch_directory(root)
@@ -266,10 +267,12 @@ def run_validation(
 
 
 def _one_blas_thread() -> Any:
-    """A context in which BLAS runs on one thread (threadpoolctl), for the two processes of
-    a run: OpenBLAS's threads wait for work by spinning, so two processes' pools on two
-    cores slow each other's solves several times over (a peer's dense least squares in
-    the leaderboard: 25 s a calibration alone, 115 s beside the other process, measured)."""
+    """A context in which BLAS runs on one thread (threadpoolctl), for the whole run: with
+    two processes, OpenBLAS's threads wait for work by spinning, so two processes' pools on
+    two cores slow each other's solves several times over (a peer's dense least squares in
+    the leaderboard: 36 s a calibration beside the other process on one thread each, 143 s
+    on two, measured); and a run in one process gives the same bits as a run in two (a
+    reduction on two threads adds in another order)."""
     from threadpoolctl import threadpool_limits
 
     return threadpool_limits(limits=1, user_api="blas")
