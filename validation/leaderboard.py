@@ -643,7 +643,7 @@ def _run_entry(
         kwargs = _calibrate_kwargs(cfg, step, method, cap.calibrate_seed)
         key = (id(cap), json.dumps(kwargs, sort_keys=True, default=repr))
         if key in memo:
-            _record(entry, cap, memo[key], floors)
+            _record(entry, step, cap, memo[key], floors)
             continue
         times: list[float] = []
         try:
@@ -667,7 +667,7 @@ def _run_entry(
                 entry.scores.clear()
                 return entry
             model, rep = partial
-            _record(entry, cap, _scored(step, cap, model, [], rep, _BEFORE_VIGNETTING), floors)
+            _record(entry, step, cap, _scored(cap, model, [], rep, _BEFORE_VIGNETTING), floors)
             why = _one_line(exc)
             why = why if len(why) <= 120 else why[:119].rstrip() + "…"
             entry.notes[cap.preset] = (
@@ -676,8 +676,8 @@ def _run_entry(
             )
             continue
         # the scores only: a camera and its comparison maps hold ~100 MB at 1024x768
-        memo[key] = _scored(step, cap, model, times, rep)
-        _record(entry, cap, memo[key], floors)
+        memo[key] = _scored(cap, model, times, rep)
+        _record(entry, step, cap, memo[key], floors)
     return entry
 
 
@@ -722,19 +722,18 @@ def _response_alone(
 
 @dataclass(frozen=True, eq=False)
 class _Scored:
-    """What a board keeps of one calibration: its scores, times, the scene's noise floor
-    and (response step) the curves; ``floor`` is ``None`` where the pipeline was not the
-    entry's whole one."""
+    """What a board keeps of one calibration: its scores, time, the steps' own times, the
+    scene's noise floor (``None`` where the pipeline was not the entry's whole one) and
+    the response curves (the default pipeline's is shared by every board)."""
 
     scores: dict[str, float | None]
     time_s: float | None
-    step_time_s: float | None
+    step_times_s: dict[str, float]
     floor: float | None
-    curves: dict[str, np.ndarray] | None
+    curves: dict[str, np.ndarray]
 
 
 def _scored(
-    step: str,
     cap: _Capture,
     model: Any,
     times: list[float],
@@ -747,26 +746,29 @@ def _scored(
     scores = _scores(rep, cap, model)
     if kept is not None:
         scores = {k: (v if k in kept else None) for k, v in scores.items()}
-    step_t = model.report.get("timings_s", {}).get(_STEP_TIMING[step])
     return _Scored(
         scores=scores,
         time_s=float(statistics.median(times)) if times else None,
-        step_time_s=None if step_t is None else float(step_t),
+        step_times_s={k: float(v) for k, v in model.report.get("timings_s", {}).items()},
         floor=float(rep["scene"]["noise_floor_mean"]) if kept is None else None,
-        curves=_curves(model, cap.truth.camera) if step == "response" else None,
+        curves=_curves(model, cap.truth.camera),
     )
 
 
-def _record(entry: Entry, cap: _Capture, scored: _Scored, floors: dict[str, float]) -> None:
-    """One capture's :class:`_Scored` into ``entry`` (and the board's noise floor)."""
+def _record(
+    entry: Entry, step: str, cap: _Capture, scored: _Scored, floors: dict[str, float]
+) -> None:
+    """One capture's :class:`_Scored` into ``entry`` of ``step``'s board (and the board's
+    noise floor)."""
     entry.scores[cap.preset] = dict(scored.scores)
     if scored.time_s is not None:
         entry.time_s[cap.preset] = scored.time_s
-    if scored.step_time_s is not None:
-        entry.step_time_s[cap.preset] = scored.step_time_s
+    step_t = scored.step_times_s.get(_STEP_TIMING[step])
+    if step_t is not None:
+        entry.step_time_s[cap.preset] = step_t
     if scored.floor is not None:
         floors.setdefault(cap.preset, scored.floor)
-    if scored.curves is not None:
+    if step == "response":
         entry.curves[cap.preset] = scored.curves
 
 

@@ -236,8 +236,13 @@ def test_the_default_entry_is_the_validation_pipelines_calibration(board):
         scores = lb.board("response").entry("Debevec 1997").scores[preset]
         assert scores["g_rms"] == max(r["rms"] for r in rep["response"])
         assert scores["scene"] == rep["scene"]["error"].e_mean
-        vig = lb.board("vignetting").entry(cal.model.vignetting.method).scores[preset]
-        assert vig == scores  # the default pipeline, on either board
+        vig_entry = lb.board("vignetting").entry(cal.model.vignetting.method)
+        assert vig_entry.scores[preset] == scores  # the default pipeline, on either board
+        # calibrated once (the memo), each board showing its own step's time
+        resp_entry = lb.board("response").entry("Debevec 1997")
+        assert vig_entry.time_s[preset] == resp_entry.time_s[preset]
+        assert vig_entry.step_time_s[preset] != resp_entry.step_time_s[preset]
+        assert preset in resp_entry.curves and preset not in vig_entry.curves
 
 
 def test_colorchecker_and_lut_columns_are_table1s_and_the_comparisons(board):
