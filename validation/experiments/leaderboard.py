@@ -14,10 +14,11 @@ two seconds each on two cores); the peers' methods (OpenCV, colour-hdri,
 Hugin, pfstools: most of them run their own iterative solvers or programs,
 5–30 s a calibration at 320×240) would take two minutes of it
 (``--peers`` ranks them). ``--full`` (configuration ``full``) ranks the
-peers and the merge step as well, and ranks the
+peers and the merge step as well, on capture sets of its study size
+(320×240, N = 4: :meth:`~validation.config.ValidationConfig.study_config`),
+and ranks the
 response methods also on cameras outside the presets (:data:`EXTRA_CAMERAS`:
 two with responses drawn from the EMoR space of real ones, one film-like;
-about 4 minutes on 2 cores at 160×120 for the eleven response methods, so
 not in the quick job; ``photoquant leaderboard`` ranks on them by default).
 The report shows the response methods' recovered curves over the truth and
 every method's error against its time (:mod:`validation.plots`). The metrics are

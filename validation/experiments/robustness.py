@@ -30,8 +30,10 @@ on another test scene (the glare rows: the lamp scene) is compared with the
 clean camera on that scene, a row of its own. Each row also reports the
 scene's error more than 2 px from a sharp edge, where demosaicing and JPEG
 do not blur the analytic scene's pixel-sharp edges.
-Not in the quick job (its baseline is unchanged): ``--full`` runs it, and
-``--experiments robustness`` on any configuration.
+Not in the quick job (its baseline is unchanged): ``--full`` runs it, on
+capture sets of its study size (320×240, N = 4:
+:meth:`~validation.config.ValidationConfig.study_config`), and
+``--experiments robustness`` on any configuration (at its study size).
 
 References
 ----------
