@@ -229,12 +229,13 @@ def run_validation(
     shared = Shared(config, seed, root, progress)
     t_start = time.perf_counter()
     results: dict[str, ExperimentResult] = {}
-    beside = [n for n in names if n in beside_for(config)] if n_workers > 1 else []
+    second = beside_for(config)
+    beside = [n for n in names if n in second] if n_workers > 1 else []
     try:
         # BLAS on one thread whatever the number of processes: the same bits either way
         with _one_blas_thread():
             if beside and len(beside) < len(names):
-                if beside_for(config) == BESIDE:
+                if second == BESIDE:
                     # simulated and calibrated once, before the fork: both processes read them
                     for preset in config.presets:
                         _calibrate_or_remember(shared, preset)
