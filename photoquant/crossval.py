@@ -520,12 +520,8 @@ def crossval_stack(
     for k in range(1, k_count - 1):
         t0 = time.perf_counter()
         keep = [i for i in range(k_count) if i != k]
-        sub = ExposureStack(
-            stack.frames[:, keep],
-            stack.exposure_s[keep],
-            bit_depth=stack.bit_depth,
-            channels=stack.channels,
-        )
+        # the bracket's own levels and exposure basis (given or found on every frame)
+        sub = stack.with_frames(stack.frames[:, keep], stack.exposure_s[keep])
         context: dict[str, Any] = {}
         if peer is None:
             levels, g, sat, log_e, flagged = _fit_photoquant(

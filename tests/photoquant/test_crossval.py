@@ -325,3 +325,34 @@ def test_a_fold_whose_noise_the_data_do_not_fix_states_none_and_runs():
     stated = [row.within_95 is not None for row in result.rows]
     assert any(stated) and not all(stated), stated
     assert result.interval_coverage() is not None
+
+
+def test_each_fold_keeps_the_brackets_levels(gamma_stack, monkeypatch):
+    """A fold's ``K − 1`` frames are calibrated with the bracket's black level, saturation
+    level and exposure basis (a manifest's ``black_level`` reaches the calibration)."""
+    import photoquant.calibration as calibration
+
+    seen = []
+    real = calibration.calibrate
+
+    def spy(stacks, **kwargs):
+        seen.append(stacks[0])
+        return real(stacks, **kwargs)
+
+    monkeypatch.setattr(calibration, "calibrate", spy)
+    frames = gamma_stack.frames.astype(np.uint16) * 15 + 64  # a 12-bit camera with a pedestal
+    stack = ExposureStack(
+        frames,
+        gamma_stack.exposure_s,
+        bit_depth=12,
+        black_level=np.full(3, 64.0),
+        saturation_level=np.full(3, 3800),
+    )
+    crossval_stack(stack)
+    assert len(seen) == stack.n_exposures - 2
+    for k, sub in enumerate(seen, start=1):
+        assert sub.n_exposures == stack.n_exposures - 1
+        assert stack.exposure_s[k] not in sub.exposure_s
+        np.testing.assert_array_equal(sub.black_level, stack.black_level)
+        np.testing.assert_array_equal(sub.saturation_level, stack.saturation_level)
+        assert sub.exposure_basis == stack.exposure_basis
