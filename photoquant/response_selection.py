@@ -55,17 +55,31 @@ on half of the grid's pixels (interleaved column strips of 8), and each
 inner exposure of the other half (both of a two-exposure bracket) is
 predicted from that half's other exposures, where their merge has a valid
 exposure; the score, the jackknife and the rule are the same. A bracket of
-two exposures can then be scored too. Measured (2026-12-04; pqsim 160×120,
-N = 1, seeds 0 and 1, the ccd, cmos, emor, emor-1 and film presets at
-K = 4 (3.8-stop steps), K = 8 (1.1) and K = 3 (3); worst channel's ``g``
-error against the truth): among Debevec's β = 10⁵, 10⁴ and the default 10³
-they choose a ``g`` as good as the default's in 24 of 30 cases, better in 4
-(ccd and emor at K = 8: 0.002–0.008 against 0.004–0.020) and worse in 2
-(film at K = 3: 0.012 against 0.005–0.008); with EMoR 2004 (3, 5, 7
-components) among the candidates they prefer EMoR on the ccd and cmos
-cameras' wide brackets, 3–11× worse. On the real brackets (crossval,
-nested, Debevec's three): Memorial 2.29 DN, frobisher 6.54, St. Louis
-11.06, the 12-bit bracket 94.49 (the default's 2.29, 6.54, 11.14, 94.62).
+two exposures can then be scored too.
+
+What pixel folds cannot see. Measured (2026-12-05) with the default
+candidates (below) on pqsim's ccd, cmos, emor, emor-1 and film presets
+(160×120, N = 1, seeds 0 and 1, exposures from 1 to 200 ms: K = 3,
+3.8-stop steps; K = 4, 2.5; K = 8, 1.1; worst channel's ``g`` error against
+the truth): the choice's ``g`` is worse than the profile default's in 8 of
+30 cases (up to 5.9×: ``film``, ``cmos`` and ``ccd`` at K = 4), better in
+10 (up to 2.6×: ``ccd`` at K = 3), the same in 12; geometric mean of
+the ratio 1.19. On the wide brackets the score falls steadily from the
+smoothest candidate to the least smooth (β = 10²) while the ``g`` error
+of β = 10² is 4–6× that of β = 10³ or 10⁴: an error of ``g`` that keeps
+the transfers between the bracket's own exposures predicts held-out pixels
+as well as the truth does, so no score taken inside the bracket can see
+it. On the real brackets (crossval, nested): Memorial 2.14 DN, frobisher
+4.65, St. Louis 11.11 (the default's 2.29, 6.54, 11.14); frobisher's
+crossval error against the smoothness of a single Debevec fit is 19.1 DN
+at β = 1, 6.28 at 10, 3.88 at 30, 4.65 at 10², 5.72 at 3·10², 6.54 at 10³
+and 7.9 at 10⁴ — a minimum the held-out frame finds, and the data inside
+each fold only roughly. Restricted to β ≥ 10³ (``candidates``; measured
+2026-12-04 at K = 4, 3.8-stop steps, K = 8 and K = 3, 3-stop steps), the
+selection's ``g`` was as good as the default's in 24 of 30 cases, better in
+4 and worse in 2 (``film`` at K = 3: 0.012 against 0.005–0.008), and the
+real brackets' crossval errors were Memorial 2.29 DN, frobisher 6.54, St.
+Louis 11.06 and the 12-bit bracket 94.49.
 
 The default candidates are Debevec 1997 [Debevec1997]_ responses from the
 smoothest to the least smooth (β = 10⁵, 10⁴, 10³, the profile's default, and
