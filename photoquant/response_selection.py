@@ -69,8 +69,9 @@ smoothest candidate to the least smooth (β = 10²) while the ``g`` error
 of β = 10² is 4–6× that of β = 10³ or 10⁴: an error of ``g`` that keeps
 the transfers between the bracket's own exposures predicts held-out pixels
 as well as the truth does, so no score taken inside the bracket can see
-it. On the real brackets (crossval, nested): Memorial 2.14 DN, frobisher
-4.65, St. Louis 11.11 (the default's 2.29, 6.54, 11.14); frobisher's
+it. On the real brackets (crossval, nested; the JPEG brackets' values read
+as they are, ``saturation_spread`` 0): Memorial 2.14 DN, frobisher 4.65,
+St. Louis 11.11 (the default's 2.29, 6.54, 11.14); frobisher's
 crossval error against the smoothness of a single Debevec fit is 19.1 DN
 at β = 1, 6.28 at 10, 3.88 at 30, 4.65 at 10², 5.72 at 3·10², 6.54 at 10³
 and 7.9 at 10⁴ — a minimum the held-out frame finds, and the data inside
@@ -89,7 +90,7 @@ and whose smoothness is what the real brackets disagree on (the bracket's
 own exposures can say how much of the curve's shape the data support).
 
 Measured (2026-12-04, ``photoquant crossval`` on the user's path, the
-selection nested in every fold): Memorial 2.14 DN against 2.29 with the
+selection nested in every fold, the JPEG values read as they are): Memorial 2.14 DN against 2.29 with the
 profile's default response, the St. Louis Arch 11.03 against 11.14, the
 12-bit machine-vision bracket 92.41 against 94.62 with ``("EMoR 2004",
 {"n_components": n})``, n = 3, 5, 7, among the candidates; frobisher (3

@@ -43,7 +43,9 @@ Key                           Required  Meaning
                                         ``"exposure value"`` (see below)
 ``saturation_spread``         no        pixels over which the camera's processing
                                         after the clip (demosaicing, JPEG) spreads a
-                                        clipped value, 0 to 64; 0 (default): none
+                                        clipped value, 0 to 64, or ``"auto"``
+                                        (default): 8 when every frame of the lit
+                                        frame sets is a JPEG file, else 0
                                         (:mod:`photoquant.saturation`)
 ============================  ========  =================================================
 
@@ -108,6 +110,7 @@ from photoquant.io.atomic import real_path, write_text_atomic
 
 __all__ = [
     "CAPTURE_FORMAT",
+    "JPEG_SATURATION_SPREAD",
     "FrameRef",
     "FrameSetRef",
     "CaptureManifest",
@@ -183,6 +186,20 @@ class FrameSetRef:
     frames: tuple[FrameRef, ...]
 
 
+JPEG_SATURATION_SPREAD = 8
+"""``saturation_spread`` of a bracket of JPEG files when the manifest does not give one:
+JPEG codes 8 × 8 blocks (ITU-T T.81), so a clipped value reaches the values of its
+block (:mod:`photoquant.saturation`)."""
+
+_JPEG_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe", ".jfif"})
+
+
+def _all_jpeg(framesets: Sequence[FrameSetRef | None]) -> bool:
+    """Whether every frame of the given frame sets is a JPEG file (by its name's suffix)."""
+    files = [f.file for fs in framesets if fs is not None for f in fs.frames]
+    return bool(files) and all(Path(f).suffix.lower() in _JPEG_SUFFIXES for f in files)
+
+
 @dataclass(frozen=True, eq=False)
 class CaptureManifest:
     """A validated capture manifest (see the module docstring for the format).
@@ -226,6 +243,9 @@ class CaptureManifest:
     saturation_spread : int
         Reach (pixels) of the camera's processing after the clip; every value
         that near a clipped one is read as clipped (:mod:`photoquant.saturation`).
+        The manifest's ``"auto"`` (its default) is resolved here:
+        :data:`JPEG_SATURATION_SPREAD` when every frame of the lit frame sets is
+        a JPEG file, else 0.
     """
 
     path: Path
@@ -379,10 +399,14 @@ class _Parser:
             raise self.error(
                 f"`exposure_basis` must be one of {list(EXPOSURE_BASIS_CHOICES)}, got {basis!r}"
             )
-        spread = data.get("saturation_spread", 0)
-        if not _is_int(spread) or not 0 <= spread <= 64:
+        spread = data.get("saturation_spread", "auto")
+        if spread == "auto":
+            lit = [*views, irradiance, scene, flatfield, glare]
+            spread = JPEG_SATURATION_SPREAD if _all_jpeg(lit) else 0
+        elif not _is_int(spread) or not 0 <= spread <= 64:
             raise self.error(
-                f"`saturation_spread` must be an integer from 0 to 64 (pixels), got {spread!r}"
+                '`saturation_spread` must be "auto" or an integer from 0 to 64 (pixels), '
+                f"got {spread!r}"
             )
         extra = {k: v for k, v in data.items() if k not in _KNOWN_KEYS}
         return CaptureManifest(

@@ -54,7 +54,11 @@ def test_real_bracket_calibrates_and_merges(frobisher):
     m = load_manifest(frobisher)
     stack = load_stack(m.views[0], m)
     merged = merge_stack(stack, model.response.levels, g, model.response.saturation_level)
-    assert merged.mask.mean() < 0.05  # a normal outdoor bracket: few pixels unmeasurable
+    # unmeasurable: what the shortest exposure clipped (JPEG files: with a block's reach
+    # around it, read as clipped), the sky's few per cent, and hardly anything else
+    clipped_short = stack.frames[0, 0] >= stack.saturation_level
+    assert merged.mask.mean() < 0.10
+    assert np.mean(merged.mask & ~clipped_short) < 0.005
     values = stack.mean()
     for k, t in enumerate(stack.exposure_s):
         v = values[k]

@@ -153,3 +153,40 @@ def test_manifest_refuses_a_bad_saturation_spread(tmp_path, bad):
     _manifest(tmp_path, bad)
     with pytest.raises(ManifestError, match="saturation_spread"):
         load_manifest(tmp_path / "m.json")
+
+
+def _listing(tmp_path, names, spread=None, flatfield=None) -> int:
+    """A manifest of the named frames (written as 8 × 8 images) and its resolved spread."""
+    img = np.full((8, 8, 3), 50, np.uint8)
+    for name in [*names, *(flatfield or [])]:
+        assert cv2.imwrite(str(tmp_path / name), img)
+    data = {
+        "format": CAPTURE_FORMAT,
+        "bit_depth": 8,
+        "views": [
+            {"frames": [{"file": n, "exposure_s": 0.001 * (k + 1)} for k, n in enumerate(names)]}
+        ],
+    }
+    if flatfield:
+        data["flatfield"] = {"frames": [{"file": n, "exposure_s": 0.01} for n in flatfield]}
+    if spread is not None:
+        data["saturation_spread"] = spread
+    (tmp_path / "m.json").write_text(json.dumps(data))
+    return load_manifest(tmp_path / "m.json").saturation_spread
+
+
+def test_a_bracket_of_jpeg_files_reads_a_jpeg_blocks_reach_as_clipped(tmp_path):
+    """By default ("auto") the spread is JPEG's 8 × 8 block where every lit frame is a JPEG
+    file, 0 otherwise; a given value always wins."""
+    from photoquant.io.manifest import JPEG_SATURATION_SPREAD
+
+    assert JPEG_SATURATION_SPREAD == 8
+    assert _listing(tmp_path, ["a.jpg", "b.JPEG"]) == JPEG_SATURATION_SPREAD
+    assert _listing(tmp_path, ["a.jpg", "b.JPEG"], spread="auto") == JPEG_SATURATION_SPREAD
+    assert _listing(tmp_path, ["a.jpg", "b.jpg"], spread=0) == 0
+    assert _listing(tmp_path, ["a.jpg", "b.jpg"], spread=2) == 2
+    assert _listing(tmp_path, ["a.png", "b.png"]) == 0
+    assert _listing(tmp_path, ["a.png", "b.jpg"]) == 0  # a mix: the manifest must say
+    assert _listing(tmp_path, ["a.jpg", "b.jpg"], flatfield=["f.png"]) == 0
+    with pytest.raises(ManifestError, match='saturation_spread` must be "auto" or an integer'):
+        _listing(tmp_path, ["a.jpg", "b.jpg"], spread="jpeg")
