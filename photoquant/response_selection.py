@@ -74,13 +74,16 @@ as they are, ``saturation_spread`` 0): Memorial 2.14 DN, frobisher 4.65,
 St. Louis 11.11 (the default's 2.29, 6.54, 11.14); frobisher's
 crossval error against the smoothness of a single Debevec fit is 19.1 DN
 at β = 1, 6.28 at 10, 3.88 at 30, 4.65 at 10², 5.72 at 3·10², 6.54 at 10³
-and 7.9 at 10⁴ — a minimum the held-out frame finds, and the data inside
-each fold only roughly. Restricted to β ≥ 10³ (``candidates``; measured
-2026-12-04 at K = 4, 3.8-stop steps, K = 8 and K = 3, 3-stop steps), the
-selection's ``g`` was as good as the default's in 24 of 30 cases, better in
-4 and worse in 2 (``film`` at K = 3: 0.012 against 0.005–0.008), and the
-real brackets' crossval errors were Memorial 2.29 DN, frobisher 6.54, St.
-Louis 11.06 and the 12-bit bracket 94.49.
+and 7.9 at 10⁴; with 30 and 10 among the candidates the pixel folds still
+choose 10² there (the one-standard-error rule: the smoother of two
+candidates within the error). Restricted to β ≥ 10³ (``candidates``;
+measured 2026-12-04 at K = 4, 3.8-stop steps, K = 8 and K = 3, 3-stop
+steps), the selection's ``g`` was as good as the default's in 24 of 30
+cases, better in 4 and worse in 2 (``film`` at K = 3: 0.012 against
+0.005–0.008), and the real brackets' crossval errors were Memorial 2.29 DN,
+frobisher 6.54, St. Louis 11.06 and the 12-bit bracket 94.49; with EMoR
+2004 (3, 5, 7 components) among the candidates the pixel folds preferred
+EMoR on the ccd and cmos cameras' wide brackets, 3–11× worse in ``g``.
 
 The default candidates are Debevec 1997 [Debevec1997]_ responses from the
 smoothest to the least smooth (β = 10⁵, 10⁴, 10³, the profile's default, and
@@ -90,10 +93,11 @@ and whose smoothness is what the real brackets disagree on (the bracket's
 own exposures can say how much of the curve's shape the data support).
 
 Measured (2026-12-04, ``photoquant crossval`` on the user's path, the
-selection nested in every fold, the JPEG values read as they are): Memorial 2.14 DN against 2.29 with the
-profile's default response, the St. Louis Arch 11.03 against 11.14, the
-12-bit machine-vision bracket 92.41 against 94.62 with ``("EMoR 2004",
-{"n_components": n})``, n = 3, 5, 7, among the candidates; frobisher (3
+selection nested in every fold, the JPEG values read as they are): Memorial
+2.14 DN against 2.29 with the profile's default response, the St. Louis Arch
+11.03 against 11.14, the 12-bit machine-vision bracket 92.41 against 94.62
+with ``("EMoR 2004", {"n_components": n})``, n = 3, 5, 7, among the
+candidates; frobisher (3
 frames: each crossval fold keeps two, with nothing to hold out) unchanged.
 On the simulator's presets at 3.8-stop steps (``K = 4``) it can prefer a
 response that predicts the held-out frame best but lies further from the
