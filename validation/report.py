@@ -297,6 +297,7 @@ def _fig_maps(plt, spec: FigureSpec):
             vmin=p.get("vmin"),
             vmax=p.get("vmax"),
             interpolation="nearest",
+            extent=p.get("extent"),
         )
         ax.set_title(p["title"], fontsize=9)
         ax.set_xlabel("px")

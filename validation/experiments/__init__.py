@@ -320,6 +320,7 @@ def _run_one(
     """One experiment, timed; a refusal of the calibrator is its result (skipped, with why)."""
     from photoquant.errors import PhotoquantError
     from validation._memory import return_free_memory
+    from validation.experiments.base import compact_map_panels
 
     module = import_module(EXPERIMENTS[name])
     shared.say(f"validate: [{names.index(name) + 1}/{len(names)}] {module.TITLE} ...")
@@ -331,6 +332,11 @@ def _run_one(
         res.skipped = f"failed: {exc}"
         shared.say(f"validate: {name} failed: {exc}")
     res.elapsed_s = time.perf_counter() - t0
+    compact_map_panels(res)
+    later = names[names.index(name) + 1 :]
+    shared.release_cache(
+        {key for n in later for key in getattr(import_module(EXPERIMENTS[n]), "CACHE_KEYS", ())}
+    )
     shared.release_frames()
     return_free_memory()
     return res

@@ -40,6 +40,9 @@ __all__ = ["run", "linear_fit", "PAPER", "TITLE"]
 
 TITLE = "Fig. 7: regression of measured vs ground truth"
 
+CACHE_KEYS = ("chart", "chart-pipeline", "pipeline-model")
+"""The :attr:`~validation.experiments.shared.Shared.cache` entries this experiment reads."""
+
 PAPER = {
     "uncorrected": {"slope": 0.7, "intercept": -29.47, "residual_norm": 215.35},
     "corrected": {"slope": 1.09, "intercept": -11.68, "residual_norm": 126.34},

@@ -45,6 +45,9 @@ EXTRA_CAMERAS: tuple[str, ...] = ("emor", "emor-1", "film")
 
 TITLE = "Leaderboard: every registered method ranked against the truth"
 
+CACHE_KEYS = ("study",)
+"""The :attr:`~validation.experiments.shared.Shared.cache` entries this experiment reads."""
+
 
 def steps_for(config: ValidationConfig) -> tuple[str, ...]:
     """The steps ranked at ``config``: all of them in the full job, response and vignetting else."""

@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -321,6 +321,16 @@ class Shared:
             kept = (preset, load_calibration_inputs(cal.manifest))
             self.cache["calibration-inputs"] = kept
         return kept[1]
+
+    def release_cache(self, keep: Collection[str]) -> None:
+        """Drop the :attr:`cache` entries no experiment still to run reads: those whose
+        owner (the key, or a tuple key's first item) is not in ``keep`` (the
+        ``CACHE_KEYS`` of the experiments still to run). An entry dropped too early
+        is only recomputed: the memo is never a result of its own."""
+        for key in list(self.cache):
+            owner = key[0] if isinstance(key, tuple) else key
+            if owner not in keep:
+                del self.cache[key]
 
     def release_frames(self) -> None:
         """Drop the frames :meth:`calibration_inputs` keeps (~0.8 GB a capture set at

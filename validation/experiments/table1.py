@@ -58,6 +58,9 @@ __all__ = ["run", "chart_measurements", "hugin_measurements", "PAPER", "TITLE", 
 
 TITLE = "Table 1: correlation with ground truth"
 
+CACHE_KEYS = ("chart", "chart-pipeline", "pipeline-model")
+"""The :attr:`~validation.experiments.shared.Shared.cache` entries this experiment reads."""
+
 COLUMNS = (("ccd", "outdoor"), ("ccd", "indoor"), ("cmos", "outdoor"), ("cmos", "indoor"))
 """The paper's columns: CCD outdoor, CCD indoor, CMOS outdoor, CMOS indoor."""
 

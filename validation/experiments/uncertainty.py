@@ -53,6 +53,9 @@ __all__ = ["run", "TITLE", "NOMINAL_LEVELS", "normalised_errors", "interval_shar
 
 TITLE = "Stated uncertainty against the truth"
 
+CACHE_KEYS = ("uncertainty",)
+"""The :attr:`~validation.experiments.shared.Shared.cache` entries this experiment reads."""
+
 
 def _stated(shared: Shared, preset: str) -> Any:
     """The test scene corrected with its stated uncertainty (once per run)."""

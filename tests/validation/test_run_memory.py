@@ -1,0 +1,68 @@
+"""What a validation run keeps between experiments: shrunken figure maps, no stale memos."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from validation.config import TINY
+from validation.experiments import EXPERIMENTS, _run_one
+from validation.experiments.base import ExperimentResult, FigureSpec, compact_map_panels
+from validation.experiments.shared import Shared
+
+
+def _maps(image: np.ndarray) -> ExperimentResult:
+    res = ExperimentResult("x", "X", "")
+    panel = {"title": "t", "image": image, "vmin": 0.0, "vmax": 1.0}
+    res.figures.append(FigureSpec("m", "maps", "M", "", {"panels": [panel]}))
+    res.figures.append(FigureSpec("s", "sweep", "S", "", {"panels": [{"image": image}]}))
+    return res
+
+
+def test_a_paper_size_map_is_kept_as_its_block_means():
+    rng = np.random.default_rng(0)
+    image = rng.random((768, 1024))
+    res = _maps(image)
+    compact_map_panels(res, max_side=512)
+    panel = res.figures[0].data["panels"][0]
+    small = panel["image"]
+    assert small.shape == (384, 512) and small.dtype == np.float32
+    expected = image.reshape(384, 2, 512, 2).mean(axis=(1, 3))
+    np.testing.assert_allclose(small, expected, rtol=1e-6)  # float32 of the exact means
+    assert panel["extent"] == (0.0, 1024.0, 768.0, 0.0)  # drawn in the map's own pixels
+    assert panel["vmin"] == 0.0 and panel["vmax"] == 1.0
+    assert res.figures[1].data["panels"][0]["image"] is image  # not a map: untouched
+    # a map already small enough, and a side not a multiple of the block, a partial block dropped
+    res = _maps(image[:100, :300])
+    compact_map_panels(res, max_side=512)
+    assert res.figures[0].data["panels"][0]["image"].shape == (100, 300)
+    res = _maps(image[:101, :601])
+    compact_map_panels(res, max_side=300)
+    assert res.figures[0].data["panels"][0]["image"].shape == (33, 200)
+
+
+def test_a_memo_is_dropped_once_no_experiment_still_to_run_reads_it(tmp_path):
+    shared = Shared(TINY, 0, tmp_path, lambda s: None)
+    shared.cache.update({("chart", "a"): 1, ("uncertainty", "b"): 2, "study": 3, ("x",): 4})
+    shared.release_cache({"chart", "study"})
+    assert shared.cache == {("chart", "a"): 1, "study": 3}
+    shared.release_cache(set())
+    assert shared.cache == {}
+
+
+def test_a_run_releases_each_memo_after_its_last_reader(tmp_path, monkeypatch):
+    """Table 1's chart memos live until Fig. 7 has read them, the stated uncertainty's
+    until its own experiment ends; the figures' results are the same either way."""
+    names = ["uncertainty", "table1", "fig7"]
+    assert all(n in EXPERIMENTS for n in names)
+    shared = Shared(TINY, 0, tmp_path, lambda s: None)
+    owners, results = [], []
+    for name in names:
+        results.append(_run_one(name, names, TINY, 0, tmp_path, shared))
+        owners.append({k[0] if isinstance(k, tuple) else k for k in shared.cache})
+    assert owners[0] == set()  # the uncertainty memo: no later reader
+    assert {"chart", "chart-pipeline", "pipeline-model"} <= owners[1]  # Fig. 7 still to run
+    assert owners[2] == set()
+    # Fig. 7 on its own (its memos computed afresh) gives the same metrics as in the run
+    fresh = Shared(TINY, 0, tmp_path / "alone", lambda s: None)
+    alone = _run_one("fig7", ["fig7"], TINY, 0, tmp_path / "alone", fresh)
+    assert alone.metrics and alone.metrics == results[2].metrics
