@@ -130,7 +130,8 @@ def run(
         l = shared.chart(config.illuminants[0][1], preset).l
         scene_name = f"chart, {config.illuminants[0][1]}"
         shared.say(f"validate: noise captures of '{preset}' (N = {', '.join(map(str, ns))}) ...")
-        raw_a, raw_b, ln_a, ln_b, corr_a, valid_raw = {}, {}, {}, {}, {}, None
+        # capture A's values until B's arrive, then only their difference (the √N law's input)
+        raw_a, raw_d, ln_a, ln_d, corr_a, valid_raw = {}, {}, {}, {}, {}, None
         sat = np.asarray(model.response.saturation_level, dtype=np.float64)
         valid_ln = np.ones(l.shape, dtype=bool)
         captures_a = {}
@@ -151,7 +152,8 @@ def run(
                     if n == 4:
                         captures_a[n] = cap
                 else:
-                    raw_b[n], ln_b[n] = fr.mean(axis=0), lnc
+                    raw_d[n] = raw_a.pop(n) - fr.mean(axis=0)
+                    ln_d[n] = ln_a.pop(n) - lnc
         # 1. N = 4 against the noise-free truth
         c4 = corr_a[4]
         e4, s4, _ = relative_error_eq8(l, c4.photoquantity, c4.mask)
@@ -243,10 +245,8 @@ def run(
             description="physics prediction of e_mean",
         )
         # 3. the 1/sqrt(N) law
-        sig_raw = np.array(
-            [np.std((raw_a[n] - raw_b[n])[valid_raw], ddof=1) / np.sqrt(2) for n in ns]
-        )
-        sig_ln = np.array([np.std((ln_a[n] - ln_b[n])[valid_ln], ddof=1) / np.sqrt(2) for n in ns])
+        sig_raw = np.array([np.std(raw_d[n][valid_raw], ddof=1) / np.sqrt(2) for n in ns])
+        sig_ln = np.array([np.std(ln_d[n][valid_ln], ddof=1) / np.sqrt(2) for n in ns])
         sig_pred = np.array([np.sqrt(np.mean(var[n][valid_ln])) for n in ns])
         slope_raw = power_law_exponent(np.array(ns), sig_raw)
         slope_ln = power_law_exponent(np.array(ns), sig_ln)
