@@ -97,8 +97,8 @@ selection nested in every fold, the JPEG values read as they are): Memorial
 2.14 DN against 2.29 with the profile's default response, the St. Louis Arch
 11.03 against 11.14, the 12-bit machine-vision bracket 92.41 against 94.62
 with ``("EMoR 2004", {"n_components": n})``, n = 3, 5, 7, among the
-candidates; frobisher (3
-frames: each crossval fold keeps two, with nothing to hold out) unchanged.
+candidates; frobisher (3 frames: each crossval fold keeps two, with nothing
+to hold out) unchanged.
 On the simulator's presets at 3.8-stop steps (``K = 4``) it can prefer a
 response that predicts the held-out frame best but lies further from the
 true ``g`` than the default's

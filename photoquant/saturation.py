@@ -28,8 +28,9 @@ edge-aware and variable-number-of-gradients demosaicers (5×5 windows),
 8 for JPEG (a clipped value's block; 16 with 4:2:0 chroma subsampling). It
 is a property of the camera's pipeline that its user knows, given in the
 capture manifest (``saturation_spread``, :mod:`photoquant.io.manifest`);
-by default 8 for a bracket of JPEG files and 0 (off) for any other. :func:`detect_saturation_levels_processed` finds the
-clip level as the peak of a pile-up near the maximum rather than at it.
+by default 8 for a bracket of JPEG files and 0 (off) for any other.
+:func:`detect_saturation_levels_processed` finds the clip level as the peak
+of a pile-up near the maximum rather than at it.
 
 References
 ----------

@@ -197,7 +197,7 @@ _JPEG_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe", ".jfif"})
 def _all_jpeg(framesets: Sequence[FrameSetRef | None]) -> bool:
     """Whether every frame of the given frame sets is a JPEG file (by its name's suffix)."""
     files = [f.file for fs in framesets if fs is not None for f in fs.frames]
-    return bool(files) and all(Path(f).suffix.lower() in _JPEG_SUFFIXES for f in files)
+    return bool(files) and all(f.suffix.lower() in _JPEG_SUFFIXES for f in files)
 
 
 @dataclass(frozen=True, eq=False)
