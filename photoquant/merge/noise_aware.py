@@ -69,6 +69,9 @@ References
 .. [Widrow2008] Widrow, B., & Kollár, I. (2008). Quantization Noise.
    Cambridge University Press, ch. 4-5 (the quantiser's error under
    Gaussian input). doi:10.1017/CBO9780511754661
+.. [Huber2009] Huber, P. J., & Ronchetti, E. M. (2009). Robust Statistics,
+   2nd ed. Wiley, ch. 5 (scale: the median absolute deviation and trimmed
+   variances). doi:10.1002/9780470434697
 """
 
 from __future__ import annotations
@@ -421,8 +424,8 @@ class _LinearScale:
 
 
 def _pair_values(ca: np.ndarray, cb: np.ndarray, r: float, lin: _LinearScale) -> np.ndarray:
-    """``(3, n)``: ``ȳ``, ``r`` and ``d² − q`` of one pair of exposures' values (see
-    :func:`estimate_noise_from_exposures`)."""
+    """``(4, n)``: ``ȳ``, ``r``, ``d²`` and its quantisation variance ``q`` for one pair of
+    exposures' values (see :func:`estimate_noise_from_exposures`)."""
     ya, yb = lin.y(ca), lin.y(cb)
     d = yb / r - ya
     ybar = 0.5 * (ya + yb / r)
@@ -430,7 +433,7 @@ def _pair_values(ca: np.ndarray, cb: np.ndarray, r: float, lin: _LinearScale) ->
     ratio = np.median(d / np.maximum(ybar, 1e-9))
     d = d - ratio * ybar
     q = _QUANTISATION * (lin.dy_dc(ca) ** 2 + lin.dy_dc(cb) ** 2 / r**2)
-    return np.stack([ybar, np.full(ybar.size, r), d * d - q])
+    return np.stack([ybar, np.full(ybar.size, r), d * d, q])
 
 
 def _quantile_groups(x: np.ndarray, n_groups: int) -> np.ndarray:
@@ -452,24 +455,75 @@ def _quantile_groups(x: np.ndarray, n_groups: int) -> np.ndarray:
     return group
 
 
+_TRIM = 3.5
+"""A pair's difference further than this many robust standard deviations from zero is
+left out of its bin's variance (see :func:`_binned_curve`)."""
+
+_TRIM_KEPT_VARIANCE = 1.0 - 2.0 * _TRIM * math.exp(-0.5 * _TRIM**2) / math.sqrt(
+    2.0 * math.pi
+) / math.erf(_TRIM / math.sqrt(2.0))
+"""The variance of a Gaussian truncated at ±:data:`_TRIM` σ over its whole variance
+(0.9939): the trimmed mean of ``d²`` is divided by it."""
+
+_TRIM_ROUNDS = 20
+"""Rounds of the trim at most (each cuts at the variance the previous one kept)."""
+
+
+def _trimmed(group: np.ndarray, d2: np.ndarray, q: np.ndarray, n_groups: int) -> np.ndarray:
+    """Which pairs each bin keeps: ``d² ≤ (3.5 σ̂)²``, ``σ̂²`` the mean ``d²`` kept by the
+    previous round over :data:`_TRIM_KEPT_VARIANCE` (all pairs at the start), repeated
+    until no bin changes (iterated trimming). A pair within 3.5 of its own quantisation
+    steps (``12 q``, the squared step of its values on the linear scale) is always kept:
+    quantised differences take a few values, and a cut between them removes a whole value's
+    share and lowers the next round's cut with it."""
+    floor = _TRIM**2 * 12.0 * q
+    limit = np.full(n_groups, np.inf)
+    kept = np.ones(d2.size, dtype=bool)
+    for _ in range(_TRIM_ROUNDS):
+        count = np.bincount(group, weights=kept, minlength=n_groups)
+        total = np.bincount(group, weights=np.where(kept, d2, 0.0), minlength=n_groups)
+        share = np.where(np.isinf(limit), 1.0, _TRIM_KEPT_VARIANCE)
+        limit = _TRIM**2 * total / np.maximum(count, 1.0) / share
+        now = (d2 <= limit[group]) | (d2 <= floor)
+        if np.array_equal(now, kept):
+            break
+        kept = now
+    return kept
+
+
 def _binned_curve(
     data: np.ndarray, n_bins: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs' values in quantile bins of ``ȳ``: the design rows ``(mean ȳ(1 + 1/r),
-    mean(1 + 1/r²))``, the mean ``d² − q``, its standard error, the mean ``ȳ`` and the
-    count, of the bins with at least :data:`_MIN_PAIR_VALUES` values."""
-    ybar, r, v = data
+    mean(1 + 1/r²))``, the variance ``d² − q``, its standard error, the mean ``ȳ`` and the
+    count, of the bins with at least :data:`_MIN_PAIR_VALUES` values kept.
+
+    A bin's variance is the mean of its ``d²`` within ±3.5 standard deviations (iterated:
+    :func:`_trimmed`) divided by a Gaussian's share of variance kept there (0.9939; 1
+    where nothing was cut), less
+    the kept pairs' mean ``q``: a trimmed mean, nearly as efficient
+    as the plain one on Gaussian differences, that leaves out what no sensor noise
+    gives — a moving subject, an edge a fraction of a pixel out of register, a stuck
+    pixel — whose squares would otherwise be most of a bin's sum [Huber2009]_.
+    """
+    ybar, r, d2, q = data
     n_groups = min(n_bins, max(1, ybar.size // _MIN_PAIR_VALUES))
     group = _quantile_groups(ybar, n_groups)
-    count = np.bincount(group, minlength=n_groups).astype(np.float64)
+    trimmed = _trimmed(group, d2, q, n_groups)
+    kept = trimmed.astype(np.float64)
+    count = np.bincount(group, weights=kept, minlength=n_groups)
+    # a bin the trim cut nothing from keeps its whole variance
+    cut = np.bincount(group, weights=~trimmed, minlength=n_groups) > 0
+    share = np.where(cut, _TRIM_KEPT_VARIANCE, 1.0)
     keep = count >= _MIN_PAIR_VALUES
     n = np.maximum(count, 1.0)
 
     def mean(values: np.ndarray) -> np.ndarray:
-        return np.bincount(group, weights=values, minlength=n_groups) / n
+        return np.bincount(group, weights=values * kept, minlength=n_groups) / n
 
+    v = d2 / share[group] - q
     v_mean = mean(v)
-    ss = np.bincount(group, weights=(v - v_mean[group]) ** 2, minlength=n_groups)
+    ss = np.bincount(group, weights=kept * (v - v_mean[group]) ** 2, minlength=n_groups)
     se = np.sqrt(ss / np.maximum(count - 1.0, 1.0)) / np.sqrt(n)
     design = np.stack([mean(ybar * (1 + 1 / r)), mean(1 + 1 / r**2)], axis=1)
     return design[keep], v_mean[keep], np.maximum(se[keep], 1e-12), mean(ybar)[keep], count[keep]
@@ -526,7 +580,9 @@ def estimate_noise_from_exposures(
     difference ``d = y_{k+1}/r − y_k`` (``r`` their time ratio, its error
     removed as a robust slope) has variance ``K ȳ (1 + 1/r) + σ_r² (1 +
     1/r²)`` with ``ȳ = (y_k + y_{k+1}/r)/2``; PRNU cancels in ``d``. The
-    mean of ``d²`` less its quantisation variance (``1/12`` through each
+    mean of ``d²`` within ±3.5 robust standard deviations (corrected for the
+    trim; what lies beyond is a moving subject or an edge out of register,
+    not noise) less its quantisation variance (``1/12`` through each
     value's ``dy/dc``) in up to ``n_bins`` quantile bins of ``ȳ`` is fitted
     by weighted least squares, each bin's standard error the one the line
     predicts for it (``√(2/n)`` times its variance: not the bin's own scatter,
