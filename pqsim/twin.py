@@ -25,6 +25,11 @@ preset (format ``pqsim.preset/1``) for :func:`~pqsim.synth_camera.presets.camera
 - ``disturbances``: black and white levels, DSNU (at the readout), hot and
   stuck pixel fractions from the defect map, the exposure-time error.
 - ``glare``: the camera's measured veiling glare, when it has one.
+- ``camera_unit``: the camera's unit of photoquantity in the twin's (one
+  value for every channel): a scene the camera measured (``photoquant
+  correct``) times it is the same light for the twin, so that
+  :func:`capture_camera_scene` shoots the camera's own scene at the camera's
+  own exposure times, values where the camera had them.
 
 Every field the measurement did not give is named in the preset's
 ``"assumed"`` list with the value taken; none is silently defaulted.
@@ -35,6 +40,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -42,10 +48,11 @@ import numpy as np
 from photoquant.characterise import Characterisation, load_characterisation
 from photoquant.errors import InputError
 from photoquant.model import CameraModel, load_camera
-from photoquant.utils import to_json_value
-from pqsim.synth_camera.presets import PRESET_FORMAT
+from photoquant.utils import load_json, to_json_value
+from pqsim.synth_camera.camera import Capture
+from pqsim.synth_camera.presets import PRESET_FORMAT, camera_from_preset
 
-__all__ = ["MAX_TABLE_POINTS", "twin_preset", "twin_preset_json"]
+__all__ = ["MAX_TABLE_POINTS", "capture_camera_scene", "twin_preset", "twin_preset_json"]
 
 MAX_TABLE_POINTS = 1024
 """Most points of a response table (a 16-bit response is subsampled evenly)."""
@@ -285,6 +292,8 @@ def twin_preset(
         # the camera's photoquantity unit is relative (its gauge): pqsim's convention sets
         # it, a photoquantity of 1 filling the well in 10 ms, as in the built-in presets
         "exposure_scale": PQSIM_SCALE_PER_FULL_WELL * full_well,
+        # the camera's photoquantity of 1 in the twin's unit: both expose scale e⁻ per unit·s
+        "camera_unit": scale / (PQSIM_SCALE_PER_FULL_WELL * full_well),
         "channels": list(cam.channels),
         "glare": glare,
         "disturbances": disturbances,
@@ -298,3 +307,56 @@ def twin_preset_json(
 ) -> str:
     """:func:`twin_preset` as the text of a preset file."""
     return json.dumps(twin_preset(camera, characterisation), indent=1) + "\n"
+
+
+def capture_camera_scene(
+    twin: str | os.PathLike[str],
+    photoquantity: Any,
+    exposure_s: Any,
+    n_repeats: int = 1,
+    rng: np.random.Generator | int | None = None,
+) -> Capture:
+    """The twin's capture of a scene its camera measured, at the camera's exposure times.
+
+    Parameters
+    ----------
+    twin : path
+        A twin's preset file (:func:`twin_preset_json`), with its ``camera_unit``.
+    photoquantity : array_like, shape (H, W, C)
+        The scene in the camera's unit (``photoquant correct``'s photoquantity of a
+        bracket the camera shot); non-finite values (what the camera did not measure)
+        are taken as 0.
+    exposure_s : array_like, shape (K,)
+        Exposure times, seconds (the bracket's own, for values where it had them).
+    n_repeats : int
+        Repeats ``N`` of each exposure.
+    rng : numpy.random.Generator or int
+        The noise's source (:meth:`pqsim.synth_camera.camera.SyntheticCamera.capture`).
+
+    Returns
+    -------
+    Capture
+        Its truth's photoquantity is the scene in the twin's unit.
+
+    Raises
+    ------
+    InputError
+        If the file is not a preset, has no ``camera_unit`` (not a twin, or a twin
+        written before the unit was recorded), or the scene does not match the twin's
+        channels.
+    """
+    path = Path(twin)
+    camera = camera_from_preset(str(path))
+    unit = load_json(path, f"preset file {path}").get("camera_unit")
+    if not isinstance(unit, (int, float)) or isinstance(unit, bool) or not 0 < unit < math.inf:
+        raise InputError(
+            f"preset file {path} has no `camera_unit` (the camera's photoquantity in the "
+            "twin's unit): write the twin again with `pqsim preset --from-camera`"
+        )
+    l = np.asarray(photoquantity, dtype=np.float64)  # noqa: E741 - the paper's symbol
+    if l.ndim != 3 or l.shape[2] != camera.n_channels:
+        raise InputError(
+            f"the scene has shape {l.shape}; the twin needs (H, W, {camera.n_channels})"
+        )
+    scene = np.where(np.isfinite(l), np.maximum(l, 0.0), 0.0) * float(unit)
+    return camera.capture(scene, exposure_s, n_repeats, rng=rng)

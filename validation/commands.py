@@ -1,6 +1,6 @@
 """The ``photoquant`` sub-commands the validation package provides.
 
-``validate``, ``demo``, ``compare``, ``leaderboard`` and ``sweep``.
+``validate``, ``demo``, ``compare``, ``leaderboard``, ``sweep`` and ``twin-check``.
 
 They drive the simulator and read its ground truth, which the calibrator
 never imports, so they reach the ``photoquant`` command through the
@@ -22,6 +22,7 @@ __all__ = [
     "register_compare",
     "register_leaderboard",
     "register_sweep",
+    "register_twin_check",
 ]
 
 
@@ -280,3 +281,54 @@ def register_sweep(sub: Any) -> None:
     )
     sw.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no messages")
     sw.set_defaults(func=_cmd_sweep)
+
+
+def _cmd_twin_check(args: argparse.Namespace) -> int:
+    from validation.twin_check import format_twin_check, twin_check, twin_check_json
+
+    def say(line: str) -> None:
+        if not args.quiet:
+            print(line, file=sys.stderr)
+
+    result = twin_check(
+        args.manifest,
+        args.camera,
+        args.twin,
+        methods=args.methods,
+        seed=args.seed,
+        allow_outside=args.allow_outside,
+        progress=say,
+    )
+    print(json.dumps(twin_check_json(result), indent=1) if args.json else format_twin_check(result))
+    return 0
+
+
+def register_twin_check(sub: Any) -> None:
+    """Add ``photoquant twin-check`` (:mod:`validation.twin_check`)."""
+    from validation.twin_check import DEFAULT_METHODS
+
+    tc = sub.add_parser(
+        "twin-check",
+        help="cross-validate a bracket and its camera twin's shot of the same scene side by "
+        "side; score response methods against the twin's truth",
+    )
+    tc.add_argument("manifest", metavar="MANIFEST", help="the camera's capture manifest (views[0])")
+    tc.add_argument("--camera", required=True, metavar="DIR", help="the calibrated camera")
+    tc.add_argument(
+        "--twin", required=True, metavar="FILE", help="its twin (pqsim preset --from-camera)"
+    )
+    tc.add_argument(
+        "--methods",
+        nargs="*",
+        metavar="NAME",
+        default=list(DEFAULT_METHODS),
+        help="response methods to score on the twin's truth (default: photoquant's own; "
+        "none with an empty list)",
+    )
+    tc.add_argument("--seed", type=int, default=0, help="the twin's noise seed")
+    tc.add_argument("--json", action="store_true", help="machine-readable output")
+    tc.add_argument(
+        "--allow-outside", action="store_true", help="allow frames outside the manifest's folder"
+    )
+    tc.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    tc.set_defaults(func=_cmd_twin_check)
