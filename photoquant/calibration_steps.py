@@ -396,7 +396,8 @@ def response_step(
     if policy.refine and len(views) >= 2 and not policy.asked:
         # the labels tested first against the response fitted at them: where the
         # views' data do not contradict them, the joint recovery would keep them too
-        joint = _screen_view_times(views, defects, spec, seed, log)
+        reference = _step("response", None, profile)
+        joint = _screen_view_times(views, defects, spec, seed, log, reference)
     if policy.refine and len(views) >= 2 and joint is None:
         log.say("response and exposure refinement")
         joint = _recover_with_view_times(views, defects, spec, seed, policy, log)
@@ -426,34 +427,63 @@ def _screen_view_times(
     spec: Spec,
     seed: int,
     log: CalibrationLog,
+    reference: Spec,
 ) -> _JointFit | None:
     """The response at the views' labels where their data keep them, else ``None``.
 
     ``g`` is fitted on view 0 at its labels, as without refinement
     (:func:`photoquant.response.fit_response`); every view's times are
-    estimated against it from neighbouring exposure pairs
+    estimated from neighbouring exposure pairs
     (:func:`photoquant.exposure.refine_by_pairs`, as :func:`photoquant.correct`
     estimates a scene's) and tested
     (:func:`photoquant.exposure.judge_exposure_times`). A response bent by
     view 0's shutter errors does not absorb the other views' independent ones,
     so labels off beyond the floor are rejected here, and only then is the
     response recovered jointly with the times (:func:`_recover_with_view_times`).
-    Where the test keeps the labels, the calibration is, to the bit, the one
-    without refinement.
+
+    The labels are judged against the profile's own response (``reference``),
+    fitted on view 0 as well, whichever method fits ``g``: whether the views'
+    data contradict their labels is a property of the capture, and a response
+    that does not fit the data (a peer's, a model too stiff for the camera)
+    would make exact labels look wrong and send the calibration through the
+    joint recovery for nothing. Where the test keeps the labels, the
+    calibration is, to the bit, the one without refinement, and the views'
+    refinements kept for the later floors are against the response used.
     """
     hidden = [hide_defects(view, defects) for view in views]
     fit = fit_response(hidden[0], spec, rng=seed)
-    refs = []
-    for view in hidden:
+    judge = fit
+    if _spec_record(*reference) != _spec_record(*spec):
         try:
-            refs.append(refine_by_pairs(view, fit.model, seed=seed))
+            judge = fit_response(hidden[0], reference, rng=seed)
         except CalibrationError:
-            return None  # the pairs cannot tell: the joint recovery decides
+            judge = fit  # the profile's response cannot be fitted here: the method's judges
+    refs = _refine_views_by_pairs(hidden, judge, seed)
+    if refs is None:
+        return None  # the pairs cannot tell: the joint recovery decides
     decision = judge_exposure_times(refs)
     if decision.refine:
         return None
+    if judge is not fit:
+        refs = _refine_views_by_pairs(hidden, fit, seed)
+        if refs is None:
+            return None
     log.note(f"views' exposure times: {decision.describe()}")
     return _JointFit(fit, None, decision.as_dict(), at_labels=refs)
+
+
+def _refine_views_by_pairs(
+    views: Sequence[ExposureStack], fit: StepFit[Any], seed: int
+) -> list[ExposureRefinement] | None:
+    """Each view's times from neighbouring exposure pairs against ``fit``'s response;
+    ``None`` where some view's pairs cannot tell."""
+    refs = []
+    for view in views:
+        try:
+            refs.append(refine_by_pairs(view, fit.model, seed=seed))
+        except CalibrationError:
+            return None
+    return refs
 
 
 def _recover_with_view_times(

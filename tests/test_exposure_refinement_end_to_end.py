@@ -182,3 +182,44 @@ def test_a_refinement_the_data_cannot_support_keeps_the_nominal_times_by_default
     assert any("nominal times kept" in n for n in model.report["notes"])
     with pytest.raises(CalibrationError, match="no-refine-exposures"):
         pq.calibrate(data.views, refine_exposures=True, **kwargs)
+
+
+@pytest.mark.parametrize("labels", ["exact", "jittered"])
+def test_the_labels_are_judged_against_the_profiles_response_whatever_the_method(
+    runs, monkeypatch, labels
+):
+    """A response that does not fit the camera must not make exact labels look wrong: the
+    views' labels are tested against the profile's own response (one more fit, of
+    ``Debevec 1997``), and the chosen method is fitted once, at the labels. Jittered labels
+    are rejected, and the chosen method's response is recovered jointly with the times.
+    Judged with OpenCV's Robertson response itself, these exact labels were rejected and
+    the method fitted five times (the screen, three rounds, the final fit)."""
+    import photoquant.calibration_steps as calibration_steps
+
+    fitted: list[str] = []
+    real_fit = calibration_steps.fit_response
+
+    def spy(stack, spec, rng=0):
+        fitted.append(spec[0].name)
+        return real_fit(stack, spec, rng=rng)
+
+    monkeypatch.setattr(calibration_steps, "fit_response", spy)
+    data = runs["data"].exact() if labels == "exact" else runs["data"]
+    # at exact labels the vignetting fit refuses this response (no refined times absorb
+    # its errors any more): the step is left out, the response's path is what is tested
+    model = pq.calibrate(
+        data.views,
+        irradiance=data.irradiance,
+        white_roi=data.white_roi,
+        correspondences=data.tracks,
+        response="OpenCV Robertson",
+        vignetting="None",
+    )
+    decision = model.report["exposures"]["decision"]
+    if labels == "exact":
+        assert fitted == ["OpenCV Robertson", "Debevec 1997"]
+        assert decision["refine"] is False and model.report["exposures"]["refined"] is False
+    else:
+        assert fitted[:2] == ["OpenCV Robertson", "Debevec 1997"]
+        assert fitted[2:] == ["OpenCV Robertson"] * (len(fitted) - 2) and len(fitted) >= 4
+        assert decision["refine"] is True and model.report["exposures"]["refined"] is True
