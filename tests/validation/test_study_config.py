@@ -87,13 +87,14 @@ def test_the_robustness_table_simulates_at_the_study_size(tmp_path) -> None:
 
 
 def test_the_second_process_runs_the_small_frame_studies_in_the_full_job() -> None:
-    from validation.experiments import BESIDE, STUDIES, beside_for
+    from validation.experiments import BESIDE, SMALL_FRAMES, STUDIES, beside_for
 
     assert beside_for(QUICK) == BESIDE == ("leaderboard", "noise")
-    # --full: the paper-size experiments (noise included) in one process, the studies on
-    # small frames in the other
-    assert beside_for(FULL) == STUDIES and "noise" not in STUDIES
-    assert {"leaderboard", "robustness"} <= set(STUDIES)
+    # --full: the paper-size experiments (noise included) in one process, the studies and
+    # the coverage over seeds, on small frames of their own, in the other
+    assert beside_for(FULL) == SMALL_FRAMES and "noise" not in SMALL_FRAMES
+    assert {"leaderboard", "robustness", "coverage"} <= set(SMALL_FRAMES)
+    assert set(STUDIES) <= set(SMALL_FRAMES)
 
 
 @pytest.mark.slow
