@@ -179,6 +179,7 @@ def twin_check(
     from photoquant.model import CameraModel, load_camera
     from photoquant.response import RESPONSE_METHODS
     from photoquant.utils import load_json
+    from pqsim.synth_camera.presets import camera_from_preset
     from pqsim.twin import capture_camera_scene
 
     say = progress or (lambda _line: None)
@@ -200,13 +201,17 @@ def twin_check(
             stack.image_shape,
             where=f"manifest {manifest.path}: crossval_roi",
         )
+    bits = camera_from_preset(os.fspath(twin)).bit_depth
+    if bits != stack.bit_depth:
+        raise InputError(
+            f"the twin {twin} has {bits}-bit values, the bracket {stack.bit_depth}-bit: "
+            "not this camera's twin"
+        )
     say("twin-check: correcting the bracket with the camera")
     scene = correct(stack, model, uncertainty=False).photoquantity
     say("twin-check: the twin shoots the corrected scene at the bracket's exposure times")
     capture = capture_camera_scene(twin, scene, stack.exposure_s, stack.n_repeats, rng=seed)
     twin_stack = capture.to_stack()
-    if twin_stack.image_shape != stack.image_shape:
-        raise InputError(f"the twin {twin} is not this camera's: another image size")
     say("twin-check: cross-validating the camera's bracket")
     real = crossval_stack(stack, roi=roi)
     say("twin-check: cross-validating the twin's bracket")

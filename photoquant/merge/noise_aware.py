@@ -456,8 +456,8 @@ def _quantile_groups(x: np.ndarray, n_groups: int) -> np.ndarray:
 
 
 _TRIM = 3.5
-"""A pair's difference further than this many robust standard deviations from zero is
-left out of its bin's variance (see :func:`_binned_curve`)."""
+"""A pair's difference further than this many standard deviations (of what its bin keeps)
+from zero is left out of its bin's variance (see :func:`_trimmed`)."""
 
 _TRIM_KEPT_VARIANCE = 1.0 - 2.0 * _TRIM * math.exp(-0.5 * _TRIM**2) / math.sqrt(
     2.0 * math.pi
@@ -500,11 +500,10 @@ def _binned_curve(
 
     A bin's variance is the mean of its ``d²`` within ±3.5 standard deviations (iterated:
     :func:`_trimmed`) divided by a Gaussian's share of variance kept there (0.9939; 1
-    where nothing was cut), less
-    the kept pairs' mean ``q``: a trimmed mean, nearly as efficient
-    as the plain one on Gaussian differences, that leaves out what no sensor noise
-    gives — a moving subject, an edge a fraction of a pixel out of register, a stuck
-    pixel — whose squares would otherwise be most of a bin's sum [Huber2009]_.
+    where nothing was cut), less the kept pairs' mean ``q``: a trimmed mean, nearly as
+    efficient as the plain one on Gaussian differences, that leaves out what no sensor
+    noise gives — a moving subject, an edge a fraction of a pixel out of register, a
+    stuck pixel — whose squares would otherwise be most of a bin's sum [Huber2009]_.
     """
     ybar, r, d2, q = data
     n_groups = min(n_bins, max(1, ybar.size // _MIN_PAIR_VALUES))
@@ -580,9 +579,9 @@ def estimate_noise_from_exposures(
     difference ``d = y_{k+1}/r − y_k`` (``r`` their time ratio, its error
     removed as a robust slope) has variance ``K ȳ (1 + 1/r) + σ_r² (1 +
     1/r²)`` with ``ȳ = (y_k + y_{k+1}/r)/2``; PRNU cancels in ``d``. The
-    mean of ``d²`` within ±3.5 robust standard deviations (corrected for the
-    trim; what lies beyond is a moving subject or an edge out of register,
-    not noise) less its quantisation variance (``1/12`` through each
+    mean of ``d²`` within ±3.5 standard deviations (an iterated trim,
+    corrected for the cut; what lies beyond is a moving subject or an edge
+    out of register, not noise) less its quantisation variance (``1/12`` through each
     value's ``dy/dc``) in up to ``n_bins`` quantile bins of ``ȳ`` is fitted
     by weighted least squares, each bin's standard error the one the line
     predicts for it (``√(2/n)`` times its variance: not the bin's own scatter,

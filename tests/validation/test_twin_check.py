@@ -101,6 +101,11 @@ def test_a_twin_of_another_camera_is_refused(camera_and_twin, tmp_path):
         twin_check(manifest, small, twin, methods=[])
     with pytest.raises(InputError, match=r"scene has shape"):
         capture_camera_scene(twin, np.ones((120, 160)), [0.01, 0.02])
+    deeper = json.loads(twin.read_text())
+    deeper["bit_depth"] = 12
+    (tmp_path / "twin12.json").write_text(json.dumps(deeper))
+    with pytest.raises(InputError, match="12-bit values, the bracket 8-bit"):
+        twin_check(manifest, camera_and_twin[1], tmp_path / "twin12.json", methods=[])
 
 
 def test_command_prints_the_check_and_its_json(camera_and_twin, capsys):
