@@ -170,8 +170,9 @@ def twin_check(
     Raises
     ------
     InputError
-        If the twin is not the camera's (another image size or channels), has no
-        ``camera_unit``, or a method is unknown.
+        If the camera is not the bracket's (another image size or channels), the twin
+        not the camera's (another bit depth) or without ``camera_unit``, or a method is
+        unknown.
     """
     from photoquant.correction import correct
     from photoquant.crossval import crossval_stack, parse_roi
