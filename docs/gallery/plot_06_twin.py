@@ -50,5 +50,5 @@ scored = [m for m in check.methods if m.g_rms_ln is not None]
 fig, ax = plt.subplots(figsize=(6, 3), layout="constrained")
 ax.barh([m.method for m in scored][::-1], [m.g_rms_ln for m in scored][::-1])
 ax.set(xlabel="g rms against the twin's truth (ln, worst channel)", xscale="log")
-ax.set_title(f"twin faithful within {check.ratio:.2f}x of the camera's crossval")
+ax.set_title(f"crossval error, twin / camera: {check.ratio:.2f}")
 plt.show()
