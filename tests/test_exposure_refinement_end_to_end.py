@@ -57,6 +57,17 @@ def runs():
     return out
 
 
+def _calibrate(data, **options):
+    """``pq.calibrate`` of a jittered set's views with its irradiance scene, chart and tracks."""
+    return pq.calibrate(
+        data.views,
+        irradiance=data.irradiance,
+        white_roi=data.white_roi,
+        correspondences=data.tracks,
+        **options,
+    )
+
+
 def test_refinement_recovers_most_of_the_exposure_error(runs):
     exact, nominal, refined = (runs[k][0] for k in ("exact", "nominal", "refined"))
     # the shutter's errors do matter, and the test can fail
@@ -137,13 +148,7 @@ def test_paper_profile_keeps_the_nominal_times(runs):
     # (on the jittered labels the paper's pipeline reads the views' exposure errors as
     # vignetting and refuses the fit; the exact labels show what it keeps)
     data = runs["data"].exact()
-    model = pq.calibrate(
-        data.views,
-        irradiance=data.irradiance,
-        white_roi=data.white_roi,
-        correspondences=data.tracks,
-        profile="paper",
-    )
+    model = _calibrate(data, profile="paper")
     assert model.parameters["refine_exposures"] is False
     assert model.report["exposures"] == {"refined": False}
     assert pq.correct(data.scene, model).exposures is None
@@ -171,17 +176,12 @@ def test_a_refinement_the_data_cannot_support_keeps_the_nominal_times_by_default
 
     monkeypatch.setattr(calibration_steps, "refine_jointly", fail)
     data = runs["data"]
-    kwargs = {
-        "irradiance": data.irradiance,
-        "white_roi": data.white_roi,
-        "correspondences": data.tracks,
-    }
-    model = pq.calibrate(data.views, **kwargs)
+    model = _calibrate(data)
     assert model.parameters["refine_exposures"] is False
     assert model.report["exposures"] == {"refined": False}
     assert any("nominal times kept" in n for n in model.report["notes"])
     with pytest.raises(CalibrationError, match="no-refine-exposures"):
-        pq.calibrate(data.views, refine_exposures=True, **kwargs)
+        _calibrate(data, refine_exposures=True)
 
 
 @pytest.mark.parametrize("labels", ["exact", "jittered"])
@@ -207,14 +207,7 @@ def test_the_labels_are_judged_against_the_profiles_response_whatever_the_method
     data = runs["data"].exact() if labels == "exact" else runs["data"]
     # at exact labels the vignetting fit refuses this response (no refined times absorb
     # its errors any more): the step is left out, the response's path is what is tested
-    model = pq.calibrate(
-        data.views,
-        irradiance=data.irradiance,
-        white_roi=data.white_roi,
-        correspondences=data.tracks,
-        response="OpenCV Robertson",
-        vignetting="None",
-    )
+    model = _calibrate(data, response="OpenCV Robertson", vignetting="None")
     decision = model.report["exposures"]["decision"]
     if labels == "exact":
         assert fitted == ["OpenCV Robertson", "Debevec 1997"]
