@@ -477,17 +477,16 @@ def _trimmed(group: np.ndarray, d2: np.ndarray, q: np.ndarray, n_groups: int) ->
     quantised differences take a few values, and a cut between them removes a whole value's
     share and lowers the next round's cut with it."""
     floor = _TRIM**2 * 12.0 * q
-    limit = np.full(n_groups, np.inf)
     kept = np.ones(d2.size, dtype=bool)
+    share = 1.0  # the first round's mean holds every pair: nothing cut yet
     for _ in range(_TRIM_ROUNDS):
         count = np.bincount(group, weights=kept, minlength=n_groups)
         total = np.bincount(group, weights=np.where(kept, d2, 0.0), minlength=n_groups)
-        share = np.where(np.isinf(limit), 1.0, _TRIM_KEPT_VARIANCE)
         limit = _TRIM**2 * total / np.maximum(count, 1.0) / share
         now = (d2 <= limit[group]) | (d2 <= floor)
         if np.array_equal(now, kept):
             break
-        kept = now
+        kept, share = now, _TRIM_KEPT_VARIANCE
     return kept
 
 
