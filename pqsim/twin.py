@@ -49,10 +49,16 @@ from photoquant.characterise import Characterisation, load_characterisation
 from photoquant.errors import InputError
 from photoquant.model import CameraModel, load_camera
 from photoquant.utils import load_json, to_json_value
-from pqsim.synth_camera.camera import Capture
+from pqsim.synth_camera.camera import Capture, SyntheticCamera
 from pqsim.synth_camera.presets import PRESET_FORMAT, camera_from_preset
 
-__all__ = ["MAX_TABLE_POINTS", "capture_camera_scene", "twin_preset", "twin_preset_json"]
+__all__ = [
+    "MAX_TABLE_POINTS",
+    "capture_camera_scene",
+    "load_twin",
+    "twin_preset",
+    "twin_preset_json",
+]
 
 MAX_TABLE_POINTS = 1024
 """Most points of a response table (a 16-bit response is subsampled evenly)."""
@@ -309,6 +315,27 @@ def twin_preset_json(
     return json.dumps(twin_preset(camera, characterisation), indent=1) + "\n"
 
 
+def load_twin(twin: str | os.PathLike[str]) -> tuple[SyntheticCamera, float]:
+    """A twin's preset file as its camera and its ``camera_unit`` (the camera's
+    photoquantity of 1 in the twin's unit).
+
+    Raises
+    ------
+    InputError
+        If the file is not a preset, or has no ``camera_unit`` (not a twin, or a twin
+        written before the unit was recorded).
+    """
+    path = Path(twin)
+    camera = camera_from_preset(str(path))
+    unit = load_json(path, f"preset file {path}").get("camera_unit")
+    if not isinstance(unit, (int, float)) or isinstance(unit, bool) or not 0 < unit < math.inf:
+        raise InputError(
+            f"preset file {path} has no `camera_unit` (the camera's photoquantity in the "
+            "twin's unit): write the twin again with `pqsim preset --from-camera`"
+        )
+    return camera, float(unit)
+
+
 def capture_camera_scene(
     twin: str | os.PathLike[str],
     photoquantity: Any,
@@ -345,18 +372,11 @@ def capture_camera_scene(
         written before the unit was recorded), or the scene does not match the twin's
         channels.
     """
-    path = Path(twin)
-    camera = camera_from_preset(str(path))
-    unit = load_json(path, f"preset file {path}").get("camera_unit")
-    if not isinstance(unit, (int, float)) or isinstance(unit, bool) or not 0 < unit < math.inf:
-        raise InputError(
-            f"preset file {path} has no `camera_unit` (the camera's photoquantity in the "
-            "twin's unit): write the twin again with `pqsim preset --from-camera`"
-        )
+    camera, unit = load_twin(twin)
     l = np.asarray(photoquantity, dtype=np.float64)  # noqa: E741 - the paper's symbol
     if l.ndim != 3 or l.shape[2] != camera.n_channels:
         raise InputError(
             f"the scene has shape {l.shape}; the twin needs (H, W, {camera.n_channels})"
         )
-    scene = np.where(np.isfinite(l), np.maximum(l, 0.0), 0.0) * float(unit)
+    scene = np.where(np.isfinite(l), np.maximum(l, 0.0), 0.0) * unit
     return camera.capture(scene, exposure_s, n_repeats, rng=rng)

@@ -33,7 +33,6 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from photoquant.errors import InputError
@@ -179,9 +178,7 @@ def twin_check(
     from photoquant.io import CaptureManifest, load_manifest, load_stack
     from photoquant.model import CameraModel, load_camera
     from photoquant.response import RESPONSE_METHODS
-    from photoquant.utils import load_json
-    from pqsim.synth_camera.presets import camera_from_preset
-    from pqsim.twin import capture_camera_scene
+    from pqsim.twin import capture_camera_scene, load_twin
 
     say = progress or (lambda _line: None)
     names = [RESPONSE_METHODS[m].name for m in methods]
@@ -202,11 +199,11 @@ def twin_check(
             stack.image_shape,
             where=f"manifest {manifest.path}: crossval_roi",
         )
-    bits = camera_from_preset(os.fspath(twin)).bit_depth
-    if bits != stack.bit_depth:
+    twin_camera, unit = load_twin(twin)
+    if twin_camera.bit_depth != stack.bit_depth:
         raise InputError(
-            f"the twin {twin} has {bits}-bit values, the bracket {stack.bit_depth}-bit: "
-            "not this camera's twin"
+            f"the twin {twin} has {twin_camera.bit_depth}-bit values, the bracket "
+            f"{stack.bit_depth}-bit: not this camera's twin"
         )
     say("twin-check: correcting the bracket with the camera")
     scene = correct(stack, model, uncertainty=False).photoquantity
@@ -222,7 +219,6 @@ def twin_check(
         say(f"twin-check: {name} against the twin's truth")
         scored.append(_score_on_truth(twin_stack, capture.truth, name, seed))
     scored.sort(key=lambda m: (m.g_rms_ln is None, m.g_rms_ln or 0.0))
-    unit = float(load_json(Path(twin), f"preset file {twin}")["camera_unit"])
     return TwinCheck(real, twin_cv, unit, seed, tuple(scored))
 
 
