@@ -36,6 +36,13 @@ replace without ``overwrite=True``. The plain file writers
 mostly write files inside a new temporary folder or a cache; commands pass
 their ``--overwrite`` flag to them, or use :func:`atomic_output_file`.
 
+Durability: a file is flushed to disk (``fsync`` of the file, then of its
+folder) before and after it takes its name. The files written inside a folder
+that :func:`atomic_directory` is building are flushed together instead, by
+one flush of the file system before the folder takes its name; nothing
+written inside a scratch folder (below) is flushed: it is removed when its
+work ends.
+
 Temporaries are registered in a process-wide set while they exist and are
 removed by the ``finally`` clauses of these functions, by an :mod:`atexit`
 hook, and — through :func:`photoquant._signals.handle_signals`, which the
@@ -231,6 +238,47 @@ def live_temporaries() -> list[Path]:
 def _inside_live_dir(path: Path) -> bool:
     dirs = {p for p, kind in _live_items() if kind == "dir"}
     return any(parent in dirs for parent in path.parents)
+
+
+def _inside_scratch(path: Path) -> bool:
+    """Whether ``path`` lies inside a live scratch folder, also one a parent process made
+    before it forked this one (its registry entry came with the fork)."""
+    with _live_lock:
+        folders = {p for p, (_, kind) in _live.items() if kind == "scratch"}
+    return any(parent in folders for parent in path.parents)
+
+
+def _flush_each(target: Path) -> bool:
+    """Whether a file written to ``target`` is flushed to disk on its own.
+
+    Not inside a scratch folder (removed when its work ends: nothing there
+    need survive a crash), nor inside a folder being built by
+    :func:`atomic_directory` (which flushes its file system once before the
+    folder takes its name: one flush instead of two a file).
+    """
+    return not (_inside_scratch(target) or _inside_live_dir(target))
+
+
+_syncfs_fn: Callable[[int], int] | None
+try:
+    _syncfs_fn = (
+        ctypes.CDLL(None, use_errno=True).syncfs if sys.platform.startswith("linux") else None
+    )
+except (OSError, AttributeError):
+    _syncfs_fn = None
+
+
+def _flush_file_system(folder: Path) -> None:
+    """Flush the file system holding ``folder`` to disk (``syncfs``; :func:`os.sync` without it)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        if _syncfs_fn is None or _syncfs_fn(fd) != 0:
+            os.sync()
+    finally:
+        os.close(fd)
 
 
 def _remove_path(path: Path) -> None:
@@ -635,6 +683,7 @@ def atomic_write(
     if overwrite:
         _check_replaceable_file(target, replaceable)
     _clean_stale(target)
+    flush = _flush_each(target)
     fd, tmp = _new_temp_file(target)
     try:
         _hook("created", tmp)
@@ -642,7 +691,8 @@ def atomic_write(
         with os.fdopen(fd, _MODES[mode], encoding=encoding if text else None) as f:
             yield f
             f.flush()
-            os.fsync(f.fileno())
+            if flush:
+                os.fsync(f.fileno())
         with deferred_signals():
             _hook("committing", tmp)
             _commit_file(tmp, target, overwrite=overwrite, replaceable=replaceable)
@@ -651,7 +701,8 @@ def atomic_write(
         _discard(tmp)
         raise
     _hook("committed", target)
-    _fsync_dir(target.parent)
+    if flush:
+        _fsync_dir(target.parent)
 
 
 def write_text_atomic(
@@ -827,11 +878,14 @@ def atomic_directory(
             _check_replaceable(target, target, replaceable)
     target.parent.mkdir(parents=True, exist_ok=True)
     _clean_stale(target)
+    flush = not _inside_scratch(target)
     tmp = _new_temp_dir(target)
     try:
         _hook("created", tmp)
         yield tmp
         os.chmod(tmp, _NEW_DIR_MODE)
+        if flush:
+            _flush_file_system(tmp)  # the files inside were not flushed one by one
         with deferred_signals():
             _hook("committing", tmp)
             _commit_dir(
@@ -841,7 +895,8 @@ def atomic_directory(
     finally:
         _discard(tmp)
     _hook("committed", target)
-    _fsync_dir(target.parent)
+    if flush:
+        _fsync_dir(target.parent)
 
 
 # ------------------------------------------------------------------------ scratch folders

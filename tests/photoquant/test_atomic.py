@@ -532,3 +532,47 @@ def test_a_folder_displaced_by_mistake_is_put_back_or_kept(tmp_path, monkeypatch
     (kept,) = [tmp_path / name for name in siblings(cam)]
     assert kept.name.endswith(".old") and (kept / "camera.json").read_text() == "old"
     assert clean_stale_temporaries(cam)[0] == []  # ours and alive; later: named, not deleted
+
+
+def test_files_are_flushed_one_by_one_or_with_their_folder_or_not_in_scratch(tmp_path, monkeypatch):
+    """A lone file: its data and its folder's entry (2 flushes). Files of a folder being
+    built: none each, one flush of the file system before the folder takes its name. Scratch:
+    none at all."""
+    flushed: list[str] = []
+    real_fsync = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: (flushed.append("fsync"), real_fsync(fd)))
+    monkeypatch.setattr(atomic, "_flush_file_system", lambda folder: flushed.append("fs"))
+
+    write_text_atomic(tmp_path / "alone.txt", "a")
+    assert flushed == ["fsync", "fsync"]
+
+    flushed.clear()
+    with atomic_directory(tmp_path / "built") as folder:
+        for i in range(3):
+            write_text_atomic(folder / f"f{i}.txt", str(i))
+        assert flushed == []
+    assert flushed[0] == "fs" and "fs" not in flushed[1:]
+    assert sorted(p.name for p in (tmp_path / "built").iterdir()) == ["f0.txt", "f1.txt", "f2.txt"]
+
+    flushed.clear()
+    with atomic.scratch_directory("pqtest-", parent=tmp_path) as scratch:
+        write_text_atomic(scratch / "s.txt", "s")
+        with atomic_directory(scratch / "set") as folder:
+            write_text_atomic(folder / "f.txt", "f")
+        assert (scratch / "set" / "f.txt").read_text() == "f"
+    assert flushed == []
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
+def test_a_forked_child_writes_into_its_parents_scratch_without_flushing(tmp_path):
+    """A validation's second process writes its capture sets into the scratch folder its
+    parent made: nothing there is flushed to disk, in the child either."""
+    with atomic.scratch_directory("pqtest-", parent=tmp_path) as scratch:
+        pid = os.fork()
+        if pid == 0:  # the child: exit 0 only if nothing was flushed
+            calls = []
+            os.fsync = lambda fd: calls.append(fd)  # the child's own copy of the module
+            write_text_atomic(scratch / "child.txt", "c")
+            os._exit(0 if not calls and (scratch / "child.txt").exists() else 1)
+        _, status = os.waitpid(pid, 0)
+        assert os.waitstatus_to_exitcode(status) == 0
