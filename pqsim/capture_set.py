@@ -306,7 +306,7 @@ def write_capture_folder(
     scene: CaptureSource | None,
     extra_sets: Mapping[str, tuple[CaptureSource, Mapping[str, Any]]] | None = None,
     white_roi: Sequence[int] | None,
-    correspondences: list[Any] | None,
+    correspondences: Any,
     ext: str,
     write_saturation_level: bool,
     generator: Mapping[str, Any],
@@ -349,8 +349,10 @@ def write_capture_folder(
         other: the dark frames measure it).
     white_roi : sequence of 4 int, optional
         The white chart's box in view 0.
-    correspondences : list, optional
-        Manifest tracks ``[[view, x, y], ...]`` (pixel-index coordinates).
+    correspondences : list or ndarray, optional
+        Manifest tracks ``[[view, x, y], ...]`` (pixel-index coordinates); an
+        ``(M, V, 3)`` array of integers is written without a walk over its
+        numbers.
     ext : str
         Frame file extension (:func:`frame_extension`).
     write_saturation_level : bool
@@ -416,7 +418,7 @@ def _write_capture_contents(
     scene: CaptureSource | None,
     extra_sets: Mapping[str, tuple[CaptureSource, Mapping[str, Any]]],
     white_roi: Sequence[int] | None,
-    correspondences: list[Any] | None,
+    correspondences: Any,
     ext: str,
     write_saturation_level: bool,
     generator: Mapping[str, Any],
@@ -454,7 +456,7 @@ def _write_capture_contents(
         manifest["scene"] = write("scene", "scene", scene)
     for name, (source, fields) in extra_sets.items():
         manifest[name] = write(name, name, source) | dict(fields)
-    if correspondences:
+    if correspondences is not None and len(correspondences) > 0:
         manifest["correspondences"] = correspondences
     if write_saturation_level:
         manifest["saturation_level"] = camera.saturation_dn.tolist()
@@ -707,7 +709,7 @@ def write_capture_set(
         scene=test,
         extra_sets=extra,
         white_roi=pv.white_rois[0],
-        correspondences=pv.correspondences() if pv.tracks.shape[0] and n_views > 1 else None,
+        correspondences=pv.tracks if pv.tracks.shape[0] and n_views > 1 else None,
         ext=ext,
         write_saturation_level=write_saturation_level,
         generator={

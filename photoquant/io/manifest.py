@@ -104,7 +104,7 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._json import to_json_value
+from photoquant._json import dumps_indented, to_json_value
 from photoquant.errors import ManifestError
 from photoquant.io.atomic import real_path, write_text_atomic
 
@@ -852,7 +852,7 @@ def write_manifest(path: PathLike, data: Mapping[str, Any], *, allow_outside: bo
     parser = _Parser(resolved, resolved.parent, check_files=False, allow_outside=allow_outside)
     parser.parse(plain)
     try:
-        text = json.dumps(plain, indent=2, allow_nan=False)
+        text = dumps_indented(plain)
     except (TypeError, ValueError) as exc:
         raise parser.error(f"cannot be written as JSON: {exc}") from None
     write_text_atomic(path, text + "\n")

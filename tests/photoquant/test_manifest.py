@@ -247,6 +247,49 @@ def test_write_manifest_validates_and_keeps_old_file(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["m.json"]
 
 
+def test_written_tracks_take_a_line_each_and_load_back(tmp_path):
+    data = _base(tmp_path)
+    tracks = np.array([[[0, 1, 2], [1, 3, 2]], [[0, 5, 4], [1, 7, 4]]])
+    data["correspondences"] = tracks  # an integer array, as the simulator passes it
+    path = tmp_path / "out.json"
+    write_manifest(path, data)
+    lines = path.read_text().splitlines()
+    assert "    [[0, 1, 2], [1, 3, 2]]," in lines
+    assert "    [[0, 5, 4], [1, 7, 4]]" in lines
+    loaded = load_manifest(path).correspondences
+    assert [t.tolist() for t in loaded] == tracks.astype(float).tolist()
+
+
+_JSON_VALUES = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(max_size=5),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=4), inner, max_size=4)
+    ),
+    max_leaves=30,
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(_JSON_VALUES)
+def test_the_indented_writer_gives_the_same_values_as_json(value):
+    from photoquant._json import dumps_indented
+
+    assert json.loads(dumps_indented(value)) == json.loads(json.dumps(value))
+
+
+def test_the_indented_writer_refuses_what_strict_json_cannot_hold():
+    from photoquant._json import dumps_indented
+
+    with pytest.raises(ValueError, match="Out of range float"):
+        dumps_indented({"a": [[1.0, float("nan")]]})
+    with pytest.raises(TypeError, match="not JSON serializable"):
+        dumps_indented({"a": [{1, 2}]})
+
+
 # ----------------------------------------------------------------------------- invalid manifests
 
 
