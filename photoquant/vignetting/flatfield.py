@@ -87,14 +87,19 @@ class _Smoothed:
 
 
 def _local_linear(data: np.ndarray, valid: np.ndarray, sigma: float) -> _Smoothed:
-    """Gaussian-weighted local linear regression of ``data`` over ``valid`` pixels."""
+    """Gaussian-weighted local linear regression of ``data`` over ``valid`` pixels.
+
+    Per pixel, the weighted least-squares plane through its neighbours: the
+    3 × 3 normal equations ``A c = b`` in the centred basis ``φ = (1, x_i − x,
+    y_i − y)`` are solved by their adjugate (``A`` is symmetric), pixel by
+    pixel in closed form.
+    """
     h, w = data.shape
     m = valid.astype(np.float64)
     d = np.where(valid, data, 0.0)
     # coordinates in units of sigma, centred on the image, for conditioning
     x = ((np.arange(w, dtype=np.float64) - (w - 1) / 2) / sigma)[None, :]
     y = ((np.arange(h, dtype=np.float64) - (h - 1) / 2) / sigma)[:, None]
-    x, y = np.broadcast_to(x, (h, w)), np.broadcast_to(y, (h, w))
 
     def g(a: np.ndarray) -> np.ndarray:
         return gaussian_filter(a, sigma, mode="constant", cval=0.0)
@@ -105,8 +110,8 @@ def _local_linear(data: np.ndarray, valid: np.ndarray, sigma: float) -> _Smoothe
             4.0 * np.pi * sigma * sigma
         )
 
-    def centred(filt: Any) -> np.ndarray:
-        """The 3 × 3 moments Σ k_i m_i φ φᵀ with φ = (1, x_i − x, y_i − y)."""
+    def centred(filt: Any) -> tuple[np.ndarray, ...]:
+        """The moments Σ k_i m_i φ φᵀ with φ = (1, x_i − x, y_i − y): s0, cx, cy, cxx, cxy, cyy."""
         s0, sx, sy = filt(m), filt(m * x), filt(m * y)
         sxx, sxy, syy = filt(m * x * x), filt(m * x * y), filt(m * y * y)
         cx = sx - x * s0
@@ -114,27 +119,31 @@ def _local_linear(data: np.ndarray, valid: np.ndarray, sigma: float) -> _Smoothe
         cxx = sxx - 2 * x * sx + x * x * s0
         cyy = syy - 2 * y * sy + y * y * s0
         cxy = sxy - x * sy - y * sx + x * y * s0
-        return np.stack(
-            [
-                np.stack([s0, cx, cy], -1),
-                np.stack([cx, cxx, cxy], -1),
-                np.stack([cy, cxy, cyy], -1),
-            ],
-            -2,
-        )
+        return s0, cx, cy, cxx, cxy, cyy
 
-    a = centred(g)
-    t0, tx, ty = g(d), g(d * x), g(d * y)
-    b = np.stack([t0, tx - x * t0, ty - y * t0], -1)
-    weight = a[..., 0, 0]
+    a00, a01, a02, a11, a12, a22 = centred(g)
+    weight = a00
     ok = weight >= _MIN_WEIGHT
-    a_ok = np.where(ok[..., None, None], a, np.eye(3))
-    coef = np.linalg.solve(a_ok, b[..., None])[..., 0]
-    # equivalent kernel w = e1ᵀ A⁻¹ φ g: Σ w² = e1ᵀ A⁻¹ B A⁻¹ e1, B = Σ g² m φ φᵀ
-    e1 = np.linalg.solve(a_ok, np.broadcast_to(np.array([1.0, 0.0, 0.0]), (h, w, 3))[..., None])
-    bmat = centred(g2)
-    gain2 = (np.swapaxes(e1, -1, -2) @ bmat @ e1)[..., 0, 0]
-    value = np.where(ok, coef[..., 0], np.nan)
+    # first row of the adjugate of the symmetric A, and its determinant
+    c0 = a11 * a22 - a12 * a12
+    c1 = a02 * a12 - a01 * a22
+    c2 = a01 * a12 - a02 * a11
+    det = a00 * c0 + a01 * c1 + a02 * c2
+    # where the window is (nearly) empty: A = I, as for a pixel without data
+    c0, c1, c2 = np.where(ok, c0, 1.0), np.where(ok, c1, 0.0), np.where(ok, c2, 0.0)
+    det = np.where(ok, det, 1.0)
+    t0, tx, ty = g(d), g(d * x), g(d * y)
+    coef0 = (c0 * t0 + c1 * (tx - x * t0) + c2 * (ty - y * t0)) / det
+    # equivalent kernel w = e1ᵀ A⁻¹ φ g: Σ w² = e1ᵀ A⁻¹ B A⁻¹ e1, B = Σ g² m φ φᵀ,
+    # with A⁻¹ e1 = (c0, c1, c2) / det
+    b00, b01, b02, b11, b12, b22 = centred(g2)
+    gain2 = (
+        b00 * c0 * c0
+        + b11 * c1 * c1
+        + b22 * c2 * c2
+        + 2.0 * (b01 * c0 * c1 + b02 * c0 * c2 + b12 * c1 * c2)
+    ) / (det * det)
+    value = np.where(ok, coef0, np.nan)
     return _Smoothed(value, np.sqrt(np.maximum(gain2, 0.0)), weight)
 
 
