@@ -157,11 +157,28 @@ def predicted_relative_error(
 
     Monte Carlo over ``n_draws`` draws of ``ln l̂ = ln l + b + ε``,
     ``ε ~ N(0, Var)``, with the bias ``b`` of :func:`predicted_log_error`.
+    The draws are float32 (their Monte Carlo error, ~5 % a pixel at 64 draws,
+    dwarfs float32's 1e-7), made channel plane by channel plane; the sum over
+    the draws is float64.
     """
-    sd = np.sqrt(log_variance)
-    norm = np.linalg.norm(l, axis=-1)
+    n_ch = l.shape[-1]
+    norm = np.linalg.norm(l, axis=-1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.moveaxis(l / norm, -1, 0).astype(np.float32)  # (C, H, W), NaN where ‖l‖ = 0
+    sd = np.moveaxis(np.sqrt(log_variance), -1, 0).astype(np.float32)
+    bias = np.moveaxis(np.broadcast_to(np.asarray(log_bias, dtype=np.float64), l.shape), -1, 0)
+    bias = bias.astype(np.float32)
+    eps = np.empty((n_ch, *l.shape[:-1]), dtype=np.float32)
+    draw = np.empty(l.shape[:-1], dtype=np.float32)
     total = np.zeros(l.shape[:-1])
     for _ in range(n_draws):
-        eps = log_bias + rng.standard_normal(l.shape) * sd
-        total += np.linalg.norm(l * np.expm1(eps), axis=-1) / norm
+        rng.standard_normal(eps.shape, dtype=np.float32, out=eps)
+        eps *= sd
+        eps += bias
+        np.expm1(eps, out=eps)
+        eps *= share
+        np.square(eps, out=eps)
+        np.sum(eps, axis=0, out=draw)
+        np.sqrt(draw, out=draw)
+        total += draw
     return total / n_draws
