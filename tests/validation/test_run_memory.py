@@ -66,3 +66,36 @@ def test_a_run_releases_each_memo_after_its_last_reader(tmp_path, monkeypatch):
     fresh = Shared(TINY, 0, tmp_path / "alone", lambda s: None)
     alone = _run_one("fig7", ["fig7"], TINY, 0, tmp_path / "alone", fresh)
     assert alone.metrics and alone.metrics == results[2].metrics
+
+
+def test_one_capture_sets_frames_at_a_time(tmp_path, monkeypatch):
+    """The calibration inputs of the previous preset are dropped before the next preset's
+    are read (the ablation goes through the presets in turn; two paper-size sets and
+    their stacks' memos are ~2.4 GB)."""
+    import gc
+    import weakref
+    from types import SimpleNamespace
+
+    import validation.experiments.shared as shared_module
+
+    class Inputs:  # stands for CalibrationInputs (a weak reference needs a class)
+        def __init__(self, manifest):
+            self.manifest = manifest
+
+    alive_at_load: list[bool] = []
+    previous: list[weakref.ref] = []
+
+    def load(manifest):
+        gc.collect()
+        alive_at_load.append(any(ref() is not None for ref in previous))
+        inputs = Inputs(manifest)
+        previous.append(weakref.ref(inputs))
+        return inputs
+
+    monkeypatch.setattr(shared_module, "load_calibration_inputs", load)
+    shared = Shared(TINY, 0, tmp_path, lambda s: None)
+    monkeypatch.setattr(shared, "calibration", lambda p: SimpleNamespace(manifest=f"{p}.json"))
+    assert shared.calibration_inputs("ccd").manifest == "ccd.json"
+    assert shared.calibration_inputs("ccd") is shared.calibration_inputs("ccd")  # kept
+    assert shared.calibration_inputs("cmos").manifest == "cmos.json"
+    assert alive_at_load == [False, False]

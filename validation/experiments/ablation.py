@@ -71,10 +71,13 @@ def run(
         for key, label, kwargs in variants():
             shared.say(f"  {preset}: {label}")
             try:
-                # the set read once for every variant (calibrate_manifest's inputs)
-                inputs = shared.calibration_inputs(preset)
-                model = inputs.calibrate(seed=cal.calibrate_seed, **kwargs)
+                # the set read once for every variant (calibrate_manifest's inputs), held
+                # for the call only: the next preset's replaces it
+                model = shared.calibration_inputs(preset).calibrate(
+                    seed=cal.calibrate_seed, **kwargs
+                )
                 rep = compare_with_truth(cal.manifest, model, cal.truth)
+                del model  # not held while the next variant calibrates
             except PhotoquantError as exc:
                 res.row(f"{preset}: {label}", f"refused: {exc}", detail=False)
                 for q, _, unit in QUANTITIES:
@@ -82,6 +85,7 @@ def run(
                 continue
             scores = pipeline_scores(rep)
             floor = rep["scene"]["noise_floor_mean"]
+            del rep  # its maps are not held while the next variant calibrates
             for q, name, unit in QUANTITIES:
                 res.metric(
                     f"{preset}.{key}.{q}",

@@ -314,10 +314,16 @@ class Shared:
         """The capture set of ``preset`` as :func:`photoquant.calibrate` reads it (all its
         views), for calibrating it other ways; the last preset's is kept (one set's frames
         in memory: the experiments go through the presets in turn) until
-        :meth:`release_frames`."""
+        :meth:`release_frames` or the next preset's is read. A caller holds it for one
+        call, not across presets (``shared.calibration_inputs(p).calibrate(...)``), so
+        that it can be dropped."""
         cal = self.calibration(preset)
         kept = self.cache.get("calibration-inputs")
         if kept is None or kept[0] != preset:
+            # the previous set is dropped before the next is read, not after: never two
+            # sets' frames (and the stacks' memos of their masks) at once
+            del kept
+            self.release_frames()
             kept = (preset, load_calibration_inputs(cal.manifest))
             self.cache["calibration-inputs"] = kept
         return kept[1]
