@@ -242,6 +242,7 @@ def compare_with_truth(
     *,
     allow_outside: bool = False,
     uncertainty: bool = False,
+    scene: Any = None,
 ) -> dict[str, Any]:
     """Compare a calibrated camera and its corrections with a capture set's ground truth.
 
@@ -261,6 +262,12 @@ def compare_with_truth(
     uncertainty : bool
         Also correct the scene with its stated uncertainty and score it against
         the truth (``uncertainty``, :func:`stated_uncertainty_coverage`).
+    scene : ExposureStack, optional
+        The manifest's ``scene`` frames as :func:`photoquant.io.load_stack`
+        reads them (``load_stack(manifest.scene, manifest)``); read from the
+        files when not given. A caller that compares many cameras with one
+        capture set reads them once: the correction and every score are the
+        same.
 
     Returns
     -------
@@ -313,9 +320,11 @@ def compare_with_truth(
             np.where(w >= 0.05, w, 0.0),
         )
         out["response"].append({"rms": rms, "max": worst})
-    res = correct_manifest(
-        manifest, model, allow_outside=allow_outside, uncertainty="auto" if uncertainty else False
-    )
+    stated = "auto" if uncertainty else False
+    if scene is None:
+        res = correct_manifest(manifest, model, allow_outside=allow_outside, uncertainty=stated)
+    else:
+        res = correct(scene, model, uncertainty=stated)  # correct_manifest's call, frames read
     scene = truth.captures["scene"]
     # A calibrated camera makes the white chart neutral: it measures l_λ / W_λ,
     # W the chart's true photoquantity (neutral for pqsim's analytic chart, the

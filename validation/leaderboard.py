@@ -467,6 +467,28 @@ class _Capture:
     allow_outside: bool = False
     chart: Callable[[Any], dict[str, float]] | None = None
     """The ColorChecker corrected with a model → ``cc_r``, ``cc_r_cie`` (None: no chart)."""
+    loaded: Any = None
+    """The manifest as loaded and its test scene's frames, read on the first comparison and
+    kept for the others (every method's camera corrects the same frames)."""
+    scene: Any = None
+
+    def compare(self, model: Any) -> dict[str, Any]:
+        """:func:`validation.compare.compare_with_truth` of ``model`` on this capture, with
+        its stated uncertainty scored."""
+        from photoquant.io import load_manifest, load_stack
+        from validation.compare import compare_with_truth
+
+        if self.scene is None:
+            self.loaded = load_manifest(self.manifest, allow_outside=self.allow_outside)
+            self.scene = load_stack(self.loaded.scene, self.loaded)
+        return compare_with_truth(
+            self.loaded,
+            model,
+            self.truth,
+            allow_outside=self.allow_outside,
+            uncertainty=True,
+            scene=self.scene,
+        )
 
     def describe(self) -> str:
         ref = self.views[0]
@@ -625,7 +647,6 @@ def _run_entry(
     ``memo`` keeps each calibration's scores by capture and keywords: the default
     pipeline, on every board, is calibrated and scored once per capture.
     """
-    from validation.compare import compare_with_truth
 
     entry = Entry(step, method.name, method.reference)
     unavailable = _unavailable(method)
@@ -656,9 +677,7 @@ def _run_entry(
                     model = fitted  # deterministic: the first one is scored
                 if len(times) >= repeats or times[-1] > repeat_below_s:
                     break
-            rep = compare_with_truth(
-                cap.manifest, model, cap.truth, allow_outside=cap.allow_outside, uncertainty=True
-            )
+            rep = cap.compare(model)
         except Exception as exc:  # noqa: BLE001 - a method must not crash the board
             partial = _response_alone(step, cap, kwargs, exc) if model is None else None
             if partial is None:
@@ -706,15 +725,12 @@ def _response_alone(
     without the vignetting step gives the same response and LUT (both come first).
     ``None`` when that fails too, or for another step's method."""
     from photoquant.errors import PhotoquantError
-    from validation.compare import compare_with_truth
 
     if step != "response" or not isinstance(error, PhotoquantError):
         return None
     try:
         model = _calibrate_capture(cap, {**kwargs, "vignetting": "None"})
-        rep = compare_with_truth(
-            cap.manifest, model, cap.truth, allow_outside=cap.allow_outside, uncertainty=True
-        )
+        rep = cap.compare(model)
     except Exception:  # noqa: BLE001 - then the entry fails with the first error
         return None
     return model, rep

@@ -128,3 +128,22 @@ def test_the_scene_floor_is_computed_once_per_truth_and_is_the_same(capture, mon
     fresh = scene_noise_floor(load_truth(manifest.parent / "truth"), False)
     np.testing.assert_array_equal(fresh, scene_noise_floor(truth, False))
     assert len(calls) == 1 and not fresh.flags.writeable
+
+
+def test_the_scene_read_once_gives_the_same_comparison(capture, monkeypatch):
+    """A caller comparing many cameras with one capture set passes its scene frames: the
+    same correction, scores and stated uncertainty as reading them, and no file read."""
+    import validation.compare as compare
+    from photoquant.io import load_manifest, load_stack
+
+    manifest, truth = capture
+    model = calibrate_manifest(manifest)
+    read = compare_with_truth(manifest, model, truth, uncertainty=True)
+    loaded = load_manifest(manifest)
+    scene = load_stack(loaded.scene, loaded)
+    monkeypatch.setattr(compare, "correct_manifest", lambda *a, **k: pytest.fail("read again"))
+    given = compare_with_truth(loaded, model, truth, uncertainty=True, scene=scene)
+    np.testing.assert_array_equal(given["scene"]["photoquantity"], read["scene"]["photoquantity"])
+    assert given["scene"]["error"] == read["scene"]["error"]
+    assert given["balance"] == read["balance"]
+    assert given["uncertainty"] == read["uncertainty"]

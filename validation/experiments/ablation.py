@@ -59,6 +59,7 @@ def run(
 ) -> ExperimentResult:
     """Calibrate each preset with the paper's profile, each deviation alone and photoquant's."""
     from photoquant.errors import PhotoquantError
+    from photoquant.io import load_manifest, load_stack
     from photoquant.profiles import DEVIATIONS
     from validation.compare import compare_with_truth
 
@@ -68,6 +69,9 @@ def run(
     for preset in config.presets:
         cal = shared.calibration(preset)
         floor = None
+        # the test scene's frames and manifest read once: every variant corrects them
+        manifest = load_manifest(cal.manifest)
+        scene = load_stack(manifest.scene, manifest)
         for key, label, kwargs in variants():
             shared.say(f"  {preset}: {label}")
             try:
@@ -76,7 +80,7 @@ def run(
                 model = shared.calibration_inputs(preset).calibrate(
                     seed=cal.calibrate_seed, **kwargs
                 )
-                rep = compare_with_truth(cal.manifest, model, cal.truth)
+                rep = compare_with_truth(manifest, model, cal.truth, scene=scene)
                 del model  # not held while the next variant calibrates
             except PhotoquantError as exc:
                 res.row(f"{preset}: {label}", f"refused: {exc}", detail=False)
@@ -103,6 +107,7 @@ def run(
                 "–",
                 "g rms / balance / LUT / vignetting / scene",
             )
+        del scene  # not held while the next preset's frames are read
         if floor is not None:
             res.metric(
                 f"{preset}.scene_noise_floor",
