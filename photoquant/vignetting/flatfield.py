@@ -123,13 +123,14 @@ def _local_linear(data: np.ndarray, valid: np.ndarray, sigma: float) -> _Smoothe
 
     a00, a01, a02, a11, a12, a22 = centred(g)
     weight = a00
-    ok = weight >= _MIN_WEIGHT
     # first row of the adjugate of the symmetric A, and its determinant
     c0 = a11 * a22 - a12 * a12
     c1 = a02 * a12 - a01 * a22
     c2 = a01 * a12 - a02 * a11
     det = a00 * c0 + a01 * c1 + a02 * c2
-    # where the window is (nearly) empty: A = I, as for a pixel without data
+    # no plane where the window is (nearly) empty or its pixels lie on a line (A singular);
+    # there A = I, as for a pixel without data
+    ok = (weight >= _MIN_WEIGHT) & (det > 0)
     c0, c1, c2 = np.where(ok, c0, 1.0), np.where(ok, c1, 0.0), np.where(ok, c2, 0.0)
     det = np.where(ok, det, 1.0)
     t0, tx, ty = g(d), g(d * x), g(d * y)

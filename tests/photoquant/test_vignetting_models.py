@@ -782,3 +782,19 @@ def test_extended_goldman_chen_max_tracks_subsamples_evenly(rng):
     # and the subsample is no toy: it is still within the noise of the truth
     err = np.abs(part.model.map(IMAGE_SHAPE) / truth - 1.0).mean(axis=(0, 1))
     assert np.all(err < 3 * part.report["map_uncertainty"]), err
+
+
+def test_a_window_whose_valid_pixels_lie_on_a_line_has_no_plane():
+    """Flagged pixels everywhere but one column: beside it the local plane's tilt across
+    the column is undetermined (singular normal equations), the estimate NaN, no warning;
+    on the column itself the data are fitted."""
+    import warnings
+
+    flat = np.full((40, 50, 1), np.nan)
+    flat[:, 25, 0] = 2.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        smooth, _, _ = smooth_flat_field(flat, 3.0, reject=0.0)
+    assert np.isnan(smooth[:, :20]).all() and np.isnan(smooth[:, 31:]).all()
+    finite = smooth[np.isfinite(smooth)]
+    assert finite.size and np.allclose(finite, 2.0)
