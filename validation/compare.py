@@ -325,12 +325,12 @@ def compare_with_truth(
         res = correct_manifest(manifest, model, allow_outside=allow_outside, uncertainty=stated)
     else:
         res = correct(scene, model, uncertainty=stated)  # correct_manifest's call, frames read
-    scene = truth.captures["scene"]
+    true_scene = truth.captures["scene"]
     # A calibrated camera makes the white chart neutral: it measures l_λ / W_λ,
     # W the chart's true photoquantity (neutral for pqsim's analytic chart, the
     # paper's colour under the lamp for a rendered set). Compare with that.
     white = _white_chart_truth(manifest, truth)
-    scene_l = white_reference(scene.l, white / white[min(1, white.size - 1)])
+    scene_l = white_reference(true_scene.l, white / white[min(1, white.size - 1)])
     ratios = channel_scale_ratios(scene_l, res.photoquantity, res.mask)
     out["balance"] = {
         "factors": model.balance.factors.tolist(),

@@ -468,9 +468,10 @@ class _Capture:
     chart: Callable[[Any], dict[str, float]] | None = None
     """The ColorChecker corrected with a model → ``cc_r``, ``cc_r_cie`` (None: no chart)."""
     loaded: Any = None
-    """The manifest as loaded and its test scene's frames, read on the first comparison and
-    kept for the others (every method's camera corrects the same frames)."""
+    """The manifest as loaded (on the first comparison)."""
     scene: Any = None
+    """Its test scene's frames, read on the first comparison and kept for the others (every
+    method's camera corrects the same frames)."""
 
     def compare(self, model: Any) -> dict[str, Any]:
         """:func:`validation.compare.compare_with_truth` of ``model`` on this capture, with
@@ -647,7 +648,6 @@ def _run_entry(
     ``memo`` keeps each calibration's scores by capture and keywords: the default
     pipeline, on every board, is calibrated and scored once per capture.
     """
-
     entry = Entry(step, method.name, method.reference)
     unavailable = _unavailable(method)
     if unavailable is not None:
