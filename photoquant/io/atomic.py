@@ -36,12 +36,12 @@ replace without ``overwrite=True``. The plain file writers
 mostly write files inside a new temporary folder or a cache; commands pass
 their ``--overwrite`` flag to them, or use :func:`atomic_output_file`.
 
-Durability: a file is flushed to disk (``fsync`` of the file, then of its
-folder) before and after it takes its name. The files written inside a folder
-that :func:`atomic_directory` is building are flushed together instead, by
-one flush of the file system before the folder takes its name; nothing
-written inside a scratch folder (below) is flushed: it is removed when its
-work ends.
+Durability: a file's data are flushed to disk (``fsync``) before it takes
+its name, and its folder's entry after. The files written inside a folder
+that :func:`atomic_directory` is building have their data flushed one by
+one, and the entries of that folder and of the folders inside it once each,
+before it takes its name; nothing written inside a scratch folder (below) is
+flushed: it is removed when its work ends.
 
 Temporaries are registered in a process-wide set while they exist and are
 removed by the ``finally`` clauses of these functions, by an :mod:`atexit`
@@ -248,37 +248,24 @@ def _inside_scratch(path: Path) -> bool:
     return any(parent in folders for parent in path.parents)
 
 
-def _flush_each(target: Path) -> bool:
-    """Whether a file written to ``target`` is flushed to disk on its own.
+def _flushes(target: Path) -> tuple[bool, bool]:
+    """Whether a file written to ``target`` has its data flushed to disk, and its folder's entry.
 
-    Not inside a scratch folder (removed when its work ends: nothing there
-    need survive a crash), nor inside a folder being built by
-    :func:`atomic_directory` (which flushes its file system once before the
-    folder takes its name: one flush instead of two a file).
+    Neither inside a scratch folder (removed when its work ends: nothing
+    there need survive a crash). Inside a folder being built by
+    :func:`atomic_directory`, the data only: the folder flushes each of its
+    folders' entries once, before it takes its name (one flush a file
+    instead of two).
     """
-    return not (_inside_scratch(target) or _inside_live_dir(target))
+    if _inside_scratch(target):
+        return False, False
+    return True, not _inside_live_dir(target)
 
 
-_syncfs_fn: Callable[[int], int] | None
-try:
-    _syncfs_fn = (
-        ctypes.CDLL(None, use_errno=True).syncfs if sys.platform.startswith("linux") else None
-    )
-except (OSError, AttributeError):
-    _syncfs_fn = None
-
-
-def _flush_file_system(folder: Path) -> None:
-    """Flush the file system holding ``folder`` to disk (``syncfs``; :func:`os.sync` without it)."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        if _syncfs_fn is None or _syncfs_fn(fd) != 0:
-            os.sync()
-    finally:
-        os.close(fd)
+def _flush_tree_entries(folder: Path) -> None:
+    """Flush the entries of ``folder`` and of every folder inside it (not following links)."""
+    for root, _, _ in os.walk(folder):
+        _fsync_dir(Path(root))
 
 
 def _remove_path(path: Path) -> None:
@@ -683,7 +670,7 @@ def atomic_write(
     if overwrite:
         _check_replaceable_file(target, replaceable)
     _clean_stale(target)
-    flush = _flush_each(target)
+    flush_data, flush_entry = _flushes(target)
     fd, tmp = _new_temp_file(target)
     try:
         _hook("created", tmp)
@@ -691,7 +678,7 @@ def atomic_write(
         with os.fdopen(fd, _MODES[mode], encoding=encoding if text else None) as f:
             yield f
             f.flush()
-            if flush:
+            if flush_data:
                 os.fsync(f.fileno())
         with deferred_signals():
             _hook("committing", tmp)
@@ -701,7 +688,7 @@ def atomic_write(
         _discard(tmp)
         raise
     _hook("committed", target)
-    if flush:
+    if flush_entry:
         _fsync_dir(target.parent)
 
 
@@ -885,7 +872,7 @@ def atomic_directory(
         yield tmp
         os.chmod(tmp, _NEW_DIR_MODE)
         if flush:
-            _flush_file_system(tmp)  # the files inside were not flushed one by one
+            _flush_tree_entries(tmp)  # its files' data are on disk, their entries not yet
         with deferred_signals():
             _hook("committing", tmp)
             _commit_dir(

@@ -534,25 +534,31 @@ def test_a_folder_displaced_by_mistake_is_put_back_or_kept(tmp_path, monkeypatch
     assert clean_stale_temporaries(cam)[0] == []  # ours and alive; later: named, not deleted
 
 
-def test_files_are_flushed_one_by_one_or_with_their_folder_or_not_in_scratch(tmp_path, monkeypatch):
-    """A lone file: its data and its folder's entry (2 flushes). Files of a folder being
-    built: none each, one flush of the file system before the folder takes its name. Scratch:
-    none at all."""
+def test_files_are_flushed_with_their_entries_or_inside_a_folder_built_or_not_in_scratch(
+    tmp_path, monkeypatch
+):
+    """A lone file: its data, then its folder's entry. Files of a folder being built: their
+    data one by one, the folder's entries (its own and its subfolder's) once each before it
+    takes its name, then its parent's. Scratch: nothing."""
     flushed: list[str] = []
     real_fsync = os.fsync
-    monkeypatch.setattr(os, "fsync", lambda fd: (flushed.append("fsync"), real_fsync(fd)))
-    monkeypatch.setattr(atomic, "_flush_file_system", lambda folder: flushed.append("fs"))
+    monkeypatch.setattr(os, "fsync", lambda fd: (flushed.append("data"), real_fsync(fd)))
+    monkeypatch.setattr(atomic, "_fsync_dir", lambda folder: flushed.append(f"entry {folder.name}"))
 
     write_text_atomic(tmp_path / "alone.txt", "a")
-    assert flushed == ["fsync", "fsync"]
+    assert flushed == ["data", f"entry {tmp_path.name}"]
 
     flushed.clear()
     with atomic_directory(tmp_path / "built") as folder:
+        (folder / "sub").mkdir()
         for i in range(3):
             write_text_atomic(folder / f"f{i}.txt", str(i))
-        assert flushed == []
-    assert flushed[0] == "fs" and "fs" not in flushed[1:]
-    assert sorted(p.name for p in (tmp_path / "built").iterdir()) == ["f0.txt", "f1.txt", "f2.txt"]
+        write_text_atomic(folder / "sub" / "g.txt", "g")
+        assert flushed == ["data"] * 4
+    assert flushed[4:] == [f"entry {folder.name}", "entry sub", f"entry {tmp_path.name}"]
+    assert sorted(p.name for p in (tmp_path / "built").iterdir()) == [
+        "f0.txt", "f1.txt", "f2.txt", "sub",
+    ]  # fmt: skip
 
     flushed.clear()
     with atomic.scratch_directory("pqtest-", parent=tmp_path) as scratch:
