@@ -235,16 +235,15 @@ def live_temporaries() -> list[Path]:
     return [p for p, _ in _live_items()]
 
 
-def _inside_live_dir(path: Path) -> bool:
-    dirs = {p for p, kind in _live_items() if kind == "dir"}
-    return any(parent in dirs for parent in path.parents)
-
-
-def _inside_scratch(path: Path) -> bool:
-    """Whether ``path`` lies inside a live scratch folder, also one a parent process made
+def _inside_live(path: Path, kind: str, *, any_process: bool = False) -> bool:
+    """Whether ``path`` lies inside a live temporary folder of ``kind`` (``"dir"``,
+    ``"scratch"``) of this process, or with ``any_process`` also one a parent process made
     before it forked this one (its registry entry came with the fork)."""
+    pid = os.getpid()
     with _live_lock:
-        folders = {p for p, (_, kind) in _live.items() if kind == "scratch"}
+        folders = {
+            p for p, (owner, k) in _live.items() if k == kind and (any_process or owner == pid)
+        }
     return any(parent in folders for parent in path.parents)
 
 
@@ -257,9 +256,9 @@ def _flushes(target: Path) -> tuple[bool, bool]:
     folders' entries once, before it takes its name (one flush a file
     instead of two).
     """
-    if _inside_scratch(target):
+    if _inside_live(target, "scratch", any_process=True):
         return False, False
-    return True, not _inside_live_dir(target)
+    return True, not _inside_live(target, "dir")
 
 
 def _flush_tree_entries(folder: Path) -> None:
@@ -382,7 +381,7 @@ def clean_stale_temporaries(target: str | os.PathLike[str]) -> tuple[list[Path],
 
 
 def _clean_stale(target: Path) -> None:
-    if not _inside_live_dir(target):  # a new temporary folder holds no stale siblings
+    if not _inside_live(target, "dir"):  # a new temporary folder holds no stale siblings
         clean_stale_temporaries(target)
 
 
@@ -865,7 +864,7 @@ def atomic_directory(
             _check_replaceable(target, target, replaceable)
     target.parent.mkdir(parents=True, exist_ok=True)
     _clean_stale(target)
-    flush = not _inside_scratch(target)
+    flush = not _inside_live(target, "scratch", any_process=True)
     tmp = _new_temp_dir(target)
     try:
         _hook("created", tmp)
