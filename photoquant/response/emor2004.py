@@ -345,8 +345,8 @@ def fit_emor_values(
     Raises
     ------
     CalibrationError
-        When fewer than two pixels have two weighted values, or the fit finds
-        no monotone response.
+        When fewer than two pixels have two weighted values, the fit finds
+        no monotone response, or it diverges (:func:`_newton_step`).
     """
     e, f0, h = emor_basis()
     c = np.asarray(start, dtype=np.float64).copy()
@@ -437,7 +437,7 @@ def fit_emor_values(
             hxx, _ = at(xx, hk)
             hess = np.einsum("akp,bkp->ab", hxx * w, hxx)
             grad = np.einsum("akp,kp->a", hxx * w, m - f0x - np.tensordot(c, hxx, 1))
-            dc = np.linalg.solve(hess + 1e-12 * np.eye(c.size), grad)
+            dc = _newton_step(hess, grad, 1e-12)
             if np.min(d_f0 + d_h @ (c + dc)) < 0:
                 dc = monotone_step(hess, grad, c)
             dx = x_new - x
@@ -450,7 +450,7 @@ def fit_emor_values(
             g_c = np.einsum("akp,kp->a", hx, w * r)
             hess = a - b.T @ (b / d[:, None])
             grad = g_c - b.T @ (g_x / d)
-            dc = np.linalg.solve(hess + 1e-12 * np.trace(hess) * np.eye(c.size), grad)
+            dc = _newton_step(hess, grad, 1e-12 * np.trace(hess))
             if np.min(d_f0 + d_h @ (c + dc)) < 0:
                 dc = monotone_step(hess, grad, c)
             dx = np.clip((g_x - b @ dc) / d, -0.5, 0.5)
@@ -469,6 +469,27 @@ def fit_emor_values(
     fx, _ = at(big_x, f)
     rms = float(np.sqrt(np.sum(w * (m - fx) ** 2) / np.sum(w)))
     return c, rms, n_round
+
+
+def _newton_step(hess: np.ndarray, grad: np.ndarray, ridge: float) -> np.ndarray:
+    """The coefficients' step ``(H + ridge·I)⁻¹ g``; an undetermined fit is a :class:`CalibrationError`.
+
+    ``H`` vanishes when, at the current estimate, every weighted value lies
+    outside the response's range (the fit diverged: seen on two exposures six
+    stops apart, where the few values linking them leave the exposures free).
+    """
+    if not (np.all(np.isfinite(hess)) and float(np.trace(hess)) > 0.0):
+        raise CalibrationError(
+            f"the {grad.size}-component EMoR fit diverged: at its estimate no weighted value "
+            "lies inside the response's range (do the bracket's exposures overlap enough?)"
+        )
+    try:
+        return np.linalg.solve(hess + ridge * np.eye(grad.size), grad)
+    except np.linalg.LinAlgError:
+        raise CalibrationError(
+            f"the {grad.size}-component EMoR fit is undetermined: its values do not separate "
+            "the components"
+        ) from None
 
 
 def _debevec_start(

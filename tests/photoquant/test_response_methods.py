@@ -522,6 +522,34 @@ def test_emor_fits_responses_with_few_components(rng, truth, bit_depth, n_compon
     _check_g_within_quantisation(fit.model, truth, bit_depth)
 
 
+def test_emor_newton_step_names_an_undetermined_fit():
+    """A vanishing or singular normal matrix is a CalibrationError, a regular one a solve."""
+    from photoquant.response.emor2004 import _newton_step
+
+    grad = np.array([1.0, -2.0, 0.5])
+    with pytest.raises(CalibrationError, match="3-component EMoR fit diverged"):
+        _newton_step(np.zeros((3, 3)), grad, 0.0)
+    rank_one = np.outer([1.0, 1.0, 1.0], [1.0, 1.0, 1.0])
+    with pytest.raises(CalibrationError, match="do not separate the components"):
+        _newton_step(rank_one, grad, 0.0)
+    hess = np.diag([2.0, 4.0, 8.0])
+    np.testing.assert_allclose(_newton_step(hess, grad, 0.0), grad / np.diag(hess))
+
+
+def test_emor_fit_that_diverges_is_a_calibration_error():
+    """Two exposures 6 stops apart of the cmos camera (160 × 120): the 5-component fit
+    leaves every value outside the response's range on its third round; the user gets
+    a CalibrationError naming it, not numpy's "Singular matrix"."""
+    from pqsim.analytic import scene_calibration_world
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    cam = camera_from_preset("cmos", bit_depth=8)
+    world = scene_calibration_world((120, 160), np.random.default_rng(0), channels=3)
+    stack = cam.capture(world.l, np.array([0.002, 0.128]), 1, rng=100).to_stack()
+    with pytest.raises(CalibrationError, match="EMoR fit diverged"):
+        fit_response(stack, ("EMoR 2004", {"n_components": 5}), rng=0)
+
+
 FULL_WELL_E = 10_000.0
 READ_NOISE_E = 15.0
 
