@@ -163,14 +163,23 @@ class SensorNoise:
             return z
         limit = np.inf if self.poisson_exact_below_e is None else self.poisson_exact_below_e
         exact = mean_e < limit
+        n_exact = int(np.count_nonzero(exact))
+        if n_exact == exact.size:
+            # every pixel exact (a short exposure): no approximation to compute and no
+            # pixel to pick out; the same draws, in the same order, as below
+            read = z
+            read *= dtype(self.read_noise_e)
+            return (rng.poisson(np.minimum(mean_e, POISSON_MEAN_CAP_E)) + read).astype(dtype)
         # normal approximation: shot and read noise together, N(μ, μ + σ_read²)
         n = np.add(mean_e, dtype(self.read_noise_e**2))
         np.sqrt(n, out=n)
         n *= z
         n += mean_e
-        if np.any(exact):
-            mu_x = np.minimum(mean_e[exact], POISSON_MEAN_CAP_E)
-            n[exact] = rng.poisson(mu_x) + dtype(self.read_noise_e) * z[exact]
+        if n_exact:
+            at = np.flatnonzero(exact)
+            flat = n.reshape(-1)
+            mu_x = np.minimum(mean_e.reshape(-1)[at], POISSON_MEAN_CAP_E)
+            flat[at] = rng.poisson(mu_x) + dtype(self.read_noise_e) * z.reshape(-1)[at]
         return n
 
     def to_dict(self) -> dict[str, Any]:

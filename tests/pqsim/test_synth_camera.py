@@ -317,6 +317,24 @@ def test_electron_counts_have_poisson_moments(
         assert abs(skew) < 5 * math.sqrt(6.0 / m)
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("high", [250.0, 5e3])
+def test_electron_draws_follow_their_documented_order(high: float, dtype: type) -> None:
+    """One standard-normal image, then one Poisson draw per exact pixel in C order: the
+    same draws whether every pixel is exact (``high`` below the threshold) or some are not."""
+    noise = SensorNoise(read_noise_e=3.0, dark_current_e_per_s=0.0, poisson_exact_below_e=300.0)
+    mean = np.random.default_rng(1).uniform(2.0, high, size=(13, 17, 3)).astype(dtype)
+    n = noise.draw_electrons(mean, np.random.default_rng(5))
+    rng = np.random.default_rng(5)
+    z = rng.standard_normal(mean.shape, dtype=dtype)
+    exact = mean < 300.0
+    expected = np.empty_like(mean)
+    expected[~exact] = mean[~exact] + np.sqrt(mean[~exact] + dtype(9.0)) * z[~exact]
+    expected[exact] = rng.poisson(mean[exact]) + dtype(3.0) * z[exact]
+    assert n.dtype == dtype
+    np.testing.assert_array_equal(n, expected)
+
+
 def test_capture_does_not_depend_on_workers() -> None:
     cam = camera_from_preset("cmos")
     lq = np.random.default_rng(3).uniform(0.0, 2.0, size=(*SHAPE, 3))
