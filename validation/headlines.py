@@ -139,7 +139,18 @@ def _uncertainty(m: _Metrics) -> list[Headline]:
             "–",
             "95",
         ),
-    ]
+    ] + (
+        [
+            (
+                "z spread, dark current as light",
+                m.join("uncertainty.{p}.stated_dark_light.z_spread", lambda v: _num(v, ".2f")),
+                "–",
+                "1",
+            )
+        ]
+        if m.has("uncertainty.{p}.stated_dark_light.z_spread")
+        else []
+    )
 
 
 def _coverage(m: _Metrics) -> list[Headline]:

@@ -359,6 +359,17 @@ class CaptureTruth:
             return self.camera.sensor_lut * self.camera.vignetting
         return np.asarray(self.camera.sensor_lut)
 
+    def dark_current_light(self) -> np.ndarray:
+        """The photoquantity the mean dark current is equivalent to, ``D / (u·v·scale)``.
+
+        The dark current's mean ``D·t`` electrons grows with the exposure time as
+        the light does: a frame of ``l`` with it has the expected values of a
+        frame of ``l + D / (u·v·scale)`` without it (``D / (u·scale)`` when
+        optics were off). Eq. 1 of [PQ] has no dark current: a calibration
+        that does not subtract dark frames measures that sum. Shape (H, W, C).
+        """
+        return self.camera.noise.dark_current_e_per_s / (self.gain * self.camera.exposure_scale)
+
     def sensor_photoquantity(self) -> np.ndarray:
         """What reaches the sensor's pixels, ``u·v·l``, or ``u·G(v·l)`` with veiling glare ``G``."""
         glare = self.camera.glare

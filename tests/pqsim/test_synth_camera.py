@@ -289,6 +289,22 @@ def test_noise_free_capture_is_rounded_model() -> None:
     assert cap.frames[0, 1, 10, 20, 1] == round(min(x, 1.0) * 255)
 
 
+@pytest.mark.parametrize("optics", [True, False])
+def test_dark_current_is_the_light_it_is_equivalent_to(optics: bool) -> None:
+    """The cmos camera (60 e⁻/s, PRNU, vignetting): the expected values of a frame with
+    the dark current are those of ``l + D/(u·v·scale)`` without it, at every exposure."""
+    cam = camera_from_preset("cmos")
+    lq = np.random.default_rng(4).uniform(0.0, 0.05, size=(*SHAPE, 3))
+    t = np.array([1e-3, 2e-2, 0.2])
+    truth = cam.capture(lq, t, 1, rng=0, optics=optics).truth
+    light = truth.dark_current_light()
+    assert light.shape == lq.shape and np.all(light > 0)
+    expected = truth.noise_free_dn()  # the dark current's mean included
+    for k, tk in enumerate(t):
+        equivalent = truth.camera.noise_free_dn(tk * truth.gain * (lq + light))
+        np.testing.assert_allclose(equivalent, expected[k], rtol=1e-12, atol=1e-9)
+
+
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("threshold", [300.0, None])
 @pytest.mark.parametrize("mean_e", [3.0, 299.0, 301.0, 5e4])
