@@ -142,7 +142,7 @@ def _uncertainty(m: _Metrics) -> list[Headline]:
     ] + (
         [
             (
-                "z spread, dark current as light",
+                "z spread vs l + dark light",
                 m.join("uncertainty.{p}.stated_dark_light.z_spread", lambda v: _num(v, ".2f")),
                 "–",
                 "1",
