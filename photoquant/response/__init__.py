@@ -23,8 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from photoquant.errors import InputError
+from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import REGISTRIES, Method, StepFit, resolve_method
+from photoquant.response._common import stack_black_level
 from photoquant.response.debevec1997 import (
     DEFAULT_SMOOTHNESS,
     SAMPLING_METHODS,
@@ -52,6 +53,7 @@ from photoquant.stack import ExposureStack
 
 __all__ = [
     "DEFAULT_SMOOTHNESS",
+    "MIN_REACH",
     "RESPONSE_METHODS",
     "SAMPLING_METHODS",
     "DebevecResponseOptions",
@@ -69,6 +71,7 @@ __all__ = [
     "characterise_response_MitsunagaNayar1999",
     "characterise_response_Robertson2003",
     "recover_response",
+    "check_reaches_range",
     "fit_response",
     "without_covariance",
     "response_levels",
@@ -150,6 +153,7 @@ def fit_response(
     method, options = resolve_method("response", spec, ("Debevec 1997", {}))
     if not isinstance(stack, ExposureStack):
         raise InputError(f"`stack` must be an ExposureStack, got {type(stack).__name__}")
+    check_reaches_range(stack)
     fit = method.function(stack, options, rng)
     if not isinstance(fit, StepFit) or not isinstance(fit.model, ResponseModel):
         raise InputError(
@@ -157,6 +161,64 @@ def fit_response(
             f"got {type(fit).__name__}"
         )
     return fit
+
+
+MIN_REACH = 0.125
+"""The least share of the range (black level to saturation level) a bracket's brightest value
+must reach for a response to be measured from it (:func:`check_reaches_range`)."""
+
+
+def check_reaches_range(stack: ExposureStack) -> None:
+    """Refuse a bracket too dark to measure a response from.
+
+    A response is measured only between the levels the bracket's values link;
+    a bracket whose brightest value below the saturation level stays, in a
+    channel, below :data:`MIN_REACH` of the range (at most three of an 8-bit
+    response's eight bits) measures nothing above it, and every method would
+    extrapolate the rest (some silently). Values at the saturation level (a
+    lamp, a defect hidden there) say nothing about the levels between. The
+    exposures are read from the longest down, until every channel has a value
+    in ``[bar, saturation)``: one frame for a usual bracket.
+
+    Raises
+    ------
+    CalibrationError
+        Naming the channel, the highest level below saturation reached and the bar.
+    """
+    frames = stack.frames
+    n_ch = stack.n_channels
+    sat = np.broadcast_to(np.asarray(stack.saturation_level, dtype=np.float64), (n_ch,))
+    black = stack_black_level(stack)
+    lo = np.zeros(n_ch) if black is None else black
+    bar = lo + MIN_REACH * (sat - lo)
+    reached = np.zeros(n_ch, dtype=bool)
+    for k in np.argsort(np.asarray(stack.exposure_s))[::-1]:
+        for c in np.flatnonzero(~reached):
+            values = frames[:, k, ..., c]
+            reached[c] = bool(np.any((values >= bar[c]) & (values < sat[c])))
+        if reached.all():
+            return
+    ch = int(np.flatnonzero(~reached)[0])
+    values = frames[..., ch]
+    below = values < sat[ch]
+    name, level = stack.channels[ch], f"the saturation level {sat[ch]:g}"
+    if not below.any():
+        raise CalibrationError(
+            f"channel {name}: every value is at {level}: the bracket is overexposed "
+            "(exposures too long?)"
+        )
+    top = float(np.max(values, where=below, initial=0))
+    saturated = 1.0 - float(np.mean(below))
+    hint = (
+        "exposures too long, or too far apart?"
+        if saturated >= 0.5
+        else "a lens cap left on, or exposures too short?"
+    )
+    raise CalibrationError(
+        f"channel {name}: the bracket's values below saturation reach level {top:g} at "
+        f"most, under an eighth of the range up to {level} ({saturated:.0%} of the values "
+        f"at it): too few levels to measure a response ({hint})"
+    )
 
 
 def without_covariance(spec: Any) -> Any:
