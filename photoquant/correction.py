@@ -316,6 +316,8 @@ def correct(
     if defects is not None and defects.mask.any():
         photoquantity[defects.mask] = np.nan
         mask |= defects.mask
+    if mask.any():
+        notes.append(_unmerged_note(mask, all_saturated, all_dark))
     stated = {}
     if uncertainty:
         try:
@@ -333,6 +335,24 @@ def correct(
         notes=tuple(notes),
         exposure_decision=decision,
         **stated,
+    )
+
+
+def _unmerged_note(mask: np.ndarray, all_saturated: np.ndarray, all_dark: np.ndarray) -> str:
+    """What share of the values has no photoquantity (NaN), and why."""
+    n = mask.size
+    parts = [
+        f"{100 * np.count_nonzero(a) / n:.3g} % {what}"
+        for a, what in (
+            (all_saturated, "saturated in every exposure"),
+            (all_dark, "dark in every exposure"),
+            (mask & ~all_saturated & ~all_dark, "defects"),
+        )
+        if a.any()
+    ]
+    return (
+        f"{100 * np.count_nonzero(mask) / n:.3g} % of the values have no photoquantity "
+        f"(NaN): {', '.join(parts)}"
     )
 
 

@@ -225,10 +225,21 @@ def detect_saturation_levels(
     ndarray, shape (C,), int64
         Per channel: the maximum value when it piles up (or equals the nominal
         maximum), otherwise the nominal maximum ``2**bit_depth - 1`` (the
-        data never clip, so nothing is treated as saturated before it).
+        data never clip, so nothing is treated as saturated before it). A
+        channel whose every value is 0 (no light at all) has nothing that
+        clips either: the nominal maximum.
     """
     bit_depth = check_bit_depth(bit_depth)
     frames = check_array(frames, "frames", kind="iu")
+    levels = _detect_saturation_levels(frames, bit_depth, min_fraction, min_count, pile_up_ratio)
+    levels[levels < 1] = 2**bit_depth - 1  # a pile at 0 is black, not clipping
+    return levels
+
+
+def _detect_saturation_levels(
+    frames: np.ndarray, bit_depth: int, min_fraction: float, min_count: int, pile_up_ratio: float
+) -> np.ndarray:
+    """:func:`detect_saturation_levels` on checked input, a pile at 0 included."""
     c_max = 2**bit_depth - 1
     n_ch = frames.shape[-1]
     levels = np.full(n_ch, c_max, dtype=np.int64)

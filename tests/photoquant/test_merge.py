@@ -252,3 +252,27 @@ def test_photoquantity_is_exp_of_the_log_to_the_bit(dtype, shape):
     expected = np.exp(log_c)
     assert lin.dtype == expected.dtype and lin.shape == expected.shape
     np.testing.assert_array_equal(lin, expected)
+
+
+def test_correct_says_how_many_values_have_no_photoquantity(rng):
+    """A scene black in every exposure corrects without an error, every value NaN, and
+    the notes say so; a usual scene's notes give the shares of each cause."""
+    from photoquant.calibration import calibrate
+    from photoquant.correction import correct
+    from photoquant.stack import ExposureStack
+
+    frames = capture(log_uniform_scene(rng, (10, 12, 3)), EXPOSURES, balance=BALANCE)
+    model = calibrate([ExposureStack(frames.astype(np.uint8), EXPOSURES)])
+    black = ExposureStack(np.zeros_like(frames, dtype=np.uint8), EXPOSURES)
+    result = correct(black, model)
+    assert np.all(np.isnan(result.photoquantity)) and result.all_dark.all()
+    assert "100 % of the values have no photoquantity (NaN): 100 % dark in every exposure" in (
+        result.notes
+    )
+    frames = frames.astype(np.uint8)
+    frames[:, :, 0, 0, :] = 255  # one pixel saturated in every exposure: 1 of 120 values
+    result = correct(ExposureStack(frames, EXPOSURES), model)
+    share = 100 * np.count_nonzero(result.mask) / result.mask.size
+    note = [n for n in result.notes if "no photoquantity" in n]
+    assert note and note[0].startswith(f"{share:.3g} % of the values")
+    assert "saturated in every exposure" in note[0]

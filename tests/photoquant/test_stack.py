@@ -39,6 +39,24 @@ def test_saturation_pile_up_below_the_nominal_maximum_is_detected(rng):
     np.testing.assert_array_equal(levels, [216, 255, 255])
 
 
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_black_channel_has_nothing_that_clips(compiled, monkeypatch):
+    """Every value 0 (no light): a pile at the maximum, but no clipping; the nominal
+    maximum, a level the stack accepts back (``with_frames`` revalidates it)."""
+    import photoquant.stack as stack_module
+
+    if compiled and not HAVE_NUMBA:
+        pytest.skip("numba not installed")
+    if not compiled:
+        monkeypatch.setattr(stack_module, "_pile_counts", lambda *a: None)
+    frames = np.zeros((1, 2, 10, 12, 3), dtype=np.uint8)
+    frames[..., 1] = 7  # a channel clipped at 7 (a pile at its maximum) stays detected
+    np.testing.assert_array_equal(detect_saturation_levels(frames, 8), [255, 7, 255])
+    stack = ExposureStack(frames, [1e-3, 2e-3])
+    np.testing.assert_array_equal(stack.saturation_level, [255, 7, 255])
+    assert stack.with_frames(frames[:, :1], [1e-3]).n_exposures == 1
+
+
 def test_saturated_means_any_repeat_clipped():
     frames = np.full((2, 1, 1, 1, 1), 100, dtype=np.uint8)
     frames[1] = 255
