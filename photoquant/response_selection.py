@@ -85,6 +85,31 @@ frobisher 6.54, St. Louis 11.06 and the 12-bit bracket 94.49; with EMoR
 2004 (3, 5, 7 components) among the candidates the pixel folds preferred
 EMoR on the ccd and cmos cameras' wide brackets, 3–11× worse in ``g``.
 
+Why the short-bracket model is not chosen by the data either. Measured
+(2026-12-05) on pqsim's ``ccd``, ``cmos`` and ``film`` presets and four
+EMoR-drawn cameras (``emor-0`` … ``emor-3``; 160×120, N = 1, seed 0),
+each fitted by the profile's Debevec response, EMoR 2004 with 3 and 5
+components and Debevec with β = 30 and 10², mean ``g`` error over the
+channels: on two exposures 4 stops apart EMoR with 5 components recovers
+the EMoR cameras' ``g`` 2.7–10× better than the profile's default (0.006–0.011
+against 0.026–0.074), and 3.5–11× worse on the presets (0.066–0.098
+against 0.009–0.023); 6 stops apart no model is best on both families
+(geometric means over the cameras each could fit: 0.097 default, 0.075
+EMoR 3, 0.089 EMoR 5, 0.16 β = 30; EMoR's fit diverges on ``film``, with 5
+components on ``cmos`` too). The pixel folds, given EMoR 5, EMoR 3, the
+default and β = 10², choose β = 10² on all four EMoR cameras at 4 and 6
+stops: two exposures link each level to one other only, and a ``g`` that
+keeps those links predicts the held-out pixels as well as the truth does.
+On three exposures 3 stops apart the same folds choose EMoR 5 on every EMoR
+camera and a Debevec response on every preset (the right family each time).
+No single candidate is within 2.5× of the best on every camera at 4 stops
+(the default: within 2.5× on the presets, 2.7–10× off on the EMoR cameras;
+EMoR 3: up to 4.5× and 6.4× off; EMoR 5: 3.5–11× off on the presets). A two-exposure bracket, and a three-exposure one in
+cross-validation (whose folds keep two), therefore gets the profile's
+default, the one whose ``g`` the wide-step template draws towards a real
+camera's mean shape (:mod:`photoquant.response.wide_steps`) without
+betting on either family.
+
 The default candidates are Debevec 1997 [Debevec1997]_ responses from the
 smoothest to the least smooth (β = 10⁵, 10⁴, 10³, the profile's default, and
 10²): the one model family whose fit is fast enough to repeat per fold
