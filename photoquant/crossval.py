@@ -69,7 +69,7 @@ from typing import Any
 
 import numpy as np
 
-from photoquant.errors import InputError
+from photoquant.errors import CalibrationError, InputError
 from photoquant.holdout import (
     SCORE_RANGE_8BIT,
     fill_unmerged,
@@ -523,27 +523,34 @@ def crossval_stack(
         # the bracket's own levels and exposure basis (given or found on every frame)
         sub = stack.with_frames(stack.frames[:, keep], stack.exposure_s[keep])
         context: dict[str, Any] = {}
-        if peer is None:
-            levels, g, sat, log_e, flagged = _fit_photoquant(
-                sub,
-                name if given is None else method,
-                seed,
-                profile,
-                options,
-                calibration_only=calibration_only,
-                given=given,
-                adequacies=adequacies,
-                context=context,
-            )
-        else:
-            fit = peer.fit(sub)
-            levels, g, sat, log_e = (
-                fit.levels,
-                fit.log_inverse_response,
-                fit.saturation_level,
-                fit.log_photoquantity,
-            )
-            flagged = ~np.isfinite(log_e)
+        try:
+            if peer is None:
+                levels, g, sat, log_e, flagged = _fit_photoquant(
+                    sub,
+                    name if given is None else method,
+                    seed,
+                    profile,
+                    options,
+                    calibration_only=calibration_only,
+                    given=given,
+                    adequacies=adequacies,
+                    context=context,
+                )
+            else:
+                fit = peer.fit(sub)
+                levels, g, sat, log_e = (
+                    fit.levels,
+                    fit.log_inverse_response,
+                    fit.saturation_level,
+                    fit.log_photoquantity,
+                )
+                flagged = ~np.isfinite(log_e)
+        except (CalibrationError, InputError) as exc:
+            # the bracket without one exposure is a wider one than the user's: say which
+            raise type(exc)(
+                f"with exposure {k + 1} of {k_count} ({1e3 * stack.exposure_s[k]:g} ms) held "
+                f"out, the other {k_count - 1}: {exc}"
+            ) from None
         z = observed_all[k]
         scored = (z >= lo) & (z <= hi) & region[..., None]
         pred, bound = predict_held_out(levels, g, sat, log_e, stack.exposure_s[k], sub.frames)

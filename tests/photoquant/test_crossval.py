@@ -356,3 +356,16 @@ def test_each_fold_keeps_the_brackets_levels(gamma_stack, monkeypatch):
         np.testing.assert_array_equal(sub.black_level, stack.black_level)
         np.testing.assert_array_equal(sub.saturation_level, stack.saturation_level)
         assert sub.exposure_basis == stack.exposure_basis
+
+
+def test_a_fold_that_cannot_be_fitted_says_which_exposure_it_held_out(rng):
+    """Three exposures 10 stops apart (a gamma of 2.2: 23× in code values): the bracket
+    links its neighbours, but without its middle exposure the other two (530× apart) share
+    no well-exposed pixel; the error names the fold."""
+    from photoquant.errors import CalibrationError
+
+    t = np.array([1e-3, 1.024, 1048.576])
+    frames = capture(1e3 * log_uniform_scene(rng, (30, 40, 3), 6.0), t)
+    stack = ExposureStack(frames.astype(np.uint8), t)
+    with pytest.raises(CalibrationError, match=r"^with exposure 2 of 3 \(1024 ms\) held out"):
+        crossval_stack(stack)
