@@ -104,11 +104,11 @@ On three exposures 3 stops apart the same folds choose EMoR 5 on every EMoR
 camera and a Debevec response on every preset (the right family each time).
 No single candidate is within 2.5× of the best on every camera at 4 stops
 (the default: within 2.5× on the presets, 2.7–10× off on the EMoR cameras;
-EMoR 3: up to 4.5× and 6.4× off; EMoR 5: 3.5–11× off on the presets). A two-exposure bracket, and a three-exposure one in
-cross-validation (whose folds keep two), therefore gets the profile's
-default, the one whose ``g`` the wide-step template draws towards a real
-camera's mean shape (:mod:`photoquant.response.wide_steps`) without
-betting on either family.
+EMoR 3: up to 4.5× and 6.4× off; EMoR 5: 3.5–11× off on the presets). A
+two-exposure bracket, and a three-exposure one in cross-validation (whose
+folds keep two), therefore gets the profile's default, the one whose ``g``
+the wide-step template draws towards a real camera's mean shape
+(:mod:`photoquant.response.wide_steps`) without betting on either family.
 
 The default candidates are Debevec 1997 [Debevec1997]_ responses from the
 smoothest to the least smooth (β = 10⁵, 10⁴, 10³, the profile's default, and

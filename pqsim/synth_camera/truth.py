@@ -365,8 +365,9 @@ class CaptureTruth:
         The dark current's mean ``D·t`` electrons grows with the exposure time as
         the light does: a frame of ``l`` with it has the expected values of a
         frame of ``l + D / (u·v·scale)`` without it (``D / (u·scale)`` when
-        optics were off). Eq. 1 of [PQ] has no dark current: a calibration
-        that does not subtract dark frames measures that sum. Shape (H, W, C).
+        optics were off; without veiling glare, which would spread that light
+        too). Eq. 1 of [PQ] has no dark current: a calibration that does not
+        subtract dark frames measures that sum. Shape (H, W, C).
         """
         return self.camera.noise.dark_current_e_per_s / (self.gain * self.camera.exposure_scale)
 
