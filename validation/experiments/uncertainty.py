@@ -131,7 +131,8 @@ def run(
             )
             series.append({"label": f"{label} ({z.size} values)", "y": shares})
         dark_e = scene.camera.noise.dark_current_e_per_s
-        if dark_e > 0 and not dark_subtracted:
+        glare = scene.camera.glare is not None and not scene.camera.glare.is_identity
+        if dark_e > 0 and not dark_subtracted and not glare:
             # the dark current is light to eq. 1 (pqsim CaptureTruth.dark_current_light):
             # measured against l plus it, the spread is what the statement leaves out
             # of the model's own errors; the difference, what the unmodelled dark adds
