@@ -25,6 +25,12 @@ other). Unknown fields are refused, naming the valid ones.
 - ``"emor-S"`` (S = 0, 1, …): the same camera with the draws of seeds
   ``3S``, ``3S + 1``, ``3S + 2`` (``"emor-0"`` is ``"emor"``): as many
   cameras from the space of real responses as a study needs.
+- ``"tone-S"`` (S = 0, 1, …): the same camera with *one* EMoR draw (seed
+  ``S``) for the three channels and balance 1: a camera that writes JPEG
+  (or any output-referred) files applies one tone curve to the channels
+  after its white balance, which the per-channel draws of ``"emor-S"`` do
+  not model (the white balance before the curve is a per-channel scale of
+  the photoquantity, the gauge the balance step measures).
 - ``"film"``: the ccd camera with film-like characteristic curves (toe and
   shoulder, :func:`~pqsim.synth_camera.responses.response_film`) and a
   soft knee at 97 % of the range.
@@ -271,6 +277,19 @@ def _emor_draw(seed: int) -> dict[str, Any]:
     return fields
 
 
+_TONE_DRAW = re.compile(r"^tone-(\d{1,6})$")
+"""``tone-S``: the ``emor`` preset with one EMoR draw (seed ``S``) for every channel, balance 1."""
+
+
+def _tone_draw(seed: int) -> dict[str, Any]:
+    fields = dict(_EMOR)
+    fields["responses"] = [
+        {"kind": "emor", "params": {"seed": seed, "n_components": 5}} for _ in range(3)
+    ]
+    fields["balance"] = (1.0, 1.0, 1.0)
+    return fields
+
+
 def _preset_file_problem(path: Path) -> str | None:
     """Why the existing file ``path`` is not a preset file (None: it is one)."""
     try:
@@ -318,12 +337,17 @@ def preset_fields(name: str | os.PathLike[str]) -> dict[str, Any]:
     draw = _EMOR_DRAW.match(name.strip().lower())
     if draw:
         return _emor_draw(int(draw.group(1)))
+    tone = _TONE_DRAW.match(name.strip().lower())
+    if tone:
+        return _tone_draw(int(tone.group(1)))
     try:
         key = validate_method(name, CAMERA_PRESETS, "camera preset")
     except InputError:
         raise InputError(
             f"unknown camera preset {name!r}: use one of {', '.join(sorted(CAMERA_PRESETS))}, "
-            "emor-S (EMoR responses drawn from seed S) or a preset file (.json; `pqsim preset ccd` prints one to start from)"
+            "emor-S (EMoR responses drawn from seed S), tone-S (one drawn tone curve for "
+            "the three channels) or a preset file (.json; `pqsim preset ccd` prints one to "
+            "start from)"
         ) from None
     return dict(CAMERA_PRESETS[key])
 

@@ -224,3 +224,21 @@ def test_emor_s_presets_are_further_seeded_draws() -> None:
     assert [r.params["seed"] for r in cam.responses] == [6, 7, 8]
     with pytest.raises(InputError, match="emor-S"):
         camera_from_preset("emor-x")
+
+
+def test_tone_s_presets_share_one_drawn_curve() -> None:
+    """``tone-S``: one EMoR draw (seed S) for every channel, balance 1, the rest the emor
+    camera's; the same exposure gives the same value in every channel."""
+    cam = camera_from_preset("tone-4")
+    assert [r.params["seed"] for r in cam.responses] == [4, 4, 4]
+    assert cam.responses[0] == cam.responses[1] == cam.responses[2]
+    assert cam.responses[0] == camera_from_preset("emor-1").responses[1]  # seed 3·1 + 1
+    assert cam.balance == (1.0, 1.0, 1.0)
+    assert cam.noise == camera_from_preset("emor").noise
+    assert camera_from_preset("tone-5").responses[0] != cam.responses[0]
+    x = np.repeat(np.linspace(0.0, 0.012, 20).reshape(4, 5, 1), 3, axis=2)  # past clipping
+    values = cam.truth((4, 5)).noise_free_dn(x)
+    assert np.all(values[..., 0] == values[..., 1]) and np.all(values[..., 1] == values[..., 2])
+    assert values.min() == 0.0 and values.max() == cam.c_max
+    with pytest.raises(InputError, match="tone-S"):
+        camera_from_preset("tone-x")
