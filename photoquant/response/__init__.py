@@ -214,10 +214,11 @@ def check_reaches_range(stack: ExposureStack) -> None:
         if saturated >= 0.5
         else "a lens cap left on, or exposures too short?"
     )
+    at_it = f" ({100 * saturated:.0f} % of the values at it)" if saturated >= 0.005 else ""
     raise CalibrationError(
         f"channel {name}: the bracket's values below saturation reach level {top:g} at "
-        f"most, under an eighth of the range up to {level} ({saturated:.0%} of the values "
-        f"at it): too few levels to measure a response ({hint})"
+        f"most, under an eighth of the range up to {level}{at_it}: too few levels to "
+        f"measure a response ({hint})"
     )
 
 

@@ -85,3 +85,16 @@ def test_a_usual_bracket_passes():
     stack = _bracket(1.0)
     check_reaches_range(stack)
     assert fit_response(stack, "Gamma").model.n_channels == 3
+
+
+def test_a_bracket_mostly_saturated_and_dark_between_says_so():
+    """Half the values clipped, the rest near black (a night scene's lamps): the share at
+    saturation is named, and the hint is the exposures' spacing, not a lens cap."""
+    stack = _bracket(1.5e-3)
+    frames = stack.frames.copy()
+    frames[..., : frames.shape[2] // 2 + 1, :, :] = 255
+    with pytest.raises(CalibrationError, match=r"\(5\d % of the values at it\).*too far apart"):
+        check_reaches_range(stack.with_frames(frames))
+    with pytest.raises(CalibrationError) as small:
+        check_reaches_range(stack)
+    assert "of the values at it" not in str(small.value)
