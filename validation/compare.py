@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from photoquant.correction import correct, correct_manifest
+from photoquant.correction import correct
 from photoquant.errors import InputError
 from photoquant.io import extra_frameset, extra_path, load_manifest, load_stack
 from photoquant.model import CameraModel
@@ -60,12 +60,35 @@ from validation.truth_model import white_reference
 __all__ = [
     "channel_scale_variance",
     "compare_with_truth",
+    "read_scene",
     "stated_uncertainty_coverage",
     "format_comparison",
     "comparison_json",
     "comparison_figures",
     "write_comparison_figures",
 ]
+
+
+def read_scene(manifest: Any, *, allow_outside: bool = False) -> tuple[Any, Any]:
+    """A capture set's manifest (loaded when given a path) and its test scene's frames.
+
+    The frames are read as :func:`photoquant.correction.correct_manifest` reads
+    them (``load_stack(manifest.scene, manifest)``), for a caller that corrects
+    them with several cameras or scores them more than once (pass them to
+    :func:`compare_with_truth` as ``scene``).
+
+    Raises
+    ------
+    InputError
+        If the manifest has no ``scene`` frames.
+    """
+    from photoquant.io import CaptureManifest
+
+    if not isinstance(manifest, CaptureManifest):
+        manifest = load_manifest(manifest, allow_outside=allow_outside)
+    if manifest.scene is None:
+        raise InputError(f"{manifest.path} has no `scene` frames to correct")
+    return manifest, load_stack(manifest.scene, manifest)
 
 
 def stated_uncertainty_coverage(result: Any, truth_l: np.ndarray) -> dict[str, float] | None:
@@ -263,11 +286,10 @@ def compare_with_truth(
         Also correct the scene with its stated uncertainty and score it against
         the truth (``uncertainty``, :func:`stated_uncertainty_coverage`).
     scene : ExposureStack, optional
-        The manifest's ``scene`` frames as :func:`photoquant.io.load_stack`
-        reads them (``load_stack(manifest.scene, manifest)``); read from the
-        files when not given. A caller that compares many cameras with one
-        capture set reads them once: the correction and every score are the
-        same.
+        The manifest's ``scene`` frames as :func:`read_scene` reads them; read
+        from the files when not given. A caller that compares many cameras
+        with one capture set reads them once: the correction and every score
+        are the same.
 
     Returns
     -------
@@ -320,11 +342,9 @@ def compare_with_truth(
             np.where(w >= 0.05, w, 0.0),
         )
         out["response"].append({"rms": rms, "max": worst})
-    stated = "auto" if uncertainty else False
     if scene is None:
-        res = correct_manifest(manifest, model, allow_outside=allow_outside, uncertainty=stated)
-    else:
-        res = correct(scene, model, uncertainty=stated)  # correct_manifest's call, frames read
+        manifest, scene = read_scene(manifest)
+    res = correct(scene, model, uncertainty="auto" if uncertainty else False)
     true_scene = truth.captures["scene"]
     # A calibrated camera makes the white chart neutral: it measures l_λ / W_λ,
     # W the chart's true photoquantity (neutral for pqsim's analytic chart, the

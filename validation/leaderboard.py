@@ -476,12 +476,10 @@ class _Capture:
     def compare(self, model: Any) -> dict[str, Any]:
         """:func:`validation.compare.compare_with_truth` of ``model`` on this capture, with
         its stated uncertainty scored."""
-        from photoquant.io import load_manifest, load_stack
-        from validation.compare import compare_with_truth
+        from validation.compare import compare_with_truth, read_scene
 
         if self.scene is None:
-            self.loaded = load_manifest(self.manifest, allow_outside=self.allow_outside)
-            self.scene = load_stack(self.loaded.scene, self.loaded)
+            self.loaded, self.scene = read_scene(self.manifest, allow_outside=self.allow_outside)
         return compare_with_truth(
             self.loaded,
             model,

@@ -141,7 +141,7 @@ def test_the_scene_read_once_gives_the_same_comparison(capture, monkeypatch):
     read = compare_with_truth(manifest, model, truth, uncertainty=True)
     loaded = load_manifest(manifest)
     scene = load_stack(loaded.scene, loaded)
-    monkeypatch.setattr(compare, "correct_manifest", lambda *a, **k: pytest.fail("read again"))
+    monkeypatch.setattr(compare, "load_stack", lambda *a, **k: pytest.fail("read again"))
     given = compare_with_truth(loaded, model, truth, uncertainty=True, scene=scene)
     np.testing.assert_array_equal(given["scene"]["photoquantity"], read["scene"]["photoquantity"])
     assert given["scene"]["error"] == read["scene"]["error"]

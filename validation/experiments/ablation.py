@@ -59,9 +59,8 @@ def run(
 ) -> ExperimentResult:
     """Calibrate each preset with the paper's profile, each deviation alone and photoquant's."""
     from photoquant.errors import PhotoquantError
-    from photoquant.io import load_manifest, load_stack
     from photoquant.profiles import DEVIATIONS
-    from validation.compare import compare_with_truth
+    from validation.compare import compare_with_truth, read_scene
 
     shared = shared or Shared(config, seed, workdir)
     res = ExperimentResult("ablation", TITLE, "§5-6; photoquant.profiles")
@@ -70,8 +69,7 @@ def run(
         cal = shared.calibration(preset)
         floor = None
         # the test scene's frames and manifest read once: every variant corrects them
-        manifest = load_manifest(cal.manifest)
-        scene = load_stack(manifest.scene, manifest)
+        manifest, scene = read_scene(cal.manifest)
         for key, label, kwargs in variants():
             shared.say(f"  {preset}: {label}")
             try:

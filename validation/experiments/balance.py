@@ -62,12 +62,11 @@ def _scene_scale_row(
     others: list[int],
 ) -> None:
     """The test scene's channel scales: their stated uncertainty and error / stated."""
-    from photoquant.io import load_manifest, load_stack
-    from validation.compare import channel_scale_variance
+    from validation.compare import channel_scale_variance, read_scene
 
     corr = shared.scene_correction(preset)
-    manifest = load_manifest(shared.calibration(preset).manifest)
-    variance = channel_scale_variance(load_stack(manifest.scene, manifest), model, corr.mask)
+    _, scene = read_scene(shared.calibration(preset).manifest)
+    variance = channel_scale_variance(scene, model, corr.mask)
     if variance is None:
         return
     _stated_std_rows(

@@ -85,8 +85,7 @@ def coverage_z(manifest: Path, truth: Any, model: Any) -> dict[str, np.ndarray]:
     where the camera states no uncertainty for it).
     """
     import photoquant as pq
-    from photoquant.io import load_manifest, load_stack
-    from validation.compare import channel_scale_variance, compare_with_truth
+    from validation.compare import channel_scale_variance, compare_with_truth, read_scene
 
     shape = tuple(model.image_shape)
     out = {key: np.empty(0) for key, _ in PARAMETERS}
@@ -101,12 +100,12 @@ def coverage_z(manifest: Path, truth: Any, model: Any) -> dict[str, np.ndarray]:
         d = np.log(model.vignetting_map()) - np.log(truth.vignetting)
         with np.errstate(divide="ignore", invalid="ignore"):
             out["vignetting"] = (d / np.sqrt(vig_var))[::step, ::step].ravel()
-    loaded = load_manifest(manifest)
-    scene = load_stack(loaded.scene, loaded)
+    loaded, scene = read_scene(manifest)
     mask = pq.correct(scene, model, refine_exposures=False).mask
     ratio_var = channel_scale_variance(scene, model, mask)
     if ratio_var is not None:
-        error = np.asarray(compare_with_truth(manifest, model)["balance"]["channel_error"])
+        compared = compare_with_truth(loaded, model, scene=scene)  # the frames read once
+        error = np.asarray(compared["balance"]["channel_error"])
         stated = ratio_var > 0  # the reference channel states none
         out["balance"] = np.log1p(error[stated]) / np.sqrt(ratio_var[stated])
     return {key: z[np.isfinite(z)] for key, z in out.items()}

@@ -349,11 +349,10 @@ class Shared:
         """The capture set's HDR test scene corrected with the calibrated camera (once)."""
         if preset not in self._scenes:
             from photoquant.correction import correct
-            from photoquant.io import load_manifest, load_stack
+            from validation.compare import read_scene
 
             cal = self.calibration(preset)
-            manifest = load_manifest(cal.manifest)
-            stack = load_stack(manifest.scene, manifest)
+            _, stack = read_scene(cal.manifest)
             t0 = time.perf_counter()
             res = correct(stack, cal.model)
             self._scenes[preset] = (res, time.perf_counter() - t0)

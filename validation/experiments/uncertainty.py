@@ -69,11 +69,11 @@ def _stated(shared: Shared, preset: str) -> tuple[Any, bool]:
     key = ("uncertainty", preset)
     if key not in shared.cache:
         from photoquant.correction import correct
-        from photoquant.io import load_manifest, load_stack
+        from validation.compare import read_scene
 
         cal = shared.calibration(preset)
-        manifest = load_manifest(cal.manifest)
-        result = correct(load_stack(manifest.scene, manifest), cal.model, uncertainty="auto")
+        manifest, scene = read_scene(cal.manifest)
+        result = correct(scene, cal.model, uncertainty="auto")
         shared.cache[key] = (result, bool(manifest.dark_subtraction))
     return shared.cache[key]  # type: ignore[no-any-return]
 
