@@ -349,10 +349,13 @@ class Shared:
         """The capture set's HDR test scene corrected with the calibrated camera (once)."""
         if preset not in self._scenes:
             from photoquant.correction import correct
-            from validation.compare import read_scene
+            from photoquant.io import load_manifest, load_stack
 
+            # read here, not by validation.compare.read_scene: compare imports the
+            # experiments package, which imports this module
             cal = self.calibration(preset)
-            _, stack = read_scene(cal.manifest)
+            manifest = load_manifest(cal.manifest)
+            stack = load_stack(manifest.scene, manifest)
             t0 = time.perf_counter()
             res = correct(stack, cal.model)
             self._scenes[preset] = (res, time.perf_counter() - t0)
