@@ -24,9 +24,10 @@ a block mean:
 ``departure`` (code values) is the rms of the misfit that varies over the
 image at the block's scale beyond the noise: 0 (to its sampling error) for a
 camera that follows eq. 1 (pqsim's CCD preset: 0.005–0.008 DN at 8 bits).
-Measured 2026-12-03 on the shared real sets (8-bit DN unless said): Memorial
-0.43, frobisher 0.23, St. Louis (a compact camera's JPEG, moving water)
-1.40, the 12-bit machine-vision bracket (hand-held) 19.1 DN of 4095.
+Measured 2026-12-05 on the shared real sets (8-bit DN unless said; JPEG
+files read with the manifest's default ``saturation_spread``): Memorial 0.49,
+frobisher 0.11, St. Louis (a compact camera's JPEG, moving water) 0.71, the
+12-bit machine-vision bracket (hand-held) 19.4 DN of 4095.
 
 References
 ----------

@@ -87,11 +87,13 @@ from photoquant.errors import InputError
 from photoquant.io.outputs import OutputKind, folder_of_kind
 from photoquant.merge.noise_aware import (
     _QUANTISATION,
+    TOE_FRACTION,
     _dy_dc,
     _Scale,
     combine_photon_transfer_fits,
     estimate_noise_from_exposures,
     estimate_noise_parameters,
+    photon_transfer_floor,
 )
 from photoquant.model import CameraModel
 from photoquant.stack import ExposureStack
@@ -349,16 +351,19 @@ def _sqrt_u(var: float, u_var: float) -> tuple[float, float]:
 def _black_slope(camera: CameraModel) -> np.ndarray:
     """``dy/dc`` near the black level per channel (1 for a linear camera).
 
-    The secant over the first 2 % of the range above black (at least 8 DN),
-    from a quarter of it: a recovered response is least certain in its first
-    few levels, so its slope there is read over a span.
+    The secant over the first 4 % of the range above black (at least 8 DN),
+    from a quarter of it (:data:`~photoquant.merge.noise_aware.TOE_FRACTION`
+    of the range): a recovered response is least certain in its first levels,
+    where eq. 7's smoothness prior rounds a toe as sharp as a linear camera's
+    ``ln(c − b)`` (:func:`~photoquant.merge.noise_aware.photon_transfer_floor`),
+    so its slope there is read over a span beyond them.
     """
     scale = _Scale(camera.response)
     black = np.asarray(camera.response.black_level, dtype=np.float64)
     sat = np.asarray(camera.response.saturation_level, dtype=np.float64)
     out = np.empty(black.size)
     for ch, b in enumerate(black):
-        step = max(8.0, 0.02 * float(sat[ch] - b))
+        step = max(8.0, 4.0 * TOE_FRACTION * float(sat[ch] - b))
         c = np.array([b + step / 4.0, b + step])
         y = scale.linear(scale.log_inverse(c, ch), ch)
         out[ch] = (y[1] - y[0]) / (0.75 * step)
@@ -384,7 +389,7 @@ def _ptc_points(
     n = stack.n_repeats
     clipped = stack.saturated(resp.saturation_level) | stack.dark_clipped()
     sat = np.asarray(resp.saturation_level, dtype=np.float64)
-    lo = np.asarray(resp.valid_min, dtype=np.float64)
+    lo = photon_transfer_floor(resp)
     out = []
     for ch in range(stack.n_channels):
         xs: list[float] = []

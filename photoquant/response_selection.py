@@ -120,10 +120,10 @@ own exposures can say how much of the curve's shape the data support).
 Measured (2026-12-04, ``photoquant crossval`` on the user's path, the
 selection nested in every fold, the JPEG values read as they are): Memorial
 2.14 DN against 2.29 with the profile's default response, the St. Louis Arch
-11.03 against 11.14, the 12-bit machine-vision bracket 92.41 against 94.62
-with ``("EMoR 2004", {"n_components": n})``, n = 3, 5, 7, among the
-candidates; frobisher (3 frames: each crossval fold keeps two, with nothing
-to hold out) unchanged.
+11.03 against 11.14; frobisher (3 frames: each crossval fold keeps two, with
+nothing to hold out) unchanged; the 12-bit machine-vision bracket 93.24
+against 94.31 with ``("EMoR 2004", {"n_components": n})``, n = 3, 5, 7, among
+the candidates (2026-12-05).
 On the simulator's presets at 3.8-stop steps (``K = 4``) it can prefer a
 response that predicts the held-out frame best but lies further from the
 true ``g`` than the default's

@@ -37,6 +37,7 @@ from photoquant.response.debevec1997 import (
     response_levels,
     select_samples_histogram,
     select_samples_random,
+    smoothness_per_level,
 )
 from photoquant.response.emor2004 import EMoRResponseOptions, characterise_response_EMoR2004
 from photoquant.response.gamma import GammaResponseOptions, characterise_response_Gamma
@@ -77,6 +78,7 @@ __all__ = [
     "response_levels",
     "select_samples_histogram",
     "select_samples_random",
+    "smoothness_per_level",
 ]
 
 RESPONSE_METHODS = REGISTRIES["response"]

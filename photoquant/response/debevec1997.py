@@ -24,8 +24,19 @@ Implementation notes
 * **Binned unknowns**: above ``max_levels`` levels (bit depths > 10 by
   default) ``g`` is represented by ``max_levels`` evenly spaced knots and
   interpolated linearly in between; 8- to 10-bit data get one unknown per
-  integer level, as in the paper. ``g''`` is taken between knots, so β acts
-  per knot.
+  integer level, as in the paper. ``g''`` is taken between knots.
+* **β at every bit depth**: β is stated for 256 levels over the value range
+  (the paper's 8 bits). With ``L`` levels the second difference of a given
+  curve shrinks as ``L⁻²`` and its rows number ``L``: the prior's weight on
+  the curve's shape falls as ``L⁻³``, while the data rows stay as many. Each
+  smoothness row therefore gets ``β·((L − 1)/255)³``
+  (:func:`smoothness_per_level`), so that one β smooths a 10-, 12- or 16-bit
+  camera's curve as much as an 8-bit one's. Measured (2026-12-05; pqsim's
+  ccd, cmos and two EMoR cameras, 640×480, one frame per exposure, six
+  exposures one stop apart and four two stops apart): the rms error of ``g``
+  at 12 bits (1024 knots) 0.034 → 0.008 and at 10 bits 0.033 → 0.008,
+  where 8 bits give 0.008; β taken per knot as given, the 12-bit curve
+  followed the noise (wiggles of a few hundredths in ``ln``).
 * **Why β matters**: with a geometric exposure series (constant ratio ``R``),
   adding to ``g`` any function periodic in ``ln X`` with period ``ln R`` and
   shifting each ``ln c_p`` accordingly leaves every data equation satisfied:
@@ -169,12 +180,17 @@ __all__ = [
     "DebevecResponseOptions",
     "characterise_response_Debevec1997",
     "DEFAULT_SMOOTHNESS",
+    "REFERENCE_LEVELS",
+    "smoothness_per_level",
     "TOE_MODES",
     "continue_toe",
 ]
 
 DEFAULT_SMOOTHNESS = 1000.0
-"""Default β of eq. 7 (weights scaled to a peak of 1). The paper leaves β free."""
+"""Default β of eq. 7 (weights scaled to a peak of 1; stated for 256 levels, see
+:func:`smoothness_per_level`). The paper leaves β free."""
+REFERENCE_LEVELS = 256
+"""The levels over the value range for which β is stated (the paper's 8 bits)."""
 DEFAULT_MAX_PIXELS = 2**17
 """Default ``max_pixels`` of :func:`camera_response_Debevec1997`: candidates for the samples."""
 
@@ -300,6 +316,30 @@ def response_levels(bit_depth: int, max_levels: int = 1024) -> np.ndarray:
     if n <= max_levels:
         return np.arange(n, dtype=np.float64)
     return np.linspace(0.0, n - 1.0, int(max_levels))
+
+
+def smoothness_per_level(smoothness: float, n_levels: int) -> float:
+    """The weight of each smoothness row of eq. 7 for β stated at 256 levels (module notes).
+
+    ``β·((L − 1)/(R − 1))³`` with ``R`` = :data:`REFERENCE_LEVELS`: the
+    penalty a curve ``g(c/c_max)`` pays, ``Σ β (Δ²g)²`` over ``L`` levels, is
+    about ``β (L − 1)⁻³ ∫ g''² dx``; the factor keeps it the same at every
+    number of levels. 1 at 256 levels.
+
+    Parameters
+    ----------
+    smoothness : float
+        β as stated (for 256 levels).
+    n_levels : int
+        Levels (or knots) of ``g`` over the whole value range.
+
+    Returns
+    -------
+    float
+    """
+    if n_levels < 2:
+        raise InputError(f"`n_levels` must be at least 2, got {n_levels}")
+    return float(smoothness) * ((n_levels - 1) / (REFERENCE_LEVELS - 1)) ** 3
 
 
 def _channel_major(a: np.ndarray) -> np.ndarray:
@@ -1304,7 +1344,9 @@ def camera_response_Debevec1997(
     saturated : ndarray, shape (K, H, W, C) of bool, optional
         Values known to be clipped (any repeat at the saturation level).
     smoothness : float
-        β of eq. 7, with weights scaled to a peak of 1.
+        β of eq. 7, with weights scaled to a peak of 1, for 256 levels: with
+        more levels (or knots) each smoothness row weighs
+        :func:`smoothness_per_level` (module notes, *β at every bit depth*).
     n_samples : int
         Pixels sampled per channel (the paper used 500).
     weighting : str or callable
@@ -1407,7 +1449,7 @@ def camera_response_Debevec1997(
         levels=levels,
         t=inputs.t,
         wfun=inputs.wfun,
-        smoothness=inputs.smoothness,
+        smoothness=smoothness_per_level(inputs.smoothness, levels.size),
         min_support=min_support,
         toe=toe,
         censoring=censoring,

@@ -125,14 +125,15 @@ def test_one_frame_per_exposure_states_the_scatter_between_frame_sets(one_frame_
 
 def test_a_calibration_without_repeats_stores_the_views_noise(one_frame_each):
     """One frame per exposure: the calibration stores the mean of every view's
-    neighbouring-exposure line. Over six seeds its gains were within 7.6 % rms of the
-    camera's (at most 13 %); view 0's line alone, weighted by its bins' own scatter, read
-    them 20-59 % low (54 % on green here), which the stored uncertainty then carried."""
+    neighbouring-exposure line. Over six seeds (3-8) its gains are within 2.9 % rms of the
+    camera's (at most 8 %; 7.6 % rms and 13 % where the lines also read the first percent
+    of the range above black, the response's rounded toe); view 0's line alone, weighted
+    by its bins' own scatter, read them 20-59 % low."""
     camera, _, model = one_frame_each
     record = model.parameters["noise"]
     assert record is not None and record["source"] == "neighbouring exposures"
     gain = np.asarray(record["gain_dn_per_e"])
-    assert np.all(np.abs(gain / true_values(camera)["gain"] - 1) < 0.25), gain
+    assert np.all(np.abs(gain / true_values(camera)["gain"] - 1) < 0.15), gain
 
 
 @pytest.fixture(scope="module")

@@ -3,8 +3,9 @@ skipped when absent): calibrated with the defaults, characterised from that one 
 the twin written, then :func:`validation.twin_check.twin_check`.
 
 Measured 2026-12-05 (leave one exposure out, DN, the camera's bracket against the twin's):
-Memorial 2.288 against 1.912 (0.84), the 12-bit machine-vision bracket 94.62 against 112.4
-(1.19), frobisher 7.338 against 6.034 (0.82), St. Louis 9.726 against 6.830 (0.70). These
+Memorial 2.288 against 1.912 (0.84), the 12-bit machine-vision bracket 94.31 against 109.4
+(1.16), frobisher 7.338 against 6.061 (0.83), St. Louis 9.726 against 5.699 (0.59: its
+moving water and JPEG tone curve are not in the twin; not among the sets checked). These
 brackets hold one frame per exposure: the twin's noise is what their neighbouring exposures
 share beyond one global response, with a moving subject and edges out of register left out
 of it.
