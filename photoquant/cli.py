@@ -64,12 +64,15 @@ def _step_logger(
 
 
 def _fmt(values: Any) -> str:
-    """Numbers as ``[a, b, c]``; anything else (an untrusted camera's report) as its repr."""
+    """A number as ``a``, numbers as ``[a, b, c]``; anything else (an untrusted camera's
+    report) as its repr."""
     try:
-        arr = np.asarray(values, dtype=float).ravel()
+        arr = np.asarray(values, dtype=float)
     except (TypeError, ValueError):
         return repr(values)[:80]
-    return "[" + ", ".join(f"{v:.4g}" for v in arr) + "]"
+    if arr.ndim == 0:
+        return f"{float(arr):.4g}"
+    return "[" + ", ".join(f"{v:.4g}" for v in arr.ravel()) + "]"
 
 
 def _parse_value(text: str) -> Any:
@@ -323,7 +326,9 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
         lines.append(f"note: {note}")
     timings = _section(rep, "timings_s")
     if timings:
-        lines.append("time: " + ", ".join(f"{k} {_fmt(v)} s" for k, v in timings.items()))
+        lines.append(
+            "time: " + ", ".join(f"{k.replace('_', ' ')} {_fmt(v)} s" for k, v in timings.items())
+        )
     print("\n".join(lines))
 
 

@@ -79,6 +79,9 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     # every vignetting parameter with its standard uncertainty
     assert re.search(r"  R: Extended Goldman-Chen \[[^]]+\] ± \[[^]]+\]", text), text
     assert "views' exposure times: nominal times kept: likelihood ratio" in text
+    # one duration per step, as a number and by name (not a one-element list)
+    assert re.search(r"^time: defects [0-9.e-]+ s, response [0-9.e-]+ s, ", text, re.M), text
+    assert "merge per view " in text
 
     assert main(["info", str(cam), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)

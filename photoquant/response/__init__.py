@@ -18,7 +18,8 @@ Methods
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+import re
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -156,13 +157,40 @@ def fit_response(
     if not isinstance(stack, ExposureStack):
         raise InputError(f"`stack` must be an ExposureStack, got {type(stack).__name__}")
     check_reaches_range(stack)
-    fit = method.function(stack, options, rng)
+    try:
+        fit = method.function(stack, options, rng)
+    except CalibrationError as exc:
+        named = _channels_by_name(str(exc), stack.channels)
+        if named == str(exc):
+            raise
+        raise CalibrationError(named) from exc
     if not isinstance(fit, StepFit) or not isinstance(fit.model, ResponseModel):
         raise InputError(
             f"response method {method.name!r} must return StepFit(ResponseModel, report), "
             f"got {type(fit).__name__}"
         )
     return fit
+
+
+_CHANNEL_INDEX = re.compile(r"\bchannel (\d+)\b")
+
+
+def _channels_by_name(message: str, channels: Sequence[str]) -> str:
+    """``message`` with each ``channel <index>`` of the fitting code named as the stack names it.
+
+    The response methods work on channel indices; a user knows the channels by
+    the names the manifest (or the stack) gives them. An index outside
+    ``channels`` is left as it is.
+
+    >>> _channels_by_name("channel 2: too few pairs", ("R", "G", "B"))
+    'channel B: too few pairs'
+    """
+
+    def name(match: re.Match[str]) -> str:
+        index = int(match.group(1))
+        return f"channel {channels[index]}" if index < len(channels) else match.group(0)
+
+    return _CHANNEL_INDEX.sub(name, message)
 
 
 MIN_REACH = 0.125

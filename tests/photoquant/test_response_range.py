@@ -98,3 +98,17 @@ def test_a_bracket_mostly_saturated_and_dark_between_says_so():
     with pytest.raises(CalibrationError) as small:
         check_reaches_range(stack)
     assert "of the values at it" not in str(small.value)
+
+
+@pytest.mark.parametrize("method", ["Debevec 1997", "Mitsunaga-Nayar 1999", "Robertson 2003"])
+def test_a_methods_error_names_the_channel_as_the_stack_does(method, rng):
+    """Two exposures 20 stops apart share no well-exposed pixel: the methods, which work on
+    channel indices, fail in the first channel; the error names it as the user does."""
+    from .analytic import capture
+
+    t = np.array([1e-3, 1048.576])
+    frames = capture(1e3 * log_uniform_scene(rng, (30, 40, 3), 6.0), t).astype(np.uint8)
+    stack = ExposureStack(frames, t, channels=("L", "M", "S"))
+    with pytest.raises(CalibrationError, match=r"^channel L: only 0 pixels") as info:
+        fit_response(stack, method)
+    assert "channel 0" not in str(info.value)
