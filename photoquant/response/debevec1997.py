@@ -127,6 +127,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -160,6 +161,13 @@ from photoquant.response.covariance import (
 )
 from photoquant.response.model import ResponseModel
 from photoquant.response.robust import LEVEL_BANDS, check_robust, robust_weights, round_loss
+from photoquant.response.values_objective import (
+    OBJECTIVES,
+    VALUE_STEPS,
+    model_positions,
+    step_scale,
+    values_residual,
+)
 from photoquant.response.wide_steps import (
     WIDE_STEP_MODES,
     emor_mean_log_inverse,
@@ -627,14 +635,14 @@ def _normal_equations(
     # each pixel's valid values first (stable), and only as many rows as the fullest pixel
     # has: a combined stack of several views has many exposures, each pixel a few of them
     k_used = max(int(valid.sum(axis=0).max(initial=0)), 1)
+    log_tk = np.asarray(log_t, dtype=np.float64)
+    if log_tk.ndim == 1:
+        log_tk = np.broadcast_to(log_tk[:, None], valid.shape)
     if k_used < valid.shape[0]:
         order = np.argsort(~valid, axis=0, kind="stable")[:k_used]
-        valid, weights, knot_pos = (
-            np.take_along_axis(a, order, axis=0) for a in (valid, weights, knot_pos)
+        valid, weights, knot_pos, log_tk = (
+            np.take_along_axis(a, order, axis=0) for a in (valid, weights, knot_pos, log_tk)
         )
-        log_tk = log_t[order]
-    else:
-        log_tk = np.broadcast_to(log_t[:, None], valid.shape)
     k_count = valid.shape[0]
     w = np.where(valid, weights, 0.0)
     u = np.minimum(np.where(valid, knot_pos, 0.0), top)
@@ -827,6 +835,7 @@ def _check_inputs(
     workers: int | None,
     robust: str,
     robust_rounds: int,
+    objective: str = "log",
 ) -> _CheckedInputs:
     """The checked arguments of :func:`camera_response_Debevec1997` (its parameters, by name).
 
@@ -851,6 +860,8 @@ def _check_inputs(
     if int(n_samples) < 2:
         raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
     check_robust(robust, robust_rounds)
+    if objective not in OBJECTIVES:
+        raise InputError(f"`objective` must be one of {list(OBJECTIVES)}, got {objective!r}")
     rounds = 1 + int(robust_rounds) if robust != "none" else 1
     if workers is None:  # one thread per channel wherever there is more than one CPU
         workers = n_ch if default_workers() > 1 else 1
@@ -938,6 +949,7 @@ class _FitSettings:
     robust: str
     rounds: int
     uncertainty: bool
+    objective: str = "log"
 
     @property
     def spacing(self) -> float:
@@ -1144,6 +1156,53 @@ def _robust_solution(
     return _eq7_solution(sample, row_w, smooth_w, prior, settings)
 
 
+def _values_solution(
+    sample: _ChannelSample,
+    solution: _Eq7Solution,
+    smooth_w: np.ndarray,
+    prior: np.ndarray | None,
+    c_lo: float,
+    settings: _FitSettings,
+) -> _Eq7Solution:
+    """Eq. 7's solution refined in the values (:mod:`photoquant.response.values_objective`).
+
+    :data:`VALUE_STEPS` Gauss–Newton steps, each eq. 7 with every datum at the
+    level where the model puts it and its right-hand side ``ln t_k − r`` (``r``
+    the value's residual in ``ln`` units at the model's slope), the rows
+    weighted as eq. 7's times the robust weight of ``r``; each step shortened
+    to move ``g`` by at most :data:`~photoquant.response.values_objective.MAX_STEP`.
+    """
+    black = c_lo / settings.spacing
+    for _ in range(VALUE_STEPS):
+        at, step = model_positions(solution.g, solution.log_e, settings.log_t)
+        resid = values_residual(sample.knots, at, step)
+        row_w = np.where(sample.valid, sample.weights, 0.0)
+        if settings.robust != "none":
+            band = _log_bands(at, black, sample.top)
+            row_w = row_w * np.sqrt(robust_weights(row_w * resid, sample.valid, band))
+        rhs = settings.log_t[:, None] - resid
+        trial = _Eq7Solution(
+            *_solve_channel(
+                sample.valid,
+                row_w,
+                rhs,
+                at,
+                sample.top,
+                smooth_w,
+                settings.smoothness,
+                sample.gauge,
+                prior,
+            )
+        )
+        share = step_scale(solution.g, trial.g)
+        solution = dataclasses.replace(
+            trial,
+            g=solution.g + share * (trial.g - solution.g),
+            log_e=solution.log_e + share * (trial.log_e - solution.log_e),
+        )
+    return solution
+
+
 def _toe_and_valid_min(
     g: np.ndarray, support: np.ndarray, gauge: int, settings: _FitSettings
 ) -> tuple[np.ndarray, int]:
@@ -1224,6 +1283,8 @@ def _fit_channel(
     smooth_w = _smoothness_weights(c_lo, c_sat, settings)
     factor, prior = _wide_step_prior(sample, smooth_w, c_lo, c_sat, settings)
     solution = _robust_solution(sample, smooth_w, prior, c_lo, settings)
+    if settings.objective == "values":
+        solution = _values_solution(sample, solution, smooth_w, prior, c_lo, settings)
     g, lowest = _toe_and_valid_min(solution.g, solution.support, gauge, settings)
     cov_factor, variance = None, None
     if settings.uncertainty:
@@ -1328,6 +1389,7 @@ def camera_response_Debevec1997(
     robust: str = "huber",
     robust_rounds: int = 3,
     uncertainty: bool = False,
+    objective: str = "log",
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -1409,6 +1471,11 @@ def camera_response_Debevec1997(
         Also estimate the covariance of ``g`` (the pixel-clustered sandwich of
         the final solve, :mod:`photoquant.response.covariance`), returned as a
         low-rank factor.
+    objective : {"log", "values"}
+        ``"log"`` (default): eq. 7 as written, its residuals in ``ln X``;
+        ``"values"``: eq. 7's solution refined by Gauss–Newton steps on the
+        values' residuals, without the bias of a noisy value inside ``g``
+        (:mod:`photoquant.response.values_objective`).
     workers : int, optional
         Threads for the channels. By default one per channel wherever the
         process may run on two CPUs or more, and one thread otherwise: three
@@ -1442,6 +1509,7 @@ def camera_response_Debevec1997(
         workers=workers,
         robust=robust,
         robust_rounds=robust_rounds,
+        objective=objective,
     )
     candidates, clipped = _candidate_values(inputs)
     levels = response_levels(inputs.bit_depth, max_levels)
@@ -1457,6 +1525,7 @@ def camera_response_Debevec1997(
         robust=robust,
         rounds=inputs.rounds,
         uncertainty=uncertainty,
+        objective=objective,
     )
     fits = _fit_channels(candidates, clipped, inputs, settings, int(n_samples))
     return _response_recovery(levels, inputs, fits, uncertainty)
@@ -1484,7 +1553,8 @@ class DebevecResponseOptions:
     Attributes
     ----------
     smoothness : float
-        β of eq. 7 (weights scaled to a peak of 1).
+        β of eq. 7 (weights scaled to a peak of 1), stated for 256 levels
+        (:func:`smoothness_per_level`).
     n_samples : int
         Pixels sampled per channel (the paper used 500).
     weighting : str
@@ -1526,6 +1596,9 @@ class DebevecResponseOptions:
         cost of the ``K`` fits). Brackets of fewer than
         :data:`~photoquant.response.covariance.MIN_JACKKNIFE_EXPOSURES`
         exposures take the sandwich; the report says which was used.
+    objective : {"log", "values"}
+        Eq. 7 as written, or refined in the values
+        (:mod:`photoquant.response.values_objective`).
     """
 
     smoothness: float = DEFAULT_SMOOTHNESS
@@ -1542,8 +1615,13 @@ class DebevecResponseOptions:
     robust_rounds: int = 3
     uncertainty: bool = True
     covariance: str = "sandwich"
+    objective: str = "log"
 
     def __post_init__(self) -> None:
+        if self.objective not in OBJECTIVES:
+            raise InputError(
+                f"`objective` must be one of {list(OBJECTIVES)}, got {self.objective!r}"
+            )
         if self.covariance not in COVARIANCE_MODES:
             raise InputError(
                 f"`covariance` must be one of {list(COVARIANCE_MODES)}, got {self.covariance!r}"
@@ -1639,6 +1717,7 @@ def characterise_response_Debevec1997(
             robust=opts.robust,
             robust_rounds=opts.robust_rounds,
             uncertainty=uncertainty,
+            objective=opts.objective,
         )
 
     n_k = stack.n_exposures
