@@ -1283,9 +1283,12 @@ def _fit_channel(
     smooth_w = _smoothness_weights(c_lo, c_sat, settings)
     factor, prior = _wide_step_prior(sample, smooth_w, c_lo, c_sat, settings)
     solution = _robust_solution(sample, smooth_w, prior, c_lo, settings)
+    # a level is measured by the values observed there (eq. 7's rows), not by where the
+    # values objective puts noisy ones: the toe rule reads eq. 7's support
+    support = solution.support
     if settings.objective == "values":
         solution = _values_solution(sample, solution, smooth_w, prior, c_lo, settings)
-    g, lowest = _toe_and_valid_min(solution.g, solution.support, gauge, settings)
+    g, lowest = _toe_and_valid_min(solution.g, support, gauge, settings)
     cov_factor, variance = None, None
     if settings.uncertainty:
         cov_factor, variance = _covariance_of_g(solution.system, gauge, top, n_levels)

@@ -32,7 +32,10 @@ complement and monotone solve. The rows keep eq. 7's weights (the hat of the
 observed value) times the robust weights of ``r``; a step that would move
 ``g`` by more than :data:`MAX_STEP` anywhere is shortened to it
 (:func:`step_scale`: a trust region, for real brackets whose first steps
-can be large). The covariance is the sandwich of the last step's system.
+can be large). The lowest trusted level (``valid_min``, the toe rule of
+:mod:`photoquant.response.debevec1997`) counts the values *observed* at each
+level (eq. 7's rows), not those the model moves there. The covariance is the
+sandwich of the last step's system.
 
 Measured (2026-12-05)
 ---------------------
@@ -45,17 +48,17 @@ Measured (2026-12-05)
 * ``photoquant validate`` (quick; ``ccd`` / ``cmos``): ``g`` worst channel
   0.0024 / 0.0106 → 0.0013 / 0.0017, balance 0.36 / 0.50 % → 0.09 / 0.03 %,
   vignetting 0.07 / 0.13 % → 0.04 / 0.03 %, the HDR test scene 1.36 / 3.68 %
-  → 1.51 / 3.28 % (its noise floor 1.01 / 3.21 %), the stated uncertainty's
-  ``z`` spread against ``l`` plus the dark current's light 1.02 / 1.09 →
-  1.02 / 0.97.
+  → 1.01 / 3.35 % (its noise floor 1.01 / 3.21 %), the stated uncertainty's
+  ``z`` spread 1.09 / 1.65 → 1.00 / 1.48, against ``l`` plus the dark
+  current's light 1.02 / 1.09 → 0.99 / 0.97.
 * Leave one exposure out on the user's path (``photoquant crossval``, DN):
-  Memorial 2.288 → 2.270, the 12-bit machine-vision bracket 94.31 → 93.57
+  Memorial 2.288 → 2.270, the 12-bit machine-vision bracket 94.31 → 93.58
   (its authors' response 92.31), the St. Louis Arch 9.726 → 9.691,
   frobisher 7.338 → 7.822 (two frames six stops apart in each fold, where
   the wide-step prior shapes ``g``).
 
-Not the default: the ``ccd`` test scene and frobisher are worse, and the
-validation's full configuration has not been run with it.
+Not yet the default: frobisher is worse, and the validation's full
+configuration and the benchmarks have not been run with it.
 
 References
 ----------
