@@ -468,7 +468,7 @@ class _Capture:
     chart: Callable[[Any], dict[str, float]] | None = None
     """The ColorChecker corrected with a model → ``cc_r``, ``cc_r_cie`` (None: no chart)."""
     loaded: Any = None
-    """The manifest as loaded (on the first comparison)."""
+    """The manifest as loaded (when the capture was, or on the first comparison)."""
     scene: Any = None
     """Its test scene's frames, read on the first comparison and kept for the others (every
     method's camera corrects the same frames)."""
@@ -479,7 +479,8 @@ class _Capture:
         from validation.compare import compare_with_truth, read_scene
 
         if self.scene is None:
-            self.loaded, self.scene = read_scene(self.manifest, allow_outside=self.allow_outside)
+            source = self.manifest if self.loaded is None else self.loaded
+            self.loaded, self.scene = read_scene(source, allow_outside=self.allow_outside)
         return compare_with_truth(
             self.loaded,
             model,
@@ -526,6 +527,7 @@ def _capture_from_manifest(
         calibrate_seed=int(seed),
         inputs=frozenset({"tracks"} if len(views) >= 2 else set()),
         allow_outside=allow_outside,
+        loaded=manifest,
     )
 
 

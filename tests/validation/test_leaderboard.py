@@ -513,14 +513,31 @@ def test_command_errors_are_one_line(command, tmp_path):
     assert not list(tmp_path.glob("photoquant-leaderboard-*"))
 
 
-def test_given_synthetic_manifests_are_ranked_with_their_truth(board, command, tmp_path):
+def test_given_synthetic_manifests_are_ranked_with_their_truth(
+    board, command, tmp_path, monkeypatch
+):
+    import photoquant.io
+    import validation.compare
+
     lb, shared = board
     manifest = shared.calibration("ccd").manifest
+    loads = []
+    for module in (photoquant.io, validation.compare):
+        real_load = module.load_manifest
+
+        def counted(path, *args, _load=real_load, **kwargs):
+            loads.append(path)
+            return _load(path, *args, **kwargs)
+
+        monkeypatch.setattr(module, "load_manifest", counted)
     status, out, err = command(
         "leaderboard", str(manifest), "--step", "response", "--methods", "Debevec 1997",
         "--json", "-q",
     )  # fmt: skip
     assert status == 0, err
+    # the user's manifest is read once: the capture keeps it for its comparisons
+    assert [str(p) for p in loads].count(str(manifest)) == 1, loads
+    monkeypatch.undo()
     data = json.loads(out)
     assert data["presets"] == ["capture"] and data["manifests"] == {"capture": str(manifest)}
     assert data["captures"] == "96x72, N = 4, K = 8, V = 3"
