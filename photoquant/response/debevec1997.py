@@ -1102,12 +1102,26 @@ def _reweighted_rows(
     (:func:`_log_bands`, bands above ``black`` in units of the level spacing;
     :func:`photoquant.response.robust.robust_weights`).
     """
-    top, weights = sample.top, sample.weights
+    top = sample.top
     at = np.minimum(sample.knots, top)
     fitted = np.interp(at, np.arange(top + 1), solution.g)
-    resid = weights * (fitted - solution.log_e - settings.log_t[:, None])
-    band = _log_bands(at, black, top)
-    return weights * np.sqrt(robust_weights(resid, sample.valid, band, loss=loss))
+    resid = fitted - solution.log_e - settings.log_t[:, None]
+    return _robust_rows(sample, sample.weights, resid, at, black, loss)
+
+
+def _robust_rows(
+    sample: _ChannelSample,
+    weights: np.ndarray,
+    resid: np.ndarray,
+    at: np.ndarray,
+    black: float,
+    loss: str,
+) -> np.ndarray:
+    """``weights`` scaled by the robust weight (``loss``) of the rows ``weights·resid``
+    against the noise of their band of levels (:func:`_log_bands` of the positions ``at``,
+    above ``black``, in units of the level spacing)."""
+    band = _log_bands(at, black, sample.top)
+    return weights * np.sqrt(robust_weights(weights * resid, sample.valid, band, loss=loss))
 
 
 def _eq7_solution(
@@ -1178,8 +1192,7 @@ def _values_solution(
         resid = values_residual(sample.knots, at, step)
         row_w = np.where(sample.valid, sample.weights, 0.0)
         if settings.robust != "none":
-            band = _log_bands(at, black, sample.top)
-            row_w = row_w * np.sqrt(robust_weights(row_w * resid, sample.valid, band))
+            row_w = _robust_rows(sample, row_w, resid, at, black, "huber")
         rhs = settings.log_t[:, None] - resid
         trial = _Eq7Solution(
             *_solve_channel(
