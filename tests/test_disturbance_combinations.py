@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import itertools
 
+import numpy as np
 import pytest
 
 import photoquant as pq
@@ -84,6 +85,16 @@ def test_every_pair_calibrates(tmp_path, first, second):
 def test_all_together_calibrate(tmp_path):
     every = {key: value for group in GROUPS.values() for key, value in group.items()}
     _calibrates(_capture(tmp_path, every))
+
+
+def test_the_values_objective_calibrates_a_bayer_camera_with_dsnu_and_glare(tmp_path):
+    """The response refined in the values: values just below a Bayer channel's clip that the
+    model would clip pulled ``g`` at the clip off the data, and the glare fit through that
+    response went to its bound (a fraction of 0.5, refused); they keep eq. 7's rows."""
+    manifest = _capture(tmp_path, {**_DSNU_READOUT, **_BAYER_RAW})
+    model = pq.calibrate_manifest(manifest, response=("Debevec 1997", {"objective": "values"}))
+    assert np.all(model.report["response"]["refined_in_values"])
+    assert np.all(np.asarray(model.glare.fraction) < 0.1)
 
 
 def test_the_issues_camera_with_a_glare_capture_and_dark_frames(tmp_path):

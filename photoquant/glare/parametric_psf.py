@@ -340,6 +340,13 @@ def _channel_fit(
     amplitude = float(np.exp(sol.x[0]))
     width_px = float(np.exp(sol.x[1]))
     fraction = amplitude / (1.0 + amplitude)
+    if sol.x[0] >= hi[0] - 1e-6:
+        raise CalibrationError(
+            f"glare capture, channel {ch}: the tail is too bright for a glare spread of the "
+            f"source (the fitted fraction reached its bound, {MAX_GLARE_FRACTION:g} of the "
+            "light): check that the source is the only light in the capture and that the "
+            "response is right near its clip"
+        )
     # d f / d ln A = A / (1 + A)²,  d w / d ln w = w
     f_std = float(np.sqrt(max(cov[0, 0], 0.0)) * amplitude / (1.0 + amplitude) ** 2)
     w_std = float(np.sqrt(max(cov[1, 1], 0.0)) * width_px)

@@ -162,8 +162,10 @@ from photoquant.response.covariance import (
 from photoquant.response.model import ResponseModel
 from photoquant.response.robust import LEVEL_BANDS, check_robust, robust_weights, round_loss
 from photoquant.response.values_objective import (
+    MAX_STEP_FACTOR,
     OBJECTIVES,
     VALUE_STEPS,
+    beyond_ends,
     model_positions,
     step_scale,
     values_residual,
@@ -295,6 +297,10 @@ class ResponseRecovery:
         ``F`` of each channel: the smoothness across the EMoR mean response
         is ``F β`` (``wide_steps="template"``, :mod:`photoquant.response.wide_steps`;
         1 on brackets of steps up to ``ρ₀`` or with ``wide_steps="none"``).
+    refined_in_values : ndarray, shape (C,) of bool
+        Whether the channel's ``g`` was refined in the values
+        (``objective="values"`` on a bracket whose typical step's ``F`` is at
+        most :data:`~photoquant.response.values_objective.MAX_STEP_FACTOR`).
     """
 
     levels: np.ndarray
@@ -307,6 +313,7 @@ class ResponseRecovery:
     smoothness: float
     valid_min: np.ndarray
     smoothness_factor: np.ndarray | None = None
+    refined_in_values: np.ndarray | None = None
     log_inverse_response_factor: np.ndarray | None = None
     log_inverse_response_variance: np.ndarray | None = None
 
@@ -1050,23 +1057,30 @@ def _smoothness_weights(c_lo: float, c_sat: float, settings: _FitSettings) -> np
     return smooth_w
 
 
+def _bracket_factor(sample: _ChannelSample, settings: _FitSettings) -> float:
+    """``F = max(1, (ρ/ρ₀)⁴)`` of the typical step ``ρ`` the sampled values link
+    (:func:`~photoquant.response.wide_steps.typical_step`), whatever ``wide_steps``."""
+    return step_factor(typical_step(sample.valid, settings.log_t))
+
+
 def _wide_step_prior(
     sample: _ChannelSample,
     smooth_w: np.ndarray,
     c_lo: float,
     c_sat: float,
     settings: _FitSettings,
+    bracket_factor: float,
 ) -> tuple[float, np.ndarray | None]:
     """The channel's smoothness factor ``F`` and the template penalty it adds to eq. 7.
 
-    With ``wide_steps="template"``, ``F`` follows the typical step of the
-    sampled values' bracket (:mod:`photoquant.response.wide_steps`) and, when
-    above 1, the penalty (``(top + 1, top + 1)``, times β) draws ``g``
-    towards the EMoR mean response's shape; otherwise ``F = 1`` and no penalty.
+    With ``wide_steps="template"``, ``F`` is the bracket's (``bracket_factor``,
+    :func:`_bracket_factor`) and, when above 1, the penalty (``(top + 1,
+    top + 1)``, times β) draws ``g`` towards the EMoR mean response's shape;
+    otherwise ``F = 1`` and no penalty.
     """
     if settings.wide_steps != "template":
         return 1.0, None
-    factor = step_factor(typical_step(sample.valid, settings.log_t))
+    factor = bracket_factor
     if not factor > 1.0:
         return factor, None
     top = sample.top
@@ -1185,11 +1199,17 @@ def _values_solution(
     the value's residual in ``ln`` units at the model's slope), the rows
     weighted as eq. 7's times the robust weight of ``r``; each step shortened
     to move ``g`` by at most :data:`~photoquant.response.values_objective.MAX_STEP`.
+    A value the model puts at or beyond ``g``'s ends
+    (:func:`~photoquant.response.values_objective.beyond_ends`) keeps eq. 7's
+    row.
     """
     black = c_lo / settings.spacing
     for _ in range(VALUE_STEPS):
         at, step = model_positions(solution.g, solution.log_e, settings.log_t)
         resid = values_residual(sample.knots, at, step)
+        beyond = beyond_ends(at, sample.top)
+        at = np.where(beyond, sample.knots, at)
+        resid = np.where(beyond, 0.0, resid)
         row_w = np.where(sample.valid, sample.weights, 0.0)
         if settings.robust != "none":
             row_w = _robust_rows(sample, row_w, resid, at, black, "huber")
@@ -1272,6 +1292,7 @@ class _ChannelFit:
     constrained: bool
     valid_min: float
     smoothness_factor: float
+    refined_in_values: bool
     covariance_factor: np.ndarray | None
     variance: np.ndarray | None
 
@@ -1294,12 +1315,14 @@ def _fit_channel(
     sample = _channel_sample(ch, vals, valid, idx, c_lo, c_sat, settings)
     top, gauge = sample.top, sample.gauge
     smooth_w = _smoothness_weights(c_lo, c_sat, settings)
-    factor, prior = _wide_step_prior(sample, smooth_w, c_lo, c_sat, settings)
+    bracket_factor = _bracket_factor(sample, settings)
+    factor, prior = _wide_step_prior(sample, smooth_w, c_lo, c_sat, settings, bracket_factor)
     solution = _robust_solution(sample, smooth_w, prior, c_lo, settings)
     # a level is measured by the values observed there (eq. 7's rows), not by where the
     # values objective puts noisy ones: the toe rule reads eq. 7's support
     support = solution.support
-    if settings.objective == "values":
+    refined = settings.objective == "values" and bracket_factor <= MAX_STEP_FACTOR
+    if refined:
         solution = _values_solution(sample, solution, smooth_w, prior, c_lo, settings)
     g, lowest = _toe_and_valid_min(solution.g, support, gauge, settings)
     cov_factor, variance = None, None
@@ -1313,6 +1336,7 @@ def _fit_channel(
         constrained=solution.constrained,
         valid_min=settings.levels[lowest],
         smoothness_factor=factor,
+        refined_in_values=refined,
         covariance_factor=cov_factor,
         variance=variance,
     )
@@ -1373,6 +1397,7 @@ def _response_recovery(
         smoothness=inputs.smoothness,
         valid_min=np.array([fit.valid_min for fit in fits], dtype=np.float64),
         smoothness_factor=np.array([fit.smoothness_factor for fit in fits], dtype=np.float64),
+        refined_in_values=np.array([fit.refined_in_values for fit in fits], dtype=bool),
         log_inverse_response_factor=(
             _stack_factors([fit.covariance_factor for fit in fits]) if uncertainty else None
         ),
@@ -1490,8 +1515,9 @@ def camera_response_Debevec1997(
     objective : {"log", "values"}
         ``"log"`` (default): eq. 7 as written, its residuals in ``ln X``;
         ``"values"``: eq. 7's solution refined by Gauss–Newton steps on the
-        values' residuals, without the bias of a noisy value inside ``g``
-        (:mod:`photoquant.response.values_objective`).
+        values' residuals, without the bias of a noisy value inside ``g``,
+        on brackets of steps up to about 2.5 stops (wider ones keep eq. 7's
+        solution; :mod:`photoquant.response.values_objective`).
     workers : int, optional
         Threads for the channels. By default one per channel wherever the
         process may run on two CPUs or more, and one thread otherwise: three
@@ -1613,8 +1639,8 @@ class DebevecResponseOptions:
         :data:`~photoquant.response.covariance.MIN_JACKKNIFE_EXPOSURES`
         exposures take the sandwich; the report says which was used.
     objective : {"log", "values"}
-        Eq. 7 as written, or refined in the values
-        (:mod:`photoquant.response.values_objective`).
+        Eq. 7 as written, or refined in the values on brackets of steps up
+        to about 2.5 stops (:mod:`photoquant.response.values_objective`).
     """
 
     smoothness: float = DEFAULT_SMOOTHNESS
@@ -1780,6 +1806,7 @@ def characterise_response_Debevec1997(
         "saturation_level": rec.saturation_level,
         "valid_min": rec.valid_min,
         "smoothness_factor": rec.smoothness_factor,
+        "refined_in_values": rec.refined_in_values,
     }
     if covariance is not None:
         report["covariance"] = covariance

@@ -163,6 +163,16 @@ def test_fit_refuses_a_saturated_source_and_a_dark_tail():
         fit_glare_ParametricPSF(dark)
 
 
+def test_a_tail_no_glare_spread_explains_is_refused_by_name():
+    """A tail brighter than any glare fraction below the bound allows (here 100× the
+    spread of 2 % of the light) is a clear error, not a model the glare step then refuses."""
+    y = GlareSpread(0.02, 10.0).apply(scene_glare_source((40, 50)))
+    core = y > 0.5 * y.max()
+    bright = np.where(core, y, 100.0 * y)
+    with pytest.raises(CalibrationError, match="channel 0: the tail is too bright"):
+        fit_glare_ParametricPSF(bright)
+
+
 def test_defects_are_not_the_source():
     """Hot pixels brighter than the source and stuck pixels clipped in every exposure,
     scattered over a glare capture, are neither taken for the source nor refused."""

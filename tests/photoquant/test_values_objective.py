@@ -11,6 +11,7 @@ from photoquant.errors import InputError
 from photoquant.response import camera_response_Debevec1997
 from photoquant.response.debevec1997 import DebevecResponseOptions
 from photoquant.response.values_objective import (
+    beyond_ends,
     model_positions,
     step_scale,
     values_residual,
@@ -111,3 +112,45 @@ def test_the_lowest_trusted_level_is_measured_where_the_values_were_observed():
     }
     assert np.all(valid_min["log"] > 0)
     np.testing.assert_array_equal(valid_min["values"], valid_min["log"])
+
+
+def test_beyond_ends_marks_positions_at_or_past_either_end():
+    position = np.array([[-0.5, 0.0, 0.01, 5.0, 9.99, 10.0, 12.0]])
+    np.testing.assert_array_equal(
+        beyond_ends(position, 10), [[True, True, False, False, False, True, True]]
+    )
+
+
+def _bracket(stops: float, k: int, preset: str = "ccd"):
+    from pqsim.analytic import scene_calibration_world
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    camera = camera_from_preset(preset)
+    world = scene_calibration_world((60, 80), np.random.default_rng(0), channels=3)
+    t = 0.002 * (2.0**stops) ** np.arange(k)
+    return camera.capture(world.l, t, 1, rng=100).to_stack()
+
+
+@pytest.mark.parametrize("wide_steps", ["template", "none"])
+def test_the_values_steps_run_up_to_two_and_a_half_stops_and_not_at_three(wide_steps):
+    """The bound reads the bracket's typical step, whatever the wide-step prior: at 3 stops
+    (``F`` 48) the fit is eq. 7's to the bit, at 2 stops (``F`` 9.6) it is refined."""
+    import photoquant as pq
+
+    def fit(stack, objective):
+        options = {"objective": objective, "wide_steps": wide_steps}
+        return pq.calibrate([stack], response=("Debevec 1997", options)).report["response"]
+
+    wide, narrow = _bracket(3.0, 3), _bracket(2.0, 4)
+    refined = fit(narrow, "values")
+    assert np.all(refined["refined_in_values"])
+    kept = fit(wide, "values")
+    assert not np.any(kept["refined_in_values"])
+    assert not np.any(fit(narrow, "log")["refined_in_values"])
+    r_values = pq.calibrate(
+        [wide], response=("Debevec 1997", {"objective": "values", "wide_steps": wide_steps})
+    ).response
+    r_log = pq.calibrate(
+        [wide], response=("Debevec 1997", {"objective": "log", "wide_steps": wide_steps})
+    ).response
+    np.testing.assert_array_equal(r_values.log_inverse_response, r_log.log_inverse_response)
