@@ -252,6 +252,12 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
         line += f", samples {_fmt(resp['n_samples'])}"
     if "residual_rms" in resp:
         line += f", residual rms (ln) {_fmt(resp['residual_rms'])}"
+    refined = resp.get("refined_in_values")
+    if isinstance(refined, list | tuple) or hasattr(refined, "tolist"):
+        flags = list(refined.tolist() if hasattr(refined, "tolist") else refined)
+        names = [c for c, r in zip(model.channels, flags, strict=False) if r is True]
+        if names:
+            line += f", refined in the values ({' '.join(names)})"
     lines.append(line)
     selection = _selection_line(resp.get("selection"))
     if selection is not None:

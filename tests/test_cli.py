@@ -239,6 +239,8 @@ def test_pqsim_preset_file_drives_a_capture(tmp_path, capsys):
         {"response": "not a dict", "vignetting": [1, 2], "notes": "one string", "timings_s": 3},
         {"response": {"n_samples": "many", "residual_rms": {"a": 1}}, "sensor_lut": {"x": 1}},
         {"vignetting": {"n_tracks": None, "residual_rms": "?"}, "timings_s": {"a": "b"}},
+        {"response": {"refined_in_values": "yes"}},
+        {"response": {"refined_in_values": [1, "x", None, True]}},
     ],
 )
 def test_info_prints_any_valid_camera_whatever_its_report_holds(capture, tmp_path, capsys, report):
@@ -365,6 +367,21 @@ def test_a_monochrome_camera_with_a_white_chart_calibrates_and_corrects(tmp_path
     # the photoquantity, then its stated uncertainty's layers
     assert names[0] == "Y" and "sigma_ln.Y" in names and image.shape[-1] == len(names)
     assert np.isfinite(image[..., 0]).any()
+
+
+def test_info_says_which_channels_the_values_objective_refined(capture, tmp_path, capsys):
+    cam = tmp_path / "values"
+    args = ["calibrate", str(capture), "-o", str(cam), "-q"]
+    assert main([*args, "--option", "response.objective=values"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(cam)]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("response:"))
+    assert line.endswith("refined in the values (R G B)"), line
+    plain = tmp_path / "log"
+    assert main(["calibrate", str(capture), "-o", str(plain), "-q"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(plain)]) == 0
+    assert "refined in the values" not in capsys.readouterr().out
 
 
 def test_info_shows_the_response_models_selection(capture, tmp_path, capsys):
