@@ -253,9 +253,10 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
     if "residual_rms" in resp:
         line += f", residual rms (ln) {_fmt(resp['residual_rms'])}"
     refined = resp.get("refined_in_values")
-    if isinstance(refined, list | tuple) or hasattr(refined, "tolist"):
-        flags = list(refined.tolist() if hasattr(refined, "tolist") else refined)
-        names = [c for c, r in zip(model.channels, flags, strict=False) if r is True]
+    if isinstance(refined, np.ndarray):
+        refined = refined.tolist()
+    if isinstance(refined, list):
+        names = [c for c, r in zip(model.channels, refined, strict=False) if r is True]
         if names:
             line += f", refined in the values ({' '.join(names)})"
     lines.append(line)
