@@ -96,23 +96,36 @@ What the steps reach
 --------------------
 Four steps in a trust region of :data:`MAX_STEP` do not reach the values
 objective's minimum. At the ends of the range — a clip's pile of values
-just below an undetected saturation level, a floor — the linearised step
+just below an undetected saturation level, the floor — the linearised step
 asks for moves of 1–1.4 in ``ln`` at a few levels, so every step is
 shortened to about 4 % of the Gauss–Newton step: the gains above come from
-a sixth of the way. Measured on analytic 60×80 brackets (8 exposures, 2 DN
-of noise, 20 captures): with the trust region read only at the levels the
-hat weighs ≥ 10 % of its peak, the steps converge in 3–6 and ``g``'s scatter
-between captures falls a further 20–35 % at mid-range, with the sandwich
-then stating it (``z`` spread 1.04, against 1.31 for the four short steps,
-whose result keeps part of eq. 7's noise the sandwich does not describe);
-but the ends then move freely, and on a Bayer camera demosaicked before its
-tone curve (R and B clipped at 217 and 191 of 255) ``g`` at the top levels
-went 0.45 off, and with those ends kept as eq. 7's rows the steps
-oscillated. Hence an option, not the default: a likelihood that models the
-clip and the floor (censored values, a Tobit model) is the way to both.
-``objective="values"`` states its uncertainty by the sandwich of its last
-step, which is too small by about a third (``z`` spread 1.3–1.4 on the
-analytic brackets, 20–40 captures).
+about a sixth of the way, and the sandwich of the last step, which describes
+the converged estimator, states ``g``'s uncertainty about a third too small
+(``z`` spread 1.3–1.4 on analytic 60×80 brackets of 8 exposures with 2 DN
+of noise, 20–40 captures; eq. 7: 0.98).
+
+Converged variants were measured (2026-12-05) and not adopted:
+
+* a box trust region (every level moved by at most :data:`MAX_STEP` a step,
+  the well-weighted levels taking the whole step), up to 10 steps, eq. 7's
+  shape kept above the levels the hat weighs ≥ 20 % of its peak: ``z`` 1.045
+  (the stated uncertainty right), Memorial 2.10 DN, but the 12-bit bracket
+  94.07 and, on the simulated cameras, ``g`` worse than eq. 7's on the EMoR
+  and tone cameras (2-stop brackets: 0.0050 against the four steps' 0.0045);
+* the same with the trust region scaled over the well-weighted levels and
+  eq. 7's shape at both ends: ``g`` 0.0030 at one stop, ``z`` 1.05, but
+  Memorial 2.32 and the 12-bit bracket 94.41;
+* with the ends free, ``g`` at a Bayer camera's clip (a channel demosaicked
+  before its tone curve) went 0.45 off, and a Memorial fold diverged.
+
+Near the clip and the floor the observed values are a selected sample (the
+noise that would cross is clipped away; a demosaicked channel's values next
+to clipped photosites are mixtures) and a residual in the values, the value
+being the dependent variable, is biased by the selection, where eq. 7's,
+which conditions on the observed value, is not. A likelihood that models
+the censoring at both ends (a truncated-normal mean with the noise per
+level did not change the figures above) is what the option lacks to be the
+default.
 
 References
 ----------
