@@ -89,8 +89,8 @@ bracket                                   F     eq. 7  values  ratio
 ======================================  =====  ======  ======  =====
 
 (at 3 and 4 stops the values column is the steps forced on, before the
-ends rule of :func:`beyond_ends`, for the record: ``ccd``, ``cmos`` and ``film`` 1.3–2× worse at 3 stops; the bound
-keeps eq. 7's figures there.)
+ends rule of :func:`beyond_ends`, for the record: ``ccd``, ``cmos`` and
+``film`` 1.3–2× worse at 3 stops; the bound keeps eq. 7's figures there.)
 
 What the steps reach
 --------------------
