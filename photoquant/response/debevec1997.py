@@ -1144,14 +1144,21 @@ def _eq7_solution(
     smooth_w: np.ndarray,
     prior: np.ndarray | None,
     settings: _FitSettings,
+    at: np.ndarray | None = None,
+    rhs: np.ndarray | None = None,
 ) -> _Eq7Solution:
-    """Eq. 7 solved for one channel, its data rows weighted by ``row_w`` ``(K, n)``."""
+    """Eq. 7 solved for one channel, its data rows weighted by ``row_w`` ``(K, n)``.
+
+    Each datum sits at its observed level and has ``ln t_k`` on the right-hand
+    side, unless ``at`` (positions, in units of the level spacing) and ``rhs``
+    (``(K, n)``) place it elsewhere (the values objective's steps).
+    """
     return _Eq7Solution(
         *_solve_channel(
             sample.valid,
             row_w,
-            settings.log_t,
-            sample.knots,
+            settings.log_t if rhs is None else rhs,
+            sample.knots if at is None else at,
             sample.top,
             smooth_w,
             settings.smoothness,
@@ -1214,19 +1221,7 @@ def _values_solution(
         if settings.robust != "none":
             row_w = _robust_rows(sample, row_w, resid, at, black, "huber")
         rhs = settings.log_t[:, None] - resid
-        trial = _Eq7Solution(
-            *_solve_channel(
-                sample.valid,
-                row_w,
-                rhs,
-                at,
-                sample.top,
-                smooth_w,
-                settings.smoothness,
-                sample.gauge,
-                prior,
-            )
-        )
+        trial = _eq7_solution(sample, row_w, smooth_w, prior, settings, at=at, rhs=rhs)
         share = step_scale(solution.g, trial.g)
         solution = dataclasses.replace(
             trial,
