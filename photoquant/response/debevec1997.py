@@ -159,6 +159,7 @@ from photoquant.response.covariance import (
     exposure_jackknife_factor,
     low_rank_factor,
 )
+from photoquant.response.flat_samples import EDGE_METHODS, flat_candidates
 from photoquant.response.model import ResponseModel
 from photoquant.response.robust import LEVEL_BANDS, check_robust, robust_weights, round_loss
 from photoquant.response.values_objective import (
@@ -820,6 +821,7 @@ class _CheckedInputs:
     wfun: WeightingFunction
     sampler: Callable[..., np.ndarray]
     rng: np.random.Generator
+    edges: str = "kept"
 
 
 def _check_inputs(
@@ -843,6 +845,7 @@ def _check_inputs(
     robust: str,
     robust_rounds: int,
     objective: str = "log",
+    edges: str = "kept",
 ) -> _CheckedInputs:
     """The checked arguments of :func:`camera_response_Debevec1997` (its parameters, by name).
 
@@ -869,6 +872,8 @@ def _check_inputs(
     check_robust(robust, robust_rounds)
     if objective not in OBJECTIVES:
         raise InputError(f"`objective` must be one of {list(OBJECTIVES)}, got {objective!r}")
+    if edges not in EDGE_METHODS:
+        raise InputError(f"`edges` must be one of {list(EDGE_METHODS)}, got {edges!r}")
     rounds = 1 + int(robust_rounds) if robust != "none" else 1
     if workers is None:  # one thread per channel wherever there is more than one CPU
         workers = n_ch if default_workers() > 1 else 1
@@ -905,6 +910,7 @@ def _check_inputs(
         wfun=wfun,
         sampler=sampler,
         rng=rng,
+        edges=edges,
     )
 
 
@@ -913,8 +919,10 @@ def _candidate_values(inputs: _CheckedInputs) -> tuple[np.ndarray, np.ndarray]:
 
     Above ``max_pixels`` pixels, the candidates are a random thinning of the
     image, in pixel order (module notes, *Samples*; one draw per pixel from
-    ``rng``); otherwise every pixel. Values at or above their channel's
-    saturation level count as clipped when no mask is given.
+    ``rng``); otherwise every pixel. With ``edges="excluded"`` the candidates
+    at an edge or in texture are left out (:mod:`photoquant.response.flat_samples`).
+    Values at or above their channel's saturation level count as clipped when
+    no mask is given.
     """
     k_count, height, width, n_ch = inputs.values.shape
     n_pix = height * width
@@ -923,8 +931,18 @@ def _candidate_values(inputs: _CheckedInputs) -> tuple[np.ndarray, np.ndarray]:
     if saturated is not None:
         saturated = saturated.reshape(k_count, n_pix, n_ch)
     max_pixels = inputs.max_pixels
+    cand = None
     if max_pixels is not None and n_pix > max_pixels:
         cand = np.flatnonzero(inputs.rng.random(n_pix) < max_pixels / n_pix)
+    if inputs.edges == "excluded":
+        cand = flat_candidates(
+            lambda idx: np.take(values, idx, axis=1),
+            (height, width),
+            np.arange(n_pix) if cand is None else cand,
+            inputs.floor,
+            inputs.sat,
+        )
+    if cand is not None:
         # np.take along the pixels, not values[:, cand]: the fancy index walks the
         # trailing channels three at a time (4× slower, as in exposure._take_pixels)
         values = np.take(values, cand, axis=1)
@@ -1426,6 +1444,7 @@ def camera_response_Debevec1997(
     robust_rounds: int = 3,
     uncertainty: bool = False,
     objective: str = "log",
+    edges: str = "kept",
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -1513,6 +1532,13 @@ def camera_response_Debevec1997(
         values' residuals, without the bias of a noisy value inside ``g``,
         on brackets of steps up to about 2.5 stops (wider ones keep eq. 7's
         solution; :mod:`photoquant.response.values_objective`).
+    edges : {"kept", "excluded"}
+        ``"kept"`` (default): every candidate pixel may be sampled (the
+        paper's); ``"excluded"``: the candidates at an edge or in texture
+        (their Laplacian more than 3× its exposure's median in some
+        exposure) are left out, where a sub-pixel shift, a JPEG's ringing
+        or a demosaicking error changes a value without the response
+        ([Debevec1997]_ §2.2; :mod:`photoquant.response.flat_samples`).
     workers : int, optional
         Threads for the channels. By default one per channel wherever the
         process may run on two CPUs or more, and one thread otherwise: three
@@ -1547,6 +1573,7 @@ def camera_response_Debevec1997(
         robust=robust,
         robust_rounds=robust_rounds,
         objective=objective,
+        edges=edges,
     )
     candidates, clipped = _candidate_values(inputs)
     levels = response_levels(inputs.bit_depth, max_levels)
@@ -1636,6 +1663,10 @@ class DebevecResponseOptions:
     objective : {"log", "values"}
         Eq. 7 as written, or refined in the values on brackets of steps up
         to about 2.5 stops (:mod:`photoquant.response.values_objective`).
+    edges : {"kept", "excluded"}
+        Sample from every candidate pixel (default; the paper's), or leave
+        those at an edge or in texture out; see
+        :mod:`photoquant.response.flat_samples`.
     """
 
     smoothness: float = DEFAULT_SMOOTHNESS
@@ -1653,8 +1684,11 @@ class DebevecResponseOptions:
     uncertainty: bool = True
     covariance: str = "sandwich"
     objective: str = "log"
+    edges: str = "kept"
 
     def __post_init__(self) -> None:
+        if self.edges not in EDGE_METHODS:
+            raise InputError(f"`edges` must be one of {list(EDGE_METHODS)}, got {self.edges!r}")
         if self.objective not in OBJECTIVES:
             raise InputError(
                 f"`objective` must be one of {list(OBJECTIVES)}, got {self.objective!r}"
@@ -1715,10 +1749,21 @@ def characterise_response_Debevec1997(
     if not isinstance(rng, np.random.Generator):
         rng = np.random.default_rng(rng)
     n_pix = stack.image_shape[0] * stack.image_shape[1]
+    cand = None
     if opts.max_pixels is not None and n_pix > opts.max_pixels:
         # the thinning of camera_response_Debevec1997 (same draw), applied to the
         # stack's exact integer sums, so that no full-size float mean is formed
         cand = np.flatnonzero(rng.random(n_pix) < opts.max_pixels / n_pix)
+    if opts.edges == "excluded":
+        # the flat candidates, judged once on the full frames of every exposure
+        cand = flat_candidates(
+            lambda idx: np.moveaxis(stack.mean_at_pixels(idx)[0], 0, -1),
+            stack.image_shape,
+            np.arange(n_pix) if cand is None else cand,
+            c_min,
+            np.asarray(stack.saturation_level, dtype=np.float64),
+        )
+    if cand is not None:
         # the sums and masks at the candidates only (no full-size arrays made for them)
         # = stack.mean() at cand, bit for bit, laid out channel by channel; single
         # integer frames as they are (the same numbers, no float64 copy: the fit
@@ -1755,6 +1800,7 @@ def characterise_response_Debevec1997(
             robust_rounds=opts.robust_rounds,
             uncertainty=uncertainty,
             objective=opts.objective,
+            edges="kept",  # the candidates are the flat ones already, when asked
         )
 
     n_k = stack.n_exposures
