@@ -58,7 +58,7 @@ changes, measured 2026-12-05:
   (160×120, N = 1, seeds 0 and 1; six exposures one stop apart, four two
   stops, three three stops, two four stops): the rms error of ``g`` against
   the truth changes by a factor of 0.72-1.15, geometric mean 0.96 (better on
-  the brackets of two stops, 0.75-1.02; within ±15 % elsewhere);
+  the brackets of two stops, 0.75-1.02; 0.72-1.15 on the others);
 * the quick validation (``photoquant validate``, 320×240, N = 4): the HDR
   test scene's error ``ccd`` 1.36 → 1.08 % (floor 1.00 %), ``cmos`` 3.68 →
   3.75 % (floor 3.21 %); the vignetting map's largest error 0.76 → 0.61 % and
