@@ -131,7 +131,12 @@ def _mirror(index: np.ndarray, n: int) -> np.ndarray:
 
 
 def laplacian_at(
-    values_at: ValuesAt, shape: tuple[int, int], index: np.ndarray, step: int = EDGE_STEP
+    values_at: ValuesAt,
+    shape: tuple[int, int],
+    index: np.ndarray,
+    step: int = EDGE_STEP,
+    *,
+    centre: np.ndarray | None = None,
 ) -> np.ndarray:
     """``|4 v(p) − Σ v(neighbours at distance step)|`` at the flat pixel indices ``index``.
 
@@ -145,6 +150,8 @@ def laplacian_at(
         Flat pixel indices.
     step : int
         Distance of the four neighbours (mirrored at the border).
+    centre : ndarray, shape (K, P, C), optional
+        ``values_at(index)`` when the caller has read it already.
 
     Returns
     -------
@@ -152,8 +159,9 @@ def laplacian_at(
     """
     height, width = shape
     rows, cols = np.divmod(np.asarray(index, dtype=np.intp), width)
-    centre = np.asarray(values_at(index), dtype=np.float64)
-    lap = 4.0 * centre
+    if centre is None:
+        centre = values_at(index)
+    lap = 4.0 * np.asarray(centre, dtype=np.float64)
     for dr, dc in ((-step, 0), (step, 0), (0, -step), (0, step)):
         near = _mirror(rows + dr, height) * width + _mirror(cols + dc, width)
         lap -= np.asarray(values_at(near), dtype=np.float64)
@@ -206,7 +214,7 @@ def flat_candidates(
     if index.size == 0:
         return index
     values = np.asarray(values_at(index), dtype=np.float64)  # (K, P, C)
-    lap = laplacian_at(values_at, shape, index, step)
+    lap = laplacian_at(values_at, shape, index, step, centre=values)
     lo = np.broadcast_to(np.asarray(black_level, dtype=np.float64), values.shape[-1:])
     hi = np.broadcast_to(np.asarray(saturation_level, dtype=np.float64), values.shape[-1:])
     valid = (values > lo) & (values < hi)
