@@ -51,14 +51,15 @@ changes, measured 2026-12-05:
 
 * real brackets, ``photoquant crossval`` on the user's path (mean over the
   sampling seeds 0-3; every pixel scored, edges included): Memorial 2.28 →
-  2.08 DN, the St. Louis Arch 9.72 → 9.65, frobisher 7.43 → 7.35, the 12-bit
+  2.10 DN, the St. Louis Arch 9.72 → 9.65, frobisher 7.43 → 7.35, the 12-bit
   machine-vision bracket 94.27 → 93.30 (its authors' response: 92.31);
-  the seeds spread by 0.01-0.07 DN (0.3-0.6 on the 12-bit bracket);
+  over the seeds, 2.10 on Memorial each time, 9.62-9.69 on the St. Louis
+  Arch, 7.20-7.49 on frobisher, 93.11-93.49 on the 12-bit bracket;
 * pqsim's ``ccd``, ``cmos``, ``film``, ``emor-0`` and ``emor-1`` cameras
   (160×120, N = 1, seeds 0 and 1; six exposures one stop apart, four two
   stops, three three stops, two four stops): the rms error of ``g`` against
-  the truth changes by a factor of 0.72-1.15, geometric mean 0.96 (better on
-  the brackets of two stops, 0.75-1.02; 0.72-1.15 on the others);
+  the truth changes by a factor of 0.75-1.40, geometric mean 0.99 (0.0104 →
+  0.0102; 0.75-1.40 on the brackets of two stops, 0.84-1.24 on the others);
 * the quick validation (``photoquant validate``, 320×240, N = 4; master
   seeds 0, 1, 2): the HDR test scene's error ``ccd`` 1.36 / 1.17 / 1.10 →
   1.08 / 1.16 / 1.04 % (floor 1.00 %), ``cmos`` 3.68 / 3.78 / 3.98 → 3.75 /
@@ -73,8 +74,10 @@ changes, measured 2026-12-05:
   exposures one stop apart, 1 DN of noise: ``g``'s error 0.0054 → 0.0060
   on a still bracket (fewer candidates at each level), 0.0108 → 0.0082 when
   the middle exposure is shifted by one pixel;
-* with ``step = 1`` the 12-bit mosaic gained nothing (94.04 DN); with
-  ``limit = 2``, Memorial 2.14 DN and the 12-bit bracket 93.16.
+* in a prototype without the min-fraction guard (Memorial 2.08 DN, the
+  other brackets as above): with ``step = 1`` the 12-bit mosaic gained
+  nothing (94.04 DN); with ``limit = 2``, Memorial 2.14 DN and the 12-bit
+  bracket 93.16.
 
 References
 ----------
