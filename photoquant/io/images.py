@@ -669,15 +669,37 @@ def _drop_alpha_and_to_rgb(arr: np.ndarray, bgr: bool) -> np.ndarray:
     raise ValueError(f"unsupported number of channels {c}")
 
 
-def _decode_opencv(path: Path, data: bytes, fmt: str) -> np.ndarray:
+_RGB_FLAGS: int | None = (
+    cv2.IMREAD_ANYDEPTH | cv2.IMREAD_COLOR_RGB | cv2.IMREAD_IGNORE_ORIENTATION
+    if hasattr(cv2, "IMREAD_COLOR_RGB")
+    else None
+)
+"""imdecode flags that give a colour image's R, G, B at its stored depth, alpha dropped and
+the orientation tag ignored (as ``IMREAD_UNCHANGED`` does); OpenCV 4.11 and later."""
+
+
+def _decode_opencv(path: Path, data: bytes, header: ImageHeader) -> np.ndarray:
+    """A PNG's or JPEG's pixels as ``(H, W, C)``, R, G, B.
+
+    A colour image (a PNG of three or four samples, a palette's included; a
+    three-component JPEG) is decoded straight into R, G, B where OpenCV can
+    (:data:`_RGB_FLAGS`): a contiguous array the frame loader copies in one
+    ``memcpy``, with no channel swap run on OpenCV's thread pool beside the
+    loader's own threads. Other images are read as stored.
+    """
+    fmt = header.format
+    rgb = _RGB_FLAGS is not None and (
+        (fmt == "png" and header.channels in (3, 4)) or (fmt == "jpeg" and header.channels == 3)
+    )
+    flags = _RGB_FLAGS if rgb and _RGB_FLAGS is not None else cv2.IMREAD_UNCHANGED
     try:
-        arr = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+        arr = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), flags)
     except cv2.error as exc:
         raise _fail(path, f"OpenCV could not decode the {fmt.upper()} data: {exc}") from None
     if arr is None:
         raise _fail(path, f"truncated or corrupt {fmt.upper()} data (OpenCV could not decode it)")
     try:
-        return _drop_alpha_and_to_rgb(arr, bgr=True)
+        return _drop_alpha_and_to_rgb(arr, bgr=not rgb)
     except ValueError as exc:
         raise _fail(path, exc) from None
 
@@ -750,9 +772,10 @@ def read_image(path: PathLike, *, max_pixels: int | None = None) -> np.ndarray:
 def _read_pixels(path: Path, max_pixels: int | None) -> np.ndarray:
     """:func:`read_image`'s array, every check done, but not yet made contiguous.
 
-    A colour PNG or JPEG comes as a view of the decoder's B, G, R(, A) array
-    with its channels reversed; :func:`_copy_pixels` copies it into a
-    destination in one pass (the frame loader's way to skip a copy).
+    A colour PNG or JPEG that OpenCV cannot decode as R, G, B (before 4.11)
+    comes as a view of the decoder's B, G, R(, A) array with its channels
+    reversed; :func:`_copy_pixels` copies it into a destination in one pass
+    (the frame loader's way to skip a copy).
     """
     f, size = _open(path)
     with f:
@@ -774,7 +797,7 @@ def _read_pixels(path: Path, max_pixels: int | None) -> np.ndarray:
                 header = _header(f, path, size)
                 _check_limits(header, path, size, max_pixels)
                 f.seek(0)
-                arr = _decode_opencv(path, f.read(), header.format)
+                arr = _decode_opencv(path, f.read(), header)
         except OSError as exc:
             raise _fail(path, exc.strerror or exc) from None
     if arr.dtype not in (np.uint8, np.uint16):

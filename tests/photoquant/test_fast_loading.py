@@ -99,6 +99,55 @@ def test_rgba_frames_drop_alpha_in_the_stack(tmp_path):
             np.testing.assert_array_equal(frames[n, k], img)
 
 
+def _as_stored(path: Path) -> np.ndarray:
+    """The file's samples as OpenCV stores them (B, G, R(, A)), reordered R, G, B."""
+    import cv2
+
+    arr = cv2.imdecode(np.fromfile(path, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    return arr[..., 2::-1] if arr.ndim == 3 else arr[..., None]
+
+
+@pytest.mark.parametrize(
+    ("dtype", "channels"), [(np.uint8, 3), (np.uint8, 4), (np.uint16, 3), (np.uint16, 4)]
+)
+@pytest.mark.parametrize("rgb_decoder", [True, False])
+def test_colour_png_decodes_to_its_stored_samples(
+    tmp_path, monkeypatch, dtype, channels, rgb_decoder
+):
+    """Decoded as R, G, B by OpenCV (4.11+) or as stored and reversed: the same samples."""
+    import cv2
+
+    from photoquant.io import images
+
+    if not rgb_decoder:
+        monkeypatch.setattr(images, "_RGB_FLAGS", None)
+    rng = np.random.default_rng(11)
+    stored = rng.integers(0, np.iinfo(dtype).max + 1, (9, 13, channels), dtype=dtype)
+    path = tmp_path / "frame.png"
+    assert cv2.imwrite(str(path), stored)  # B, G, R(, A) as OpenCV writes them
+    got = read_image(path)
+    assert got.dtype == dtype and got.flags.c_contiguous
+    np.testing.assert_array_equal(got, stored[..., 2::-1])
+
+
+def test_palette_png_and_oriented_jpeg_decode_as_stored(tmp_path):
+    from PIL import Image
+
+    rng = np.random.default_rng(12)
+    rgb = rng.integers(0, 256, (12, 20, 3), dtype=np.uint8)
+    palette = tmp_path / "palette.png"
+    Image.fromarray(rgb).quantize(colors=16).save(palette)
+    np.testing.assert_array_equal(read_image(palette), _as_stored(palette))
+    # an EXIF orientation tag (6: rotate 90°) is ignored: the pixels as stored
+    jpeg = tmp_path / "oriented.jpg"
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(rgb).save(jpeg, quality=90, exif=exif)
+    got = read_image(jpeg)
+    assert got.shape == (12, 20, 3)
+    np.testing.assert_array_equal(got, _as_stored(jpeg))
+
+
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
 @pytest.mark.parametrize("shape", [(1, 1), (5, 7), (64, 33)])
 def test_copy_pixels_is_numpy_copy(dtype, shape):
