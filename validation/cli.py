@@ -35,6 +35,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from validation import _memory
+
 __all__ = ["add_validate_arguments", "run_validate", "EXIT_REGRESSION", "DEFAULT_REPORT_DIR"]
 
 EXIT_REGRESSION = 1
@@ -295,6 +297,9 @@ def run_validate(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(message, file=sys.stderr, flush=True)
 
+    # the job owns its process: its allocator keeps freed stacks for reuse (and the
+    # forked second process inherits it)
+    _memory.keep_freed_blocks()
     t0 = time.perf_counter()
     if args.write_baseline:
         runs: list[Any] = []

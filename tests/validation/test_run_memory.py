@@ -1,9 +1,16 @@
-"""What a validation run keeps between experiments: shrunken figure maps, no stale memos."""
+"""What a validation run keeps between experiments: shrunken figure maps, no stale memos, the
+allocator's freed blocks."""
 
 from __future__ import annotations
 
-import numpy as np
+import subprocess
+import sys
+from pathlib import Path
 
+import numpy as np
+import pytest
+
+from validation import _memory
 from validation.config import TINY
 from validation.experiments import EXPERIMENTS, _run_one
 from validation.experiments.base import ExperimentResult, FigureSpec, compact_map_panels
@@ -99,3 +106,55 @@ def test_one_capture_sets_frames_at_a_time(tmp_path, monkeypatch):
     assert shared.calibration_inputs("ccd") is shared.calibration_inputs("ccd")  # kept
     assert shared.calibration_inputs("cmos").manifest == "cmos.json"
     assert alive_at_load == [False, False]
+
+
+_REUSE_PROBE = """
+import resource, sys
+import numpy as np
+from validation._memory import KEPT_BLOCK_BYTES, keep_freed_blocks
+kept = keep_freed_blocks() if sys.argv[1] == "keep" else None
+# above glibc's own mmap threshold (32 MiB at most), below the kept blocks' bound
+n = max(48 * 2**20, 3 * KEPT_BLOCK_BYTES // 4) // 8
+a = np.ones(n)
+del a
+before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+b = np.ones(n)
+print(kept, resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+"""
+
+
+@pytest.mark.skipif(_memory._libc_function("mallopt") is None, reason="glibc only")
+def test_the_jobs_allocator_reuses_a_freed_stack_instead_of_fresh_pages():
+    """A stack of 48 MiB or more freed then made again: fresh pages from the system (page
+    faults) by default, the freed block reused once the job keeps freed blocks."""
+
+    def faults(mode: str) -> tuple[str, int]:
+        out = subprocess.run(
+            [sys.executable, "-c", _REUSE_PROBE, mode],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=Path(__file__).resolve().parents[2],
+        ).stdout.split()
+        return out[0], int(out[1])
+
+    kept, reused = faults("keep")
+    assert kept == "True"
+    assert reused == 0
+    assert faults("default")[1] > 0  # the probe can tell: glibc's default maps it anew
+
+
+def test_the_validate_command_keeps_freed_blocks_before_it_runs(monkeypatch, tmp_path):
+    calls = []
+    monkeypatch.setattr(_memory, "keep_freed_blocks", lambda: calls.append("kept") or True)
+
+    def fake_run(*args, **kwargs):
+        calls.append("run")
+        raise SystemExit(0)
+
+    monkeypatch.setattr("validation.experiments.run_validation", fake_run)
+    from photoquant.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["validate", "--quick", "-o", str(tmp_path / "report"), "-q"])
+    assert calls == ["kept", "run"]
