@@ -254,20 +254,26 @@ def check_reaches_range(stack: ExposureStack) -> None:
 
 def without_covariance(spec: Any) -> Any:
     """``spec`` with its method's estimate of the covariance of ``g`` turned off where it
-    has one (option ``uncertainty``), in the form given (``(name, options)`` or a
+    has one (option ``uncertainty``; its estimator, option ``covariance``, then back at
+    its default, which nothing reads), in the form given (``(name, options)`` or a
     resolved ``(Method, options)``): for fits that need ``g`` only, which is the same
-    either way. A spec whose method has no such option is returned as it is."""
+    either way, and to tell two specs that fit the same ``g``. A spec whose method has
+    no such option is returned as it is."""
     method, options = resolve_method("response", spec, ("Debevec 1997", {}))
     fields = (
-        {f.name for f in dataclasses.fields(options)}
+        {f.name: f for f in dataclasses.fields(options)}
         if dataclasses.is_dataclass(options)
-        else set()
+        else {}
     )
     if "uncertainty" not in fields:
         return spec
+    changes: dict[str, Any] = {"uncertainty": False}
+    estimator = fields.get("covariance")
+    if estimator is not None and estimator.default is not dataclasses.MISSING:
+        changes["covariance"] = estimator.default
     if isinstance(spec, tuple) and len(spec) == 2 and isinstance(spec[1], Mapping):
-        return spec[0], {**spec[1], "uncertainty": False}
-    return method, dataclasses.replace(options, uncertainty=False)
+        return spec[0], {**spec[1], **changes}
+    return method, dataclasses.replace(options, **changes)
 
 
 def recover_response(

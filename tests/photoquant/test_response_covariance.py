@@ -203,6 +203,52 @@ def test_the_method_keeps_its_g_and_says_which_covariance():
         DebevecResponseOptions(covariance="bootstrap")
 
 
+def test_the_view_time_screen_judges_with_the_jackknife_fit_itself(monkeypatch):
+    """Two views: the screen of the labels fits ``g`` on view 0 with the method, and with
+    the profile's reference only where that is another ``g``; the exposure jackknife
+    differs from the reference in the covariance alone, so its own fit judges — one fit
+    fewer, the same decision and ``g`` as the default."""
+    import photoquant as pq
+    from photoquant import calibration_steps
+
+    rng = np.random.default_rng(5)
+    views = [
+        ExposureStack(
+            capture(log_uniform_scene(rng, (30, 40, 3)), EXPOSURES, noise_dn=1.0, rng=rng),
+            EXPOSURES,
+            bit_depth=8,
+            saturation_level=[255] * 3,
+        )
+        for _ in range(2)
+    ]
+    calls: list[str] = []
+    real_fit = calibration_steps.fit_response
+
+    def counted(stack, spec, **kwargs):
+        calls.append(spec[1].covariance if hasattr(spec[1], "covariance") else str(spec))
+        return real_fit(stack, spec, **kwargs)
+
+    monkeypatch.setattr(calibration_steps, "fit_response", counted)
+    default = pq.calibrate(views, vignetting="None", sensor_lut="None", balance="None")
+    n_default = len(calls)
+    calls.clear()
+    jack = pq.calibrate(
+        views,
+        response=("Debevec 1997", {"covariance": "exposure jackknife"}),
+        vignetting="None",
+        sensor_lut="None",
+        balance="None",
+    )
+    # the screen's fit is the method's own (first), and no reference fit is added to the
+    # default's count (the old screen fitted the reference too: one more)
+    assert calls[0] == "exposure jackknife" and len(calls) == n_default
+    np.testing.assert_array_equal(
+        jack.response.log_inverse_response, default.response.log_inverse_response
+    )
+    assert jack.report["exposures"] == default.report["exposures"]
+    assert jack.report["response"]["covariance"] == "exposure jackknife"
+
+
 def test_a_jackknife_that_cannot_fit_keeps_the_sandwich_and_says_why(monkeypatch):
     import photoquant.response.debevec1997 as debevec
 

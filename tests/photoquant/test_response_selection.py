@@ -248,7 +248,13 @@ def test_fold_fits_without_the_covariance_score_the_same(rng, monkeypatch, folds
     stack = _exp_shoulder_stack(rng)
     from photoquant.response import without_covariance
 
-    assert without_covariance(("Debevec 1997", {}))[1] == {"uncertainty": False}
+    assert without_covariance(("Debevec 1997", {}))[1] == {
+        "uncertainty": False,
+        "covariance": "sandwich",
+    }
+    # the estimator does not change g: two specs apart in it alone are the same g-only spec
+    jackknife = ("Debevec 1997", {"covariance": "exposure jackknife"})
+    assert without_covariance(jackknife) == without_covariance(("Debevec 1997", {}))
     assert without_covariance(("Gamma", {})) == ("Gamma", {})
     options = SelectionOptions(folds=folds)
     fast = select_response(stack, options)
