@@ -405,7 +405,7 @@ def response_step(
             policy = ExposurePolicy(False, policy.asked)
     decision = None if joint is None else joint.decision
     view_times = None if joint is None else joint.view_times
-    if joint is not None and (view_times is not None or joint.at_labels is not None):
+    if joint is not None and (view_times is not None or joint.screened):
         fit = joint.fit
     else:
         if policy.refine and len(views) < 2:
@@ -448,7 +448,9 @@ def _screen_view_times(
     would make exact labels look wrong and send the calibration through the
     joint recovery for nothing. Where the test keeps the labels, the
     calibration is, to the bit, the one without refinement, and the views'
-    refinements kept for the later floors are against the response used.
+    refinements kept for the later floors are against the response used; where
+    that response cannot relate some view's pairs, the labels stay kept and the
+    floor is measured on the views it can relate (:func:`_response_floor`).
     """
     hidden = [hide_defects(view, defects) for view in views]
     fit = fit_response(hidden[0], spec, rng=seed)
@@ -467,11 +469,12 @@ def _screen_view_times(
     if decision.refine:
         return None
     if judge is not fit:
+        # the floors' refinements against the response used; where its g cannot relate
+        # some view's pairs (a peer's poor fit), the labels stay as the reference judged
+        # them and the floor is measured on the views it can relate (_response_floor)
         refs = _refine_views_by_pairs(hidden, fit, seed)
-        if refs is None:
-            return None
     log.note(f"views' exposure times: {decision.describe()}")
-    return _JointFit(fit, None, decision.as_dict(), at_labels=refs)
+    return _JointFit(fit, None, decision.as_dict(), at_labels=refs, screened=True)
 
 
 def _refine_views_by_pairs(
@@ -554,9 +557,11 @@ class _JointFit:
     fit: StepFit[Any]
     view_times: list[ExposureRefinement] | None
     decision: dict[str, Any]
-    # the screen kept the labels: the fit is at them, and these are the views refined
-    # against it from pairs (the exposure floor's refinements)
+    # the screen kept the labels: the fit is at them (``screened``), and these are the
+    # views refined against it from pairs (the exposure floor's refinements; ``None``
+    # where the response cannot relate some view's pairs)
     at_labels: list[ExposureRefinement] | None = None
+    screened: bool = False
 
 
 def refine_exposures_step(

@@ -249,6 +249,51 @@ def test_the_view_time_screen_judges_with_the_jackknife_fit_itself(monkeypatch):
     assert jack.report["response"]["covariance"] == "exposure jackknife"
 
 
+def test_labels_the_reference_keeps_stay_where_the_methods_own_g_cannot_relate_pairs(
+    monkeypatch,
+):
+    """The screen judges the labels with the profile's response; a method whose own ``g``
+    cannot relate some view's neighbouring pairs (a peer's poor fit) keeps those labels,
+    with no joint recovery of the times: the calibration at the labels, the reference's
+    decision reported."""
+    import photoquant as pq
+    from photoquant import calibration_steps
+
+    rng = np.random.default_rng(6)
+    views = [
+        ExposureStack(
+            capture(log_uniform_scene(rng, (30, 40, 3)), EXPOSURES, noise_dn=1.0, rng=rng),
+            EXPOSURES,
+            bit_depth=8,
+            saturation_level=[255] * 3,
+        )
+        for _ in range(2)
+    ]
+    spec = ("Debevec 1997", {"smoothness": 300.0})  # not the profile's: the reference judges
+    steps = {"vignetting": "None", "sensor_lut": "None", "balance": "None"}
+    real_pairs = calibration_steps._refine_views_by_pairs
+    calls = []
+
+    def method_cannot_tell(views_, fit, seed):
+        calls.append(fit)
+        return real_pairs(views_, fit, seed) if len(calls) == 1 else None
+
+    def no_joint(*args, **kwargs):
+        raise AssertionError("the joint recovery ran although the labels were kept")
+
+    monkeypatch.setattr(calibration_steps, "_refine_views_by_pairs", method_cannot_tell)
+    monkeypatch.setattr(calibration_steps, "_recover_with_view_times", no_joint)
+    kept = pq.calibrate(views, response=spec, **steps)
+    monkeypatch.undo()
+    assert len(calls) == 2  # the reference's pairs, then the method's own
+    assert kept.report["exposures"]["refined"] is False
+    assert kept.report["exposures"]["decision"]["refine"] is False
+    at_labels = pq.calibrate(views, response=spec, refine_exposures=False, **steps)
+    np.testing.assert_array_equal(
+        kept.response.log_inverse_response, at_labels.response.log_inverse_response
+    )
+
+
 def test_a_jackknife_that_cannot_fit_keeps_the_sandwich_and_says_why(monkeypatch):
     import photoquant.response.debevec1997 as debevec
 
