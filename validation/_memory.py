@@ -32,11 +32,6 @@ def _libc_function(name: str) -> Callable[..., Any] | None:
         return None
 
 
-def _malloc_trim() -> Callable[[int], Any] | None:
-    """glibc's ``malloc_trim``, or ``None`` where the C library is not glibc."""
-    return _libc_function("malloc_trim")
-
-
 def keep_freed_blocks() -> bool:
     """Let this process's allocator reuse freed blocks of up to :data:`KEPT_BLOCK_BYTES`.
 
@@ -73,6 +68,6 @@ def return_free_memory() -> None:
     grows by what the next step happens not to reuse (0.3–0.5 GB an experiment at
     1024×768, measured).
     """
-    trim = _malloc_trim()
+    trim = _libc_function("malloc_trim")
     if trim is not None:
         trim(0)
