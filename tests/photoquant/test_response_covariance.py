@@ -203,16 +203,14 @@ def test_the_method_keeps_its_g_and_says_which_covariance():
         DebevecResponseOptions(covariance="bootstrap")
 
 
-def test_the_view_time_screen_judges_with_the_jackknife_fit_itself(monkeypatch):
-    """Two views: the screen of the labels fits ``g`` on view 0 with the method, and with
-    the profile's reference only where that is another ``g``; the exposure jackknife
-    differs from the reference in the covariance alone, so its own fit judges — one fit
-    fewer, the same decision and ``g`` as the default."""
-    import photoquant as pq
-    from photoquant import calibration_steps
+RESPONSE_ONLY = {"vignetting": "None", "sensor_lut": "None", "balance": "None"}
+"""calibrate's later steps off: the calibrations below differ in the response step alone."""
 
-    rng = np.random.default_rng(5)
-    views = [
+
+def _two_views(seed: int) -> list[ExposureStack]:
+    """Two views of analytic scenes (30×40, the 8 exposures, 1 DN of noise), exact labels."""
+    rng = np.random.default_rng(seed)
+    return [
         ExposureStack(
             capture(log_uniform_scene(rng, (30, 40, 3)), EXPOSURES, noise_dn=1.0, rng=rng),
             EXPOSURES,
@@ -221,6 +219,17 @@ def test_the_view_time_screen_judges_with_the_jackknife_fit_itself(monkeypatch):
         )
         for _ in range(2)
     ]
+
+
+def test_the_view_time_screen_judges_with_the_jackknife_fit_itself(monkeypatch):
+    """Two views: the screen of the labels fits ``g`` on view 0 with the method, and with
+    the profile's reference only where that is another ``g``; the exposure jackknife
+    differs from the reference in the covariance alone, so its own fit judges — one fit
+    fewer, the same decision and ``g`` as the default."""
+    import photoquant as pq
+    from photoquant import calibration_steps
+
+    views = _two_views(5)
     calls: list[str] = []
     real_fit = calibration_steps.fit_response
 
@@ -229,15 +238,11 @@ def test_the_view_time_screen_judges_with_the_jackknife_fit_itself(monkeypatch):
         return real_fit(stack, spec, **kwargs)
 
     monkeypatch.setattr(calibration_steps, "fit_response", counted)
-    default = pq.calibrate(views, vignetting="None", sensor_lut="None", balance="None")
+    default = pq.calibrate(views, **RESPONSE_ONLY)
     n_default = len(calls)
     calls.clear()
     jack = pq.calibrate(
-        views,
-        response=("Debevec 1997", {"covariance": "exposure jackknife"}),
-        vignetting="None",
-        sensor_lut="None",
-        balance="None",
+        views, response=("Debevec 1997", {"covariance": "exposure jackknife"}), **RESPONSE_ONLY
     )
     # the screen's fit is the method's own (first), and no reference fit is added to the
     # default's count (the old screen fitted the reference too: one more)
@@ -259,18 +264,8 @@ def test_labels_the_reference_keeps_stay_where_the_methods_own_g_cannot_relate_p
     import photoquant as pq
     from photoquant import calibration_steps
 
-    rng = np.random.default_rng(6)
-    views = [
-        ExposureStack(
-            capture(log_uniform_scene(rng, (30, 40, 3)), EXPOSURES, noise_dn=1.0, rng=rng),
-            EXPOSURES,
-            bit_depth=8,
-            saturation_level=[255] * 3,
-        )
-        for _ in range(2)
-    ]
+    views = _two_views(6)
     spec = ("Debevec 1997", {"smoothness": 300.0})  # not the profile's: the reference judges
-    steps = {"vignetting": "None", "sensor_lut": "None", "balance": "None"}
     real_pairs = calibration_steps._refine_views_by_pairs
     calls = []
 
@@ -283,12 +278,12 @@ def test_labels_the_reference_keeps_stay_where_the_methods_own_g_cannot_relate_p
 
     monkeypatch.setattr(calibration_steps, "_refine_views_by_pairs", method_cannot_tell)
     monkeypatch.setattr(calibration_steps, "_recover_with_view_times", no_joint)
-    kept = pq.calibrate(views, response=spec, **steps)
+    kept = pq.calibrate(views, response=spec, **RESPONSE_ONLY)
     monkeypatch.undo()
     assert len(calls) == 2  # the reference's pairs, then the method's own
     assert kept.report["exposures"]["refined"] is False
     assert kept.report["exposures"]["decision"]["refine"] is False
-    at_labels = pq.calibrate(views, response=spec, refine_exposures=False, **steps)
+    at_labels = pq.calibrate(views, response=spec, refine_exposures=False, **RESPONSE_ONLY)
     np.testing.assert_array_equal(
         kept.response.log_inverse_response, at_labels.response.log_inverse_response
     )
