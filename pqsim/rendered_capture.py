@@ -278,6 +278,7 @@ def write_rendered_capture_set(
     workers: int | None = None,
     view_rendering: str = "reprojected",
     view_supersample: int = VIEW_SUPERSAMPLE,
+    compress_frames: bool = True,
 ) -> Path:
     """Render the calibration and test scenes and write a capture set with its truth.
 
@@ -352,6 +353,9 @@ def write_rendered_capture_set(
         default (16 at 1024 px: ~2000 tracks; 2 at 64 px: ~100).
     frame_format : {"png", "tiff"}
         Image format of the frames (uint8 for 8 bits, uint16 above).
+    compress_frames : bool
+        Deflate the PNG frames (``False``: stored uncompressed; as
+        :func:`pqsim.capture_set.write_capture_set`'s).
     write_saturation_level : bool
         Write the camera's true saturation values in the manifest.
     progress : bool
@@ -650,4 +654,5 @@ def write_rendered_capture_set(
         remove_previous=non_empty,
         workers=workers,
         progress=progress,
+        compress_frames=compress_frames,
     )

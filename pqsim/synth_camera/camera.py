@@ -390,8 +390,10 @@ class SyntheticCamera:
         e = np.maximum(electrons, 0.0) / self.noise.full_well_e
         out = np.empty(e.shape, dtype=self.dtype)
         for ch, (a, resp) in enumerate(zip(self.balance, self.responses, strict=True)):
-            dn = np.rint(a * self.c_max * resp(e[..., ch]))
-            out[..., ch] = np.clip(dn, 0, self.c_max)
+            dn = resp.forward_valid(e[..., ch].astype(np.float64))
+            dn *= a * self.c_max
+            np.rint(dn, out=dn)
+            out[..., ch] = np.clip(dn, 0, self.c_max, out=dn)
         return out
 
     def capture(

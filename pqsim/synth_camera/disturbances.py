@@ -420,7 +420,7 @@ class SensorDisturbances:
         # (before the converter clips), white balance is digital (after it)
         raw = np.empty(e.shape, dtype=np.float64)
         for ch, resp in enumerate(camera.responses):
-            raw[..., ch] = camera.c_max * resp(e[..., ch])
+            raw[..., ch] = camera.c_max * resp.forward_valid(e[..., ch].astype(np.float64))
         raw += black
         if readout_dsnu:  # the readout's fixed offset pattern, with the pedestal
             assert pattern is not None

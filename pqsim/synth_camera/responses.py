@@ -275,17 +275,46 @@ def response_s_curve(e: Any, contrast: float = 1.5, pivot: float = 0.25) -> np.n
     >>> round(float(response_s_curve(0.25, contrast=1.5, pivot=0.25)), 12)
     0.5
     """
-    e = _exposure(e)
+    return _s_curve_valid(_exposure(e), contrast, pivot)
+
+
+_CHUNK = 16384
+"""Elements a chunked kernel works on at once (128 KiB of float64: its buffers stay in cache)."""
+
+
+def _s_curve_valid(e: np.ndarray, contrast: float = 1.5, pivot: float = 0.25) -> np.ndarray:
+    """:func:`response_s_curve` of float64 exposures already checked (``>= 0``, no NaN).
+
+    The formula of :func:`response_s_curve` and :func:`_logistic`, the same operations in
+    the same order (so the same values to the bit), evaluated in place on chunks of
+    :data:`_CHUNK` elements: no temporaries the size of a frame, no masked copies. At
+    ``e >= 1``, ``log r = +inf`` and the logistic gives exactly 1, the saturated output.
+    """
     c, p = _s_params(contrast, pivot)
-    x = np.minimum(e, 1.0)
-    out = np.ones_like(x)
-    inside = x < 1.0
-    xi = x[inside]
-    # log r, computed so that 0 maps to -inf without warnings
+    log_odds = math.log((1.0 - p) / p)
+    x = np.minimum(e, 1.0, out=np.empty(np.shape(e)))
+    flat = x.reshape(-1)  # a view of the fresh x: its chunks are overwritten with F
+    m = min(_CHUNK, flat.size)
+    a, b, positive = np.empty(m), np.empty(m), np.empty(m, dtype=bool)
     with np.errstate(divide="ignore"):
-        log_r = np.log(xi) - np.log1p(-xi) + math.log((1.0 - p) / p)
-    out[inside] = _logistic(c * log_r)
-    return out
+        for start in range(0, flat.size, _CHUNK):
+            o = flat[start : start + _CHUNK]
+            k = o.size
+            ak, bk, pk = a[:k], b[:k], positive[:k]
+            np.negative(o, out=ak)
+            np.log1p(ak, out=ak)  # log(1 - x)
+            np.log(o, out=o)
+            o -= ak
+            o += log_odds  # log r: 0 → -inf, 1 → +inf
+            o *= c  # z
+            np.greater_equal(o, 0.0, out=pk)
+            np.abs(o, out=ak)
+            np.negative(ak, out=ak)
+            np.exp(ak, out=ak)  # exp(-|z|)
+            np.add(ak, 1.0, out=bk)
+            np.copyto(ak, 1.0, where=pk)  # numerator: 1 where z >= 0, exp(-|z|) elsewhere
+            np.divide(ak, bk, out=o)
+    return x
 
 
 def response_s_curve_inverse(F: Any, contrast: float = 1.5, pivot: float = 0.25) -> np.ndarray:
@@ -970,6 +999,10 @@ class ResponseModel:
     resolve : callable or None
         ``resolve(params) -> params``: completes a record's parameters once
         (the ``"emor"`` kind draws its coefficients from its seed).
+    forward_valid : callable or None
+        ``forward_valid(e, **params) -> F`` for float64 exposures already known to be
+        ``>= 0`` without NaN, the same values as ``forward`` without its checks (the
+        simulator's frames); ``None``: ``forward``.
     """
 
     forward: Callable[..., np.ndarray]
@@ -977,13 +1010,17 @@ class ResponseModel:
     defaults: Mapping[str, Any]
     max_output: Callable[..., float] = lambda **_: 1.0  # noqa: E731
     resolve: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    forward_valid: Callable[..., np.ndarray] | None = None
 
 
 RESPONSE_MODELS: dict[str, ResponseModel] = {
     "linear": ResponseModel(response_linear, response_linear_inverse, {"knee": None}),
     "gamma": ResponseModel(response_gamma, response_gamma_inverse, {"gamma": 1.0 / 2.2}),
     "s_curve": ResponseModel(
-        response_s_curve, response_s_curve_inverse, {"contrast": 1.5, "pivot": 0.25}
+        response_s_curve,
+        response_s_curve_inverse,
+        {"contrast": 1.5, "pivot": 0.25},
+        forward_valid=_s_curve_valid,
     ),
     "table": ResponseModel(
         response_table_forward,
@@ -1069,6 +1106,13 @@ class ResponseCurve:
     def __call__(self, e: Any) -> np.ndarray:
         """``F(e)``: normalised output in ``[0, 1]`` of normalised exposure ``e >= 0``."""
         return RESPONSE_MODELS[self.kind].forward(e, **self.params)
+
+    def forward_valid(self, e: np.ndarray) -> np.ndarray:
+        """``F(e)`` of float64 exposures its caller made (``>= 0``, no NaN): the values of
+        :meth:`__call__` without its input checks, where the family has such a path."""
+        model = RESPONSE_MODELS[self.kind]
+        forward = model.forward if model.forward_valid is None else model.forward_valid
+        return forward(e, **self.params)
 
     def inverse(self, F: Any) -> np.ndarray:
         """Exact inverse ``e = F⁻¹(F)`` for ``F`` in ``[0, max_output]``, vectorised.

@@ -126,6 +126,28 @@ def test_round_trip(tmp_path, ext, dtype, channels):
     assert _only_file(tmp_path) == [path.name]
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("channels", [3, None])
+def test_uncompressed_png_holds_the_same_pixels_in_more_bytes(tmp_path, dtype, channels):
+    # a smooth image deflates well: the stored file is the raw pixels and more, read
+    # back identically by us and Pillow
+    yy, xx = np.mgrid[0:40, 0:60]
+    ramp = ((xx + yy) * (257 if dtype == np.uint16 else 1) % np.iinfo(dtype).max).astype(dtype)
+    img = ramp if channels is None else np.stack([ramp, ramp[::-1], ramp[:, ::-1]], axis=-1)
+    write_image(tmp_path / "deflated.png", img)
+    write_image(tmp_path / "stored.png", img, compress=False)
+    stored, deflated = (
+        (tmp_path / "stored.png").stat().st_size,
+        (tmp_path / "deflated.png").stat().st_size,
+    )
+    assert stored >= img.nbytes > deflated
+    out = read_image(tmp_path / "stored.png")
+    np.testing.assert_array_equal(out.reshape(img.shape), img)
+    if dtype == np.uint8:  # Pillow reads 16-bit RGB as 8 bits
+        with Image.open(tmp_path / "stored.png") as im:
+            np.testing.assert_array_equal(np.asarray(im).reshape(img.shape), img)
+
+
 def test_png_16bit_rgb_keeps_16_bits(tmp_path):
     img = np.array([[[65535, 1000, 1], [256, 257, 40000]]], dtype=np.uint16)
     write_image(tmp_path / "a.png", img)

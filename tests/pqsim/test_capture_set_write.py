@@ -7,6 +7,7 @@ import hashlib
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from photoquant.errors import InputError, OutputExistsError
@@ -40,6 +41,19 @@ def siblings(path: Path) -> list[str]:
 @pytest.fixture
 def cam():
     return camera_from_preset("ccd")
+
+
+def test_uncompressed_frames_load_as_the_deflated_ones(tmp_path, cam):
+    from photoquant.io import load_manifest, load_stack
+
+    a = write_capture_set(tmp_path / "a", cam, **KW)
+    b = write_capture_set(tmp_path / "b", cam, **KW, compress_frames=False)
+    ma, mb = load_manifest(a), load_manifest(b)
+    sets_a, sets_b = [*ma.views, ma.irradiance, ma.scene], [*mb.views, mb.irradiance, mb.scene]
+    for sa, sb in zip(sets_a, sets_b, strict=True):
+        np.testing.assert_array_equal(load_stack(sb, mb).frames, load_stack(sa, ma).frames)
+    size = {name: sum(p.stat().st_size for p in (tmp_path / name).rglob("*.png")) for name in "ab"}
+    assert size["b"] > size["a"]
 
 
 def test_a_written_set_is_a_replaceable_capture_set(tmp_path, cam):

@@ -159,6 +159,37 @@ def test_response_reference_values() -> None:
     assert np.allclose(response_s_curve(e, 1.0, 0.5), e, atol=1e-15)
 
 
+def test_s_curve_kernel_matches_closed_form_across_its_chunks() -> None:
+    # the in-place chunked kernel against F = r^c / (1 + r^c) written out, on more
+    # elements than one chunk holds (a partial last chunk), saturated and zero exposures
+    # included, and in any array layout
+    from pqsim.synth_camera.responses import _CHUNK
+
+    rng = np.random.default_rng(3)
+    e = rng.uniform(0.0, 1.3, 2 * _CHUNK + 77)
+    e[[0, 5, -1]] = [0.0, 1.0, np.inf]
+    c, p = 1.45, 0.3
+    x = np.minimum(e, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):  # inf / inf where saturated
+        rc = (x / (1.0 - x) * (1.0 - p) / p) ** c
+        expected = np.where(x < 1.0, rc / (1.0 + rc), 1.0)
+    got = response_s_curve(e, c, p)
+    assert np.allclose(got, expected, rtol=1e-13, atol=0.0)
+    assert got[0] == 0.0 and got[5] == 1.0 and got[-1] == 1.0
+    grid = e[: 6 * 7 * 3].reshape(6, 7, 3)
+    assert np.array_equal(
+        response_s_curve(grid[..., 1], c, p), response_s_curve(grid, c, p)[..., 1]
+    )
+    assert isinstance(response_s_curve(0.2, c, p), np.ndarray)
+
+
+@given(curve=response_curves())
+@settings(max_examples=30, deadline=None)
+def test_forward_valid_gives_the_checked_values(curve: ResponseCurve) -> None:
+    e = np.concatenate([np.linspace(0.0, 1.5, 40), [np.inf]])
+    assert np.array_equal(curve.forward_valid(e), curve(e))
+
+
 def test_linear_knee_is_continuous_with_continuous_slope() -> None:
     k, h = 0.7, 1e-6
     left = (response_linear(k, knee=k) - response_linear(k - h, knee=k)) / h

@@ -148,6 +148,7 @@ def _preset_z(
             n_repeats=2,
             n_views=3,
             seed=shared.stream("coverage", preset, i),
+            compress_frames=False,
         )
         model = pq.calibrate_manifest(manifest, **config.calibrate_kwargs)
         for key, z in coverage_z(manifest, truth, model).items():

@@ -78,6 +78,7 @@ def run(
             cache_dir=cache,
             progress=False,
             overwrite=True,
+            compress_frames=False,
         )
         t_capture = time.perf_counter() - t0
         t0 = time.perf_counter()

@@ -309,6 +309,7 @@ def _one(
         n_views=cfg.n_views,
         seed=capture_seed,
         overwrite=True,
+        compress_frames=False,
         **dist.capture,
     )
     try:

@@ -272,6 +272,7 @@ class Shared:
             n_views=cfg.n_views,
             seed=capture_seed,
             overwrite=True,
+            compress_frames=False,  # read back once by this run
         )
         simulate_s = time.perf_counter() - t0
         t0 = time.perf_counter()

@@ -95,7 +95,7 @@ def run(
         ("vignetting", "–", "all correspondences"),
         ("vignetting_10_points", "40 s (10 points)", "10 random correspondences"),
         ("calibrate_total", "< 5 min with acquisition", "response → balance"),
-        ("simulate_capture_set", "–", "pqsim, frames written as PNG"),
+        ("simulate_capture_set", "–", "pqsim, frames written as uncompressed PNG"),
     ]
     for key, paper, note in rows:
         vals = [per_preset[p].get(key) for p in names]
@@ -109,6 +109,8 @@ def run(
         )
     res.notes.append(
         f"Times on this machine at {scene_shape}; the paper's with Matlab at 1024x768. "
-        "--check ignores every time."
+        "--check ignores every time. The simulated frames are stored as uncompressed PNG "
+        "(read back once): reading a camera's deflated frames takes longer (the benchmarks' "
+        "load-frames row)."
     )
     return res

@@ -195,6 +195,7 @@ def _compute(config: Mapping[str, Any]) -> list[tuple[str, float]]:
                 cache_dir=config.get("cache_dir") or default_cache_dir(),
                 progress=False,
                 workers=1,
+                compress_frames=False,  # a scratch capture set, read once
             )
         else:
             from pqsim.capture_set import write_capture_set
@@ -208,6 +209,7 @@ def _compute(config: Mapping[str, Any]) -> list[tuple[str, float]]:
                 n_views=s["n_views"],
                 seed=seed,
                 workers=1,
+                compress_frames=False,
             )
         times["simulate"] = time.perf_counter() - t
         t = time.perf_counter()
