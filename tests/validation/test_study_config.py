@@ -89,12 +89,15 @@ def test_the_robustness_table_simulates_at_the_study_size(tmp_path) -> None:
 def test_the_second_process_runs_the_small_frame_studies_in_the_full_job() -> None:
     from validation.experiments import BESIDE, SMALL_FRAMES, STUDIES, beside_for
 
-    assert beside_for(QUICK) == BESIDE == ("leaderboard", "noise")
+    assert beside_for(QUICK) == BESIDE == ("noise", "leaderboard")
     # --full: the paper-size experiments (noise included) in one process, the studies and
     # the coverage over seeds, on small frames of their own, in the other
     assert beside_for(FULL) == SMALL_FRAMES and "noise" not in SMALL_FRAMES
     assert {"leaderboard", "robustness", "coverage"} <= set(SMALL_FRAMES)
     assert set(STUDIES) <= set(SMALL_FRAMES)
+    # the robustness table's peaks beside the first process's lightest experiments, the
+    # coverage (the lightest) beside its heaviest (the ablation, last)
+    assert SMALL_FRAMES[0] == "robustness" and SMALL_FRAMES[-1] == "coverage"
 
 
 @pytest.mark.slow

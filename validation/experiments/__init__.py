@@ -74,18 +74,23 @@ OPT_IN: dict[str, str] = {
 """Experiment key → the :class:`ValidationConfig` flag that includes it in a default run
 (a flag the configuration does not have: only when named)."""
 
-BESIDE: tuple[str, ...] = ("leaderboard", "noise")
+BESIDE: tuple[str, ...] = ("noise", "leaderboard")
 """Experiments a run with two workers gives to a second process, beside the others there
-(:func:`run_validation`): about half of the quick job's time after the calibrations."""
+(:func:`run_validation`), in the order it runs them: about half of the quick job's time
+after the calibrations."""
 
 STUDIES: tuple[str, ...] = ("leaderboard", "robustness", "robustness_pairs")
 """The studies beyond the paper on capture sets of the configuration's study size
 (:meth:`~validation.config.ValidationConfig.study_config`)."""
 
 
-SMALL_FRAMES: tuple[str, ...] = (*STUDIES, "coverage")
+SMALL_FRAMES: tuple[str, ...] = ("robustness", "robustness_pairs", "leaderboard", "coverage")
 """The experiments that simulate and calibrate small capture sets of their own: the
-:data:`STUDIES` and the parameters' coverage over seeds (64×48)."""
+:data:`STUDIES` and the parameters' coverage over seeds (64×48), in the order the second
+process of ``--full`` runs them: the robustness table (up to 1.1 GB in its glare rows)
+beside the first process's calibrations and vignetting sweeps (up to 1.8 GB), the
+leaderboard (up to 1.0 GB) beside the noise experiment and Table 1 (up to 2.9 GB), the
+coverage (0.4 GB) beside the ablation (2.9 GB); measured 2026-12-05."""
 
 
 def beside_for(config: ValidationConfig) -> tuple[str, ...]:
@@ -235,7 +240,7 @@ def run_validation(
     t_start = time.perf_counter()
     results: dict[str, ExperimentResult] = {}
     second = beside_for(config)
-    beside = [n for n in names if n in second] if n_workers > 1 else []
+    beside = [n for n in second if n in names] if n_workers > 1 else []  # in its order
     try:
         # BLAS on one thread whatever the number of processes: the same bits either way
         with _one_blas_thread():
