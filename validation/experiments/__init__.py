@@ -98,7 +98,8 @@ def beside_for(config: ValidationConfig) -> tuple[str, ...]:
     or, where the configuration's study size is not its own (``--full``), the
     :data:`SMALL_FRAMES` experiments beside the paper-size ones, so that the two processes
     together hold about one paper-size capture set's memory (and about half of the full
-    job's time each: 621 and 569 s of their work, measured 2026-12-05)."""
+    job's time each: 576 and 539 s of their work in :data:`SMALL_FRAMES`'s order,
+    measured 2026-12-05)."""
     return SMALL_FRAMES if config.study_config() is not config else BESIDE
 
 
