@@ -128,9 +128,11 @@ def step_specs(args: argparse.Namespace) -> dict[str, Any]:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from photoquant.calibration import calibrate_manifest
+    from photoquant.io.images import use_exr_threads
     from photoquant.io.manifest import load_manifest
     from photoquant.io.outputs import CAMERA, Output, check_outputs, manifest_inputs
 
+    use_exr_threads()  # the command owns its process (and starts no other): maps on every CPU
     out = Path(args.output)
     try:  # read once, for the outputs' check and the calibration
         manifest = load_manifest(args.manifest, allow_outside=args.allow_outside)
@@ -366,7 +368,7 @@ def printable(path: Any) -> str:
 def _cmd_correct(args: argparse.Namespace) -> int:
     from photoquant.correction import correct_manifest
     from photoquant.io.atomic import atomic_output_file
-    from photoquant.io.images import write_exr
+    from photoquant.io.images import use_exr_threads, write_exr
     from photoquant.io.outputs import (
         EXR_IMAGE,
         Output,
@@ -376,6 +378,7 @@ def _cmd_correct(args: argparse.Namespace) -> int:
     )
     from photoquant.model import load_camera
 
+    use_exr_threads()  # the command owns its process (and starts no other): EXR on every CPU
     out = Path(args.output)
     check_outputs(
         [Output(out, EXR_IMAGE)],

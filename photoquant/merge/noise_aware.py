@@ -90,7 +90,7 @@ from photoquant.merge._base import MergeResult
 from photoquant.merge._tables import ValueTables
 from photoquant.merge.debevec1997 import DebevecMergeOptions, merge_stack_Debevec1997
 from photoquant.response.model import ResponseModel
-from photoquant.stack import ExposureStack
+from photoquant.stack import ExposureStack, _compare_per_channel
 from photoquant.weighting import WEIGHTING_FUNCTIONS
 
 __all__ = [
@@ -432,6 +432,22 @@ def _grid_step(height: int, width: int, max_pixels: int) -> int:
     return step
 
 
+def _within_levels(frames: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """``(frames >= low) & (frames < high)`` for per-channel levels ``(C,)``, bool.
+
+    Integer frames are compared with the integer thresholds ``⌈low⌉`` and
+    ``⌈high⌉`` (for an integer ``c``, ``c ≥ x ⟺ c ≥ ⌈x⌉`` and ``c < x ⟺ c <
+    ⌈x⌉``) along whole rows (:func:`photoquant.stack._compare_per_channel`):
+    the same booleans without casting every value to float64.
+    """
+    low = np.asarray(low, dtype=np.float64)
+    high = np.asarray(high, dtype=np.float64)
+    if frames.dtype.kind not in "iu" or not (np.isfinite(low).all() and np.isfinite(high).all()):
+        return (frames >= low) & (frames < high)
+    above = _compare_per_channel(np.greater_equal, frames, np.ceil(low).astype(np.int64))
+    return above & _compare_per_channel(np.less, frames, np.ceil(high).astype(np.int64))
+
+
 class _LinearScale:
     """``y(c)`` and ``dy/dc`` of one channel: table lookups for unsigned integer values of
     up to 16 bits (the same numbers as the interpolation, computed once per level), the
@@ -653,8 +669,11 @@ def estimate_noise_from_exposures(
     lo = photon_transfer_floor(response)
     step = _grid_step(*stack.image_shape, max_pixels)
     frames = stack.frames[0, :, ::step, ::step]
-    clipped = (stack.saturated(response.saturation_level) | stack.dark_clipped())[:, ::step, ::step]
-    trusted = ~clipped & (frames >= lo) & (frames < sat)
+    # the grid's values only (the stack's masks are memoised at full size; the grid is a
+    # sixteenth of them or less), compared per channel in the frames' own integer type
+    clipped = stack.saturated(response.saturation_level)[:, ::step, ::step]
+    clipped = clipped | stack.dark_clipped()[:, ::step, ::step]
+    trusted = _within_levels(frames, lo, sat) & ~clipped
     t = np.asarray(stack.exposure_s, dtype=np.float64)
     order_t = np.argsort(t)
     n_ch = stack.n_channels

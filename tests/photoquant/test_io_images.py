@@ -396,6 +396,32 @@ def test_write_exr_bad_input(tmp_path, kwargs, match):
     assert _only_file(tmp_path) == []
 
 
+def test_exr_written_on_threads_is_the_same_file(tmp_path):
+    """OpenEXR's thread pool compresses each block of lines on its own: the same bytes
+    with none, one or three threads; the call returns the pool's size before it."""
+    import OpenEXR
+
+    from photoquant.io.images import use_exr_threads
+
+    rng = np.random.default_rng(0)
+    array = np.exp(rng.normal(size=(70, 90, 4))).astype(np.float32)  # several line blocks
+    before = OpenEXR.global_thread_count()
+    try:
+        files = []
+        for threads in (0, 1, 3):
+            use_exr_threads(threads)
+            assert OpenEXR.global_thread_count() == threads
+            write_exr(tmp_path / f"t{threads}.exr", array, ("R", "G", "B", "A"))
+            files.append((tmp_path / f"t{threads}.exr").read_bytes())
+            np.testing.assert_array_equal(read_exr(tmp_path / f"t{threads}.exr")[0], array)
+        assert files[0] == files[1] == files[2]
+        assert use_exr_threads(0) == 3
+        with pytest.raises(InputError, match="threads"):
+            use_exr_threads(-1)
+    finally:
+        OpenEXR.set_global_thread_count(before)
+
+
 # ----------------------------------------------------------------------------- EXIF
 
 

@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import photoquant as pq
 from photoquant.errors import InputError
@@ -271,3 +273,24 @@ def test_a_loosely_fixed_noise_is_not_stated():
     np.testing.assert_array_equal(params.read_noise, [0.5, 0.0, 0.0])
     assert PhotonTransferFit(gain, read, loose, []).noise_parameters(MAX_GAIN_ERROR) is None
     assert PhotonTransferFit(gain, read, loose, []).noise_parameters() is not None
+
+
+@given(
+    st.sampled_from([np.uint8, np.uint16]),
+    st.lists(st.floats(-3.0, 70000.0), min_size=3, max_size=3),
+    st.lists(st.floats(-3.0, 70000.0), min_size=3, max_size=3),
+    st.integers(0, 2**16 - 1),
+)
+@settings(max_examples=60, deadline=None)
+def test_within_levels_is_the_float_comparison(dtype, low, high, seed):
+    """The neighbouring-exposure fit's integer thresholds select the values the float
+    comparison does, for fractional, integral and out-of-range levels."""
+    from photoquant.merge.noise_aware import _within_levels
+
+    top = np.iinfo(dtype).max
+    frames = np.random.default_rng(seed).integers(0, top, (3, 5, 7, 3), endpoint=True)
+    frames = frames.astype(dtype)[:, ::2, ::3]  # a grid view, as the fit reads it
+    low = np.array(low) if seed % 2 else np.round(low)
+    high = np.array(high) if seed % 3 else np.round(high)
+    expected = (frames >= low) & (frames < high)
+    np.testing.assert_array_equal(_within_levels(frames, low, high), expected)

@@ -81,6 +81,49 @@ def test_map_variance_is_the_linearised_parameter_covariance():
     np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-14)
 
 
+@pytest.mark.parametrize("band_pixels", [1, 7, 64, 10**9])
+@pytest.mark.parametrize("relative_to", [None, (17.0, 9.5)])
+def test_map_variance_is_the_same_in_bands_of_any_size(monkeypatch, band_pixels, relative_to):
+    """The map is computed in bands of rows: each pixel's variance from that pixel alone,
+    so any band size (one pixel a row, a partial last band, the whole image) gives the same
+    bits as the textbook product over the whole image at once."""
+    import photoquant.vignetting.extended_goldman_chen as egc
+
+    rng = np.random.default_rng(3)
+    params = DARKENING[None] + np.array([[0.02, -0.01, 0.005, 0.1, 0.01, -0.02]])
+    params = np.concatenate([DARKENING[None], params])
+    root = rng.normal(scale=1e-3, size=(2, 6, 6))
+    model = ExtendedGoldmanChenVignetting("given", params, root @ root.transpose(0, 2, 1))
+    shape = (13, 21)
+    monkeypatch.setattr(egc, "_MAP_BAND_PIXELS", band_pixels)
+    got = model.log_map_variance(shape, relative_to=relative_to)
+    h, w = shape
+    x_n = np.tile((np.arange(w) + 0.5) / w, h)
+    y_n = np.repeat((np.arange(h) + 0.5) / h, w)
+    for ch in range(2):
+        v, rows = egc._model_and_jacobian_rows(x_n, y_n, model.params[ch])
+        cov = model.param_covariance[ch]
+        if relative_to is None:
+            var = np.einsum("jn,jn->n", rows, cov @ rows) / (v * v)
+        else:
+            at = (np.array([relative_to[0] / w]), np.array([relative_to[1] / h]))
+            rows = rows / v - egc._log_gradient_at(at, model.params[ch])[:, None]
+            var = np.einsum("jn,jn->n", rows, cov @ rows)
+        np.testing.assert_array_equal(got[..., ch], np.maximum(var, 0.0).reshape(h, w))
+
+
+def test_map_is_the_model_evaluated_at_every_pixel_centre():
+    """The map's in-place evaluation gives the bits of the model's expression."""
+    params = np.stack([DARKENING, DARKENING + np.array([0.03, -0.02, 0.01, 0.2, 0.05, -0.04])])
+    h, w = 11, 17
+    got = vignetting_map(params, (h, w))
+    x_n = ((np.arange(w) + 0.5) / w)[None, :, None]
+    y_n = ((np.arange(h) + 0.5) / h)[:, None, None]
+    m1, m2, m3, m4, m5, m6 = params.T
+    r = m4 * (x_n - m5) ** 2 + (y_n - m6) ** 2
+    np.testing.assert_array_equal(got, 1.0 + r * (m1 + r * (m2 + r * m3)))
+
+
 def test_covariance_persisted_and_checked():
     cov = np.tile(np.eye(6) * 1e-6, (2, 1, 1))
     model = ExtendedGoldmanChenVignetting("given", np.tile(DARKENING, (2, 1)), cov)
