@@ -313,9 +313,10 @@ def correct(
     # hot/stuck pixels: not merged (NaN, flagged); the calibration's map of the sensor when
     # the camera has one (no search per scene: 75 ms of a 1024x768 K = 4 stack's ~100 ms)
     defects = model.defects if model.defects is not None else detect_defects(stack)
-    if defects is not None and defects.mask.any():
-        photoquantity[defects.mask] = np.nan
-        mask |= defects.mask
+    flagged = None if defects is None else defects.mask  # hot | stuck, formed once
+    if flagged is not None and flagged.any():
+        photoquantity[flagged] = np.nan
+        mask |= flagged
     if mask.any():
         notes.append(_unmerged_note(mask, all_saturated, all_dark))
     stated = {}
