@@ -12,6 +12,7 @@ unless ``--overwrite`` is given, and every output is written atomically.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -126,13 +127,26 @@ def step_specs(args: argparse.Namespace) -> dict[str, Any]:
     return specs
 
 
+def _exr_on_every_cpu(command: Callable[[argparse.Namespace], int]) -> Any:
+    """The command with OpenEXR's thread pool at every CPU while it runs
+    (:func:`photoquant.io.images.exr_threads`; the pool emptied again after it)."""
+
+    @functools.wraps(command)
+    def run(args: argparse.Namespace) -> int:
+        from photoquant.io.images import exr_threads
+
+        with exr_threads():
+            return command(args)
+
+    return run
+
+
+@_exr_on_every_cpu
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from photoquant.calibration import calibrate_manifest
-    from photoquant.io.images import use_exr_threads
     from photoquant.io.manifest import load_manifest
     from photoquant.io.outputs import CAMERA, Output, check_outputs, manifest_inputs
 
-    use_exr_threads()  # the command owns its process (and starts no other): maps on every CPU
     out = Path(args.output)
     try:  # read once, for the outputs' check and the calibration
         manifest = load_manifest(args.manifest, allow_outside=args.allow_outside)
@@ -365,10 +379,11 @@ def printable(path: Any) -> str:
     return text.encode(encoding, "backslashreplace").decode(encoding, "replace")
 
 
+@_exr_on_every_cpu
 def _cmd_correct(args: argparse.Namespace) -> int:
     from photoquant.correction import correct_manifest
     from photoquant.io.atomic import atomic_output_file
-    from photoquant.io.images import use_exr_threads, write_exr
+    from photoquant.io.images import write_exr
     from photoquant.io.outputs import (
         EXR_IMAGE,
         Output,
@@ -378,7 +393,6 @@ def _cmd_correct(args: argparse.Namespace) -> int:
     )
     from photoquant.model import load_camera
 
-    use_exr_threads()  # the command owns its process (and starts no other): EXR on every CPU
     out = Path(args.output)
     check_outputs(
         [Output(out, EXR_IMAGE)],

@@ -23,8 +23,14 @@ def capture(tmp_path_factory):
 
 
 def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
+    import OpenEXR
+
+    pool = OpenEXR.global_thread_count()
     cam = tmp_path / "cam"
     assert main(["calibrate", str(capture), "-o", str(cam), "-q"]) == 0
+    # the command's OpenEXR threads end with it (a later fork of this process must not
+    # inherit a pool without its threads: photoquant.io.images.exr_threads)
+    assert OpenEXR.global_thread_count() == pool
     out = capsys.readouterr().out
     assert "correspondences used" in out and "balance:" in out and "time:" in out
     model = load_camera(cam)
@@ -39,6 +45,7 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     # by default with its uncertainty: the layers named in the header and output
     exr2 = tmp_path / "scene-sigma.exr"
     assert main(["correct", str(capture), "--camera", str(cam), "-o", str(exr2), "-q"]) == 0
+    assert OpenEXR.global_thread_count() == pool
     both, names = read_exr(exr2)
     assert names == (
         "R", "G", "B", "sigma_ln.R", "sigma_ln.G", "sigma_ln.B",

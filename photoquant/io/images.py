@@ -55,6 +55,7 @@ read ``R, G, B`` first, then the other channels sorted by name.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import math
@@ -62,7 +63,7 @@ import os
 import stat
 import struct
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import IO, NamedTuple
 
@@ -96,7 +97,7 @@ __all__ = [
     "write_image",
     "read_exr",
     "write_exr",
-    "use_exr_threads",
+    "exr_threads",
     "exif_exposure_time",
 ]
 
@@ -1110,31 +1111,34 @@ def write_exr(
         exr.write(f)
 
 
-def use_exr_threads(threads: int | None = None) -> int:
-    """Let OpenEXR compress and decompress a file's blocks of lines on ``threads`` threads.
+@contextlib.contextmanager
+def exr_threads(threads: int | None = None) -> Iterator[None]:
+    """OpenEXR compresses and decompresses a file's blocks of lines on ``threads`` threads
+    inside the ``with`` block; the pool's size before it is restored on leaving.
 
     OpenEXR's thread pool belongs to the process (``OpenEXR.set_global_thread_count``;
-    none by default: every block on the calling thread). The ``photoquant`` command owns
-    its process and calls this with every CPU; the library's functions leave the
-    process's setting as it is, so a program calling :func:`write_exr` chooses for
-    itself. The files are the same bytes with any number of threads (each block is
-    compressed on its own). Measured 2026-12-05 on 2 cores: a 1024×768 file of 12
-    float32 channels written in 0.46 s on the calling thread, 0.28 s with 2 threads.
+    none by default: every block on the calling thread). The ``photoquant`` commands
+    that write cameras and photoquantities run inside this block with every CPU; the
+    library's functions leave the process's setting as it is, so that a program calling
+    :func:`write_exr` chooses for itself. The pool is emptied again on leaving because a
+    process forked while it has threads (the validation's second process) inherits a
+    pool without them, and its first OpenEXR write would wait for them for ever. The
+    files are the same bytes with any number of threads (each block is compressed on
+    its own). Measured 2026-12-05 on 2 cores: a 1024×768 file of 12 float32 channels
+    written in 0.46 s on the calling thread, 0.28 s with 2 threads.
 
     Parameters
     ----------
     threads : int, optional
         Threads of the pool (0: none); every CPU this process may use by default.
-
-    Returns
-    -------
-    int
-        The pool's size before the call.
     """
-    before = int(OpenEXR.global_thread_count())
     n = default_workers() if threads is None else check_int(threads, "threads", 0)
+    before = int(OpenEXR.global_thread_count())
     OpenEXR.set_global_thread_count(n)
-    return before
+    try:
+        yield
+    finally:
+        OpenEXR.set_global_thread_count(before)
 
 
 def exif_exposure_time(path: PathLike) -> float | None:

@@ -398,28 +398,52 @@ def test_write_exr_bad_input(tmp_path, kwargs, match):
 
 def test_exr_written_on_threads_is_the_same_file(tmp_path):
     """OpenEXR's thread pool compresses each block of lines on its own: the same bytes
-    with none, one or three threads; the call returns the pool's size before it."""
+    with none, one or three threads; the pool's size is restored on leaving the block."""
     import OpenEXR
 
-    from photoquant.io.images import use_exr_threads
+    from photoquant.io.images import exr_threads
 
     rng = np.random.default_rng(0)
     array = np.exp(rng.normal(size=(70, 90, 4))).astype(np.float32)  # several line blocks
     before = OpenEXR.global_thread_count()
-    try:
-        files = []
-        for threads in (0, 1, 3):
-            use_exr_threads(threads)
+    files = []
+    for threads in (0, 1, 3):
+        with exr_threads(threads):
             assert OpenEXR.global_thread_count() == threads
             write_exr(tmp_path / f"t{threads}.exr", array, ("R", "G", "B", "A"))
-            files.append((tmp_path / f"t{threads}.exr").read_bytes())
             np.testing.assert_array_equal(read_exr(tmp_path / f"t{threads}.exr")[0], array)
-        assert files[0] == files[1] == files[2]
-        assert use_exr_threads(0) == 3
-        with pytest.raises(InputError, match="threads"):
-            use_exr_threads(-1)
-    finally:
-        OpenEXR.set_global_thread_count(before)
+        assert OpenEXR.global_thread_count() == before
+        files.append((tmp_path / f"t{threads}.exr").read_bytes())
+    assert files[0] == files[1] == files[2]
+    with pytest.raises(InputError, match="threads"), exr_threads(-1):
+        pass
+    assert OpenEXR.global_thread_count() == before
+
+
+def _write_small_exr(path: str) -> None:
+    write_exr(path, np.ones((40, 30, 3), np.float32))
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="a forked process: POSIX only")
+def test_a_process_forked_after_the_commands_pool_writes_exr(tmp_path):
+    """A process forked while OpenEXR's pool has threads inherits a pool without them and
+    its first write waits for ever: the commands' pool is emptied when they end, so the
+    validation's second process, forked later in the same process, still writes."""
+    import multiprocessing
+
+    from photoquant.io.images import exr_threads
+
+    with exr_threads(2):
+        write_exr(tmp_path / "parent.exr", np.ones((40, 30, 3), np.float32))
+    child = multiprocessing.get_context("fork").Process(
+        target=_write_small_exr, args=(str(tmp_path / "child.exr"),)
+    )
+    child.start()
+    child.join(timeout=60)
+    if child.is_alive():  # pragma: no cover - the failure this test is about
+        child.kill()
+        pytest.fail("the forked process hung in its OpenEXR write")
+    assert child.exitcode == 0 and (tmp_path / "child.exr").is_file()
 
 
 # ----------------------------------------------------------------------------- EXIF
