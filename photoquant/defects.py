@@ -56,6 +56,7 @@ import numpy as np
 from scipy import ndimage
 
 from photoquant._checks import check_int, default_workers
+from photoquant._grid import mirror_index
 from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant._threads import thread_map
 from photoquant.errors import InputError
@@ -428,14 +429,10 @@ def _ring_median_at(image: np.ndarray, where: np.ndarray) -> np.ndarray:
     """
     ii, jj, cc = np.nonzero(where)
     h, w = image.shape[:2]
-
-    def mirror(idx: np.ndarray, n: int) -> np.ndarray:
-        if n == 1:
-            return np.zeros_like(idx)
-        return np.where(idx < 0, -idx, np.where(idx >= n, 2 * (n - 1) - idx, idx))
-
     ring = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)]
-    vals = np.stack([image[mirror(ii + di, h), mirror(jj + dj, w), cc] for di, dj in ring], axis=-1)
+    vals = np.stack(
+        [image[mirror_index(ii + di, h), mirror_index(jj + dj, w), cc] for di, dj in ring], axis=-1
+    )
     return np.sort(vals, axis=-1)[..., 4]
 
 

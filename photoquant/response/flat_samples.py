@@ -96,6 +96,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from photoquant._grid import mirror_index
 from photoquant.errors import InputError
 
 __all__ = [
@@ -122,15 +123,6 @@ MIN_FLAT_FRACTION = 0.5
 
 ValuesAt = Callable[[np.ndarray], np.ndarray]
 """``values_at(index)``: the ``(K, P, C)`` values of a stack at flat pixel indices."""
-
-
-def _mirror(index: np.ndarray, n: int) -> np.ndarray:
-    """``index`` reflected into ``[0, n)`` about the border pixels (``n ≥ 1``)."""
-    if n == 1:
-        return np.zeros_like(index)
-    period = 2 * (n - 1)
-    index = np.abs(index) % period
-    return np.where(index >= n, period - index, index)
 
 
 def laplacian_at(
@@ -166,7 +158,7 @@ def laplacian_at(
         centre = values_at(index)
     lap = 4.0 * np.asarray(centre, dtype=np.float64)
     for dr, dc in ((-step, 0), (step, 0), (0, -step), (0, step)):
-        near = _mirror(rows + dr, height) * width + _mirror(cols + dc, width)
+        near = mirror_index(rows + dr, height) * width + mirror_index(cols + dc, width)
         lap -= np.asarray(values_at(near), dtype=np.float64)
     return np.abs(lap, out=lap)
 
