@@ -127,7 +127,9 @@ def step_specs(args: argparse.Namespace) -> dict[str, Any]:
     return specs
 
 
-def _exr_on_every_cpu(command: Callable[[argparse.Namespace], int]) -> Any:
+def _exr_on_every_cpu(
+    command: Callable[[argparse.Namespace], int],
+) -> Callable[[argparse.Namespace], int]:
     """The command with OpenEXR's thread pool at every CPU while it runs
     (:func:`photoquant.io.images.exr_threads`; the pool emptied again after it)."""
 

@@ -212,15 +212,12 @@ def _as_channel_params(params: Any, name: str = "params") -> np.ndarray:
     return params
 
 
-def _pixel_centres(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(x_n, y_n)`` of every pixel centre in raster order, ``((x + 0.5)/W, (y + 0.5)/H)``."""
-    x_n = np.tile((np.arange(w, dtype=np.float64) + 0.5) / w, h)
-    y_n = np.repeat((np.arange(h, dtype=np.float64) + 0.5) / h, w)
-    return x_n, y_n
-
-
-def _pixel_centres_of_rows(h: int, w: int, y0: int, y1: int) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_pixel_centres` of rows ``y0 … y1 − 1`` only (the same values)."""
+def _pixel_centres(
+    h: int, w: int, y0: int = 0, y1: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(x_n, y_n)`` of the pixel centres of rows ``y0 … y1 − 1`` (every row by default)
+    in raster order, ``((x + 0.5)/W, (y + 0.5)/H)``."""
+    y1 = h if y1 is None else y1
     x_n = np.tile((np.arange(w, dtype=np.float64) + 0.5) / w, y1 - y0)
     y_n = np.repeat((np.arange(y0, y1, dtype=np.float64) + 0.5) / h, w)
     return x_n, y_n
@@ -1623,7 +1620,7 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
         rows_per_band = max(1, _MAP_BAND_PIXELS // w)
         for y0 in range(0, h, rows_per_band):
             y1 = min(h, y0 + rows_per_band)
-            x_n, y_n = _pixel_centres_of_rows(h, w, y0, y1)
+            x_n, y_n = _pixel_centres(h, w, y0, y1)
             for ch, (p, cov) in enumerate(zip(self.params, self.param_covariance, strict=True)):
                 flat[y0 * w : y1 * w, ch] = _log_variance_rows(x_n, y_n, p, cov, gradients[ch])
         return out
