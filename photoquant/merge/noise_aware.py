@@ -90,7 +90,7 @@ from photoquant.merge._base import MergeResult
 from photoquant.merge._tables import ValueTables
 from photoquant.merge.debevec1997 import DebevecMergeOptions, merge_stack_Debevec1997
 from photoquant.response.model import ResponseModel
-from photoquant.stack import ExposureStack, _compare_per_channel
+from photoquant.stack import ExposureStack, _compare_per_channel, _sat_threshold
 from photoquant.weighting import WEIGHTING_FUNCTIONS
 
 __all__ = [
@@ -435,17 +435,18 @@ def _grid_step(height: int, width: int, max_pixels: int) -> int:
 def _within_levels(frames: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """``(frames >= low) & (frames < high)`` for per-channel levels ``(C,)``, bool.
 
-    Integer frames are compared with the integer thresholds ``⌈low⌉`` and
-    ``⌈high⌉`` (for an integer ``c``, ``c ≥ x ⟺ c ≥ ⌈x⌉`` and ``c < x ⟺ c <
-    ⌈x⌉``) along whole rows (:func:`photoquant.stack._compare_per_channel`):
-    the same booleans without casting every value to float64.
+    Integer frames are compared with the stack's integer thresholds of "at or above"
+    (:func:`photoquant.stack._sat_threshold`, ``⌈x⌉``: for an integer ``c``, ``c ≥ x
+    ⟺ c ≥ ⌈x⌉`` and ``c < x ⟺ c < ⌈x⌉``) along whole rows
+    (:func:`photoquant.stack._compare_per_channel`): the same booleans without
+    casting every value to float64.
     """
     low = np.asarray(low, dtype=np.float64)
     high = np.asarray(high, dtype=np.float64)
     if frames.dtype.kind not in "iu" or not (np.isfinite(low).all() and np.isfinite(high).all()):
         return (frames >= low) & (frames < high)
-    above = _compare_per_channel(np.greater_equal, frames, np.ceil(low).astype(np.int64))
-    return above & _compare_per_channel(np.less, frames, np.ceil(high).astype(np.int64))
+    above = _compare_per_channel(np.greater_equal, frames, _sat_threshold(low))
+    return above & _compare_per_channel(np.less, frames, _sat_threshold(high))
 
 
 class _LinearScale:
