@@ -892,6 +892,42 @@ def _value_rows(
     return z, y, ok0, chan, _ChannelBlocks([r[0].shape[0] for r in rows])
 
 
+def _largest_linked_set(use: np.ndarray, refined: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The exposures of ``refined`` that pixels link into one set, the set with most values.
+
+    Pixels that use two exposures (``use``, ``(P, K)``) link them; exposures
+    in separate sets share no pixel, directly or through others, so the
+    values fix the times within each set and nothing between them: one
+    gauge over two sets leaves their relative scale to rounding (a glare
+    capture whose source is clipped at the middle exposures, its tail dark
+    at the short ones, split its times by 44× that way). The other sets keep
+    their labels. Ties go to the set of the shortest exposure.
+    """
+    members = np.flatnonzero(refined)
+    if members.size < 2:
+        return refined
+    sub = use[:, members].astype(np.float64)
+    linked = (sub.T @ sub) > 0  # exposures sharing a pixel
+    component = np.full(members.size, -1)
+    for start in range(members.size):
+        if component[start] >= 0:
+            continue
+        component[start] = start
+        frontier = [start]
+        while frontier:
+            nxt = np.flatnonzero(linked[frontier].any(axis=0) & (component < 0))
+            component[nxt] = start
+            frontier = nxt.tolist()
+    labels = np.unique(component)
+    if labels.size == 1:
+        return refined
+    sizes = [int(counts[members[component == lab]].sum()) for lab in labels]
+    best = labels[int(np.argmax(sizes))]
+    out = np.zeros_like(refined)
+    out[members[component == best]] = True
+    return out
+
+
 def _refine_once(
     stack: ExposureStack, p: _RefinementProblem, rng: np.random.Generator
 ) -> ExposureRefinement:
@@ -927,7 +963,7 @@ def _refine_once(
     w0 = np.zeros_like(y)
     cov = np.full((n_k, n_k), np.nan)
     scale, iterations = 1.0, 0
-    refined = np.zeros(n_k, dtype=bool)
+    refined = linked = np.zeros(n_k, dtype=bool)
     counts = np.zeros(n_k, dtype=np.int64)
     # slope and curvature tables of g per channel
     d1 = [np.gradient(np.where(np.isfinite(g[ch]), g[ch], np.nan), levels) for ch in range(n_ch)]
@@ -987,39 +1023,48 @@ def _refine_once(
                 f"{counts.tolist()}); the data do not determine the exposure times"
             )
         use &= refined[None, :]
-        rows_ok = use.sum(axis=1) >= 2
-        w0 = np.where(use, w_all, 0.0)[rows_ok][:, refined]
-        c = c_full[refined] / c_full[refined].sum() if gauge == "geometric mean" else None
+        # the solve's exposures: those the pixels link into one set (the other sets keep
+        # their labels; their values still predict the next pass's levels)
+        linked = _largest_linked_set(use, refined, counts)
+        if linked.sum() < 2:
+            raise CalibrationError(
+                "exposure refinement: no two exposures share values with each other (per "
+                f"exposure: {counts.tolist()}); the data do not relate the exposure times"
+            )
+        solve = use & linked[None, :]
+        rows_ok = solve.sum(axis=1) >= 2
+        w0 = np.where(solve, w_all, 0.0)[rows_ok][:, linked]
+        c = c_full[linked] / c_full[linked].sum() if gauge == "geometric mean" else None
         if c is None:
-            c = np.zeros(int(refined.sum()))
+            c = np.zeros(int(linked.sum()))
             c[-1] = 1.0
-        target = float(c @ x_nom[refined])
+        target = float(c @ x_nom[linked])
         xr, cov_r, a_p, scale, iterations = _solve(
-            np.where(use, y, 0.0)[rows_ok][:, refined],
+            np.where(solve, y, 0.0)[rows_ok][:, linked],
             w0,
-            x[refined],
+            x[linked],
             c,
             target,
             huber_k,
             max_iterations,
         )
         x = x_nom.copy()
-        x[refined] = xr
+        x[linked] = xr
         cov = np.full((n_k, n_k), np.nan)
-        cov[np.ix_(refined, refined)] = cov_r
+        cov[np.ix_(linked, linked)] = cov_r
         if stack.n_repeats == 1:
             # σ²(z) from the residuals of this pass, corrected for leverage w/W
-            yy = np.where(use, y, 0.0)[rows_ok][:, refined]
+            yy = np.where(solve, y, 0.0)[rows_ok][:, linked]
             res = np.where(w0 > 0, yy - a_p[:, None] - xr[None, :], np.nan)
             lev = w0 / w0.sum(axis=1, keepdims=True)
-            z_levels = z_ref[rows_ok][:, refined]
-            var_z = (res / s1[rows_ok][:, refined]) ** 2 / np.maximum(1 - lev, 1e-3)
+            z_levels = z_ref[rows_ok][:, linked]
+            var_z = (res / s1[rows_ok][:, linked]) ** 2 / np.maximum(1 - lev, 1e-3)
             for ch in range(n_ch):
                 sel = (chan[rows_ok] == ch)[:, None] & (w0 > 0)
                 tables[ch] = _binned_variance(
                     z_levels[sel], var_z[sel], float(black[ch]), float(sat[ch])
                 )
-    return _refinement_of(nominal, x, refined, cov, counts, scale, gauge, iterations)
+    return _refinement_of(nominal, x, linked, cov, counts, scale, gauge, iterations)
 
 
 PAIR_ROWS = 3_000

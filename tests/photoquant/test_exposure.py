@@ -122,6 +122,31 @@ def test_exposures_that_share_no_pixels_are_not_refined():
         refine_exposure_times(stack, levels, g)
 
 
+def test_exposures_in_sets_no_pixel_links_keep_the_labels_of_the_smaller_set():
+    """Two sets of exposures 16× apart that no pixel sees both of (the bright pixels
+    clip in the long ones, the dark ones are below the floor in the short ones, as a
+    glare capture's source and tail): the values relate the times within each set and
+    nothing between them. The set with more values is refined, to its jitter; the other
+    keeps its labels. (One gauge over both sets left their relative scale to rounding:
+    a glare capture's times came out 44× off.)"""
+    rng = np.random.default_rng(11)
+    t_nom = np.array([1.0, 2.0, 4.0, 64.0, 128.0, 256.0]) * 1e-3
+    t_act = t_nom * np.exp(0.02 * rng.standard_normal(t_nom.size))
+    e = np.concatenate([rng.uniform(6e3, 5e4, 700), rng.uniform(60.0, 800.0, 300)])  # DN / s
+    rng.shuffle(e)
+    values = e[None, :] * t_act[:, None] + rng.normal(0.0, 0.7, (t_nom.size, e.size))
+    frames = np.clip(np.rint(values), 0, 255).astype(np.uint8).reshape(1, t_nom.size, 25, 40, 1)
+    stack = ExposureStack(frames, t_nom, channels=("Y",), saturation_level=[255])
+    levels = np.arange(256.0)
+    g = np.log(np.maximum(levels, 0.5))[None]
+    ref = refine_exposure_times(stack, levels, g, valid_min=np.array([12.0]))
+    short, long_ = slice(0, 3), slice(3, 6)
+    assert ref.refined[short].all() and not ref.refined[long_].any(), ref.n_values
+    np.testing.assert_array_equal(ref.exposure_s[long_], t_nom[long_])
+    err = _gauge_free(np.log(ref.exposure_s[short])) - _gauge_free(np.log(t_act[short]))
+    assert np.all(np.abs(err) < 4 * ref.log_std[short] + 1e-3), (err, ref.log_std)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
