@@ -651,17 +651,13 @@ def _normal_equations(
         valid, weights, knot_pos, log_tk = (
             np.take_along_axis(a, order, axis=0) for a in (valid, weights, knot_pos, log_tk)
         )
-    k_count = valid.shape[0]
-    w = np.where(valid, weights, 0.0)
-    u = np.minimum(np.where(valid, knot_pos, 0.0), top)
-    i0 = np.minimum(np.floor(u).astype(np.int64), max(top - 1, 0))
-    alpha = u - i0
-    i1 = i0 + 1
-    wlt = w * log_tk
-    # per value: its two level entries (2K, P) and their coefficients in its data row
-    idx = np.concatenate([i0, i1])
-    coef = np.concatenate([w * (1 - alpha), w * alpha])
-    # N_gg: the data rows' 2 × 2 blocks, the smoothness rows' 3 × 3, the gauge
+    # C order whatever the sample's layout: numpy's sums over an axis add in an order
+    # that depends on the layout (pairwise along a contiguous axis), the compiled kernel's
+    # and the solve's in one: with C order they are the same sums, in the exposures' order
+    valid, weights, knot_pos, log_tk = (
+        np.ascontiguousarray(a) for a in (valid, weights, knot_pos, log_tk)
+    )
+    # the smoothness rows' 3 × 3 blocks of N_gg and the gauge
     j = np.arange(1, top)
     sw2 = smoothness * smooth_w[j] ** 2
     stencil = np.array([1.0, -2.0, 1.0])
@@ -670,31 +666,16 @@ def _normal_equations(
     s_prod = np.append(
         (sw2[:, None, None] * stencil[None, :, None] * stencil[None, None, :]).reshape(-1), 1.0
     )
-    # the pixel block: d_p = Σ_k w², and N_ge's column p: −w · coef at the value's levels
-    d = np.sum(w * w, axis=0)
+    if _kernels.HAVE_NUMBA:
+        w, wlt, idx, coef, nge, d, rhs_e, schur, r_red, support = _kernels.normal_terms(
+            valid, weights, log_tk, knot_pos, top, n_g, s_pair, s_prod
+        )
+    else:
+        w, wlt, idx, coef, nge, d, rhs_e, schur, r_red, support = _normal_terms_numpy(
+            valid, weights, log_tk, knot_pos, top, n_g, s_pair, s_prod
+        )
     if np.any(d <= 0):  # pragma: no cover - sampling guarantees two equations per pixel
         raise CalibrationError("a sampled pixel has no valid exposure")
-    w2 = np.concatenate([w, w])
-    nge = -w2 * coef  # (2K, P)
-    rhs_g = np.bincount(idx.reshape(-1), (coef * np.concatenate([wlt, wlt])).reshape(-1), n_g)
-    rhs_e = -np.sum(w * wlt, axis=0)
-    # Schur complement: Σ_p (1/d_p) n_p n_pᵀ over the pairs of entries of pixel p
-    scaled = nge / d
-    if _kernels.HAVE_NUMBA:
-        n_gg = np.zeros(n_g * n_g)
-        corr = np.zeros(n_g * n_g)
-        _kernels.normal_blocks(idx, coef, scaled, nge, k_count, n_g, s_pair, s_prod, n_gg, corr)
-    else:
-        n_gg, corr = _normal_blocks_numpy(idx, coef, scaled, nge, k_count, n_g, s_pair, s_prod)
-    schur = n_gg.reshape(n_g, n_g) - corr.reshape(n_g, n_g)
-    r_red = rhs_g - np.bincount(idx.reshape(-1), (nge * (rhs_e / d)).reshape(-1), n_g)
-    support = np.bincount(
-        idx.reshape(-1),
-        np.where(np.concatenate([valid, valid]), np.concatenate([1 - alpha, alpha]), 0.0).reshape(
-            -1
-        ),
-        n_g + 1,
-    )[:n_g]
     return {
         "schur": schur,
         "r_red": r_red,
@@ -708,6 +689,52 @@ def _normal_equations(
         "support": support,
         "valid": valid,
     }
+
+
+def _normal_terms_numpy(
+    valid: np.ndarray,
+    weights: np.ndarray,
+    log_tk: np.ndarray,
+    knot_pos: np.ndarray,
+    top: int,
+    n_g: int,
+    s_pair: np.ndarray,
+    s_prod: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """The arrays of eq. 7's normal equations from the data rows ``(K, P)``:
+    ``w, wlt, idx, coef, nge, d, rhs_e, schur, r_red, support`` (the readable version of
+    :func:`photoquant.response._kernels.normal_terms`, which gives the same bits)."""
+    k_count = valid.shape[0]
+    w = np.where(valid, weights, 0.0)
+    u = np.minimum(np.where(valid, knot_pos, 0.0), top)
+    i0 = np.minimum(np.floor(u).astype(np.int64), max(top - 1, 0))
+    alpha = u - i0
+    i1 = i0 + 1
+    wlt = w * log_tk
+    # per value: its two level entries (2K, P) and their coefficients in its data row
+    idx = np.concatenate([i0, i1])
+    coef = np.concatenate([w * (1 - alpha), w * alpha])
+    # the pixel block: d_p = Σ_k w², and N_ge's column p: −w · coef at the value's levels
+    d = np.sum(w * w, axis=0)
+    if np.any(d <= 0):  # pragma: no cover - sampling guarantees two equations per pixel
+        raise CalibrationError("a sampled pixel has no valid exposure")
+    w2 = np.concatenate([w, w])
+    nge = -w2 * coef  # (2K, P)
+    rhs_g = np.bincount(idx.reshape(-1), (coef * np.concatenate([wlt, wlt])).reshape(-1), n_g)
+    rhs_e = -np.sum(w * wlt, axis=0)
+    # Schur complement: Σ_p (1/d_p) n_p n_pᵀ over the pairs of entries of pixel p
+    scaled = nge / d
+    n_gg, corr = _normal_blocks_numpy(idx, coef, scaled, nge, k_count, n_g, s_pair, s_prod)
+    schur = n_gg.reshape(n_g, n_g) - corr.reshape(n_g, n_g)
+    r_red = rhs_g - np.bincount(idx.reshape(-1), (nge * (rhs_e / d)).reshape(-1), n_g)
+    support = np.bincount(
+        idx.reshape(-1),
+        np.where(np.concatenate([valid, valid]), np.concatenate([1 - alpha, alpha]), 0.0).reshape(
+            -1
+        ),
+        n_g + 1,
+    )[:n_g]
+    return w, wlt, idx, coef, nge, d, rhs_e, schur, r_red, support
 
 
 def _normal_blocks_numpy(

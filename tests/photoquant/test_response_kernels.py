@@ -22,6 +22,7 @@ from photoquant.response.censoring import trim_censored_partners
 from photoquant.response.debevec1997 import (
     _at_or_above_by_channel,
     _channel_major,
+    _normal_equations,
     select_samples_histogram,
 )
 
@@ -112,6 +113,42 @@ def test_the_compiled_sampler_takes_integer_values():
         slow = select_samples_histogram(ints, valid, 255.0, 300, np.random.default_rng(2))
     assert fast.size == 300
     np.testing.assert_array_equal(fast, slow)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    k_count=st.integers(1, 9),
+    n_pix=st.integers(1, 60),
+    top=st.integers(1, 300),
+    layout=st.sampled_from(["C", "F"]),
+    per_value_times=st.booleans(),
+)
+def test_the_compiled_normal_equations_are_the_numpy_ones(
+    seed, k_count, n_pix, top, layout, per_value_times
+):
+    # every array of eq. 7's system, bit for bit: values past the top level, invalid
+    # values (whose weights and positions are garbage), the sample's layout either way
+    rng = np.random.default_rng(seed)
+    valid = rng.random((k_count, n_pix)) < 0.7
+    valid[0] = True  # every pixel has a valid value
+    weights = np.where(valid, rng.random((k_count, n_pix)), rng.normal(0, 1e3, valid.shape))
+    knot_pos = np.where(valid, rng.random(valid.shape) * top * 1.1, -rng.random(valid.shape))
+    log_t = (
+        rng.normal(size=(k_count, n_pix)) if per_value_times else np.sort(rng.normal(size=k_count))
+    )
+    if layout == "F":
+        valid, weights, knot_pos = (np.asfortranarray(a) for a in (valid, weights, knot_pos))
+        log_t = np.asfortranarray(log_t)
+    smooth_w = rng.random(top + 1)
+    args = (valid, weights, log_t, knot_pos, top, smooth_w, 10.0 * rng.random(), top // 2)
+    fast = _normal_equations(*args)
+    with _numpy_only():
+        slow = _normal_equations(*args)
+    assert fast.keys() == slow.keys()
+    for name in fast:
+        assert fast[name].dtype == slow[name].dtype, name
+        assert fast[name].tobytes() == np.ascontiguousarray(slow[name]).tobytes(), name
 
 
 @settings(max_examples=25, deadline=None)
