@@ -57,6 +57,7 @@ from __future__ import annotations
 import numpy as np
 
 from photoquant.errors import InputError
+from photoquant.response import _kernels
 
 __all__ = [
     "HUBER_K",
@@ -114,6 +115,23 @@ def round_loss(robust: str, index: int, n_rounds: int) -> str:
     return "tukey" if robust == "tukey" and index >= n_rounds // 2 else "huber"
 
 
+def _band_scales(r: np.ndarray, used: np.ndarray, band: np.ndarray, n_bands: int) -> np.ndarray:
+    """``s_b``: the normalised median absolute residual ``r`` of the used values in each
+    band (0 where a band has none); compiled where numba is (the same bits)."""
+    scale = np.zeros(n_bands)
+    if _kernels.HAVE_NUMBA:
+        flat = (np.ascontiguousarray(a).reshape(-1) for a in (r, used, band))
+        medians, counts = _kernels.band_medians(*flat, n_bands)
+        for b in np.flatnonzero(counts):
+            scale[b] = _MAD_TO_SIGMA * float(medians[b])
+        return scale
+    for i in range(n_bands):
+        in_band = r[used & (band == i)]
+        if in_band.size:
+            scale[i] = _MAD_TO_SIGMA * float(np.median(in_band))
+    return scale
+
+
 def robust_weights(
     residual: np.ndarray,
     used: np.ndarray,
@@ -158,11 +176,7 @@ def robust_weights(
     r = np.abs(np.asarray(residual, dtype=np.float64))
     used = np.asarray(used, dtype=bool)
     b = np.clip(np.asarray(band, dtype=np.int64), 0, n_bands - 1)
-    scale = np.zeros(n_bands)
-    for i in range(n_bands):
-        in_band = r[used & (b == i)]
-        if in_band.size:
-            scale[i] = _MAD_TO_SIGMA * float(np.median(in_band))
+    scale = _band_scales(r, used, b, n_bands)
     s = scale[b]
     with np.errstate(all="ignore"):  # subnormal scales; the where()s pick finite values
         if loss == "tukey":

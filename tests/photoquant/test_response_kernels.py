@@ -151,6 +151,33 @@ def test_the_compiled_normal_equations_are_the_numpy_ones(
         assert fast[name].tobytes() == np.ascontiguousarray(slow[name]).tobytes(), name
 
 
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    shape=st.tuples(st.integers(1, 12), st.integers(1, 300)),
+    used_share=st.floats(0.0, 1.0),
+    ties=st.booleans(),
+    nan=st.booleans(),
+)
+def test_the_compiled_band_scales_are_the_numpy_ones(seed, shape, used_share, ties, nan):
+    # the robust fit's noise scale per band: empty bands, bands of one value, even and
+    # odd counts, repeated values, a NaN (numpy's median is NaN then)
+    from photoquant.response.robust import LEVEL_BANDS, _band_scales
+
+    rng = np.random.default_rng(seed)
+    r = np.abs(rng.normal(size=shape))
+    if ties:
+        r = np.round(r, 1)
+    if nan:
+        r[rng.integers(shape[0]), rng.integers(shape[1])] = np.nan
+    used = rng.random(shape) < used_share
+    band = rng.integers(0, LEVEL_BANDS, shape)
+    fast = _band_scales(r, used, band, LEVEL_BANDS)
+    with _numpy_only():
+        slow = _band_scales(r, used, band, LEVEL_BANDS)
+    assert fast.tobytes() == slow.tobytes()
+
+
 @settings(max_examples=25, deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),
