@@ -57,7 +57,7 @@ GROUPS = {
 SHAPE = (48, 64)
 
 
-def _capture(tmp_path, disturbances):
+def _capture(tmp_path, disturbances, seed=0):
     camera = camera_from_preset("ccd", disturbances=disturbances, **_GLARE)
     return write_capture_set(
         tmp_path / "set",
@@ -67,7 +67,7 @@ def _capture(tmp_path, disturbances):
         glare={"level": 30.0},
         dark_frames=4,
         n_repeats=2,
-        seed=0,
+        seed=seed,
     )
 
 
@@ -88,6 +88,21 @@ def test_every_pair_calibrates(tmp_path, first, second):
 def test_all_together_calibrate(tmp_path):
     every = {key: value for group in GROUPS.values() for key, value in group.items()}
     _calibrates(_capture(tmp_path, every))
+
+
+@pytest.mark.parametrize(
+    ("groups", "seed"),
+    [(("black", "bayer"), 4), (("black", "bayer"), 6), (("dsnu", "bayer"), 7), (tuple(GROUPS), 3)],
+    ids=["black+bayer-seed4", "black+bayer-seed6", "dsnu+bayer-seed7", "all-seed3"],
+)
+def test_captures_whose_glare_exposures_fall_in_two_unlinked_sets_calibrate(tmp_path, groups, seed):
+    """The glare capture's short exposures see only the source, its long ones only the
+    tail: no pixel links the two sets. One gauge over both left their relative scale to
+    rounding (times up to 44× off); these four of the 261 captures of seeds 1–9 were
+    then refused (the glare fit at its bound; in the last, the vignetting fit after the
+    glare removal). Seeds 0–9 of every pair: none refused now."""
+    disturbances = {key: value for name in groups for key, value in GROUPS[name].items()}
+    _calibrates(_capture(tmp_path, disturbances, seed))
 
 
 def test_the_values_objective_calibrates_a_bayer_camera_with_dsnu_and_glare(tmp_path):
