@@ -662,7 +662,12 @@ def refine_exposure_times(
         only the values noise pushed away from it, and bias the short
         exposures long and the long ones short (truncation bias).
     min_overlap : int
-        Values an exposure must share with the others to be refined.
+        Values an exposure must share with the others to be refined. Of
+        the exposures that have them, those the pixels link into one set
+        (an exposure shares a pixel with another of the set, directly or
+        through others) are refined, the set with most values; exposures in
+        other sets keep their labels: nothing in the values relates their
+        times to the set's.
     max_values : int
         At most this many pixels (× channels) are used, drawn at random
         (``seed``) among those valid in two exposures or more.
@@ -898,10 +903,11 @@ def _largest_linked_set(use: np.ndarray, refined: np.ndarray, counts: np.ndarray
     Pixels that use two exposures (``use``, ``(P, K)``) link them; exposures
     in separate sets share no pixel, directly or through others, so the
     values fix the times within each set and nothing between them: one
-    gauge over two sets leaves their relative scale to rounding (a glare
-    capture whose source is clipped at the middle exposures, its tail dark
-    at the short ones, split its times by 44× that way). The other sets keep
-    their labels. Ties go to the set of the shortest exposure.
+    gauge over two sets would leave their relative scale to rounding. A
+    glare capture has two: its short exposures see only the source, its
+    long ones only the tail, the middle ones neither (the source clipped,
+    the tail below the floor). ``counts``: each exposure's values; ties go
+    to the set of the first exposure.
     """
     members = np.flatnonzero(refined)
     if members.size < 2:

@@ -651,9 +651,10 @@ def _normal_equations(
         valid, weights, knot_pos, log_tk = (
             np.take_along_axis(a, order, axis=0) for a in (valid, weights, knot_pos, log_tk)
         )
-    # C order whatever the sample's layout: numpy's sums over an axis add in an order
-    # that depends on the layout (pairwise along a contiguous axis), the compiled kernel's
-    # and the solve's in one: with C order they are the same sums, in the exposures' order
+    # C order whatever the sample's layout: numpy sums along a contiguous axis pairwise and
+    # along another row by row, so the order of the sums over the exposures (here and in the
+    # solve) would follow the layout; in C order it is the exposures' order, in the numpy
+    # and the compiled versions alike
     valid, weights, knot_pos, log_tk = (
         np.ascontiguousarray(a) for a in (valid, weights, knot_pos, log_tk)
     )
