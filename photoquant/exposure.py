@@ -912,18 +912,12 @@ def _largest_linked_set(use: np.ndarray, refined: np.ndarray, counts: np.ndarray
     members = np.flatnonzero(refined)
     if members.size < 2:
         return refined
-    sub = use[:, members].astype(np.float64)
-    linked = (sub.T @ sub) > 0  # exposures sharing a pixel
-    component = np.full(members.size, -1)
-    for start in range(members.size):
-        if component[start] >= 0:
-            continue
-        component[start] = start
-        frontier = [start]
-        while frontier:
-            nxt = np.flatnonzero(linked[frontier].any(axis=0) & (component < 0))
-            component[nxt] = start
-            frontier = nxt.tolist()
+    sub = use[:, members].astype(np.int64)
+    # exposures sharing a pixel, then closed under "through others" by squaring
+    reach = ((sub.T @ sub) > 0) | np.eye(members.size, dtype=bool)
+    while not np.array_equal(closed := (reach.astype(np.int64) @ reach) > 0, reach):
+        reach = closed
+    component = reach.argmax(axis=1)  # each exposure's set, named by its first member
     labels = np.unique(component)
     if labels.size == 1:
         return refined

@@ -404,19 +404,13 @@ def _normal_terms_py(
     rhs_g = np.zeros(n_g)
     back = np.zeros(n_g)
     support = np.zeros(n_g + 1)
-    for a in range(2 * n_k):
+    for a in range(2 * n_k):  # each sum in the flattened (2K, P) order of its bincount
         k = a % n_k
         for p in range(n_p):
             nge[a, p] = -w[k, p] * coef[a, p]
             scaled[a, p] = nge[a, p] / d[p]
             rhs_g[idx[a, p]] += coef[a, p] * wlt[k, p]
-    for a in range(2 * n_k):
-        k = a % n_k
-        for p in range(n_p):
             back[idx[a, p]] += nge[a, p] * (rhs_e[p] / d[p])
-    for a in range(2 * n_k):
-        k = a % n_k
-        for p in range(n_p):
             if valid[k, p]:
                 support[idx[a, p]] += (1 - alpha[k, p]) if a < n_k else alpha[k, p]
             else:
