@@ -422,7 +422,7 @@ def _fit_photoquant(
 
 def crossval_stack(
     stack: ExposureStack,
-    method: str = "Debevec 1997",
+    method: str | ResponseModel = "Debevec 1997",
     *,
     roi: Sequence[int] | None = None,
     seed: int = 0,
@@ -729,7 +729,7 @@ def prediction_sigma_dn(
 
 def crossval_manifest(
     manifest: Any,
-    method: str = "Debevec 1997",
+    method: str | ResponseModel = "Debevec 1997",
     *,
     roi: Sequence[int] | None = None,
     allow_outside: bool = False,

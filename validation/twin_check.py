@@ -14,7 +14,17 @@ camera shot:
    manifest's ``crossval_roi``): a faithful twin predicts its held-out frames
    about as well as the camera's own frames are predicted. The check asks for
    a ratio within :data:`FAITHFUL_RATIO` either way;
-4. on the twin's bracket the truth is known: each response method is fitted
+4. the twin's bracket is cross-validated once more with the twin's *true*
+   response in place of the recovered one (the same merge, correction and
+   scoring). The default pipeline's error over it
+   (:attr:`TwinCheck.response_cost`) is what estimating the response from the
+   bracket costs the prediction on this camera: well above 1, the response
+   estimate is what limits it; near 1, the noise and the scene do. It can
+   fall below 1: the held-out values are predicted from the other frames'
+   noisy merge, and eq. 7's fit, which regresses towards the mean where the
+   values are noisy, can predict noisy values better than the truth does
+   (measured on Memorial's twin: 0.95);
+5. on the twin's bracket the truth is known: each response method is fitted
    (one view, the calibration's defaults otherwise) and its ``g`` scored
    against the twin's true response — which method to use for this camera,
    on its own scene, with a truth the real bracket cannot give.
@@ -29,11 +39,14 @@ looser twin.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from photoquant.errors import InputError
 
@@ -84,6 +97,9 @@ class TwinCheck:
     ----------
     real, twin : CrossvalResult
         Leave-one-exposure-out on the camera's bracket and on the twin's.
+    twin_truth : CrossvalResult
+        Leave-one-exposure-out on the twin's bracket with the twin's true
+        response in place of the recovered one.
     camera_unit : float
         The camera's photoquantity of 1 in the twin's unit (from the twin).
     seed : int
@@ -94,6 +110,7 @@ class TwinCheck:
 
     real: Any
     twin: Any
+    twin_truth: Any
     camera_unit: float
     seed: int
     methods: tuple[MethodOnTwin, ...]
@@ -103,6 +120,14 @@ class TwinCheck:
         """The twin's cross-validation error over the real bracket's."""
         real = self.real.overall_mae_dn
         return float(self.twin.overall_mae_dn / real) if real > 0 else math.nan
+
+    @property
+    def response_cost(self) -> float:
+        """The twin's cross-validation error with the recovered response over the
+        error with its true response: what estimating the response from the bracket
+        costs the prediction on this camera (module notes, step 4)."""
+        truth = self.twin_truth.overall_mae_dn
+        return float(self.twin.overall_mae_dn / truth) if truth > 0 else math.nan
 
     @property
     def faithful(self) -> bool:
@@ -179,6 +204,7 @@ def twin_check(
     from photoquant.model import CameraModel, load_camera
     from photoquant.response import RESPONSE_METHODS
     from pqsim.twin import capture_camera_scene, load_twin
+    from validation.truth_model import camera_model_from_truth
 
     say = progress or (lambda _line: None)
     names = [RESPONSE_METHODS[m].name for m in methods]
@@ -214,12 +240,21 @@ def twin_check(
     real = crossval_stack(stack, roi=roi)
     say("twin-check: cross-validating the twin's bracket")
     twin_cv = crossval_stack(twin_stack, roi=roi)
+    say("twin-check: cross-validating the twin's bracket with its true response")
+    # the twin's true response, trusted over the camera's range: the levels the camera's
+    # fit left below `valid_min` weigh nothing in the merge either way
+    true_response = camera_model_from_truth(capture.truth.camera).response
+    if model.response.valid_min is not None:
+        true_response = dataclasses.replace(
+            true_response, valid_min=np.array(model.response.valid_min, dtype=np.float64)
+        )
+    truth_cv = crossval_stack(twin_stack, true_response, roi=roi)
     scored = []
     for name in names:
         say(f"twin-check: {name} against the twin's truth")
         scored.append(_score_on_truth(twin_stack, capture.truth, name, seed))
     scored.sort(key=lambda m: (m.g_rms_ln is None, m.g_rms_ln or 0.0))
-    return TwinCheck(real, twin_cv, unit, seed, tuple(scored))
+    return TwinCheck(real, twin_cv, truth_cv, unit, seed, tuple(scored))
 
 
 def twin_check_json(result: TwinCheck) -> dict[str, Any]:
@@ -228,7 +263,9 @@ def twin_check_json(result: TwinCheck) -> dict[str, Any]:
         "format": "photoquant.twin-check/1",
         "real": result.real.to_json(),
         "twin": result.twin.to_json(),
+        "twin_true_response": result.twin_truth.to_json(),
         "ratio": result.ratio,
+        "response_cost": result.response_cost,
         "faithful": result.faithful,
         "faithful_ratio": FAITHFUL_RATIO,
         "camera_unit": result.camera_unit,
@@ -242,6 +279,7 @@ def twin_check_json(result: TwinCheck) -> dict[str, Any]:
 def format_twin_check(result: TwinCheck) -> str:
     """The check as text: the two cross-validations, the verdict and the methods' table."""
     real, twin = result.real.overall_mae_dn, result.twin.overall_mae_dn
+    truth = result.twin_truth.overall_mae_dn
     verdict = "faithful" if result.faithful else "not faithful"
     lines = [
         "leave one exposure out (default pipeline), mean |error| of the held-out values:",
@@ -259,6 +297,12 @@ def format_twin_check(result: TwinCheck) -> str:
             "  the twin is noisier than the camera: its noise was read from data that hold "
             "more than sensor noise (characterise with repeats, dark or flat frames)"
         )
+    lines += [
+        "",
+        "the twin's bracket with its true response in place of the recovered one:",
+        f"  {truth:.3f} DN: estimating the response from the bracket costs "
+        f"{result.response_cost:.3f}x",
+    ]
     if result.methods:
         lines += ["", "response methods on the twin's bracket, against its true response:"]
         width = max(len(m.method) for m in result.methods)

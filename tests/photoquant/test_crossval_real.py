@@ -9,7 +9,9 @@ the same scored values. The sets are read from ``../shared/data/real``
 
 Measured 2026-12-05 (ratio to OpenCV, DN): Memorial 2.289 against 4.265
 (0.54), frobisher 7.34 against 17.91 (0.41), St. Louis 9.73 against 14.17
-(0.69), the 12-bit bracket 94.31 against its authors' response's 92.31 (1.02).
+(0.69), the 12-bit bracket 94.31 against its authors' response's 92.31 (1.02; what
+estimating a response costs there, measured on a twin whose true response is the
+authors', is the 12-bit test's target).
 The two JPEG brackets read a JPEG block's reach of every clipped value as
 clipped (the manifest's default for JPEG files), which also removes those
 values from the scored ones, for both pipelines alike.
@@ -137,26 +139,86 @@ def _authors_response(folder: Path):
     )
 
 
-@pytest.mark.slow  # 6 frames of 1920x1200, 4 folds each for two responses: ~60 s here
+def _authors_twin_costs(folder: Path, path: Path, tmp: Path) -> tuple[float, dict[str, float]]:
+    """The bracket's cross-validation with the default pipeline, and what each
+    estimate costs on a twin whose true response is the authors' (its cross-validation
+    error over the true response's, on the same folds and values)."""
+    import dataclasses
+
+    from photoquant.calibration import calibrate_manifest
+    from photoquant.characterise import characterise_manifest
+    from photoquant.correction import correct
+    from photoquant.crossval import crossval_stack
+    from photoquant.io import load_manifest, load_stack
+    from pqsim.twin import capture_camera_scene, twin_preset_json
+    from validation.twin_check import twin_check
+
+    authors = _authors_response(folder)
+    ours = calibrate_manifest(path, allow_outside=True)
+    response = dataclasses.replace(
+        ours.response,
+        levels=authors.levels,
+        log_inverse_response=authors.log_inverse_response,
+        covariance_factor=None,
+        covariance_diagonal=None,
+        covariance_reference=None,
+    )
+    camera = dataclasses.replace(ours, response=response)
+    twin = tmp / "twin.json"
+    twin.write_text(
+        twin_preset_json(camera, characterise_manifest(path, camera, allow_outside=True))
+    )
+    check = twin_check(path, camera, twin, methods=[], allow_outside=True)
+    costs = {"Debevec 1997": check.response_cost}
+    manifest = load_manifest(path, allow_outside=True)
+    stack = load_stack(manifest.views[0], manifest)
+    scene = correct(stack, camera, uncertainty=False).photoquantity
+    # the check's twin bracket again (its seed, 0: the same bits)
+    capture = capture_camera_scene(twin, scene, stack.exposure_s, stack.n_repeats, rng=0)
+    emor = crossval_stack(capture.to_stack(), "EMoR 2004").overall_mae_dn
+    costs["EMoR 2004"] = emor / check.twin_truth.overall_mae_dn
+    return check.real.overall_mae_dn, costs
+
+
+@pytest.fixture(scope="module")
+def twelve_bit(tmp_path_factory):
+    """The 12-bit bracket's cross-validation: the default's, its authors' response's, and
+    each estimate's cost on the authors' twin (6 frames of 1920x1200: the bracket twice,
+    its twin three times, ~4 min here)."""
+    folder = _real("borealhdr_mv12bit")
+    tmp = tmp_path_factory.mktemp("twelve-bit")
+    path = _manifest(folder, tmp, bit_depth=12, channels=["Y"])
+    ours, costs = _authors_twin_costs(folder, path, tmp)
+    authors = crossval_manifest(path, _authors_response(folder), allow_outside=True)
+    assert authors.method == "BorealHDR authors' response"
+    return ours, authors.overall_mae_dn, costs
+
+
+@pytest.mark.slow
+def test_no_estimate_reaches_the_true_response_on_the_twelve_bit_twin(twelve_bit):
+    """On a simulated twin of the camera whose true response *is* the authors' (its scene,
+    exposure times and noise the bracket's), no estimate from the bracket predicts the
+    held-out frames as well as the true response. Measured 2026-12-06 over twin seeds
+    0-2: the default 1.016-1.023x the truth's error, EMoR 2004 1.004-1.006x, the option
+    ``edges="excluded"`` with ``objective="values"`` 1.009-1.010x. (Not a theorem: where
+    the merge the prediction starts from is noisy, a fit that regresses towards the mean
+    can predict noisy values better than the truth; on this twin none does.)"""
+    _, _, costs = twelve_bit
+    assert min(costs.values()) > 1.0, costs
+
+
+@pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
     reason="12-bit machine-vision bracket: 94.31 DN against 92.31 with its authors' response "
-    "through the same pipeline (1.02x; target 1.0x; measured 2026-12-05); with EMoR 2004 (5 "
-    "components) 93.12, with the option edges='excluded' 93.30 (2026-12-05)",
+    "(1.022x); the best estimate's cost on the authors' twin 1.004-1.006x (EMoR 2004; the "
+    "default's 1.016-1.023x; measured 2026-12-06)",
 )
-def test_twelve_bit_bracket_is_within_its_authors_response(tmp_path):
-    from photoquant.crossval import crossval_manifest
-
-    folder = _real("borealhdr_mv12bit")
-    path = _manifest(folder, tmp_path, bit_depth=12, channels=["Y"])
-    ours = crossval_manifest(path, allow_outside=True)
-    authors = crossval_manifest(path, _authors_response(folder), allow_outside=True)
-    assert [r.n_scored for r in ours.rows] == [r.n_scored for r in authors.rows]
-    assert authors.method == "BorealHDR authors' response"
-    assert ours.overall_mae_dn <= authors.overall_mae_dn, (
-        ours.overall_mae_dn,
-        authors.overall_mae_dn,
-    )
+def test_twelve_bit_bracket_is_within_the_cost_of_estimating_its_authors_response(twelve_bit):
+    """Within its authors' response up to what estimating a response from this bracket
+    costs the best estimate on the authors' twin (the test above)."""
+    ours, authors, costs = twelve_bit
+    assert ours <= min(costs.values()) * authors, (ours, authors, costs)
 
 
 @pytest.mark.slow  # 16 frames of 512x768, 14 folds, twice: ~50 s here
