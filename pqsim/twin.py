@@ -25,6 +25,19 @@ preset (format ``pqsim.preset/1``) for :func:`~pqsim.synth_camera.presets.camera
 - ``disturbances``: black and white levels, DSNU (at the readout), hot and
   stuck pixel fractions from the defect map, the exposure-time error.
 - ``glare``: the camera's measured veiling glare, when it has one.
+- ``measurement.response_sd_ln``: how far the twin's true response may lie
+  from the camera's (the table is the camera's *estimate*): per channel the
+  standard deviation of ``g`` the camera's calibration states
+  (``covariance_factor``, where it is the exposure jackknife's: the
+  sandwich's leaves out the fit's bias and is 1–6× below its error on the
+  simulator's cameras), as the root mean square over the levels a
+  response is scored on (hat weight ≥ 5 % of its peak, above ``valid_min``)
+  after the gauge is removed (:func:`response_sd_ln`). A method's ``g`` error
+  against the twin's truth then differs from its error against the camera's
+  by at most about that much, so two methods whose scores on the twin differ
+  by less than twice it are not told apart by the twin
+  (:func:`twin_response_sd`). Where the camera states no jackknife
+  covariance, the response's uncertainty is named as assumed, with why.
 - ``camera_unit``: the camera's unit of photoquantity in the twin's (one
   value for every channel): a scene the camera measured (``photoquant
   correct``) times it is the same light for the twin, so that
@@ -48,6 +61,7 @@ import numpy as np
 from photoquant.characterise import Characterisation, load_characterisation
 from photoquant.errors import InputError
 from photoquant.model import CameraModel, load_camera
+from photoquant.response.model import ResponseModel
 from photoquant.utils import load_json, to_json_value
 from pqsim.synth_camera.camera import Capture, SyntheticCamera
 from pqsim.synth_camera.presets import PRESET_FORMAT, camera_from_preset
@@ -56,8 +70,10 @@ __all__ = [
     "MAX_TABLE_POINTS",
     "capture_camera_scene",
     "load_twin",
+    "response_sd_ln",
     "twin_preset",
     "twin_preset_json",
+    "twin_response_sd",
 ]
 
 MAX_TABLE_POINTS = 1024
@@ -102,6 +118,64 @@ def _table(camera: CameraModel, ch: int, gain: float, full_well: float) -> dict[
     keep = np.concatenate([[True], np.diff(y) > 0])
     x, y = x[keep], y[keep]
     return {"kind": "table", "params": {"x": x.tolist(), "y": y.tolist()}}
+
+
+def response_sd_ln(response: ResponseModel) -> list[float] | None:
+    """Per channel the standard deviation of a recovered ``g`` as a score sees it.
+
+    The root mean square, over the levels a response is scored on (Debevec's hat
+    weight ≥ 5 % of its peak, above ``valid_min``; weighted by it), of the
+    stated deviation of ``g`` with its weighted mean removed (the gauge of
+    the score): ``√(Σ_r Σ_l w_l (F_rl − F̄_r)² / Σ_l w_l)`` for the covariance
+    factor ``F`` (``Fᵀ F = Cov(g)``). ``None`` where the response states no
+    covariance of ``g``.
+    """
+    resp = response
+    if resp.covariance_factor is None:
+        return None
+    levels = np.asarray(resp.levels, dtype=np.float64)
+    out = []
+    for ch in range(resp.n_channels):
+        half = 0.5 * float(resp.saturation_level[ch])  # Debevec's hat on [0, sat], peak 1
+        w = np.clip(np.minimum(levels, 2.0 * half - levels) / half, 0.0, 1.0)
+        w = np.where(w >= 0.05, w, 0.0)
+        if resp.valid_min is not None:
+            w = np.where(levels >= float(resp.valid_min[ch]), w, 0.0)
+        f = np.asarray(resp.covariance_factor[ch], dtype=np.float64)
+        f = f - (f @ w / w.sum())[:, None]
+        out.append(float(np.sqrt(np.sum(w * f**2) / w.sum())))
+    return out
+
+
+def _stated_response_sd(camera: CameraModel) -> tuple[list[float] | None, str]:
+    """:func:`response_sd_ln` where the camera's covariance of ``g`` is the exposure
+    jackknife's, else ``None`` and why not."""
+    report = camera.report.get("response") if isinstance(camera.report, dict) else None
+    how = report.get("covariance") if isinstance(report, dict) else None
+    if how == "exposure jackknife":
+        return response_sd_ln(camera.response), ""
+    if how == "sandwich":
+        return None, (
+            "the camera states the sandwich covariance of g, its statistical part only: "
+            "1-6x below the fit's error on pqsim's cameras; calibrate with the Debevec 1997 "
+            "option covariance='exposure jackknife' for a twin that states how far its true "
+            "response may lie from the camera's"
+        )
+    return None, "the camera states no covariance of g: the table is the estimate"
+
+
+def twin_response_sd(twin: str | os.PathLike[str]) -> float | None:
+    """The twin's ``measurement.response_sd_ln``, its largest channel's (module notes);
+    ``None`` where the preset states none."""
+    path = Path(twin)
+    doc = load_json(path, f"preset file {path}")
+    sd = doc.get("measurement", {}).get("response_sd_ln") if isinstance(doc, dict) else None
+    if not isinstance(sd, list) or not sd:
+        return None
+    values = [float(v) for v in sd if isinstance(v, int | float) and not isinstance(v, bool)]
+    if len(values) != len(sd) or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise InputError(f"preset file {path}: `measurement.response_sd_ln` must be numbers ≥ 0")
+    return max(values)
 
 
 def twin_preset(
@@ -203,7 +277,9 @@ def twin_preset(
         # x = n / FW with n = s · (u v l t) = s · a_λ e^{g(c)}: the table keeps the mean mapping
         g_ch = float(gain[ch]) * per_channel[ch] / scale
         responses.append(_table(cam, ch, g_ch, full_well))
-    assumed.append("response uncertainty (the camera stores none: the table is the estimate)")
+    response_sd, why_not = _stated_response_sd(cam)
+    if response_sd is None:
+        assumed.append(f"response uncertainty ({why_not})")
     assumed.append(
         f"exposure_scale ({PQSIM_SCALE_PER_FULL_WELL:g} × the full well: pqsim's convention, a "
         "photoquantity of 1 fills the well in 10 ms; a camera measures photoquantities up to "
@@ -282,7 +358,11 @@ def twin_preset(
         "description": "simulator twin of a calibrated camera: every field measured except "
         "those named in `assumed`",
         "assumed": assumed,
-        "measurement": {"uncertainties": uncertainties, "notes": notes},
+        "measurement": {
+            "uncertainties": uncertainties,
+            "notes": notes,
+            **({} if response_sd is None else {"response_sd_ln": response_sd}),
+        },
         "responses": responses,
         "balance": [1.0] * n_ch,
         "noise": {

@@ -27,7 +27,12 @@ camera shot:
 5. on the twin's bracket the truth is known: each response method is fitted
    (one view, the calibration's defaults otherwise) and its ``g`` scored
    against the twin's true response — which method to use for this camera,
-   on its own scene, with a truth the real bracket cannot give.
+   on its own scene, with a truth the real bracket cannot give. The twin's
+   true response is the camera's estimate: where the twin states how far it
+   may lie from the camera's own (``measurement.response_sd_ln``, from a
+   camera calibrated with the exposure jackknife's covariance), methods
+   whose scores are within twice that of the best are reported as tied
+   with it (:attr:`TwinCheck.resolution_ln`): this twin cannot order them.
 
 What no twin carries shows as a ratio above 1: a subject that moved between
 the frames, frames out of register, a tone curve that is not one global
@@ -106,6 +111,10 @@ class TwinCheck:
         The twin's noise seed.
     methods : tuple of MethodOnTwin
         The response methods scored against the twin's truth, best first.
+    resolution_ln : float or None
+        Twice the twin's stated ``response_sd_ln`` (its largest channel's): the
+        smallest difference of ``g`` scores this twin can tell apart; ``None``
+        where the twin states none.
     """
 
     real: Any
@@ -114,6 +123,22 @@ class TwinCheck:
     camera_unit: float
     seed: int
     methods: tuple[MethodOnTwin, ...]
+    resolution_ln: float | None = None
+
+    @property
+    def tied_with_best(self) -> tuple[str, ...]:
+        """The methods other than the best whose ``g`` score is within
+        :attr:`resolution_ln` of the best's (empty where the twin states no resolution)."""
+        scored = [m for m in self.methods if m.g_rms_ln is not None]
+        if self.resolution_ln is None or not scored:
+            return ()
+        best = scored[0].g_rms_ln
+        assert best is not None
+        return tuple(
+            m.method
+            for m in scored[1:]
+            if m.g_rms_ln is not None and m.g_rms_ln - best < self.resolution_ln
+        )
 
     @property
     def ratio(self) -> float:
@@ -203,7 +228,7 @@ def twin_check(
     from photoquant.io import CaptureManifest, load_manifest, load_stack
     from photoquant.model import CameraModel, load_camera
     from photoquant.response import RESPONSE_METHODS
-    from pqsim.twin import capture_camera_scene, load_twin
+    from pqsim.twin import capture_camera_scene, load_twin, twin_response_sd
     from validation.truth_model import camera_model_from_truth
 
     say = progress or (lambda _line: None)
@@ -254,7 +279,9 @@ def twin_check(
         say(f"twin-check: {name} against the twin's truth")
         scored.append(_score_on_truth(twin_stack, capture.truth, name, seed))
     scored.sort(key=lambda m: (m.g_rms_ln is None, m.g_rms_ln or 0.0))
-    return TwinCheck(real, twin_cv, truth_cv, unit, seed, tuple(scored))
+    sd = twin_response_sd(twin)
+    resolution = None if sd is None else 2.0 * sd
+    return TwinCheck(real, twin_cv, truth_cv, unit, seed, tuple(scored), resolution)
 
 
 def twin_check_json(result: TwinCheck) -> dict[str, Any]:
@@ -273,6 +300,8 @@ def twin_check_json(result: TwinCheck) -> dict[str, Any]:
         "methods": [
             {"method": m.method, "g_rms_ln": m.g_rms_ln, "status": m.status} for m in result.methods
         ],
+        "resolution_ln": result.resolution_ln,
+        "tied_with_best": list(result.tied_with_best),
     }
 
 
@@ -306,7 +335,19 @@ def format_twin_check(result: TwinCheck) -> str:
     if result.methods:
         lines += ["", "response methods on the twin's bracket, against its true response:"]
         width = max(len(m.method) for m in result.methods)
+        tied = set(result.tied_with_best)
         for rank, m in enumerate(result.methods, 1):
             score = "failed: " + m.status if m.g_rms_ln is None else f"g rms {m.g_rms_ln:.4f} ln"
-            lines.append(f"  {rank}. {m.method:<{width}}  {score}")
+            mark = "  tied with the best" if m.method in tied else ""
+            lines.append(f"  {rank}. {m.method:<{width}}  {score}{mark}")
+        if result.resolution_ln is None:
+            lines.append(
+                "  (the twin states no uncertainty of its true response: close scores may "
+                "not order the methods on the camera)"
+            )
+        else:
+            lines.append(
+                f"  (a score within {result.resolution_ln:.4f} ln of the best is not told apart "
+                "from it: twice the twin's stated uncertainty of its true response)"
+            )
     return "\n".join(lines)

@@ -712,8 +712,11 @@ def test_simulator_does_not_import_the_calibrator() -> None:
         "photoquant.stack",  # the ExposureStack container of the formats
     )
     # the twin writer is no part of the forward model: it reads a calibrated camera's
-    # folder and its characterisation report (their readers) to write a preset file
-    readers = {"twin.py": ("photoquant.model", "photoquant.characterise")}
+    # folder and its characterisation report (their readers, the response's record) to write a
+    # preset file
+    readers = {
+        "twin.py": ("photoquant.model", "photoquant.characterise", "photoquant.response.model")
+    }
     bad = []
     for path in Path(pqsim.__file__).parent.rglob("*.py"):
         ok = allowed + readers.get(path.name, ())

@@ -72,3 +72,38 @@ def test_bad_inputs_are_refused(measured, tmp_path):
         twin_preset(root / "cam", tmp_path / "nope")
     assert main(["preset"]) == 2
     assert main(["preset", "ccd", "--from-camera", str(root / "cam")]) == 2
+
+
+def _response_with_factor(factor):
+    from photoquant.response.model import ResponseModel
+
+    levels = np.arange(256, dtype=np.float64)
+    g = np.log(np.linspace(1e-3, 1.0, 256))[None]
+    f = np.asarray(factor, dtype=np.float64)[None]
+    return ResponseModel(
+        "test", levels, g, np.array([255.0]), valid_min=np.array([0.0]),
+        covariance_factor=f, covariance_diagonal=np.sum(f**2, axis=1),
+    )  # fmt: skip
+
+
+def test_response_sd_is_the_gauge_free_rms_of_the_stated_deviation():
+    """A deviation that is a constant is the gauge: none; a ramp's is its weighted rms about
+    its weighted mean over the scored levels (the hat ≥ 5 % of its peak); none stated, none."""
+    import dataclasses
+
+    from photoquant.weighting import weighting_hat_Debevec1997
+    from pqsim.twin import response_sd_ln
+
+    levels = np.arange(256, dtype=np.float64)
+    assert response_sd_ln(_response_with_factor(np.full((1, 256), 0.3))) == pytest.approx(
+        [0.0], abs=1e-15
+    )
+    ramp = 0.01 * levels / 255
+    sloped = _response_with_factor(np.stack([ramp, np.full(256, 0.2)]))
+    w = weighting_hat_Debevec1997(levels, 0.0, 255.0)
+    w = np.where(w >= 0.05, w, 0.0)
+    centred = ramp - np.sum(w * ramp) / w.sum()
+    expected = np.sqrt(np.sum(w * centred**2) / w.sum())
+    assert response_sd_ln(sloped) == pytest.approx([expected], rel=1e-12)
+    bare = dataclasses.replace(sloped, covariance_factor=None, covariance_diagonal=None)
+    assert response_sd_ln(bare) is None

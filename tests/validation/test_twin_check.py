@@ -96,6 +96,60 @@ def test_methods_are_scored_on_the_twins_truth_best_first(check):
     assert "faithful" in text and "1. " in text
 
 
+def test_a_twin_without_a_stated_response_uncertainty_says_so(check, camera_and_twin):
+    """The camera states the sandwich covariance (its default): the twin names its
+    response's uncertainty as assumed and the check orders every method."""
+    doc = json.loads(camera_and_twin[2].read_text())
+    assert any(a.startswith("response uncertainty (") and "sandwich" in a for a in doc["assumed"])
+    assert "response_sd_ln" not in doc["measurement"]
+    assert check.resolution_ln is None and check.tied_with_best == ()
+    assert "states no uncertainty of its true response" in format_twin_check(check)
+
+
+def test_methods_within_the_twins_resolution_are_tied_with_the_best():
+    from validation.twin_check import MethodOnTwin, TwinCheck
+
+    methods = (
+        MethodOnTwin("A", 0.010),
+        MethodOnTwin("B", 0.0139),
+        MethodOnTwin("C", 0.0141),
+        MethodOnTwin("D", None, "failed: no"),
+    )
+    tied = TwinCheck(None, None, None, 1.0, 0, methods, resolution_ln=0.004)
+    assert tied.tied_with_best == ("B",)
+    assert TwinCheck(None, None, None, 1.0, 0, methods).tied_with_best == ()
+
+
+@pytest.mark.slow
+def test_a_jackknife_camera_gives_a_twin_that_states_its_resolution(camera_and_twin, tmp_path):
+    """Calibrated with the exposure jackknife's covariance of ``g`` (whose stated deviation
+    matches the fit's error on these cameras, where the sandwich's is 1-6x below it), the
+    twin states how far its true response may lie from the camera's, and the check reports
+    which methods it cannot tell from the best."""
+    from pqsim.twin import response_sd_ln
+
+    manifest = camera_and_twin[0]
+    model = calibrate_manifest(
+        manifest, response=("Debevec 1997", {"covariance": "exposure jackknife"})
+    )
+    twin = tmp_path / "twin.json"
+    twin.write_text(twin_preset_json(model, characterise_manifest(manifest, model)))
+    doc = json.loads(twin.read_text())
+    assert not any(a.startswith("response uncertainty") for a in doc["assumed"])
+    assert doc["measurement"]["response_sd_ln"] == pytest.approx(response_sd_ln(model.response))
+    check = twin_check(manifest, model, twin, methods=["Debevec 1997", "EMoR 2004", "Gamma"])
+    assert check.resolution_ln == pytest.approx(2 * max(doc["measurement"]["response_sd_ln"]))
+    assert 0 < check.resolution_ln < 0.05
+    best = check.methods[0].g_rms_ln
+    assert set(check.tied_with_best) == {
+        m.method for m in check.methods[1:] if m.g_rms_ln - best < check.resolution_ln
+    }
+    text = format_twin_check(check)
+    assert f"within {check.resolution_ln:.4f} ln of the best" in text
+    assert text.count("tied with the best") == len(check.tied_with_best)
+    assert twin_check_json(check)["resolution_ln"] == check.resolution_ln
+
+
 def test_a_preset_that_is_not_a_twin_is_refused(camera_and_twin, tmp_path):
     manifest, model, _, _ = camera_and_twin
     plain = tmp_path / "ccd.json"
