@@ -1023,6 +1023,8 @@ def run_leaderboard(
             board = Board(step, entries, floors)
             board.rank()
             lb.boards.append(board)
+        if "response" in chosen and not given:
+            lb.notes += _twin_resolution_notes(config, presets)
         if real and "response" in chosen:
             _crossval_real(lb, real_dir, root, seed, say)
         elif real:
@@ -1034,6 +1036,34 @@ def run_leaderboard(
             remove_scratch_directory(root)
     lb.elapsed_s = time.perf_counter() - t_start
     return lb
+
+
+def _twin_resolution_notes(config: ValidationConfig, presets: Sequence[str]) -> list[str]:
+    """For each twin among ``presets``: how close two response scores on it may be and
+    still be told apart (twice its stated ``response_sd_ln``), or that it states none."""
+    from photoquant.utils import load_json
+    from pqsim.twin import twin_response_sd
+
+    notes = []
+    files = dict(config.preset_files)
+    for p in presets:
+        if p not in files or "camera_unit" not in load_json(Path(files[p]), f"preset {p}"):
+            continue  # a built-in camera or a preset file that is no twin: an exact truth
+        sd = twin_response_sd(files[p])
+        if sd is None:
+            notes.append(
+                f"{p}: a twin whose true response is its camera's estimate, with no stated "
+                "uncertainty: response scores close on it may not order the methods on the "
+                "camera (calibrate the camera with the Debevec option covariance='exposure "
+                "jackknife')"
+            )
+        else:
+            notes.append(
+                f"{p}: a twin whose true response is its camera's estimate, within "
+                f"{sd:.4f} ln: response scores on it less than {2 * sd:.4f} ln apart are not "
+                "told apart"
+            )
+    return notes
 
 
 def _crossval_real(

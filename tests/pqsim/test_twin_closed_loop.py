@@ -63,3 +63,40 @@ def test_the_twin_ranks_the_methods_as_the_camera(boards, step):
     tau = kendalltau([s[1] for s in scores], [s[2] for s in scores]).statistic
     assert tau >= 0.8, scores
     assert min(scores, key=lambda s: s[1])[0] == min(scores, key=lambda s: s[2])[0]
+
+
+@pytest.mark.slow
+def test_a_twin_board_says_how_close_its_response_scores_can_be_told_apart(boards):
+    """The twin's camera states the sandwich covariance: the twin states no uncertainty of
+    its true response, and the board says so."""
+    notes = [n for n in boards.notes if n.startswith("twin: a twin")]
+    assert len(notes) == 1 and "no stated uncertainty" in notes[0], boards.notes
+
+
+def test_twin_notes_give_twice_the_stated_deviation(tmp_path):
+    import json
+
+    from validation.leaderboard import _twin_resolution_notes
+
+    doc = json.loads(preset_json_of_ccd())
+    (tmp_path / "plain.json").write_text(json.dumps(doc))
+    doc["camera_unit"] = 1.0
+    doc["measurement"] = {"response_sd_ln": [0.002, 0.0035, 0.001]}
+    (tmp_path / "mytwin.json").write_text(json.dumps(doc))
+    config = TINY.replace(
+        preset_files=(
+            ("plain", str(tmp_path / "plain.json")),
+            ("mytwin", str(tmp_path / "mytwin.json")),
+        )
+    )
+    notes = _twin_resolution_notes(config, ["ccd", "plain", "mytwin"])
+    assert notes == [
+        "mytwin: a twin whose true response is its camera's estimate, within 0.0035 ln: "
+        "response scores on it less than 0.0070 ln apart are not told apart"
+    ]
+
+
+def preset_json_of_ccd() -> str:
+    from pqsim.synth_camera.presets import preset_json
+
+    return preset_json("ccd")
