@@ -111,6 +111,10 @@ def markdown(results: list[CaseResult], header: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+STORED_RESULTS = Path("benchmarks/results")
+"""The whole run's results, which the documentation's benchmark table is generated from."""
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks.run",
@@ -122,8 +126,10 @@ def main(argv: list[str] | None = None) -> int:
         "-o",
         "--output",
         type=Path,
-        default=Path("benchmarks/results"),
-        help="folder of results.json and results.md (benchmarks/results)",
+        default=None,
+        help="folder of results.json and results.md (benchmarks/results for a whole run, "
+        "whose results the documentation's table shows; benchmarks/results/partial for "
+        "--only, --user-path or --quick)",
     )
     parser.add_argument(
         "--only", nargs="+", default=None, metavar="NAME", help="case names (prefixes)"
@@ -141,6 +147,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=None)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
+    if args.output is None:  # a subset never replaces the stored whole run
+        partial = bool(args.only or args.user_path or args.quick)
+        args.output = STORED_RESULTS / "partial" if partial else STORED_RESULTS
     size = args.size or ("256x192" if args.quick else "1024x768")
     try:
         width, height = (int(v) for v in size.lower().split("x"))
@@ -200,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     table = markdown(results, header)
     write_text_atomic(args.output / "results.md", table)
     print(table)
+    print(f"results written to {args.output}", file=sys.stderr)
     return 0
 
 
