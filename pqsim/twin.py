@@ -169,7 +169,8 @@ def twin_response_sd(twin: str | os.PathLike[str]) -> float | None:
     ``None`` where the preset states none."""
     path = Path(twin)
     doc = load_json(path, f"preset file {path}")
-    sd = doc.get("measurement", {}).get("response_sd_ln") if isinstance(doc, dict) else None
+    measurement = doc.get("measurement") if isinstance(doc, dict) else None
+    sd = measurement.get("response_sd_ln") if isinstance(measurement, dict) else None
     if not isinstance(sd, list) or not sd:
         return None
     values = [float(v) for v in sd if isinstance(v, int | float) and not isinstance(v, bool)]

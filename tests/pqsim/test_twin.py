@@ -107,3 +107,19 @@ def test_response_sd_is_the_gauge_free_rms_of_the_stated_deviation():
     assert response_sd_ln(sloped) == pytest.approx([expected], rel=1e-12)
     bare = dataclasses.replace(sloped, covariance_factor=None, covariance_diagonal=None)
     assert response_sd_ln(bare) is None
+
+
+def test_a_twins_stated_response_sd_is_read_or_refused_in_one_line(tmp_path):
+    from pqsim.twin import twin_response_sd
+
+    path = tmp_path / "t.json"
+    for measurement, expected in [
+        ({"response_sd_ln": [0.001, 0.003]}, 0.003),
+        ({"notes": []}, None),
+        ("not a table", None),
+    ]:
+        path.write_text(json.dumps({"measurement": measurement}))
+        assert twin_response_sd(path) == expected
+    path.write_text(json.dumps({"measurement": {"response_sd_ln": [0.001, "x"]}}))
+    with pytest.raises(InputError, match="response_sd_ln"):
+        twin_response_sd(path)
