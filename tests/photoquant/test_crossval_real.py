@@ -184,7 +184,7 @@ def _authors_twin_costs(folder: Path, path: Path, tmp: Path) -> tuple[float, dic
 def twelve_bit(tmp_path_factory):
     """The 12-bit bracket's cross-validation: the default's, its authors' response's, and
     each estimate's cost on the authors' twin (6 frames of 1920x1200: the bracket twice,
-    its twin three times, ~4 min here)."""
+    its twin three times, ~40 s here)."""
     folder = _real("borealhdr_mv12bit")
     tmp = tmp_path_factory.mktemp("twelve-bit")
     path = _manifest(folder, tmp, bit_depth=12, channels=["Y"])

@@ -9,7 +9,7 @@ from scipy.stats import kendalltau
 from photoquant.calibration import calibrate_manifest
 from photoquant.characterise import characterise_manifest
 from pqsim.capture_set import write_capture_set
-from pqsim.synth_camera.presets import camera_from_preset
+from pqsim.synth_camera.presets import camera_from_preset, preset_json
 from pqsim.twin import twin_preset_json, twin_response_sd
 from validation.config import TINY
 from validation.leaderboard import PRIMARY, run_leaderboard
@@ -74,11 +74,12 @@ def test_the_twin_orders_the_cameras_best_three_up_to_its_resolution(boards):
     jackknife's): two response scores on the twin less than ``2 sd`` apart are not told
     apart (the board notes it). Beyond that, the camera's best three response methods are in
     the camera's order on the twin. Measured on whole boards (2026-12-06, every registered
-    method and peer, twins of capture sets seeded 0-2 against the camera's board at seed 0): ccd twins
-    ``2 sd`` 0.0036-0.0045 ln, 56 of 66 pairs told apart, 1-2 of them discordant (the
-    camera against itself at board seeds 1 and 2: 2 of 66); cmos 0.016-0.030 ln, 55-59
-    told apart, 2-3 discordant (the camera against itself: 4-6); the best three never
-    out of order beyond a tie (the cmos camera against itself: once)."""
+    method and peer, twins of capture sets seeded 0-2 against the camera's board at seed
+    0): ccd twins ``2 sd`` 0.0036-0.0045 ln, 56 of 66 pairs told apart, 1-2 of them
+    discordant (the camera against itself at board seeds 1 and 2: 2 of 66); cmos
+    0.016-0.030 ln, 55-59 told apart, 2-3 discordant (the camera against itself: 4-6);
+    the best three never out of order beyond a tie (the cmos camera against itself:
+    once)."""
     lb, sd = boards
     assert sd is not None and 0 < sd < 0.01
     board = lb.board("response")
@@ -97,7 +98,7 @@ def test_twin_notes_give_twice_the_stated_deviation(tmp_path):
 
     from validation.leaderboard import _twin_resolution_notes
 
-    doc = json.loads(preset_json_of_ccd())
+    doc = json.loads(preset_json("ccd"))
     (tmp_path / "plain.json").write_text(json.dumps(doc))
     doc["camera_unit"] = 1.0
     doc["measurement"] = {"response_sd_ln": [0.002, 0.0035, 0.001]}
@@ -113,9 +114,3 @@ def test_twin_notes_give_twice_the_stated_deviation(tmp_path):
         "mytwin: a twin whose true response is its camera's estimate, within 0.0035 ln: "
         "response scores on it less than 0.0070 ln apart are not told apart"
     ]
-
-
-def preset_json_of_ccd() -> str:
-    from pqsim.synth_camera.presets import preset_json
-
-    return preset_json("ccd")
