@@ -26,7 +26,12 @@ of which the pairs 0.35 ms and the passes 1.7–1.9 ms.
 The helpers (:func:`interp_near`, :func:`rounding_at`, :func:`table_index`,
 :func:`lerp_at`, :func:`huber_iterations`) are compiled on their own and
 called from the kernels; every name here is its plain-Python body when numba
-is not installed (the callers then take their numpy twins).
+is not installed (the callers then take their numpy twins). Every loop with
+a division is compiled with numpy's error model (no zero test before each
+division: none divides by zero — the search's interval, the levels' steps
+and the totals are positive where they divide, and the rest is guarded);
+measured (2026-12-06, the correction benchmark's 6 188 pairs, three passes,
+min of 50): the passes 1.61–1.64 → 1.45 ms, the same results.
 """
 
 from __future__ import annotations
@@ -470,14 +475,14 @@ def screen_passes(
 
 
 if HAVE_NUMBA:  # pragma: no cover - depends on the environment
-    rounding_at = compile_kernel(rounding_at)
-    interp_near = compile_kernel(interp_near)
-    table_index = compile_kernel(table_index)
-    lerp_at = compile_kernel(lerp_at)
-    pairs_of_values = compile_kernel(pairs_of_values)
+    rounding_at = compile_kernel(rounding_at, error_model="numpy")
+    interp_near = compile_kernel(interp_near, error_model="numpy")
+    table_index = compile_kernel(table_index, error_model="numpy")
+    lerp_at = compile_kernel(lerp_at, error_model="numpy")
+    pairs_of_values = compile_kernel(pairs_of_values, error_model="numpy")
     pair_pass = compile_kernel(pair_pass, error_model="numpy")
-    huber_iterations = compile_kernel(huber_iterations)
+    huber_iterations = compile_kernel(huber_iterations, error_model="numpy")
     _longest_run = compile_kernel(_longest_run)
-    _chain = compile_kernel(_chain)
-    _sandwich = compile_kernel(_sandwich)
+    _chain = compile_kernel(_chain, error_model="numpy")
+    _sandwich = compile_kernel(_sandwich, error_model="numpy")
     screen_passes = compile_kernel(screen_passes, error_model="numpy")
