@@ -251,7 +251,12 @@ if mode == "fallback":
 def hook(s, path):
     if s == stage and Path(path).name.startswith(match):
         print("BLOCKED", flush=True)
-        time.sleep(seconds)
+        # short sleeps: a signal the kernel hands to another thread of the process (numpy's
+        # and the decoders' pools) is then run in the main thread within 50 ms, where one
+        # long sleep would keep it waiting to its end
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            time.sleep(0.05)
 
 atomic._hook = hook
 cmd, rest = sys.argv[5], sys.argv[6:]
