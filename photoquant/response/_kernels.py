@@ -411,10 +411,8 @@ def _normal_terms_py(
             scaled[a, p] = nge[a, p] / d[p]
             rhs_g[idx[a, p]] += coef[a, p] * wlt[k, p]
             back[idx[a, p]] += nge[a, p] * (rhs_e[p] / d[p])
-            if valid[k, p]:
+            if valid[k, p]:  # an invalid value's 0 leaves the (non-negative) sum as it is
                 support[idx[a, p]] += (1 - alpha[k, p]) if a < n_k else alpha[k, p]
-            else:
-                support[idx[a, p]] += 0.0
     n_gg = np.zeros(n_g * n_g)
     corr = np.zeros(n_g * n_g)
     normal_blocks(idx, coef, scaled, nge, n_k, n_g, s_pair, s_prod, n_gg, corr)
