@@ -114,6 +114,10 @@ def markdown(results: list[CaseResult], header: dict[str, Any]) -> str:
 STORED_RESULTS = Path("benchmarks/results")
 """The whole run's results, which the documentation's benchmark table is generated from."""
 
+PARTIAL_RESULTS = Path("benchmarks/partial-results")
+"""Where a subset of the rows goes (not kept in the repository): beside the whole run's
+folder, which holds that run alone."""
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
@@ -128,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         default=None,
         help="folder of results.json and results.md (benchmarks/results for a whole run, "
-        "whose results the documentation's table shows; benchmarks/results/partial for "
+        "whose results the documentation's table shows; benchmarks/partial-results for "
         "--only, --user-path or --quick)",
     )
     parser.add_argument(
@@ -149,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.output is None:  # a subset never replaces the stored whole run
         partial = bool(args.only or args.user_path or args.quick)
-        args.output = STORED_RESULTS / "partial" if partial else STORED_RESULTS
+        args.output = PARTIAL_RESULTS if partial else STORED_RESULTS
     size = args.size or ("256x192" if args.quick else "1024x768")
     try:
         width, height = (int(v) for v in size.lower().split("x"))

@@ -83,15 +83,17 @@ def test_runner_writes_json_and_markdown(tmp_path) -> None:
 
 
 def test_a_subset_never_replaces_the_stored_whole_run(tmp_path, monkeypatch) -> None:
-    """``--only`` without ``-o`` writes ``benchmarks/results/partial``: the stored whole run,
-    which the documentation's table is generated from, is left as it was."""
+    """``--only`` without ``-o`` writes ``benchmarks/partial-results``: the stored whole run,
+    which the documentation's table is generated from, is left as it was, and its folder
+    holds that run alone."""
     monkeypatch.chdir(tmp_path)
     stored = tmp_path / "benchmarks" / "results"
     stored.mkdir(parents=True)
     (stored / "results.json").write_text("the whole run")
     assert main(["--quick", "--size", "48x32", "--repeats", "1", "--only", "merge-hat"]) == 0
     assert (stored / "results.json").read_text() == "the whole run"
-    data = json.loads((stored / "partial" / "results.json").read_text())
+    assert sorted(p.name for p in stored.iterdir()) == ["results.json"]
+    data = json.loads((tmp_path / "benchmarks" / "partial-results" / "results.json").read_text())
     assert [c["name"] for c in data["cases"]] == ["merge-hat"]
 
 
