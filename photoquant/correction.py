@@ -23,7 +23,7 @@ times on the other threads while the screen decides (the result where the
 screen keeps them, dropped for the refined times' where it does not) was
 measured and not kept (1024×768×3, K = 4, N = 1, 2 cores, 2026-12-06, the
 same bits either way): 7.3 → 6.1 ms a correction on exact times, 7.5 →
-9.0 ms on jittered ones — the screen itself runs 20–25 % slower beside a
+9.0 ms on jittered ones — the screen itself runs 13–25 % slower beside a
 merge on the other core (also beside a merge in one compiled call, without
 any Python between tiles: the cores' shared resources, not the GIL), and a
 tile begun with the nominal times is finished before its thread turns to
@@ -356,7 +356,9 @@ def _defect_indices(model: CameraModel, stack: ExposureStack) -> tuple[np.ndarra
     scene's own (:func:`photoquant.defects.detect_defects`)."""
     if model.defects is None:
         found = detect_defects(stack)
-        return np.nonzero(np.zeros((0, 0, 0), dtype=bool) if found is None else found.mask)
+        if found is None:
+            return (np.empty(0, dtype=np.intp),) * 3
+        return np.nonzero(found.mask)
     if "defect_indices" not in model._cache:
         model._cache["defect_indices"] = np.nonzero(model.defects.mask)
     indices: tuple[np.ndarray, ...] = model._cache["defect_indices"]
