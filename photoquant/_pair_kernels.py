@@ -179,7 +179,7 @@ def pair_pass(
     y_lo: Any, y_hi: Any, z_lo: Any, z_hi: Any, s2_lo: Any, s2_hi: Any, chan: Any, step: Any,
     dx: Any, dx_nom: Any, line: Any, n_rep: int, levels: Any, even: bool, inv_step: float,
     d1: Any, d2: Any, g_mono: Any, bottom: Any, top: Any, margin: float, max_bend: float,
-    rtable: Any, use: Any, w: Any, resid: Any, g2_lo: Any, g2_hi: Any,
+    code_step: float, rtable: Any, use: Any, w: Any, resid: Any, g2_lo: Any, g2_hi: Any,
 ) -> None:  # fmt: skip  # pragma: no cover - compiled by numba
     """One pass of :func:`photoquant.exposure.refine_by_pairs` (its numpy branch, value by
     value, the same operations in the same order): updates ``z_lo, z_hi, s2_lo, s2_hi``
@@ -219,7 +219,7 @@ def pair_pass(
             r_one = rounding_at(np.sqrt(max(v_one - 1.0 / 12.0, 0.0)), rtable, n_tab)
             v_mean = v_one if n_rep == 1 else v_one / n_rep + r_one
             sigma = np.sqrt(v_one + r_one)
-            bend = np.abs(s2) * sigma / s1
+            bend = np.abs(s2) * max(sigma, code_step) / s1
             inside = zz >= bottom[c] + margin * sigma and zz <= top[c] - margin * sigma
             ok = ok and inside and s1 > 0 and bend <= max_bend
             var_sum += s1 * s1 * v_mean
@@ -347,9 +347,9 @@ def _sandwich(
 def screen_passes(
     y_lo: Any, y_hi: Any, z_lo: Any, z_hi: Any, chan: Any, step: Any, row: Any, n_rows: int,
     x_nom: Any, line: Any, n_rep: int, levels: Any, even: bool, inv_step: float, d1: Any,
-    d2: Any, g_mono: Any, bottom: Any, top: Any, margin: float, max_bend: float, rtable: Any,
-    huber_k: float, max_iterations: int, min_overlap: int, geometric_mean: bool, passes: int,
-    x: Any, cov: Any, counts: Any,
+    d2: Any, g_mono: Any, bottom: Any, top: Any, margin: float, max_bend: float,
+    code_step: float, rtable: Any, huber_k: float, max_iterations: int, min_overlap: int,
+    geometric_mean: bool, passes: int, x: Any, cov: Any, counts: Any,
 ) -> tuple[int, int, float, int]:  # fmt: skip  # pragma: no cover - compiled by numba
     """The passes of :func:`photoquant.exposure._pair_passes`, all of them compiled.
 
@@ -403,8 +403,8 @@ def screen_passes(
             dx[j] = x[j + 1] - x[j]
         pair_pass(
             y_lo, y_hi, z_lo, z_hi, s2_lo, s2_hi, chan, step, dx, dx_nom, line, n_rep,
-            levels, even, inv_step, d1, d2, g_mono, bottom, top, margin, max_bend, rtable,
-            use, w, resid, g2_lo, g2_hi,
+            levels, even, inv_step, d1, d2, g_mono, bottom, top, margin, max_bend, code_step,
+            rtable, use, w, resid, g2_lo, g2_hi,
         )  # fmt: skip
         # the steps' weighted means, the scale (MAD), the Huber iterations
         total[:] = 0.0

@@ -58,9 +58,22 @@ def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
         assert np.all(np.isfinite(sigma) == np.isfinite(img)) and np.nanmin(sigma) > 0
     ok = np.isfinite(img)
     text = capsys.readouterr().out
-    # the total adds the refined scene times' part, where correct refined them
-    assert "scene exposures: " in text and "from the refined exposure times" in text
+    # the capture set's times are exact: the scene keeps them, and the total is the noise
+    # and the calibration's parts
+    assert "nominal times kept" in text and "from the refined exposure times" not in text
     assert np.all(total[ok] ** 2 >= (noise[ok] ** 2 + calibration[ok] ** 2) * (1 - 1e-5))
+    # refined whatever the test says, the total adds the refined times' part
+    exr_refined = tmp_path / "scene-refined.exr"
+    args = ["correct", str(capture), "--camera", str(cam), "-o", str(exr_refined), "-q"]
+    assert main([*args, "--refine-exposures"]) == 0
+    refined = read_exr(exr_refined)[0]
+    text = capsys.readouterr().out
+    assert "scene exposures: " in text and "from the refined exposure times" in text
+    r_noise, r_calibration, r_total = refined[..., 3:6], refined[..., 6:9], refined[..., 9:]
+    r_ok = np.isfinite(refined[..., 0:3])
+    parts = r_noise[r_ok] ** 2 + r_calibration[r_ok] ** 2
+    assert np.all(r_total[r_ok] ** 2 >= parts * (1 - 1e-5))
+    assert np.median(r_total[r_ok] ** 2 / parts) > 1.0
     assert "uncertainty of ln l from noise" in text
     assert (
         "uncertainty of ln l from the calibration (response, sensor LUT, vignetting and balance)"
