@@ -2,8 +2,8 @@
 skipped when absent): calibrated with the defaults, characterised from that one bracket,
 the twin written, then :func:`validation.twin_check.twin_check`.
 
-Measured 2026-12-05 (leave one exposure out, DN, the camera's bracket against the twin's):
-Memorial 2.288 against 1.912 (0.84), the 12-bit machine-vision bracket 94.31 against 109.4
+Measured 2026-12-06 (leave one exposure out, DN, the camera's bracket against the twin's):
+Memorial 2.288 against 1.819 (0.80), the 12-bit machine-vision bracket 94.31 against 109.4
 (1.16), frobisher 7.338 against 6.061 (0.83), St. Louis 9.726 against 5.699 (0.59: its
 moving water and JPEG tone curve are not in the twin; not among the sets checked). These
 brackets hold one frame per exposure: the twin's noise is what their neighbouring exposures
