@@ -596,7 +596,7 @@ its periodic part ``exp(−2π²σ²) ≈ 0.007``) [Widrow2008]_. Measured (pqsi
 1 910, 19 533 ± 950, 10 046 ± 4 504 — the darkest bins (1–5 DN, noise 0.2 DN) read
 variances from −0.9 to 2.4 times the line's and pulled it —; without them 21 149 ± 941,
 20 198 ± 566, 18 353 ± 643, and the twin of that camera cross-validates within 1.02× the
-camera's own bracket (1.25× before)."""
+camera's own bracket (1.25× with every bin)."""
 
 
 def _channel_line(
