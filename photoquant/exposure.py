@@ -372,6 +372,15 @@ def judge_exposure_times(
     )
 
 
+def _bend(s1: np.ndarray, s2: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """``|g''| max(σ, 1 code value) / g'``: how much the slope of ``g`` changes over a value's
+    noise, or over one code value where the noise is smaller (:data:`CODE_STEP_DN`; the
+    refinements' ``max_bend`` rule; NaN or infinite where ``g' ≤ 0``). The compiled screen
+    (:func:`photoquant._pair_kernels.pair_pass`) computes it value by value."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.abs(s2) * np.maximum(sigma, CODE_STEP_DN) / s1
+
+
 def self_consistency_floor(refinements: Sequence[ExposureRefinement]) -> float:
     """``φ``: the error per exposure a response leaves on the frames it was recovered from.
 
@@ -1030,9 +1039,7 @@ def _refine_once(
         inside = (z_hat >= floor + margin_sigma * sigma) & (z_hat <= top - margin_sigma * sigma)
         # the delta method holds where the slope of g changes little over one σ, and over
         # one code value, the step an integer value's rounding takes
-        with np.errstate(invalid="ignore", divide="ignore"):
-            bend = np.abs(s2) * np.maximum(sigma, CODE_STEP_DN) / s1
-        inside &= bend <= max_bend
+        inside &= _bend(s1, s2, sigma) <= max_bend
         use = ok_w & inside & np.isfinite(a_loo)
         use &= use.sum(axis=1, keepdims=True) >= 2
         counts = use.sum(axis=0)
@@ -1461,10 +1468,8 @@ def _pair_passes(
             v_one = one_repeat(zz)
             v_mean = mean_variance(v_one)
             sigma = np.sqrt(v_one + rounding_variance(np.sqrt(np.maximum(v_one - 1 / 12, 0.0))))
-            with np.errstate(invalid="ignore", divide="ignore"):
-                bend = np.abs(s2) * np.maximum(sigma, CODE_STEP_DN) / s1
             use &= (zz >= bottom + margin_sigma * sigma) & (zz <= top - margin_sigma * sigma)
-            use &= (s1 > 0) & (bend <= max_bend)
+            use &= (s1 > 0) & (_bend(s1, s2, sigma) <= max_bend)
             ends.append((yy - 0.5 * s2 * v_mean, s1 * s1, s2, v_mean))
         (c_lo, g2_lo, s2_lo, v_lo), (c_hi, g2_hi, s2_hi, v_hi) = ends
         with np.errstate(invalid="ignore", divide="ignore"):
