@@ -111,7 +111,7 @@ def lerp_at(table: Any, i: int, frac: float) -> float:  # pragma: no cover - num
 
 def pairs_of_values(
     values: Any, order: Any, sat_thr: Any, dark_thr: Any, tabs: Any, levels: Any,
-    even: bool, inv_step: float, quota: int, keep: Any, entries: Any, ends: Any,
+    even: bool, inv_step: float, quota: Any, keep: Any, entries: Any, ends: Any,
 ) -> tuple[int, int]:  # fmt: skip  # pragma: no cover - compiled by numba
     """The pairs of :func:`photoquant.exposure._neighbouring_pairs` from the drawn values.
 
@@ -119,7 +119,8 @@ def pairs_of_values(
     a value is clipped where a repeat reaches ``sat_thr`` or lies at or below
     ``dark_thr`` (:meth:`photoquant.stack.ExposureStack.saturated`,
     :meth:`~photoquant.stack.ExposureStack.dark_clipped`); ``tabs`` ``(2, C·L)``
-    holds ``g`` and its segments' slopes on ``levels``. A value is valid where
+    holds ``g`` and its segments' slopes on ``levels``; ``quota`` ``(K − 1,)`` the pairs
+    kept per step and channel at most. A value is valid where
     it is not clipped, ``g`` is finite there and its segment rises. Writes, as
     :func:`photoquant.exposure._selected_pairs` returns them, the rows kept
     (channel, position in ``order``) and the pairs (row, step, channel), and
@@ -158,7 +159,7 @@ def pairs_of_values(
             for j in range(n_k - 1):
                 if ok[j] and ok[j + 1]:
                     count[j] += 1
-                    if count[j] <= quota:
+                    if count[j] <= quota[j]:
                         if not kept:
                             keep[0, n_rows] = ch
                             keep[1, n_rows] = q

@@ -1223,28 +1223,64 @@ def refine_by_pairs(
     floor_level = np.maximum(black, lo)
 
     rng = np.random.default_rng(seed)
-    values = _sample_values(stack, max_pixels, rng)
-    pairs = _neighbouring_pairs(values, black, levels, g, sat, pair_rows, rng)
-    line = _repeat_noise_line(values, pairs)
     nominal = stack.exposure_s.copy()
-    x, cov, counts, run, scale, iterations = _pair_passes(
-        pairs,
-        levels,
-        g,
-        line,
-        stack.n_repeats,
-        floor_level,
-        sat,
-        np.log(nominal),
-        gauge=gauge,
-        margin_sigma=margin_sigma,
-        min_overlap=min_overlap,
-        huber_k=huber_k,
-        max_iterations=max_iterations,
-        max_bend=max_bend,
-        passes=passes,
-    )
+
+    def screen(draw: int | None, quota: np.ndarray) -> tuple[Any, ...]:
+        values = _sample_values(stack, draw, rng)
+        pairs = _neighbouring_pairs(values, black, levels, g, sat, quota, rng)
+        line = _repeat_noise_line(values, pairs)
+        return _pair_passes(
+            pairs,
+            levels,
+            g,
+            line,
+            stack.n_repeats,
+            floor_level,
+            sat,
+            np.log(nominal),
+            gauge=gauge,
+            margin_sigma=margin_sigma,
+            min_overlap=min_overlap,
+            huber_k=huber_k,
+            max_iterations=max_iterations,
+            max_bend=max_bend,
+            passes=passes,
+        )
+
+    quota = np.full(max(n_k - 1, 1), max(pair_rows // n_ch, 1), dtype=np.int64)
+    x, cov, counts, run, scale, iterations = screen(max_pixels, quota)
+    growth = _short_steps_growth(counts, min_overlap)
+    if np.any(growth > 1):
+        n_pix = stack.image_shape[0] * stack.image_shape[1]
+        draw = None if max_pixels is None else min(int(max_pixels) * int(growth.max()), n_pix)
+        x, cov, counts, run, scale, iterations = screen(draw, quota * growth)
     return _pair_refinement(nominal, x, cov, counts, run, gauge, scale, iterations)
+
+
+MAX_PAIR_GROWTH = 4
+"""The most :func:`refine_by_pairs` enlarges a step's quota of pairs (and its draw of
+pixels), once, for a step whose pairs the passes mostly left out (:func:`_short_steps_growth`)."""
+
+
+def _short_steps_growth(counts: np.ndarray, min_overlap: int) -> np.ndarray:
+    """Per step, how many times more pairs to draw so that a step the passes kept fewer
+    than ``min_overlap`` pairs of keeps them twice over; 1 for the others.
+
+    A step's quota is filled in the draw's random order before the passes select the
+    pairs inside the margins; where most of a step's pairs lie outside them (the
+    shortest exposure of a bracket sees its brightest pixels in range, their partners
+    at the next exposure near the clip) the step ends below ``min_overlap`` and its
+    exposure would keep its nominal time, untested. Its quota (and the draw) grows by
+    the shortfall, twice over, at most :data:`MAX_PAIR_GROWTH` times, where that reaches
+    ``min_overlap``. A step kept fewer pairs than ``min_overlap / MAX_PAIR_GROWTH`` does
+    not ask for it: so few pixels see both its exposures in range that the draw would
+    have to approach the image, and the exposure it leaves nominal carries the merge
+    at about as few pixels (its time matters as little to the result).
+    """
+    counts = np.asarray(counts, dtype=np.float64)
+    short = (counts * MAX_PAIR_GROWTH >= min_overlap) & (counts < min_overlap)
+    need = np.ceil(2.0 * min_overlap / np.maximum(counts, 1.0))
+    return np.where(short, np.minimum(need, MAX_PAIR_GROWTH), 1).astype(np.int64)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1281,12 +1317,12 @@ def _neighbouring_pairs(
     levels: np.ndarray,
     g: np.ndarray,
     sat: np.ndarray,
-    pair_rows: int,
+    quota: np.ndarray,
     rng: np.random.Generator,
 ) -> _Pairs:
     """The pairs of :func:`refine_by_pairs` from its drawn ``values`` ``(N, K, P, C)``:
-    (row, step) where both exposures of the step are valid, at most a quota per step,
-    rows taken in random order.
+    (row, step) where both exposures of the step are valid, at most ``quota`` ``(K − 1,)``
+    per step and channel, rows taken in random order.
 
     A value is valid where no repeat is clipped (at or above the channel's ``sat``,
     at or below its black level: :meth:`ExposureStack.saturated`,
@@ -1296,7 +1332,6 @@ def _neighbouring_pairs(
     n_rep, n_k, n_pix, n_ch = values.shape
     order = rng.permutation(n_pix)  # the quota takes pairs in random order, not by row
     step_slope = np.diff(g, axis=1) / np.diff(levels)
-    quota = max(pair_rows // n_ch, 1)
     tables = _Tables(levels, np.stack([g, np.c_[step_slope, step_slope[:, -1:]]]))
     sat_thr = np.ceil(sat).astype(np.int64)  # integer frames: c ≥ ⌈level⌉
     dark_thr = np.floor(np.broadcast_to(black_level, (n_ch,))).astype(np.int64)
@@ -1329,9 +1364,9 @@ def _neighbouring_pairs(
     return _Pairs(row, step, chan, y_lo, y_hi, z_lo, z_hi, pixels, keep_p.size)
 
 
-def _selected_pairs(ok: np.ndarray, quota: int) -> tuple[np.ndarray, ...]:
-    """The pairs :func:`_neighbouring_pairs` keeps: per channel, the first ``quota`` pairs
-    of each step in the rows' (random) order whose two values are ``ok`` ``(C, P, K)``.
+def _selected_pairs(ok: np.ndarray, quota: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The pairs :func:`_neighbouring_pairs` keeps: per channel, the first ``quota[k]`` pairs
+    of each step ``k`` in the rows' (random) order whose two values are ``ok`` ``(C, P, K)``.
 
     Returns ``(keep_c, keep_p, row, step, chan)``: the channel and pixel of each row
     kept (a row: a pixel in one channel with a pair kept; channel by channel, pixels

@@ -135,13 +135,17 @@ def test_compiled_pairs_and_passes_are_the_twins_with_repeats_and_uneven_levels(
     g[:, levels < 24] = np.nan  # no light: not finite there
     sat = np.full(3, 1000.0)
     values = exposure._sample_values(stack, 1500, np.random.default_rng(0))
-    args = (values, stack.black_level, levels, g, sat, 900)
+    quota = np.full(stack.n_exposures - 1, 300)
+    quota[1] = 40  # each step its own quota
+    args = (values, stack.black_level, levels, g, sat, quota)
     fast = exposure._neighbouring_pairs(*args, np.random.default_rng(1))
     monkeypatch.setattr(exposure, "_screen_kernels", None)
     slow = exposure._neighbouring_pairs(*args, np.random.default_rng(1))
     for name in ("row", "step", "chan", "y_lo", "y_hi", "z_lo", "z_hi"):  # the same bits
         np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
     assert fast.n_rows == slow.n_rows and fast.row.size > 1000
+    per_step = np.bincount(fast.step * 3 + fast.chan, minlength=quota.size * 3)
+    assert np.all(per_step.reshape(-1, 3) <= quota[:, None]) and per_step[3:6].max() == 40
     for a, b in zip(fast.pixels, slow.pixels, strict=True):
         np.testing.assert_array_equal(a, b)
     out = {}
@@ -219,3 +223,12 @@ def test_a_scenes_exact_times_are_kept_whatever_the_darkest_code_values_say(monk
     assert res.exposures is None and not res.exposure_decision.refine
     monkeypatch.setattr(exposure, "CODE_STEP_DN", 0.0)  # the bend over the noise only
     assert pq.correct(data.scene, model).exposure_decision.refine
+
+
+def test_a_step_short_of_pairs_asks_for_a_larger_draw_within_reach():
+    counts = np.array([21, 50, 100, 182, 199, 200, 5000, 0])
+    growth = exposure._short_steps_growth(counts, 200)
+    # twice the shortfall, at most MAX_PAIR_GROWTH times; out of reach (21 · 4 < 200),
+    # enough already, or no pair at all: no growth
+    assert exposure.MAX_PAIR_GROWTH == 4
+    np.testing.assert_array_equal(growth, [1, 4, 4, 3, 3, 1, 1, 1])
