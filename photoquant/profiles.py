@@ -68,6 +68,7 @@ _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
             "censoring": "ignored",
             "wide_steps": "none",
             "robust": "none",
+            "objective": "log",
         },
     ),
     # eq. 6: the hat over every value the camera gives
@@ -165,6 +166,15 @@ DEVIATIONS: tuple[Deviation, ...] = (
         "eq. 7's data rows reweighted by Huber's loss against their level's noise, so values no "
         "single response explains (a scene that moved between exposures, JPEG ringing) pull g "
         "with a bounded weight (Huber 1964)",
+    ),
+    Deviation(
+        "response refined in the values",
+        "response",
+        {"objective": "values"},
+        "eq. 7's solution refined by Gauss-Newton steps on the residuals of the values, where "
+        "the noise is, instead of in ln X with a noisy value inside g, whose fit regresses "
+        "towards the mean (errors in variables: Fuller 1987); on brackets of steps up to "
+        "about 2.5 stops",
     ),
     Deviation(
         "quantisation-aware weights",

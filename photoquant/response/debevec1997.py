@@ -167,6 +167,8 @@ from photoquant.response.values_objective import (
     OBJECTIVES,
     VALUE_STEPS,
     beyond_ends,
+    clip_edge,
+    join_at,
     model_positions,
     step_scale,
     values_residual,
@@ -1296,6 +1298,30 @@ def _toe_and_valid_min(
     return g, lowest
 
 
+def _continued_below(g: np.ndarray, j_l: int) -> np.ndarray:
+    """``g`` continued linearly below level ``j_l`` with its slope there (:func:`continue_toe`
+    at a given level)."""
+    g = np.array(g, dtype=np.float64)
+    if 0 < j_l < g.size - 1:
+        slope = g[j_l + 1] - g[j_l]
+        g[:j_l] = g[j_l] - slope * (j_l - np.arange(j_l))
+    return g
+
+
+def _eq7_shape_at_the_top(
+    g: np.ndarray, eq7_g: np.ndarray, c_lo: float, c_sat: float, settings: _FitSettings
+) -> np.ndarray:
+    """The refined ``g`` with eq. 7's shape above the clip's edge, joined there.
+
+    The edge is the first level above the middle of ``[c_lo, c_sat]`` where the
+    fit's weight falls below :data:`~photoquant.response.values_objective.TOP_WEIGHT_SHARE`
+    of its peak (:func:`~photoquant.response.values_objective.clip_edge`).
+    """
+    levels = settings.levels[: g.size]
+    j = clip_edge(levels, settings.wfun(levels, c_lo, c_sat), 0.5 * (c_lo + c_sat))
+    return join_at(g, eq7_g, j)
+
+
 def _covariance_of_g(
     system: dict[str, Any], gauge: int, top: int, n_levels: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -1362,13 +1388,24 @@ def _fit_channel(
     # a level is measured by the values observed there (eq. 7's rows), not by where the
     # values objective puts noisy ones: the toe rule reads eq. 7's support
     support = solution.support
+    # the covariance stated is eq. 7's sandwich, refined or not: the values steps go a
+    # part of the way to their minimum, whose sandwich would state g a third too small
+    # (values_objective, *What the steps reach*)
+    covariance_system = solution.system
     refined = settings.objective == "values" and bracket_factor <= MAX_STEP_FACTOR
     if refined:
+        # the trusted range as eq. 7's solution sets it (its toe: where regression
+        # dilution starts); the values steps refine g above it, not how far down it holds
+        _, lowest = _toe_and_valid_min(solution.g, support, gauge, settings)
+        eq7_g = solution.g
         solution = _values_solution(sample, solution, smooth_w, prior, c_lo, settings)
-    g, lowest = _toe_and_valid_min(solution.g, support, gauge, settings)
+        g = _continued_below(solution.g, lowest) if settings.toe == "continued" else solution.g
+        g = _eq7_shape_at_the_top(g, eq7_g, c_lo, c_sat, settings)
+    else:
+        g, lowest = _toe_and_valid_min(solution.g, support, gauge, settings)
     cov_factor, variance = None, None
     if settings.uncertainty:
-        cov_factor, variance = _covariance_of_g(solution.system, gauge, top, n_levels)
+        cov_factor, variance = _covariance_of_g(covariance_system, gauge, top, n_levels)
     return _ChannelFit(
         g=np.concatenate([g, np.repeat(g[-1:], n_levels - top - 1)]),
         n_samples=sample.n_pixels,
@@ -1471,7 +1508,7 @@ def camera_response_Debevec1997(
     robust: str = "huber",
     robust_rounds: int = 3,
     uncertainty: bool = False,
-    objective: str = "log",
+    objective: str = "values",
     edges: str = "kept",
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
@@ -1554,12 +1591,12 @@ def camera_response_Debevec1997(
         Also estimate the covariance of ``g`` (the pixel-clustered sandwich of
         the final solve, :mod:`photoquant.response.covariance`), returned as a
         low-rank factor.
-    objective : {"log", "values"}
-        ``"log"`` (default): eq. 7 as written, its residuals in ``ln X``;
-        ``"values"``: eq. 7's solution refined by Gauss–Newton steps on the
-        values' residuals, without the bias of a noisy value inside ``g``,
-        on brackets of steps up to about 2.5 stops (wider ones keep eq. 7's
-        solution; :mod:`photoquant.response.values_objective`).
+    objective : {"values", "log"}
+        ``"values"`` (default): eq. 7's solution refined by Gauss–Newton steps
+        on the values' residuals, without the bias of a noisy value inside
+        ``g``, on brackets of steps up to about 2.5 stops (wider ones keep
+        eq. 7's solution; :mod:`photoquant.response.values_objective`);
+        ``"log"``: eq. 7 as written, its residuals in ``ln X`` (the paper's).
     edges : {"kept", "excluded"}
         ``"kept"`` (default): every candidate pixel may be sampled (the
         paper's); ``"excluded"``: the candidates at an edge or in texture
@@ -1688,9 +1725,10 @@ class DebevecResponseOptions:
         cost of the ``K`` fits). Brackets of fewer than
         :data:`~photoquant.response.covariance.MIN_JACKKNIFE_EXPOSURES`
         exposures take the sandwich; the report says which was used.
-    objective : {"log", "values"}
-        Eq. 7 as written, or refined in the values on brackets of steps up
-        to about 2.5 stops (:mod:`photoquant.response.values_objective`).
+    objective : {"values", "log"}
+        Eq. 7's solution refined in the values on brackets of steps up to
+        about 2.5 stops (default; :mod:`photoquant.response.values_objective`),
+        or eq. 7 as written (the paper's).
     edges : {"kept", "excluded"}
         Sample from every candidate pixel (default; the paper's), or leave
         those at an edge or in texture out; see
@@ -1711,7 +1749,7 @@ class DebevecResponseOptions:
     robust_rounds: int = 3
     uncertainty: bool = True
     covariance: str = "sandwich"
-    objective: str = "log"
+    objective: str = "values"
     edges: str = "kept"
 
     def __post_init__(self) -> None:

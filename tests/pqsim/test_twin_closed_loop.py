@@ -53,9 +53,12 @@ def boards(tmp_path_factory):
 @pytest.mark.parametrize("step", ["response", "merge"])
 def test_the_twin_ranks_the_methods_as_the_camera(boards, step):
     """Kendall's τ of the methods' primary scores on the camera and on its twin ≥ 0.8 (at
-    most one pair in ten discordant), the best method the same. Measured on the whole board
-    (every method and peer, 160×120, N = 2): τ 0.91 (response) and 0.90 (merge)."""
-    board = next(b for b in boards[0].boards if b.step == step)
+    most one pair in ten discordant), the best method the same up to the twin's resolution
+    (a response score within ``2 sd`` of the twin's best is not told apart from it: below).
+    Measured on the whole board (every method and peer, 160×120, N = 2): τ 0.91 (response)
+    and 0.90 (merge)."""
+    lb, sd = boards
+    board = next(b for b in lb.boards if b.step == step)
     key = PRIMARY[step][0]
     scores = [
         (e.method, e.scores["ccd"][key], e.scores["twin"][key])
@@ -65,7 +68,10 @@ def test_the_twin_ranks_the_methods_as_the_camera(boards, step):
     assert len(scores) == len(METHODS[step])
     tau = kendalltau([s[1] for s in scores], [s[2] for s in scores]).statistic
     assert tau >= 0.8, scores
-    assert min(scores, key=lambda s: s[1])[0] == min(scores, key=lambda s: s[2])[0]
+    camera_best = min(scores, key=lambda s: s[1])
+    twin_best = min(scores, key=lambda s: s[2])
+    resolution = 2 * sd if step == "response" else 0.0
+    assert camera_best[2] - twin_best[2] <= resolution, (camera_best, twin_best, sd)
 
 
 @pytest.mark.slow

@@ -38,13 +38,12 @@ def test_the_sensor_luts_stated_noise_covers_its_error_over_seeds(tmp_path):
     res = run(config, 0, tmp_path)
     for preset in config.presets:
         assert abs(res.metrics[f"coverage.{preset}.lut.spread"] - 1.0) < 0.05
-        for key in ("vignetting", "balance", "balance_jackknife"):
-            assert res.metrics[f"coverage.{preset}.{key}.spread"] > 0
-        # the same g, a wider statement of its error (measured over 50 seeds: 0.5 / 0.3 of
-        # the sandwich's spread on ccd / cmos)
-        assert (
-            res.metrics[f"coverage.{preset}.balance_jackknife.spread"]
-            < res.metrics[f"coverage.{preset}.balance.spread"]
-        )
+        assert res.metrics[f"coverage.{preset}.vignetting.spread"] > 0
+        # g refined in the values, its noise bias gone: either statement of g's error holds
+        # for the balance (these 3 seeds: the sandwich's spread 0.45 / 0.71 on ccd / cmos,
+        # the jackknife's 0.41 / 0.86; with eq. 7's g the sandwich's cmos spread is 3.9).
+        # Six values a preset know a spread to about ±30 %: neither may understate by half
+        for key in ("balance", "balance_jackknife"):
+            assert 0 < res.metrics[f"coverage.{preset}.{key}.spread"] < 1.5
     assert len(res.rows) == 4 * len(config.presets)
     assert "3 capture sets per preset" in res.notes[0]
