@@ -496,18 +496,29 @@ def _condition_names(names: list[str]) -> str:
     return ", ".join(k if k.isprintable() else repr(k) for k in names)
 
 
+PEER_ROWS = {"hugin": "photoquant.peers.hugin"}
+"""The metric-name parts that are a peer program's rows (Table 1's Hugin column), with the
+module that says whether the program is installed: without it, the rows are not run."""
+
+
 def _expected(key: str, results: Mapping[str, Any], baseline: Mapping[str, Any]) -> bool:
     """Whether the run should have produced ``key``.
 
     Not when its experiment was not selected, was skipped for a missing
-    optional dependency, or belongs to a preset that was not run; an
+    optional dependency, belongs to a preset that was not run, or is a row of
+    a peer program this machine does not have (:data:`PEER_ROWS`); an
     experiment that *failed* is expected (its metrics count as missing).
     """
+    import importlib
+
     from pqsim.synth_camera.presets import CAMERA_PRESETS
 
     parts = key.split(".")
     if parts[0] not in results.get("experiments_run", []):
         return False
+    for peer in set(parts[1:]) & set(PEER_ROWS):
+        if not importlib.import_module(PEER_ROWS[peer]).available():
+            return False
     skipped = (results.get("experiments", {}).get(parts[0]) or {}).get("skipped")
     if skipped and not str(skipped).startswith("failed"):
         return False

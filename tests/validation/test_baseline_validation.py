@@ -186,6 +186,22 @@ def test_the_stored_baseline_passes_a_run_that_reproduces_it():
     assert result.ok and result.compared == len(STORED["metrics"])
 
 
+@pytest.mark.parametrize("installed", [True, False])
+def test_a_peer_programs_rows_are_expected_where_it_is_installed(monkeypatch, installed):
+    from photoquant.peers import hugin
+
+    monkeypatch.setattr(hugin, "available", lambda: installed)
+    results = _results_matching(STORED)
+    peer_rows = [k for k in results["metrics"] if ".hugin." in k]
+    assert peer_rows  # Table 1's Hugin column is in the stored baseline
+    for key in peer_rows:
+        del results["metrics"][key]
+    result = check_results(results, load_baseline(DEFAULT_BASELINE))
+    missing = {f.key for f in result.regressions if f.kind == "missing"}
+    assert missing == (set(peer_rows) if installed else set())
+    assert result.not_run == (0 if installed else len(peer_rows))
+
+
 def test_a_condition_named_with_a_line_break_is_refused_on_one_line():
     """A baseline whose conditions name a key with a line break (found by the property
     below): the refusal names it escaped, on one line."""
