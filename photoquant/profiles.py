@@ -69,6 +69,7 @@ _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
             "wide_steps": "none",
             "robust": "none",
             "objective": "log",
+            "edges": "kept",
         },
     ),
     # eq. 6: the hat over every value the camera gives
@@ -175,6 +176,14 @@ DEVIATIONS: tuple[Deviation, ...] = (
         "the noise is, instead of in ln X with a noisy value inside g, whose fit regresses "
         "towards the mean (errors in variables: Fuller 1987); on brackets of steps up to "
         "about 2.5 stops",
+    ),
+    Deviation(
+        "response sampled from flat regions",
+        "response",
+        {"edges": "excluded"},
+        "the candidate pixels at an edge or in texture left out of the response's samples, "
+        "where a sub-pixel shift, a JPEG's ringing or demosaicking changes a value without the "
+        "response, as Debevec & Malik advise (1997, section 2.2)",
     ),
     Deviation(
         "quantisation-aware weights",

@@ -1509,7 +1509,7 @@ def camera_response_Debevec1997(
     robust_rounds: int = 3,
     uncertainty: bool = False,
     objective: str = "values",
-    edges: str = "kept",
+    edges: str = "excluded",
 ) -> ResponseRecovery:
     """Recover ``g_λ = ln f_λ⁻¹`` per channel from an exposure stack [Debevec1997]_.
 
@@ -1597,13 +1597,13 @@ def camera_response_Debevec1997(
         ``g``, on brackets of steps up to about 2.5 stops (wider ones keep
         eq. 7's solution; :mod:`photoquant.response.values_objective`);
         ``"log"``: eq. 7 as written, its residuals in ``ln X`` (the paper's).
-    edges : {"kept", "excluded"}
-        ``"kept"`` (default): every candidate pixel may be sampled (the
-        paper's); ``"excluded"``: the candidates at an edge or in texture
+    edges : {"excluded", "kept"}
+        ``"excluded"`` (default): the candidates at an edge or in texture
         (their Laplacian more than 3× its exposure's median in some
         exposure) are left out, where a sub-pixel shift, a JPEG's ringing
         or a demosaicking error changes a value without the response
-        ([Debevec1997]_ §2.2; :mod:`photoquant.response.flat_samples`).
+        ([Debevec1997]_ §2.2; :mod:`photoquant.response.flat_samples`);
+        ``"kept"``: every candidate pixel may be sampled (the paper's).
     workers : int, optional
         Threads for the channels. By default one per channel wherever the
         process may run on two CPUs or more, and one thread otherwise: three
@@ -1729,9 +1729,9 @@ class DebevecResponseOptions:
         Eq. 7's solution refined in the values on brackets of steps up to
         about 2.5 stops (default; :mod:`photoquant.response.values_objective`),
         or eq. 7 as written (the paper's).
-    edges : {"kept", "excluded"}
-        Sample from every candidate pixel (default; the paper's), or leave
-        those at an edge or in texture out; see
+    edges : {"excluded", "kept"}
+        Leave the candidates at an edge or in texture out (default), or
+        sample from every candidate pixel (the paper's); see
         :mod:`photoquant.response.flat_samples`.
     """
 
@@ -1750,7 +1750,7 @@ class DebevecResponseOptions:
     uncertainty: bool = True
     covariance: str = "sandwich"
     objective: str = "values"
-    edges: str = "kept"
+    edges: str = "excluded"
 
     def __post_init__(self) -> None:
         if self.edges not in EDGE_METHODS:

@@ -93,10 +93,11 @@ shortened to about 4 % of the Gauss–Newton step: the gains above come from
 about a sixth of the way. The sandwich of the last step describes the
 converged estimator and states the refined ``g``'s scatter between captures
 about a third too small (``z`` spread 1.31 at 2 DN of noise, 1.23 at 0.7 DN,
-analytic 60×80 brackets of 8 exposures, 20 captures); eq. 7's sandwich, from
-the solution the steps start from, states it within 7 % and on the safe
-side (0.93 and 0.97): it is the covariance ``"Debevec 1997"`` reports for a
-refined ``g``.
+analytic 60×80 brackets of 8 exposures, 20 captures, every candidate
+sampled); eq. 7's sandwich, from the solution the steps start from, states
+it within 7 % and on the safe side (0.93 and 0.97; with the default samples
+from flat regions, 1.00 and 1.01): it is the covariance ``"Debevec 1997"``
+reports for a refined ``g``.
 
 Converged variants were measured (2026-12-05) and not adopted:
 

@@ -175,9 +175,15 @@ def test_thinned_candidates_are_judged_on_the_full_frames():
     assert np.mean(ratios) < 0.85, ratios
 
 
-def test_edges_kept_is_the_default_fit_to_the_bit():
+def test_edges_excluded_is_the_default_and_the_paper_profile_keeps_every_candidate():
+    from photoquant.profiles import PROFILES
+
     frames = _shaken(1)
     stack = ExposureStack(frames, _T, bit_depth=8)
     default = characterise_response_Debevec1997(stack, None, 3).model
+    flat = DebevecResponseOptions(edges="excluded")
+    excluded = characterise_response_Debevec1997(stack, flat, 3).model
     kept = characterise_response_Debevec1997(stack, DebevecResponseOptions(edges="kept"), 3).model
-    np.testing.assert_array_equal(default.log_inverse_response, kept.log_inverse_response)
+    np.testing.assert_array_equal(default.log_inverse_response, excluded.log_inverse_response)
+    assert not np.array_equal(default.log_inverse_response, kept.log_inverse_response)
+    assert PROFILES["paper"]["response"][1]["edges"] == "kept"

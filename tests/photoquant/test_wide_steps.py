@@ -147,7 +147,10 @@ def test_two_frames_far_apart_follow_a_cameras_shape(coefficients, ratio):
     against 0.002-0.012 (1.7× to 16×). The bound asks for 1.5×.
     """
     values, t, f = _emor_bracket(coefficients, ratio, 2)
-    ours = camera_response_Debevec1997(values, t, wide_steps="template", rng=0)
-    plain = camera_response_Debevec1997(values, t, wide_steps="none", rng=0)
+    # every candidate sampled: the prior is under test (on this scene of texture only the
+    # default's flat half leaves the template's gain at 4 stops within the sample's noise:
+    # 0.018 against 0.016 and 0.038 against 0.043 on two of the cameras)
+    ours = camera_response_Debevec1997(values, t, wide_steps="template", rng=0, edges="kept")
+    plain = camera_response_Debevec1997(values, t, wide_steps="none", rng=0, edges="kept")
     assert ours.smoothness_factor[0] == pytest.approx(step_factor(np.log(ratio)))
     assert _g_rms(ours, f) < _g_rms(plain, f) / 1.5
