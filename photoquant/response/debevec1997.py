@@ -1589,8 +1589,10 @@ def camera_response_Debevec1997(
         Reweighting rounds after the least-squares solution (1 to 50).
     uncertainty : bool
         Also estimate the covariance of ``g`` (the pixel-clustered sandwich of
-        the final solve, :mod:`photoquant.response.covariance`), returned as a
-        low-rank factor.
+        eq. 7's final solve, for a ``g`` refined in the values too:
+        :mod:`photoquant.response.covariance`,
+        :mod:`photoquant.response.values_objective`), returned as a low-rank
+        factor.
     objective : {"values", "log"}
         ``"values"`` (default): eq. 7's solution refined by Gauss–Newton steps
         on the values' residuals, without the bias of a noisy value inside
