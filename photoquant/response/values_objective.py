@@ -125,8 +125,10 @@ The default
 -----------
 ``"values"`` is ``"Debevec 1997"``'s default and the photoquant profile's
 (the paper profile keeps eq. 7 as written): measured on the user's path
-(2026-12-06, 2-core AMD EPYC), it is as good as eq. 7 or better wherever it
-was scored, and far better where the noise biases eq. 7:
+(2026-12-06, 2-core AMD EPYC, every candidate sampled; the default's samples
+from flat regions, :mod:`photoquant.response.flat_samples`, add their own
+gains), it is as good as eq. 7 or better wherever it was scored, and far
+better where the noise biases eq. 7:
 
 * ``photoquant validate`` (quick; ``ccd`` / ``cmos``): ``g`` worst channel
   0.0024 / 0.0106 → 0.0010 / 0.0019, balance 0.36 / 0.50 % → 0.05 /

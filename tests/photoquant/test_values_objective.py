@@ -11,7 +11,10 @@ from photoquant.errors import InputError
 from photoquant.response import camera_response_Debevec1997
 from photoquant.response.debevec1997 import DebevecResponseOptions
 from photoquant.response.values_objective import (
+    TOP_WEIGHT_SHARE,
     beyond_ends,
+    clip_edge,
+    join_at,
     model_positions,
     step_scale,
     values_residual,
@@ -154,3 +157,52 @@ def test_the_values_steps_run_up_to_two_and_a_half_stops_and_not_at_three(wide_s
         [wide], response=("Debevec 1997", {"objective": "log", "wide_steps": wide_steps})
     ).response
     np.testing.assert_array_equal(r_values.log_inverse_response, r_log.log_inverse_response)
+
+
+def test_the_clip_edge_is_where_the_hat_falls_below_its_share_towards_the_top():
+    levels = np.arange(256.0)
+    hat = weighting_hat_Debevec1997(levels, 0.0, 255.0)
+    j = clip_edge(levels, hat, 127.5)
+    assert hat[j] < TOP_WEIGHT_SHARE * hat.max() <= hat[j - 1] and j > 127
+    # the bottom end, where the hat is as low, is not the clip's edge
+    assert clip_edge(levels, np.ones(256), 127.5) == 255
+
+
+@given(st.integers(0, 9), st.floats(-3.0, 3.0))
+def test_join_at_keeps_g_below_and_the_shapes_increments_above(j, offset):
+    g = np.cumsum(np.linspace(0.1, 1.0, 10))
+    shape = np.log1p(np.arange(10.0)) + offset
+    out = join_at(g, shape, j)
+    np.testing.assert_array_equal(out[: j + 1], g[: j + 1])
+    np.testing.assert_allclose(np.diff(out[j:]), np.diff(shape[j:]), atol=1e-12)
+
+
+def test_a_refined_g_keeps_eq7s_slope_near_the_clip():
+    """Near the clip the values are a sample the clip selected; the values steps' slope
+    there read 9-27 % steep on pqsim's ccd, and every photon-transfer fit through it
+    (the sensor LUT's stated noise) read the gain high. Above the clip's edge the refined
+    ``g`` is eq. 7's shape, joined at the edge: its increments there are eq. 7's."""
+    import photoquant as pq
+    from pqsim.analytic import scene_test_hdr
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    camera = camera_from_preset("ccd")
+    stack = camera.capture(scene_test_hdr((120, 160)), EXPOSURES, 1, rng=3).to_stack()
+    fits = {
+        o: pq.calibrate([stack], response=("Debevec 1997", {"objective": o})).response
+        for o in ("log", "values")
+    }
+    r = fits["values"]
+    for ch in range(3):
+        hat = weighting_hat_Debevec1997(r.levels, r.black_level[ch], r.saturation_level[ch])
+        mid = 0.5 * (r.black_level[ch] + r.saturation_level[ch])
+        top = int(np.searchsorted(r.levels, r.saturation_level[ch]))
+        j = clip_edge(r.levels, hat, mid)
+        refined = np.diff(r.log_inverse_response[ch, j:top])
+        eq7 = np.diff(fits["log"].log_inverse_response[ch, j:top])
+        np.testing.assert_allclose(refined, eq7, atol=1e-9)
+        # below the edge the values steps did move g
+        assert not np.allclose(
+            np.diff(r.log_inverse_response[ch, :j]),
+            np.diff(fits["log"].log_inverse_response[ch, :j]),
+        )
