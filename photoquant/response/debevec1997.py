@@ -261,8 +261,7 @@ def continue_toe(g: np.ndarray, lowest: int, gauge: int) -> tuple[np.ndarray, in
     if slopes.size == 0 or not np.max(slopes) > 0:
         return g, lowest
     j_l = lowest + int(np.argmax(slopes))
-    g[:j_l] = g[j_l] - slopes[j_l - lowest] * (j_l - np.arange(j_l))
-    return g, j_l
+    return _continued_below(g, j_l), j_l
 
 
 @dataclass(frozen=True, eq=False)
@@ -1299,8 +1298,9 @@ def _toe_and_valid_min(
 
 
 def _continued_below(g: np.ndarray, j_l: int) -> np.ndarray:
-    """``g`` continued linearly below level ``j_l`` with its slope there (:func:`continue_toe`
-    at a given level)."""
+    """A copy of ``g`` continued linearly below level ``j_l`` with its slope there,
+    ``g[j] = g[j_L] − (g[j_L + 1] − g[j_L]) (j_L − j)`` (:func:`continue_toe`'s continuation,
+    and that of a ``g`` refined in the values below eq. 7's ``j_L``)."""
     g = np.array(g, dtype=np.float64)
     if 0 < j_l < g.size - 1:
         slope = g[j_l + 1] - g[j_l]
