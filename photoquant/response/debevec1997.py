@@ -965,7 +965,7 @@ def _candidate_values(inputs: _CheckedInputs) -> tuple[np.ndarray, np.ndarray]:
         cand = np.flatnonzero(inputs.rng.random(n_pix) < max_pixels / n_pix)
     if inputs.edges == "excluded":
         cand = flat_candidates(
-            lambda idx: np.take(values, idx, axis=1),
+            values,
             (height, width),
             np.arange(n_pix) if cand is None else cand,
             inputs.floor,
@@ -1825,11 +1825,14 @@ def characterise_response_Debevec1997(
     if opts.edges == "excluded":
         # the flat candidates, judged once on the full frames of every exposure
         cand = flat_candidates(
-            lambda idx: np.moveaxis(stack.mean_at_pixels(idx)[0], 0, -1),
+            stack.repeat_sum().reshape(stack.n_exposures, n_pix, -1)
+            if stack.n_repeats > 1
+            else stack.frames[0].reshape(stack.n_exposures, n_pix, -1),
             stack.image_shape,
             np.arange(n_pix) if cand is None else cand,
             c_min,
             np.asarray(stack.saturation_level, dtype=np.float64),
+            divisor=float(stack.n_repeats),
         )
     if cand is not None:
         # the sums and masks at the candidates only (no full-size arrays made for them)

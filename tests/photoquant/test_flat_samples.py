@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from photoquant.errors import InputError
+from photoquant.response import flat_samples
 from photoquant.response.debevec1997 import (
     DebevecResponseOptions,
     camera_response_Debevec1997,
@@ -17,10 +20,9 @@ from photoquant.stack import ExposureStack
 from .analytic import capture, true_g
 
 
-def _values_at(image: np.ndarray):
-    """``values_at`` of one ``(H, W, C)`` image as a one-exposure stack, ``(1, P, C)``."""
-    flat = image.reshape(1, -1, image.shape[-1]).astype(np.float64)
-    return lambda idx: flat[:, idx]
+def _values_at(image: np.ndarray) -> np.ndarray:
+    """One ``(H, W, C)`` image as a one-exposure stack's values, ``(1, H·W, C)``."""
+    return image.reshape(1, -1, image.shape[-1]).astype(np.float64)
 
 
 def test_the_laplacian_of_a_plane_is_zero_inside_and_mirrored_at_the_border():
@@ -85,6 +87,52 @@ def test_clipped_values_are_not_judged():
     assert 5 * 20 + 3 in kept  # invalid in every exposure: nothing judges it
 
 
+@pytest.mark.skipif(not flat_samples.HAVE_NUMBA, reason="numba is not installed")
+@settings(max_examples=40, deadline=None)
+@given(
+    height=st.integers(1, 9),
+    width=st.integers(1, 9),
+    n_k=st.integers(1, 3),
+    n_c=st.integers(1, 3),
+    repeats=st.sampled_from([1, 3, 4, 10]),
+    wide=st.booleans(),
+    step=st.integers(1, 3),
+    seed=st.integers(0, 2**16),
+)
+def test_the_compiled_edge_ratios_are_the_numpy_references_bits(
+    height, width, n_k, n_c, repeats, wide, step, seed
+):
+    """Integer sums of ``N`` repeats (a non-power-of-two ``N``: inexact means), levels
+    that leave values out, tiny images mirrored several times over, thinned candidates."""
+    rng = np.random.default_rng(seed)
+    top = repeats * (4095 if wide else 255)
+    values = rng.integers(0, top + 1, (n_k, height * width, n_c), dtype=np.uint32)
+    values[:, rng.random(height * width) < 0.3] = top // 2  # flat patches: ties
+    index = np.flatnonzero(rng.random(height * width) < 0.7).astype(np.intp)
+    lo = rng.uniform(0.0, 0.2, n_c) * top / repeats
+    hi = rng.uniform(0.6, 1.0, n_c) * top / repeats
+    args = (values, (height, width), index, lo, hi, step, float(repeats))
+    compiled = flat_samples._edge_ratio_compiled(*args)
+    reference = flat_samples._edge_ratio_numpy(*args)
+    np.testing.assert_array_equal(compiled.view(np.int64), reference.view(np.int64))
+
+
+def test_a_stacks_sums_give_the_ratios_of_its_mean():
+    """``values / divisor`` is the mean: the sums of ``N`` repeats with ``divisor = N``
+    judge the candidates as their float mean does."""
+    rng = np.random.default_rng(5)
+    frames = rng.integers(0, 256, (3, 2, 12, 14, 3), dtype=np.uint8)
+    frames[:, :, :, 7:] //= 4  # an edge
+    stack = ExposureStack(frames, np.array([1.0, 2.0]), bit_depth=8)
+    sums = stack.repeat_sum().reshape(2, -1, 3)
+    mean = stack.mean().reshape(2, -1, 3)
+    index = np.arange(12 * 14)
+    by_sums = flat_candidates(sums, (12, 14), index, 2.0, 250.0, divisor=3.0)
+    by_mean = flat_candidates(mean, (12, 14), index, 2.0, 250.0)
+    np.testing.assert_array_equal(by_sums, by_mean)
+    assert 0 < by_sums.size < index.size
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
@@ -92,6 +140,9 @@ def test_clipped_values_are_not_judged():
         ({"limit": 0.0}, "limit"),
         ({"min_fraction": 1.5}, "min_fraction"),
         ({"step": 0}, "step"),
+        ({"divisor": 0.0}, "divisor"),
+        ({"index": np.array([16])}, "index"),
+        ({"values": np.zeros((1, 15, 1))}, "values"),
     ],
 )
 def test_bad_arguments_are_refused(kwargs, match):
@@ -99,7 +150,7 @@ def test_bad_arguments_are_refused(kwargs, match):
     args = {"index": np.arange(16), "limit": 3.0, "min_fraction": 0.5, "step": 2, **kwargs}
     with pytest.raises(InputError, match=match):
         flat_candidates(
-            _values_at(image),
+            args.pop("values", _values_at(image)),
             (4, 4),
             args.pop("index"),
             0.0,
