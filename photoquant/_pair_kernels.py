@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from photoquant._numba import HAVE_NUMBA, compile_kernel
+from photoquant._select import median_inplace
 
 __all__ = [
     "huber_iterations",
@@ -428,7 +429,7 @@ def screen_passes(
                 if use[e]:
                     used[m] = u[e]
                     m += 1
-            scale = np.median(used) / 0.6745
+            scale = median_inplace(used) / 0.6745
             if scale == 0.0:
                 scale = 1.0
         h[:] = 1.0

@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from photoquant._numba import HAVE_NUMBA, compile_kernel
+from photoquant._select import median_inplace
 
 __all__ = [
     "HAVE_NUMBA",
@@ -430,9 +431,9 @@ def _band_medians_py(r: Any, used: Any, band: Any, n_bands: int) -> Any:  # prag
     """numba body: the median of the used ``r`` in each band, and each band's count.
 
     The values are gathered band by band in one pass (a counting sort) and
-    each band's middle found by a partial sort: its median is its middle
-    value, or the mean of its two middle values, ``(a + b) / 2`` as
-    :func:`numpy.median` takes it (NaN where the band holds a NaN, as there)
+    each band's middle found by a selection (:func:`photoquant._select.median_inplace`):
+    its median is its middle value, or the mean of its two middle values,
+    ``(a + b) / 2`` as :func:`numpy.median` takes it (NaN where the band holds a NaN, as there)
     — the same bits as one boolean mask and one :func:`numpy.median` a band,
     which pass over every value once per band.
     """
@@ -457,11 +458,7 @@ def _band_medians_py(r: Any, used: Any, band: Any, n_bands: int) -> Any:  # prag
         values = gathered[starts[b] : starts[b + 1]]
         if np.isnan(values).any():
             continue
-        upper = np.partition(values, n // 2)
-        if n % 2:
-            medians[b] = upper[n // 2]
-        else:  # the largest of the lower half
-            medians[b] = (upper[: n // 2].max() + upper[n // 2]) / 2
+        medians[b] = median_inplace(values)  # the scratch copy's order is not kept
     return medians, counts
 
 

@@ -129,6 +129,7 @@ import numpy as np
 from photoquant._checks import default_workers
 from photoquant._grid import mirror_index
 from photoquant._numba import HAVE_NUMBA, compile_kernel
+from photoquant._select import median_inplace
 from photoquant._threads import even_spans, thread_map
 from photoquant.errors import InputError
 
@@ -298,7 +299,7 @@ def _valid_median_py(lap: Any) -> float:  # pragma: no cover - compiled by numba
             n += 1
     if n == 0:
         return -1.0
-    return np.median(kept[:n])
+    return median_inplace(kept[:n])
 
 
 def _largest_ratio_py(
