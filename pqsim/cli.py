@@ -211,6 +211,22 @@ def _capture_rendered(
     )
 
 
+def _given_values(items: Sequence[str]) -> dict[str, float]:
+    """``--given FIELD=VALUE`` options as ``{field: value}`` (the values checked by
+    :func:`pqsim.twin.twin_preset`)."""
+    given: dict[str, float] = {}
+    for item in items:
+        field, sep, text = item.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = None
+        if not sep or not field.strip() or value is None:
+            raise InputError(f"--given must read FIELD=NUMBER, got {item!r}")
+        given[field.strip()] = value
+    return given
+
+
 def _cmd_preset(args: argparse.Namespace) -> int:
     from photoquant.io import write_text_atomic
     from photoquant.io.outputs import Output, check_outputs
@@ -226,7 +242,11 @@ def _cmd_preset(args: argparse.Namespace) -> int:
 
         if args.name is not None:
             raise InputError("give a preset name or --from-camera, not both")
-        text = twin_preset_json(args.from_camera, args.characterisation)
+        text = twin_preset_json(
+            args.from_camera, args.characterisation, given=_given_values(args.given)
+        )
+    elif args.given:
+        raise InputError("--given needs --from-camera: it replaces a twin's assumptions")
     elif args.name is None:
         raise InputError("give a preset name (ccd, cmos, ... or a file) or --from-camera CAM")
     else:
@@ -394,6 +414,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="REPORT",
         help="with --from-camera: its `photoquant characterise` report (noise, DSNU, PRNU)",
+    )
+    pre.add_argument(
+        "--given",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="with --from-camera: a value you know for a field the capture set cannot "
+        "measure (e.g. noise.dark_current_e_per_s=60 from a datasheet); repeatable",
     )
     pre.add_argument("-o", "--output", default=None, help="write it here instead of stdout")
     pre.add_argument("--overwrite", action="store_true", help="replace an existing file")

@@ -46,6 +46,22 @@ preset (format ``pqsim.preset/1``) for :func:`~pqsim.synth_camera.presets.camera
 
 Every field the measurement did not give is named in the preset's
 ``"assumed"`` list with the value taken; none is silently defaulted.
+
+What a capture set cannot measure, its user may know (a datasheet, another
+measurement): ``given`` values (:data:`GIVEN_FIELDS`; ``pqsim preset
+--from-camera CAM --given noise.dark_current_e_per_s=60``) replace those
+assumptions, and the preset lists them under ``"given"``. Only an assumption
+is replaced: a given value for a field the measurement fixed is refused. The
+``cmos`` preset is such a camera: its dark current (60 e⁻/s) does not reach
+its dark frames (its response's toe maps 0.3 s of dark signal to 0 DN at
+99.8-99.97 % of the pixels) and in a bracket it adds ``D·t`` as light does,
+so its twin assumes none; its merge methods then score half the camera's
+test-scene error. Given the datasheet's 60 e⁻/s, the twin scores them as
+the camera does (measured 2026-12-06, ``validation.config.TINY`` board,
+capture set seed 1; test-scene e_mean, camera / twin: Noise-Aware 0.0314 /
+0.0306, Debevec 1997 0.0333 / 0.0369, Robertson 2003 0.0340 / 0.0367,
+OpenCV MergeDebevec 0.267 / 0.268: the camera's order but for the two it
+puts 2 % apart, tied on the twin).
 """
 
 from __future__ import annotations
@@ -67,6 +83,7 @@ from pqsim.synth_camera.camera import Capture, SyntheticCamera
 from pqsim.synth_camera.presets import PRESET_FORMAT, camera_from_preset
 
 __all__ = [
+    "GIVEN_FIELDS",
     "MAX_TABLE_POINTS",
     "capture_camera_scene",
     "load_twin",
@@ -84,6 +101,60 @@ PQSIM_SCALE_PER_FULL_WELL = 100.0
 
 _DEFAULT_FULL_WELL_E = 20000.0
 """The full well taken when the camera's gain was never measured (named as assumed)."""
+
+GIVEN_FIELDS = (
+    "noise.dark_current_e_per_s",
+    "noise.read_noise_e",
+    "disturbances.dsnu_e",
+    "disturbances.exposure_jitter",
+)
+"""The assumptions a user may replace with a value they know (``given``): each in the
+twin's own units (electrons, electrons per second; the jitter as the standard deviation
+of ``ln t``)."""
+
+
+def _check_given(given: Any) -> dict[str, float]:
+    """``given`` as ``{field: value}``, each a known field and a finite value ``≥ 0``."""
+    if given is None:
+        return {}
+    if not isinstance(given, dict):
+        raise InputError(f"`given` must map fields to values, got {type(given).__name__}")
+    out: dict[str, float] = {}
+    for field, value in given.items():
+        if field not in GIVEN_FIELDS:
+            raise InputError(
+                f"{field!r} cannot be given: the fields a twin may take from its user are "
+                f"{', '.join(GIVEN_FIELDS)}"
+            )
+        if isinstance(value, bool) or not isinstance(value, int | float | np.number):
+            raise InputError(f"the given {field} must be a number, got {value!r}")
+        if not (math.isfinite(float(value)) and float(value) >= 0.0):
+            raise InputError(f"the given {field} must be finite and >= 0, got {value!r}")
+        out[field] = float(value)
+    return out
+
+
+def _apply_given(doc: dict[str, Any], given: dict[str, float]) -> None:
+    """Replace the assumptions ``given`` names with their values (module notes)."""
+    records = []
+    for field, value in given.items():
+        entry = next((a for a in doc["assumed"] if a.startswith(field + " (")), None)
+        if entry is None:
+            section, key = field.split(".")
+            measured = doc[section].get(key)
+            raise InputError(
+                f"{field} was measured ({measured!r}): a given value replaces an assumption only"
+            )
+        doc["assumed"].remove(entry)
+        section, key = field.split(".")
+        doc[section][key] = value
+        if field == "disturbances.dsnu_e":
+            doc[section]["dsnu_stage"] = "readout"
+        records.append(
+            f"{field} = {value:g} (given; otherwise assumed {entry[len(field) + 2 : -1]})"
+        )
+    if records:
+        doc["given"] = records
 
 
 def _not_measured(char: Characterisation | None, name: str, needs: str) -> str:
@@ -182,6 +253,8 @@ def twin_response_sd(twin: str | os.PathLike[str]) -> float | None:
 def twin_preset(
     camera: str | os.PathLike[str] | CameraModel,
     characterisation: str | os.PathLike[str] | Characterisation | None = None,
+    *,
+    given: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """The preset document of a camera's simulator twin (module notes).
 
@@ -194,6 +267,11 @@ def twin_preset(
         gain and read noise are the camera's own (``parameters["noise"]``,
         from its calibration's repeats) and the PRNU the LUT's spread; DSNU,
         dark current and the exposure error are then assumed.
+    given : dict, optional
+        Values the user knows for fields the measurement left assumed
+        (:data:`GIVEN_FIELDS`, e.g. ``{"noise.dark_current_e_per_s": 60}``
+        from a datasheet); recorded under ``"given"``. A field the
+        measurement fixed is refused.
 
     Returns
     -------
@@ -201,6 +279,7 @@ def twin_preset(
         A ``pqsim.preset/1`` document, with ``"assumed"`` naming every field
         not measured and ``"measurement"`` the measured values' uncertainties.
     """
+    known = _check_given(given)
     cam = camera if isinstance(camera, CameraModel) else load_camera(camera)
     char = (
         characterisation
@@ -385,15 +464,18 @@ def twin_preset(
         "glare": glare,
         "disturbances": disturbances,
     }
+    _apply_given(doc, known)
     return to_json_value(doc)
 
 
 def twin_preset_json(
     camera: str | os.PathLike[str] | CameraModel,
     characterisation: str | os.PathLike[str] | Characterisation | None = None,
+    *,
+    given: dict[str, float] | None = None,
 ) -> str:
     """:func:`twin_preset` as the text of a preset file."""
-    return json.dumps(twin_preset(camera, characterisation), indent=1) + "\n"
+    return json.dumps(twin_preset(camera, characterisation, given=given), indent=1) + "\n"
 
 
 def load_twin(twin: str | os.PathLike[str]) -> tuple[SyntheticCamera, float]:

@@ -110,10 +110,12 @@ PRESET_FORMAT = "pqsim.preset/1"
 DEFAULT_SENSITIVITIES = "nikon_d5100"
 #: Preset keys that are not :class:`SyntheticCamera` fields.
 _NON_CAMERA_KEYS = ("sensitivities",)
-#: Keys of a preset file that are not preset fields (a twin's ``assumed`` fields and
-#: ``measurement`` record, :mod:`pqsim.twin`, are documentation for the reader; its
+#: Keys of a preset file that are not preset fields (a twin's ``assumed`` and ``given``
+#: fields and ``measurement`` record, :mod:`pqsim.twin`, are documentation for the reader; its
 #: ``camera_unit`` converts the calibrated camera's photoquantities to the twin's).
-_FILE_KEYS = ("format", "base", "description", "assumed", "measurement", "camera_unit")
+_FILE_KEYS = (
+    "format", "base", "description", "assumed", "given", "measurement", "camera_unit",
+)  # fmt: skip
 
 _CCD: dict[str, Any] = {
     "responses": [{"kind": "linear", "params": {}}] * 3,

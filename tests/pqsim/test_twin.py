@@ -123,3 +123,47 @@ def test_a_twins_stated_response_sd_is_read_or_refused_in_one_line(tmp_path):
     path.write_text(json.dumps({"measurement": {"response_sd_ln": [0.001, "x"]}}))
     with pytest.raises(InputError, match="response_sd_ln"):
         twin_response_sd(path)
+
+
+def test_given_values_replace_only_assumptions(measured, tmp_path):
+    """A value the user knows replaces an assumption and is listed as given; a measured
+    field, an unknown one or a bad value is refused in one line."""
+    root, _, _ = measured
+    doc = twin_preset(
+        root / "cam", given={"noise.dark_current_e_per_s": 60, "disturbances.dsnu_e": 2}
+    )
+    assert doc["noise"]["dark_current_e_per_s"] == 60.0
+    assert doc["disturbances"]["dsnu_e"] == 2.0 and doc["disturbances"]["dsnu_stage"] == "readout"
+    assert not any(
+        a.startswith(("noise.dark_current", "disturbances.dsnu_e")) for a in doc["assumed"]
+    )
+    assert [g.split(" (")[0] for g in doc["given"]] == [
+        "noise.dark_current_e_per_s = 60",
+        "disturbances.dsnu_e = 2",
+    ]
+    out = tmp_path / "twin.json"
+    out.write_text(json.dumps(doc))
+    assert camera_from_preset(str(out)).noise.dark_current_e_per_s == 60.0
+    # the characterisation measured the read noise: a given value would replace a measurement
+    with pytest.raises(InputError, match="was measured"):
+        twin_preset(root / "cam", root / "report", given={"noise.read_noise_e": 3.0})
+    with pytest.raises(InputError, match="cannot be given"):
+        twin_preset(root / "cam", given={"noise.full_well_e": 1e4})
+    for bad in (-1.0, float("nan"), "60"):
+        with pytest.raises(InputError, match="dark_current"):
+            twin_preset(root / "cam", given={"noise.dark_current_e_per_s": bad})
+
+
+def test_the_command_takes_given_values(measured, tmp_path, capsys):
+    root, _, _ = measured
+    out = tmp_path / "twin.json"
+    argv = ["preset", "--from-camera", str(root / "cam"), "-o", str(out)]
+    assert main([*argv, "--given", "noise.dark_current_e_per_s=60"]) == 0
+    assert json.loads(out.read_text())["noise"]["dark_current_e_per_s"] == 60.0
+    capsys.readouterr()
+    for bad in ("noise.dark_current_e_per_s", "noise.dark_current_e_per_s=sixty", "=3"):
+        assert main([*argv, "--overwrite", "--given", bad]) == 2
+        err = capsys.readouterr().err
+        assert "FIELD=NUMBER" in err and len(err.strip().splitlines()) == 1, err
+    assert main(["preset", "ccd", "--given", "noise.read_noise_e=3"]) == 2
+    assert "--given needs --from-camera" in capsys.readouterr().err

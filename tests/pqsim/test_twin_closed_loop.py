@@ -3,6 +3,7 @@ the methods as the camera itself does."""
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import pytest
@@ -136,16 +137,43 @@ def cmos_merge_boards(tmp_path_factory):
     model = calibrate_manifest(
         manifest, response=("Debevec 1997", {"covariance": "exposure jackknife"})
     )
+    char = characterise_manifest(manifest, model)
     twin = root / "twin.json"
-    twin.write_text(twin_preset_json(model, characterise_manifest(manifest, model)))
+    twin.write_text(twin_preset_json(model, char))
+    # the dark current its user knows (the preset's, as from a datasheet)
+    known = {"noise.dark_current_e_per_s": camera_from_preset("cmos").noise.dark_current_e_per_s}
+    (root / "given.json").write_text(twin_preset_json(model, char, given=known))
     dark_free = root / "dark_free.json"
     noise = {**json.loads(preset_json("cmos"))["noise"], "dark_current_e_per_s": 0.0}
     dark_free.write_text(json.dumps({"format": "pqsim.preset/1", "base": "cmos", "noise": noise}))
     lb = run_leaderboard(
-        ["merge"], methods=METHODS["merge"], presets=["cmos", str(dark_free), str(twin)],
+        ["merge"], methods=METHODS["merge"],
+        presets=["cmos", str(dark_free), str(twin), str(root / "given.json")],
         config=TINY, repeats=1, workdir=root / "board", progress=lambda _: None,
     )  # fmt: skip
     return lb, json.loads(twin.read_text())
+
+
+_CAMERA_RESOLUTION = 0.03
+"""Merge scores closer than this (relative) on the camera are not told apart: the cmos
+camera's own boards at seeds 0-2 move a method's test-scene score by 1-13 % (Debevec 1997
+0.0333-0.0339, Noise-Aware 0.0299-0.0338; measured 2026-12-06)."""
+
+
+def _merge_rows(lb, *presets):
+    board = lb.board("merge")
+    key = PRIMARY["merge"][0]
+    return [tuple(e.scores[p][key] for p in presets) for e in board.entries if e.status == "ok"]
+
+
+def _discordant_beyond_resolution(rows):
+    """The pairs the camera (first column) orders, beyond its resolution, unlike the twin."""
+    return [
+        (a, b)
+        for a, b in itertools.combinations(rows, 2)
+        if abs(a[0] - b[0]) > _CAMERA_RESOLUTION * min(a[0], b[0])
+        and (a[0] - b[0]) * (a[1] - b[1]) < 0
+    ]
 
 
 @pytest.mark.slow
@@ -159,23 +187,31 @@ def test_the_cmos_twin_ranks_the_merges_as_its_camera_without_the_unmeasurable_d
     twin's: without it the camera scores as the twin does and in the twin's order.
     Measured (2026-12-06, TINY board, seed 0): test scene e_mean, cmos / without dark
     current / twin: Noise-Aware 0.0314 / 0.0155 / 0.0162, Debevec 1997 0.0333 / 0.0161 /
-    0.0184, Robertson 2003 0.0340 / 0.0155 / 0.0171; the three ranked within 2-3 % of
-    each other on the camera, whose own boards at seeds 0-2 swap them too (τ 0.8-1.0)."""
+    0.0184, Robertson 2003 0.0340 / 0.0155 / 0.0171."""
     lb, twin = cmos_merge_boards
     assert any(a.startswith("noise.dark_current_e_per_s") for a in twin["assumed"]), twin["assumed"]
-    board = lb.board("merge")
-    key = PRIMARY["merge"][0]
-    rows = [
-        (e.scores["cmos"][key], e.scores["dark_free"][key], e.scores["twin"][key])
-        for e in board.entries
-        if e.status == "ok"
-    ]
+    rows = _merge_rows(lb, "dark_free", "twin", "cmos")
     assert len(rows) >= 4
-    camera, dark_free, on_twin = (list(col) for col in zip(*rows, strict=True))
-    assert kendalltau(dark_free, on_twin).statistic >= 0.8, rows
+    assert not _discordant_beyond_resolution(rows), rows
     # photoquant's merges (the three best): the twin within 25 % of the dark-free camera,
     # the camera with its dark current at least 1.5 times either
-    best = sorted(rows)[:3]
-    for with_dark, without, twin_score in best:
-        assert abs(twin_score / without - 1.0) <= 0.25, best
-        assert with_dark >= 1.5 * max(without, twin_score), best
+    for without, on_twin, with_dark in sorted(rows)[:3]:
+        assert abs(on_twin / without - 1.0) <= 0.25, rows
+        assert with_dark >= 1.5 * max(without, on_twin), rows
+
+
+@pytest.mark.slow
+def test_given_its_dark_current_the_cmos_twin_scores_the_merges_as_the_camera(cmos_merge_boards):
+    """The dark current the captures cannot measure, given (``pqsim preset --given``): the
+    twin's merge scores come back to the camera's, in the camera's order wherever the
+    camera tells them apart. Measured (2026-12-06, as above): camera / twin given 60 e⁻/s:
+    Noise-Aware 0.0314 / 0.0306, Debevec 1997 0.0333 / 0.0369, Robertson 2003 0.0340 /
+    0.0367 (2 % apart on the camera, 0.5 % on the twin), OpenCV MergeDebevec 0.267 /
+    0.268."""
+    lb, _ = cmos_merge_boards
+    rows = _merge_rows(lb, "cmos", "given")
+    assert len(rows) >= 4
+    assert not _discordant_beyond_resolution(rows), rows
+    assert min(rows)[0] == min(rows, key=lambda r: r[1])[0]  # the same best merge
+    for on_camera, on_twin in rows:
+        assert abs(on_twin / on_camera - 1.0) <= 0.2, rows
