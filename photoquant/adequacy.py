@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from photoquant._threads import thread_map
 from photoquant.holdout import predict_values
 from photoquant.stack import ExposureStack, _compare_per_channel
 
@@ -208,10 +209,11 @@ def global_response_departure(
     n_bx = int(bx.max()) + 1
     block = (by[:, None] * n_bx + bx[None, :]).ravel()
     n_blocks = int(block.max()) + 1
-    excess, noise, used = [], [], 0
     log_t = np.log(stack.exposure_s)
     n_pix = height * width
-    for ch in range(n_ch):
+
+    def channel(ch: int) -> tuple[float, float, int] | None:
+        """The channel's excess and sampling variances between blocks, and its blocks."""
         g = np.asarray(log_inverse_response[ch], dtype=np.float64)
         ln_e = log_photoquantity[..., ch].ravel()
         # every exposure at once, exposure-major (each exposure's values in raster order)
@@ -240,14 +242,18 @@ def global_response_departure(
             counts += per_k[2][k]
         keep = counts >= min_values
         if keep.sum() < 2:
-            continue
+            return None
         means = sums[keep] / counts[keep]
         within = squares[keep] / counts[keep] - means**2
         sampling = float(np.mean(within * counts[keep] / (counts[keep] - 1) / counts[keep]))
         between = float(np.var(means))
-        excess.append(max(between - sampling, 0.0))
-        noise.append(sampling)
-        used = max(used, int(keep.sum()))
+        return max(between - sampling, 0.0), sampling, int(keep.sum())
+
+    # the channels on every core (numpy's passes release the GIL), in channel order
+    found = [c for c in thread_map(channel, range(n_ch)) if c is not None]
+    excess = [c[0] for c in found]
+    noise = [c[1] for c in found]
+    used = max((c[2] for c in found), default=0)
     if not excess:
         return ModelAdequacy(float("nan"), float("nan"), block_px, 0, top)
     return ModelAdequacy(

@@ -85,6 +85,7 @@ from typing import Any
 import numpy as np
 
 from photoquant._checks import check_int
+from photoquant._threads import thread_map
 from photoquant.errors import InputError
 from photoquant.merge._base import MergeResult
 from photoquant.merge._tables import ValueTables
@@ -708,7 +709,8 @@ def estimate_noise_from_exposures(
     order_t = np.argsort(t)
     n_ch = stack.n_channels
     gains, reads, covs, points = np.zeros(n_ch), np.zeros(n_ch), np.zeros((n_ch, 2, 2)), []
-    for ch in range(n_ch):
+
+    def channel_line(ch: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         lin = _LinearScale(scale, ch, frames.dtype)
         rows: list[np.ndarray] = []
         for a, b in zip(order_t[:-1], order_t[1:], strict=True):
@@ -720,7 +722,11 @@ def estimate_noise_from_exposures(
         if not rows:
             return None
         floor = float(scale.linear(scale.log_inverse(np.array([lo[ch]]), ch), ch)[0])
-        line = _channel_line(np.concatenate(rows, axis=1), floor, n_bins)
+        return _channel_line(np.concatenate(rows, axis=1), floor, n_bins)
+
+    # the channels on every core (numpy's sorts, searches and sums release the GIL): each
+    # channel's line on its own, the same numbers in any order
+    for ch, line in enumerate(thread_map(channel_line, range(n_ch))):
         if line is None:
             return None
         coef, cov, x, y = line
