@@ -1224,10 +1224,11 @@ def refine_by_pairs(
 
     rng = np.random.default_rng(seed)
     nominal = stack.exposure_s.copy()
+    value_tables, slopes = _screen_tables(response, levels, g)
 
     def screen(draw: int | None, quota: np.ndarray) -> tuple[Any, ...]:
         values = _sample_values(stack, draw, rng)
-        pairs = _neighbouring_pairs(values, black, levels, g, sat, quota, rng)
+        pairs = _neighbouring_pairs(values, black, levels, g, sat, quota, rng, value_tables)
         line = _repeat_noise_line(values, pairs)
         return _pair_passes(
             pairs,
@@ -1245,6 +1246,7 @@ def refine_by_pairs(
             max_iterations=max_iterations,
             max_bend=max_bend,
             passes=passes,
+            slopes=slopes,
         )
 
     quota = np.full(max(n_k - 1, 1), max(pair_rows // n_ch, 1), dtype=np.int64)
@@ -1319,6 +1321,7 @@ def _neighbouring_pairs(
     sat: np.ndarray,
     quota: np.ndarray,
     rng: np.random.Generator,
+    tables: _Tables | None = None,
 ) -> _Pairs:
     """The pairs of :func:`refine_by_pairs` from its drawn ``values`` ``(N, K, P, C)``:
     (row, step) where both exposures of the step are valid, at most ``quota`` ``(K − 1,)``
@@ -1331,8 +1334,8 @@ def _neighbouring_pairs(
     """
     n_rep, n_k, n_pix, n_ch = values.shape
     order = rng.permutation(n_pix)  # the quota takes pairs in random order, not by row
-    step_slope = np.diff(g, axis=1) / np.diff(levels)
-    tables = _Tables(levels, np.stack([g, np.c_[step_slope, step_slope[:, -1:]]]))
+    if tables is None:
+        tables = _value_tables(levels, g)
     sat_thr = np.ceil(sat).astype(np.int64)  # integer frames: c ≥ ⌈level⌉
     dark_thr = np.floor(np.broadcast_to(black_level, (n_ch,))).astype(np.int64)
     if _screen_kernels is not None:  # the same pairs, one pass over the drawn values
@@ -1429,6 +1432,7 @@ def _pair_passes(
     max_iterations: int,
     max_bend: float,
     passes: int,
+    slopes: tuple[_Tables, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, slice, float, int]:
     """The passes of :func:`refine_by_pairs`: each end of a pair predicted from the
     other at the current times (bias-corrected), the values to use and their weights,
@@ -1441,12 +1445,7 @@ def _pair_passes(
     n_ch = line.shape[0]
     row, step, chan, y_lo, y_hi = pairs.row, pairs.step, pairs.chan, pairs.y_lo, pairs.y_hi
     z_lo, z_hi = pairs.z_lo.copy(), pairs.z_hi.copy()  # evaluated there, then at predictions
-    finite_g = np.where(np.isfinite(g), g, np.nan)
-    d1 = np.gradient(finite_g, levels, axis=1)
-    tables = _Tables(
-        levels, np.stack([np.nan_to_num(d1), np.nan_to_num(np.gradient(d1, levels, axis=1))])
-    )
-    g_mono = np.maximum.accumulate(np.where(np.isfinite(g), g, -1e300), axis=1)
+    tables, g_mono = _slope_tables(levels, g) if slopes is None else slopes
     n_rows = pairs.n_rows
     n_steps = x_nom.size - 1
     rtable = _rounding_table()[1]
@@ -1631,6 +1630,40 @@ class _Tables:
         a = self.flat[:, base]
         b = self.flat[:, base + 1]
         return a + frac * (b - a)
+
+
+def _value_tables(levels: np.ndarray, g: np.ndarray) -> _Tables:
+    """``g`` and its segments' slopes on ``levels``, the pairs' lookups (:func:`_neighbouring_pairs`)."""
+    step_slope = np.diff(g, axis=1) / np.diff(levels)
+    return _Tables(levels, np.stack([g, np.c_[step_slope, step_slope[:, -1:]]]))
+
+
+def _slope_tables(levels: np.ndarray, g: np.ndarray) -> tuple[_Tables, np.ndarray]:
+    """``g'`` and ``g''`` on ``levels`` (:func:`numpy.gradient`), and ``g`` made
+    non-decreasing for the predictions' search: the passes' lookups (:func:`_pair_passes`)."""
+    finite_g = np.where(np.isfinite(g), g, np.nan)
+    d1 = np.gradient(finite_g, levels, axis=1)
+    tables = _Tables(
+        levels, np.stack([np.nan_to_num(d1), np.nan_to_num(np.gradient(d1, levels, axis=1))])
+    )
+    g_mono = np.maximum.accumulate(np.where(np.isfinite(g), g, -1e300), axis=1)
+    return tables, g_mono
+
+
+def _screen_tables(
+    response: Any, levels: np.ndarray, g: np.ndarray
+) -> tuple[_Tables, tuple[_Tables, np.ndarray]]:
+    """:func:`_value_tables` and :func:`_slope_tables` of a response, made once per
+    response object (kept in its ``_cache`` where it has one: a camera corrects many
+    scenes with one response)."""
+    cache = getattr(response, "_cache", None)
+    if isinstance(cache, dict) and "screen_tables" in cache:
+        found: tuple[_Tables, tuple[_Tables, np.ndarray]] = cache["screen_tables"]
+        return found
+    made = (_value_tables(levels, g), _slope_tables(levels, g))
+    if isinstance(cache, dict):
+        cache["screen_tables"] = made
+    return made
 
 
 def _line_fit(level: np.ndarray, var: np.ndarray) -> np.ndarray:

@@ -85,6 +85,8 @@ class ResponseModel:
     covariance_factor: np.ndarray | None = None
     covariance_diagonal: np.ndarray | None = None
     covariance_reference: str | None = None
+    # tables derived from the response, made once (e.g. the exposure screen's lookups)
+    _cache: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         levels = check_array(self.levels, "levels", ndim=1, kind="iuf", finite=True).astype(

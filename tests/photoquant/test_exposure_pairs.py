@@ -176,6 +176,22 @@ def test_the_compiled_screen_names_steps_without_pairs(capture, monkeypatch):
             refine_by_pairs(stack, model.response, min_overlap=10_000)
 
 
+def test_the_screens_tables_are_made_once_per_response(capture):
+    """The lookups derived from the response are kept with it: a camera's second scene
+    reuses them, with the same result as a response that has to make them again."""
+    _, stack, model, _ = capture
+    response = dataclasses.replace(model.response)  # a fresh object: nothing made yet
+    assert "screen_tables" not in response._cache
+    first = refine_by_pairs(stack, response)
+    tables = response._cache["screen_tables"]
+    again = refine_by_pairs(stack, response)
+    assert response._cache["screen_tables"] is tables
+    fresh = refine_by_pairs(stack, dataclasses.replace(model.response))
+    for other in (again, fresh):
+        np.testing.assert_array_equal(other.exposure_s, first.exposure_s)
+        np.testing.assert_array_equal(other.log_cov, first.log_cov)
+
+
 def test_correct_uses_the_pairs_and_its_decision(capture):
     jitter, stack, model, _ = capture
     res = pq.correct(stack, model)
