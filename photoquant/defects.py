@@ -478,7 +478,7 @@ def _below_clip(stack: ExposureStack, mean: Any) -> Any:
         return lambda k: _compare_per_channel(np.less, mean(k), sat - 0.5)
     limit = np.ceil(n * (sat - 0.5)).astype(np.int64)
     # one repeat: the frames themselves are the sums (compared in their own dtype)
-    sums = stack.frames[0] if n == 1 else stack.repeat_sum()
+    sums = stack.integer_sums()
     return lambda k: _compare_per_channel(np.less, sums[k], limit)
 
 

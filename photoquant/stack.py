@@ -577,6 +577,11 @@ class ExposureStack:
             self._sum.append(self.frames.sum(axis=0, dtype=self._sum_dtype()))
         return self._sum[0]
 
+    def integer_sums(self) -> np.ndarray:
+        """``(K, H, W, C)`` integers whose quotient by ``N`` is :meth:`mean`, to the bit:
+        one repeat's frames themselves (their own dtype, no copy), else :meth:`repeat_sum`."""
+        return self.frames[0] if self.n_repeats == 1 else self.repeat_sum()
+
     def _sum_dtype(self) -> type[np.unsignedinteger[Any]]:
         """The smallest unsigned integer holding ``N · c_max``."""
         top = self.n_repeats * self.c_max

@@ -570,7 +570,7 @@ def merge_stack_Debevec1997(
     plan = plan_stack_Debevec1997(stack, response, opts)
     if plan is not None:
         return _run_tiles(plan[0], plan[1], tile_rows, workers)
-    values = stack.frames[0] if stack.n_repeats == 1 else stack.repeat_sum()
+    values = stack.integer_sums()
     return merge_Debevec1997(
         values,
         stack.exposure_s,

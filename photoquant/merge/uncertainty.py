@@ -188,7 +188,7 @@ def _weight_setup(
     """The stack's value tables, the merge's weight on them and the checked inputs."""
     opts = options or DebevecMergeOptions()
     n = stack.n_repeats
-    values = stack.frames[0] if n == 1 else stack.repeat_sum()
+    values = stack.integer_sums()
     inp = _check_inputs(
         values,
         stack.exposure_s,
@@ -219,7 +219,7 @@ def _fused_arguments(
     """The compiled passes' values ``(K, H·W, C)`` (sums of the repeats: the tables'
     indices), saturated and dark masks (empty where none) and output ``(H·W, C)``."""
     inp = setup[2]
-    values = stack.frames[0] if stack.n_repeats == 1 else stack.repeat_sum()
+    values = stack.integer_sums()
     k, h, w, c = values.shape
     none = np.zeros((0, 0, 0), dtype=bool)
     sat = none if inp.saturated is None else inp.saturated.reshape(k, h * w, c)

@@ -1825,9 +1825,7 @@ def characterise_response_Debevec1997(
     if opts.edges == "excluded":
         # the flat candidates, judged once on the full frames of every exposure
         cand = flat_candidates(
-            stack.repeat_sum().reshape(stack.n_exposures, n_pix, -1)
-            if stack.n_repeats > 1
-            else stack.frames[0].reshape(stack.n_exposures, n_pix, -1),
+            stack.integer_sums().reshape(stack.n_exposures, n_pix, -1),
             stack.image_shape,
             np.arange(n_pix) if cand is None else cand,
             c_min,

@@ -77,6 +77,12 @@ def test_sums_means_and_clip_flags_follow_their_definitions(rng, bit_depth):
     sums = stack.repeat_sum()
     assert sums.dtype.kind == "u" and np.array_equal(sums, frames.sum(axis=0, dtype=np.int64))
     np.testing.assert_array_equal(stack.mean(), denoise_mean(frames))  # to the last bit
+    assert stack.integer_sums() is sums
+    np.testing.assert_array_equal(stack.integer_sums() / 7, stack.mean())
+    single = ExposureStack(frames[:1], [0.1, 0.2], bit_depth=bit_depth)
+    assert single.integer_sums().dtype == frames.dtype  # the frames themselves, no copy
+    assert np.shares_memory(single.integer_sums(), single.frames)
+    np.testing.assert_array_equal(single.integer_sums(), single.mean())
     for level in ([c_max] * 3, [c_max - 10.5, c_max - 3, c_max]):
         expected = np.any(frames >= np.asarray(level, dtype=float), axis=0)
         np.testing.assert_array_equal(stack.saturated(np.asarray(level)), expected)
