@@ -29,21 +29,28 @@ METHODS = {
 }  # fmt: skip
 
 
+def _calibrated_and_characterised(root, preset):
+    """A 160×120, N = 4, V = 3 capture set of ``preset`` with dark frames, calibrated with
+    the exposure jackknife's covariance of ``g``, and its characterisation."""
+    manifest = write_capture_set(
+        root / "set", camera_from_preset(preset), shape=(120, 160), n_repeats=4, seed=1,
+        dark_frames=4,
+    )  # fmt: skip
+    model = calibrate_manifest(
+        manifest, response=("Debevec 1997", {"covariance": "exposure jackknife"})
+    )
+    return model, characterise_manifest(manifest, model)
+
+
 @pytest.fixture(scope="module")
 def boards(tmp_path_factory):
     """The ccd preset and its twin (from a 160×120, N = 4, V = 3 capture set with dark
     frames, calibrated with the exposure jackknife's covariance of ``g`` and characterised),
     each ranked on the tiny board."""
     root = tmp_path_factory.mktemp("twin-loop")
-    manifest = write_capture_set(
-        root / "set", camera_from_preset("ccd"), shape=(120, 160), n_repeats=4, seed=1,
-        dark_frames=4,
-    )  # fmt: skip
-    model = calibrate_manifest(
-        manifest, response=("Debevec 1997", {"covariance": "exposure jackknife"})
-    )
+    model, char = _calibrated_and_characterised(root, "ccd")
     twin = root / "twin.json"
-    twin.write_text(twin_preset_json(model, characterise_manifest(manifest, model)))
+    twin.write_text(twin_preset_json(model, char))
     methods = [m for step in METHODS.values() for m in step]
     lb = run_leaderboard(
         ["response", "merge"], methods=methods, presets=["ccd", str(twin)], config=TINY,
@@ -130,14 +137,7 @@ def cmos_merge_boards(tmp_path_factory):
     """The cmos preset's merge board beside its twin's and beside the same camera without
     dark current (120×160, N = 4, V = 3 capture set with dark frames, as above)."""
     root = tmp_path_factory.mktemp("twin-cmos")
-    manifest = write_capture_set(
-        root / "set", camera_from_preset("cmos"), shape=(120, 160), n_repeats=4, seed=1,
-        dark_frames=4,
-    )  # fmt: skip
-    model = calibrate_manifest(
-        manifest, response=("Debevec 1997", {"covariance": "exposure jackknife"})
-    )
-    char = characterise_manifest(manifest, model)
+    model, char = _calibrated_and_characterised(root, "cmos")
     twin = root / "twin.json"
     twin.write_text(twin_preset_json(model, char))
     # the dark current its user knows (the preset's, as from a datasheet)
