@@ -138,15 +138,14 @@ def _apply_given(doc: dict[str, Any], given: dict[str, float]) -> None:
     """Replace the assumptions ``given`` names with their values (module notes)."""
     records = []
     for field, value in given.items():
+        section, key = field.split(".")
         entry = next((a for a in doc["assumed"] if a.startswith(field + " (")), None)
         if entry is None:
-            section, key = field.split(".")
-            measured = doc[section].get(key)
             raise InputError(
-                f"{field} was measured ({measured!r}): a given value replaces an assumption only"
+                f"{field} was measured ({doc[section].get(key)!r}): a given value replaces an "
+                "assumption only"
             )
         doc["assumed"].remove(entry)
-        section, key = field.split(".")
         doc[section][key] = value
         if field == "disturbances.dsnu_e":
             doc[section]["dsnu_stage"] = "readout"
