@@ -209,7 +209,19 @@ def laplacian_at(
     """
     values = _check_values(values, shape)
     index = np.asarray(index, dtype=np.intp)
-    lap = 4.0 * (np.take(values, index, axis=1) / divisor)
+    return _laplacian(values, shape, index, step, divisor, np.take(values, index, axis=1) / divisor)
+
+
+def _laplacian(
+    values: np.ndarray,
+    shape: tuple[int, int],
+    index: np.ndarray,
+    step: int,
+    divisor: float,
+    centre: np.ndarray,
+) -> np.ndarray:
+    """:func:`laplacian_at` given ``centre``, the values ``v`` at ``index`` (read once)."""
+    lap = 4.0 * centre
     for near in _neighbours(index, shape, step):
         lap -= np.take(values, near, axis=1) / divisor
     return np.abs(lap, out=lap)
@@ -227,7 +239,7 @@ def _edge_ratio_numpy(
     """Per candidate, the largest ``Δ_kc / m_kc`` over its valid ``(k, c)`` (0 when none):
     the readable reference of the compiled :func:`_edge_ratio_compiled` (same bits)."""
     centre = np.take(values, index, axis=1) / divisor  # (K, P, C)
-    lap = laplacian_at(values, shape, index, step, divisor=divisor)
+    lap = _laplacian(values, shape, index, step, divisor, centre)
     valid = (centre > lo) & (centre < hi)
     ratio = np.zeros(index.size)
     for k in range(values.shape[0]):
