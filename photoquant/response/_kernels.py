@@ -60,6 +60,8 @@ __all__ = [
     "normal_blocks",
     "normal_terms",
     "band_medians",
+    "sandwich_meat",
+    "symmetric_part",
 ]
 
 
@@ -422,6 +424,52 @@ def _normal_terms_py(
     return w, wlt, idx, coef, nge, d, rhs_e, schur, r_red, support[:n_g].copy()
 
 
+def _symmetric_part_py(schur: Any, prior: Any) -> Any:  # pragma: no cover - compiled by numba
+    """numba body: ``0.5 (S + Sᵀ)`` of ``S = schur + prior`` (``prior`` of shape ``(0, 0)``:
+    none), each entry as numpy's ``0.5 * (s + s.T)`` makes it (the same bits, one pass
+    over each half instead of four passes and a strided transpose)."""
+    n = schur.shape[0]
+    with_prior = prior.shape[0] == n
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            a = schur[i, j]
+            b = schur[j, i]
+            if with_prior:
+                a = a + prior[i, j]
+                b = b + prior[j, i]
+            out[i, j] = 0.5 * (a + b)
+            out[j, i] = 0.5 * (b + a)
+    return out
+
+
+def _sandwich_meat_py(idx: Any, coef: Any, residual: Any, n_g: int) -> Any:  # pragma: no cover
+    """numba body: ``Σ_p s_p s_pᵀ`` (flat ``(n_g·n_g,)``), ``s_p`` pixel ``p``'s score.
+
+    Entry ``a`` of pixel ``p`` (``(2K, P)``: its level ``idx``, coefficient
+    ``coef``, its row's residual ``residual[a mod K]``) scores
+    ``coef · residual``; the products of every pair of a pixel's entries are
+    added in the flattened ``(2K, 2K, P)`` order of the numpy version's
+    ``bincount`` (:func:`photoquant.response.covariance._sandwich_meat_numpy`),
+    those of an entry scoring 0 skipped (the sum starts at ``+0.0`` and rounds
+    to nearest, so it is never ``−0.0``, and adding ``±0.0`` changes no bit of it).
+    """
+    two_k, n_p = idx.shape
+    n_k = residual.shape[0]
+    score = np.empty((two_k, n_p))
+    for a in range(two_k):
+        for p in range(n_p):
+            score[a, p] = coef[a, p] * residual[a % n_k, p]
+    meat = np.zeros(n_g * n_g)
+    for a in range(two_k):
+        for b in range(two_k):
+            for p in range(n_p):
+                sa = score[a, p]
+                if sa != 0.0:
+                    meat[idx[a, p] * n_g + idx[b, p]] += sa * score[b, p]
+    return meat
+
+
 # ---------------------------------------------------------------------------
 # the robust fit's noise scales (robust.robust_weights)
 # ---------------------------------------------------------------------------
@@ -474,6 +522,9 @@ if HAVE_NUMBA:  # pragma: no cover - depends on the environment
     # a pixel without a valid value divides by 0: inf, refused by the caller (no exception)
     normal_terms = compile_kernel(_normal_terms_py, error_model="numpy")
     band_medians = compile_kernel(_band_medians_py)
+    sandwich_meat = compile_kernel(_sandwich_meat_py)
+    symmetric_part = compile_kernel(_symmetric_part_py)
 else:  # pragma: no cover - depends on the environment
     usable_masks = shared_exposures = trim_few = None
     histogram_bins = rank_candidates = normal_blocks = normal_terms = band_medians = None
+    sandwich_meat = symmetric_part = None

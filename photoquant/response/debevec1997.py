@@ -783,11 +783,14 @@ def _solve_channel(
     n_g = top + 1
     eq = _normal_equations(valid, weights, log_t, knot_pos, top, smooth_w, smoothness, gauge)
     schur, r_red, d = eq["schur"], eq["r_red"], eq["d"]
-    if prior is not None:
-        schur = schur + prior
+    if _kernels.HAVE_NUMBA:
+        schur = _kernels.symmetric_part(schur, np.empty((0, 0)) if prior is None else prior)
+    else:
+        if prior is not None:
+            schur = schur + prior
+        schur = 0.5 * (schur + schur.T)
     valid = eq["valid"]
     n_data = int(np.count_nonzero(valid))
-    schur = 0.5 * (schur + schur.T)
     try:
         chol = scipy.linalg.cho_factor(schur, lower=True)
         g = scipy.linalg.cho_solve(chol, r_red)

@@ -262,6 +262,53 @@ def test_mean_at_pixels_is_the_mean_and_mask_channel_by_channel(
 
 @settings(max_examples=60, deadline=None)
 @given(
+    seed=st.integers(0, 2**32 - 1),
+    k_count=st.integers(1, 9),
+    n_pix=st.integers(1, 80),
+    n_levels=st.integers(2, 300),
+    unused=st.floats(0.0, 1.0),
+)
+def test_the_compiled_sandwich_meat_is_the_numpy_one_and_the_dense_scores_product(
+    seed, k_count, n_pix, n_levels, unused
+):
+    # the covariance's meat Σ_p s_p s_pᵀ: the compiled pairs (zero scores skipped) give the
+    # numpy pairs' bits, and both are the dense (levels × pixels) score matrix's product
+    # with itself up to the rounding of the sums (each entry a sum of at most 4K²P terms)
+    from photoquant.response.covariance import _sandwich_meat, _sandwich_meat_numpy
+
+    rng = np.random.default_rng(seed)
+    low = rng.integers(0, n_levels - 1, (k_count, n_pix))
+    idx = np.concatenate([low, low + 1])
+    coef = rng.random((2 * k_count, n_pix)) * (rng.random((2 * k_count, n_pix)) >= unused)
+    residual = rng.normal(size=(k_count, n_pix))
+    fast = _sandwich_meat(idx, coef, residual, n_levels)
+    slow = _sandwich_meat_numpy(idx, coef, residual, n_levels).reshape(n_levels, n_levels)
+    assert fast.tobytes() == slow.tobytes()
+    scores = np.zeros((n_levels, n_pix))
+    np.add.at(
+        scores,
+        (idx, np.broadcast_to(np.arange(n_pix), idx.shape)),
+        coef * np.tile(residual, (2, 1)),
+    )
+    dense = scores @ scores.T
+    bound = 4 * k_count**2 * n_pix * np.finfo(float).eps * np.abs(scores).max() ** 2
+    np.testing.assert_allclose(fast, dense, rtol=0, atol=bound)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 300), seed=st.integers(0, 2**32 - 1), with_prior=st.booleans())
+def test_the_compiled_symmetric_part_is_numpys(n, seed, with_prior):
+    rng = np.random.default_rng(seed)
+    schur = rng.normal(size=(n, n)) * 10.0 ** rng.integers(-3, 4, (n, n))
+    prior = rng.normal(size=(n, n)) if with_prior else None
+    expected = schur + prior if with_prior else schur
+    expected = 0.5 * (expected + expected.T)
+    fast = _kernels.symmetric_part(schur, np.empty((0, 0)) if prior is None else prior)
+    assert fast.tobytes() == expected.tobytes()
+
+
+@settings(max_examples=60, deadline=None)
+@given(
     n=st.integers(4, 600),
     seed=st.integers(0, 2**32 - 1),
     zeros=st.booleans(),
