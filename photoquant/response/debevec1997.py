@@ -717,13 +717,13 @@ def _normal_terms_numpy(
     idx = np.concatenate([i0, i1])
     coef = np.concatenate([w * (1 - alpha), w * alpha])
     # the pixel block: d_p = Σ_k w², and N_ge's column p: −w · coef at the value's levels
-    d = np.sum(w * w, axis=0)
+    d = _sum_over_rows(w * w)
     if np.any(d <= 0):  # pragma: no cover - sampling guarantees two equations per pixel
         raise CalibrationError("a sampled pixel has no valid exposure")
     w2 = np.concatenate([w, w])
     nge = -w2 * coef  # (2K, P)
     rhs_g = np.bincount(idx.reshape(-1), (coef * np.concatenate([wlt, wlt])).reshape(-1), n_g)
-    rhs_e = -np.sum(w * wlt, axis=0)
+    rhs_e = -_sum_over_rows(w * wlt)
     # Schur complement: Σ_p (1/d_p) n_p n_pᵀ over the pairs of entries of pixel p
     scaled = nge / d
     n_gg, corr = _normal_blocks_numpy(idx, coef, scaled, nge, k_count, n_g, s_pair, s_prod)
@@ -737,6 +737,16 @@ def _normal_terms_numpy(
         n_g + 1,
     )[:n_g]
     return w, wlt, idx, coef, nge, d, rhs_e, schur, r_red, support
+
+
+def _sum_over_rows(a: np.ndarray) -> np.ndarray:
+    """``a``'s rows added one after the other (``(K, P)`` → ``(P,)``): numpy's axis-0
+    sum of a C-ordered array adds in this order too, except for a single column, which
+    it sums pairwise as one contiguous run; the compiled kernel's order either way."""
+    total = a[0].copy()
+    for row in a[1:]:
+        total += row
+    return total
 
 
 def _normal_blocks_numpy(
