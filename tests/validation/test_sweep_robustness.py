@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
 import logging
 import math
@@ -24,6 +25,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -302,8 +304,11 @@ def test_every_command_checks_the_environment_first(cli, tmp_path, capsys, value
 # ------------------------------------------------------------------ the network and stops
 
 
-def _silent_server() -> tuple[socket.socket, str]:
-    """A port that accepts connections and never answers."""
+@contextlib.contextmanager
+def _silent_server() -> Iterator[str]:
+    """The address of a port that accepts connections and never answers; on leaving, the
+    listening socket, its accepting thread and every connection it accepted are closed (a
+    connection left to the garbage collector warns in whichever test runs then)."""
     server = socket.socket()
     server.bind(("127.0.0.1", 0))
     server.listen(8)
@@ -317,22 +322,28 @@ def _silent_server() -> tuple[socket.socket, str]:
                 return
             held.append(conn)
 
-    threading.Thread(target=accept, daemon=True).start()
-    return server, f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    try:
+        yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    finally:
+        with contextlib.suppress(OSError):
+            server.shutdown(socket.SHUT_RDWR)  # wakes the blocked accept()
+        server.close()
+        thread.join(timeout=10)
+        for conn in held:
+            conn.close()
 
 
 def test_a_scheduler_that_never_answers_fails_within_the_timeout(cli, tmp_path, capsys):
     import dask
 
-    server, address = _silent_server()
     out = tmp_path / "out"
-    try:
+    with _silent_server() as address:
         t0 = time.monotonic()
         with dask.config.set({"distributed.comm.timeouts.connect": "2s"}):
             rc = cli(["sweep", str(_write_spec(tmp_path)), "-o", str(out), "--scheduler", address])
         elapsed = time.monotonic() - t0
-    finally:
-        server.close()
     assert rc == 2
     assert "no answer within 2 s" in _one_error_line(capsys.readouterr().err)
     assert elapsed < 30 and not out.exists()
