@@ -62,6 +62,7 @@ __all__ = [
     "band_medians",
     "sandwich_meat",
     "symmetric_part",
+    "back_substitution",
 ]
 
 
@@ -424,6 +425,32 @@ def _normal_terms_py(
     return w, wlt, idx, coef, nge, d, rhs_e, schur, r_red, support[:n_g].copy()
 
 
+def _back_substitution_py(
+    rhs_e: Any, nge: Any, idx: Any, coef: Any, d: Any, w: Any, wlt: Any, valid: Any, g: Any
+) -> tuple[Any, Any]:  # pragma: no cover - compiled by numba
+    """numba body: :func:`~photoquant.response.debevec1997._back_substitution`'s
+    ``ln E_p`` ``(P,)`` and data rows' residuals ``(K, P)``, each with its numpy
+    version's operations in the same order (the sum over the ``2K`` entries row after
+    row)."""
+    two_k, n_p = idx.shape
+    n_k = two_k // 2
+    log_e = np.empty(n_p)
+    for p in range(n_p):
+        acc = nge[0, p] * g[idx[0, p]]
+        for a in range(1, two_k):
+            acc += nge[a, p] * g[idx[a, p]]
+        log_e[p] = (rhs_e[p] - acc) / d[p]
+    residual = np.empty((n_k, n_p))
+    for k in range(n_k):
+        for p in range(n_p):
+            if valid[k, p]:
+                fitted = coef[k, p] * g[idx[k, p]] + coef[n_k + k, p] * g[idx[n_k + k, p]]
+                residual[k, p] = fitted - w[k, p] * log_e[p] - wlt[k, p]
+            else:
+                residual[k, p] = 0.0
+    return log_e, residual
+
+
 def _symmetric_part_py(schur: Any, prior: Any) -> Any:  # pragma: no cover - compiled by numba
     """numba body: ``0.5 (S + Sᵀ)`` of ``S = schur + prior`` (``prior`` of shape ``(0, 0)``:
     none), each entry as numpy's ``0.5 * (s + s.T)`` makes it (the same bits, one pass
@@ -524,7 +551,8 @@ if HAVE_NUMBA:  # pragma: no cover - depends on the environment
     band_medians = compile_kernel(_band_medians_py)
     sandwich_meat = compile_kernel(_sandwich_meat_py)
     symmetric_part = compile_kernel(_symmetric_part_py)
+    back_substitution = compile_kernel(_back_substitution_py)
 else:  # pragma: no cover - depends on the environment
     usable_masks = shared_exposures = trim_few = None
     histogram_bins = rank_candidates = normal_blocks = normal_terms = band_medians = None
-    sandwich_meat = symmetric_part = None
+    sandwich_meat = symmetric_part = back_substitution = None

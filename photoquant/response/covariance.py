@@ -152,8 +152,10 @@ def cluster_sandwich_covariance(
     """
     n_pix = residual.shape[1]
     meat = _sandwich_meat(idx, coef, residual, n_levels) * (n_pix / max(n_pix - 1, 1))
-    half = scipy.linalg.cho_solve(cho, meat)
-    cov = scipy.linalg.cho_solve(cho, half.T)
+    # the factor is a finished factorisation's and the meat is summed from finite
+    # residuals: LAPACK's input check would scan both matrices twice more
+    half = scipy.linalg.cho_solve(cho, meat, check_finite=False)
+    cov = scipy.linalg.cho_solve(cho, half.T, check_finite=False)
     return 0.5 * (cov + cov.T)
 
 

@@ -792,7 +792,7 @@ def _solve_channel(
     :func:`photoquant.response.covariance.cluster_sandwich_covariance`."""
     n_g = top + 1
     eq = _normal_equations(valid, weights, log_t, knot_pos, top, smooth_w, smoothness, gauge)
-    schur, r_red, d = eq["schur"], eq["r_red"], eq["d"]
+    schur, r_red = eq["schur"], eq["r_red"]
     if _kernels.HAVE_NUMBA:
         schur = _kernels.symmetric_part(schur, np.empty((0, 0)) if prior is None else prior)
     else:
@@ -803,7 +803,7 @@ def _solve_channel(
     n_data = int(np.count_nonzero(valid))
     try:
         chol = scipy.linalg.cho_factor(schur, lower=True)
-        g = scipy.linalg.cho_solve(chol, r_red)
+        g = scipy.linalg.cho_solve(chol, r_red, check_finite=False)  # the factor checked it
     except np.linalg.LinAlgError:
         raise CalibrationError(
             "the response equations are singular: too few valid samples or exposures"
@@ -828,16 +828,30 @@ def _solve_channel(
         g = np.cumsum(x)
         g -= g[gauge]
         constrained = True
-    log_e = (eq["rhs_e"] - np.sum(eq["nge"] * g[eq["idx"]], axis=0)) / d
-    k_count = valid.shape[0]
+    log_e, residual = _back_substitution(eq, g)
+    rms = float(np.sqrt(np.mean(residual[valid] ** 2))) if n_data else float("nan")
+    system = {"cho": chol, "idx": eq["idx"], "coef": eq["coef"], "residual": residual}
+    return g, rms, constrained, n_data, eq["support"], log_e, system
+
+
+def _back_substitution(eq: dict[str, Any], g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each sampled pixel's ``ln E_p`` at the solution ``g`` and each data row's residual
+    ``(K, P)`` (0 where the value is unused), from the system :func:`_normal_equations`
+    made; compiled where numba is (:func:`photoquant.response._kernels.back_substitution`,
+    the same bits)."""
+    if _kernels.HAVE_NUMBA:
+        return _kernels.back_substitution(
+            eq["rhs_e"], eq["nge"], eq["idx"], eq["coef"], eq["d"], eq["w"], eq["wlt"],
+            eq["valid"], g,
+        )  # fmt: skip
+    log_e = (eq["rhs_e"] - _sum_over_rows(eq["nge"] * g[eq["idx"]])) / eq["d"]
+    k_count = eq["valid"].shape[0]
     fitted = (
         eq["coef"][:k_count] * g[eq["idx"][:k_count]]
         + eq["coef"][k_count:] * g[eq["idx"][k_count:]]
     )
-    residual = np.where(valid, fitted - eq["w"] * log_e - eq["wlt"], 0.0)
-    rms = float(np.sqrt(np.mean(residual[valid] ** 2))) if n_data else float("nan")
-    system = {"cho": chol, "idx": eq["idx"], "coef": eq["coef"], "residual": residual}
-    return g, rms, constrained, n_data, eq["support"], log_e, system
+    residual = np.where(eq["valid"], fitted - eq["w"] * log_e - eq["wlt"], 0.0)
+    return log_e, residual
 
 
 @dataclass(frozen=True, eq=False)

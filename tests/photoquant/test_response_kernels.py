@@ -296,6 +296,33 @@ def test_the_compiled_sandwich_meat_is_the_numpy_one_and_the_dense_scores_produc
 
 
 @settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    k_count=st.integers(1, 9),
+    n_pix=st.integers(1, 60),
+    top=st.integers(1, 300),
+)
+def test_the_compiled_back_substitution_is_the_numpy_one(seed, k_count, n_pix, top):
+    # ln E_p and the rows' residuals at a solution, from the system of eq. 7 (unused
+    # values' garbage weights and positions included), one pixel and many alike
+    from photoquant.response.debevec1997 import _back_substitution
+
+    rng = np.random.default_rng(seed)
+    valid = rng.random((k_count, n_pix)) < 0.7
+    valid[0] = True
+    weights = np.where(valid, rng.random((k_count, n_pix)), rng.normal(0, 1e3, valid.shape))
+    knot_pos = np.where(valid, rng.random(valid.shape) * top * 1.1, -rng.random(valid.shape))
+    log_t = np.sort(rng.normal(size=k_count))
+    eq = _normal_equations(valid, weights, log_t, knot_pos, top, rng.random(top + 1), 1.0, 0)
+    g = np.cumsum(rng.random(top + 1))
+    fast = _back_substitution(eq, g)
+    with _numpy_only():
+        slow = _back_substitution(eq, g)
+    for a, b in zip(fast, slow, strict=True):
+        assert a.tobytes() == np.ascontiguousarray(b).tobytes()
+
+
+@settings(max_examples=60, deadline=None)
 @given(n=st.integers(1, 300), seed=st.integers(0, 2**32 - 1), with_prior=st.booleans())
 def test_the_compiled_symmetric_part_is_numpys(n, seed, with_prior):
     rng = np.random.default_rng(seed)
