@@ -74,16 +74,28 @@ RUN_FIRST = (
     "tests/validation/test_validate_quick.py",
     "tests/validation/test_leaderboard.py",
     "tests/validation/test_validate_job.py",
+    "tests/test_disturbance_combinations.py",
+    "tests/photoquant/test_response_covariance.py",
+    "tests/validation/test_sweep_robustness.py",
+    "tests/test_plugins.py",
+    "tests/test_no_data_loss.py",
+    "tests/validation/test_sweep_run.py",
+    "tests/validation/test_sweep_dask.py",
+    "tests/photoquant/test_crossval.py",
+    "tests/pqsim/test_twin_closed_loop.py",
+    "tests/validation/test_twin_check.py",
 )
-"""The files whose module fixtures run a validation job or a whole leaderboard
-(minutes each, the quick job the longest), in the order they are started."""
+"""The longest files, in the order they are started: those whose module fixtures run a
+validation job or a whole leaderboard (the quick job the longest), then the others of
+more than 20 s (summed test durations on 2 cores, 2026-12-06): longest first, so that
+no long file is left for one worker to finish alone while the other waits."""
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """The longest files first, each file's tests in their order.
 
     ``--dist loadfile --no-loadscope-reorder`` (``pyproject.toml``) hands the
-    files to the workers in the order collected, and these come last
+    files to the workers in the order collected, and most of these come last
     (``tests/validation``; xdist's default order, most tests first, puts them
     last too): started first, they run while the other worker goes through
     the many short files, instead of after them.

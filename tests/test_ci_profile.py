@@ -33,3 +33,12 @@ def test_ci_script_selects_the_ci_profile_and_runs_the_readme_command():
     for check in ("ruff check .", "ruff format --check .", "mypy photoquant"):
         assert check in lines
     assert any(re.fullmatch(r"python -m pytest --doctest-modules photoquant.*", x) for x in lines)
+
+
+def test_the_files_started_first_exist():
+    # a renamed file would silently fall back to the collected order
+    from tests.conftest import RUN_FIRST
+
+    assert len(set(RUN_FIRST)) == len(RUN_FIRST)
+    missing = [name for name in RUN_FIRST if not (REPO / name).is_file()]
+    assert not missing, missing
