@@ -1,4 +1,5 @@
-"""``import photoquant as pq``: the lazy public API, as the interpreter and type checkers see it."""
+"""``import photoquant as pq`` and ``photoquant.io``: the lazy public APIs, as the interpreter
+and type checkers see them."""
 
 from __future__ import annotations
 
@@ -7,23 +8,29 @@ import importlib
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
 import photoquant as pq
+import photoquant.io as pqio
 
-INIT = Path(pq.__file__)
-
-
-@pytest.mark.parametrize("name", sorted(pq._EXPORTS))
-def test_every_export_is_the_object_of_its_module(name):
-    module = importlib.import_module(pq._EXPORTS[name])
-    assert getattr(pq, name) is getattr(module, name)
+LAZY = [pq, pqio]
+EXPORTS = [(package, name) for package in LAZY for name in sorted(package._EXPORTS)]
 
 
-def test_type_checkers_see_exactly_the_lazy_exports():
+@pytest.mark.parametrize(
+    ("package", "name"), EXPORTS, ids=[f"{p.__name__}.{n}" for p, n in EXPORTS]
+)
+def test_every_export_is_the_object_of_its_module(package, name):
+    module = importlib.import_module(package._EXPORTS[name])
+    assert getattr(package, name) is getattr(module, name)
+
+
+@pytest.mark.parametrize("package", LAZY, ids=lambda p: p.__name__)
+def test_type_checkers_see_exactly_the_lazy_exports(package: ModuleType):
     """The ``if TYPE_CHECKING:`` imports re-export (``X as X``) every name of ``_EXPORTS``."""
-    tree = ast.parse(INIT.read_text())
+    tree = ast.parse(Path(package.__file__).read_text())
     blocks = [
         node
         for node in tree.body
@@ -37,18 +44,43 @@ def test_type_checkers_see_exactly_the_lazy_exports():
         for alias in node.names:
             assert alias.asname == alias.name, f"{alias.name} must be imported `as` itself"
             seen[alias.name] = node.module
-    assert seen == pq._EXPORTS
+    assert seen == package._EXPORTS
 
 
 def test_dir_and_all_list_the_exports_and_unknown_names_raise():
     assert sorted(dir(pq)) == sorted(pq.__all__) == sorted(["__version__", *pq._EXPORTS])
+    assert sorted(dir(pqio)) == sorted(pqio.__all__) == sorted(pqio._EXPORTS)
     with pytest.raises(AttributeError, match="no attribute 'calibrat'"):
         _ = pq.calibrat
+    with pytest.raises(AttributeError, match="no attribute 'load_stak'"):
+        _ = pqio.load_stak
+
+
+def _modules_after(code: str) -> list[str]:
+    out = subprocess.run(
+        [sys.executable, "-c", f"{code}\nimport sys\nprint(sorted(sys.modules))"],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    ).stdout
+    return ast.literal_eval(out.strip().splitlines()[-1])
 
 
 def test_importing_photoquant_loads_no_step_module():
-    code = "import sys, photoquant; print(sorted(m for m in sys.modules if m.startswith('photoquant.')))"
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
-    ).stdout
-    assert out.strip() == "['photoquant._version']"  # the version string alone
+    loaded = _modules_after("import photoquant")
+    assert [m for m in loaded if m.startswith("photoquant.")] == ["photoquant._version"]
+
+
+def test_the_command_line_starts_without_the_compiled_kernels_or_scipy():
+    # `photoquant --version`, `--help` and a bad argument print at once: the command line
+    # and the atomic writes it sets up load neither the frame loader nor numba nor scipy
+    loaded = _modules_after(
+        "import contextlib, io\n"
+        "from photoquant.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "    main(['--version'])"
+    )
+    heavy = [m for m in loaded if m.split(".")[0] in ("numba", "scipy", "cv2")]
+    assert not heavy, heavy[:5]
+    assert "photoquant.io.frames" not in loaded and "photoquant.stack" not in loaded
