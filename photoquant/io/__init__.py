@@ -92,32 +92,7 @@ if TYPE_CHECKING:
     )
     # isort: on
 
-__all__ = [
-    "atomic_write",
-    "write_text_atomic",
-    "write_bytes_atomic",
-    "read_image",
-    "write_image",
-    "read_exr",
-    "write_exr",
-    "exif_exposure_time",
-    "CAPTURE_FORMAT",
-    "FrameRef",
-    "FrameSetRef",
-    "CaptureManifest",
-    "load_manifest",
-    "load_stack",
-    "write_manifest",
-    "extra_frameset",
-    "extra_path",
-    "black_level_from_dark",
-    "dark_frame_model",
-    "ExposureMetadata",
-    "read_exposure_metadata",
-    "RawFrame",
-    "read_raw",
-    "is_raw_file",
-]
+__all__ = list(_EXPORTS)
 
 
 def __getattr__(name: str) -> Any:

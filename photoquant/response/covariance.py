@@ -167,9 +167,10 @@ def _sandwich_meat(
 
     A pixel's score touches the ``2K`` levels of its rows only: summed pair by
     pair over the pixels, not as the product of a dense ``(n_g, P)`` score
-    matrix with itself (at 256 levels and 2000 pixels, K = 6: 0.5 against 3.3
-    ms). Compiled where numba is (:func:`photoquant.response._kernels.sandwich_meat`,
-    the same bits).
+    matrix with itself (256 levels, 2000 pixels, K = 6, 40 % of the entries
+    unused, one thread: 0.4 ms against 5.5 ms for the score matrix and its
+    product; the same sums to rounding). Compiled where numba is
+    (:func:`photoquant.response._kernels.sandwich_meat`, the same bits).
     """
     idx = np.ascontiguousarray(idx, dtype=np.int64)
     coef = np.ascontiguousarray(coef, dtype=np.float64)
