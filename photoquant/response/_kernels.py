@@ -336,20 +336,40 @@ def _normal_blocks_py(
     """numba body: eq. 7's ``N_gg`` (data rows, then the smoothness and gauge terms
     ``s_pair, s_prod``) and the Schur correction ``Σ scaled_a nge_b``, both ``(n_g·n_g,)``.
 
-    The loops follow the flattened ``(2K, 2K, P)`` order of the numpy version's
-    ``bincount`` weights, so each entry's terms are added in the same order;
-    the data terms of two different rows, zero there, are skipped (adding
-    ``+0.0`` changes no sum of non-negative terms).
+    Pixel by pixel, the pairs of its entries: the flattened ``(P, 2K, 2K)`` order
+    of the numpy version's ``bincount`` weights, so each cell's terms are added in
+    the same order. The terms that are zero are skipped: the data terms of two
+    different rows, and the pairs with an entry whose coefficient is 0 (an unused
+    value, or the upper knot of a value on a level, as every integer value of one
+    repeat is: its ``scaled`` and ``nge`` are ``±0.0`` too). Both sums start at
+    ``+0.0`` and round to nearest, so neither is ever ``−0.0``, and adding
+    ``±0.0`` changes no bit of them. Measured (2026-12-06, 2000 pixels, K = 6,
+    256 levels, one repeat of integers): 0.37 → 0.12 ms; half the values between
+    levels 0.20 ms; K = 8 0.65 → 0.18 ms.
     """
     two_k, n_p = idx.shape
-    for a in range(two_k):
-        for b in range(two_k):
-            same = (a % n_k) == (b % n_k)
-            for p in range(n_p):
-                cell = idx[a, p] * n_g + idx[b, p]
-                if same:
-                    n_gg[cell] += coef[a, p] * coef[b, p]
-                corr[cell] += scaled[a, p] * nge[b, p]
+    level = np.empty(two_k, dtype=np.int64)
+    row = np.empty(two_k, dtype=np.int64)
+    c = np.empty(two_k)
+    sc = np.empty(two_k)
+    ng = np.empty(two_k)
+    for p in range(n_p):
+        m = 0  # the pixel's entries with a coefficient, in order
+        for a in range(two_k):
+            if coef[a, p] != 0.0:
+                level[m] = idx[a, p]
+                row[m] = a % n_k
+                c[m] = coef[a, p]
+                sc[m] = scaled[a, p]
+                ng[m] = nge[a, p]
+                m += 1
+        for x in range(m):
+            base = level[x] * n_g
+            for y in range(m):
+                cell = base + level[y]
+                if row[x] == row[y]:
+                    n_gg[cell] += c[x] * c[y]
+                corr[cell] += sc[x] * ng[y]
     for i in range(s_pair.size):
         n_gg[s_pair[i]] += s_prod[i]
 

@@ -760,16 +760,21 @@ def _normal_blocks_numpy(
     s_prod: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``N_gg`` (flat) and the Schur correction ``Σ_p (1/d_p) n_p n_pᵀ`` (flat) by
-    :func:`numpy.bincount` over the pairs of each value's ``2K`` entries (the readable
-    version of :func:`photoquant.response._kernels.normal_blocks`)."""
-    pair = (idx[:, None] * n_g + idx[None, :]).reshape(-1)  # (2K·2K·P,) within each value
+    :func:`numpy.bincount` over the pairs of each pixel's ``2K`` entries, pixel by
+    pixel (the readable version of :func:`photoquant.response._kernels.normal_blocks`)."""
+
+    def pairs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """``(P, 2K, 2K)`` flattened: pixel by pixel, each pair of its entries."""
+        return np.einsum("ap,bp->pab", a, b).reshape(-1)
+
+    pair = (idx.T[:, :, None] * n_g + idx.T[:, None, :]).reshape(-1)
     same = np.tile(np.arange(k_count), 2)
-    in_row = (same[:, None] == same[None, :])[..., None]  # entries of the same data row
-    prod = (coef[:, None] * coef[None, :] * in_row).reshape(-1)
+    in_row = (same[:, None] == same[None, :]).astype(np.float64)  # entries of one data row
+    prod = (pairs(coef, coef).reshape(-1, *in_row.shape) * in_row).reshape(-1)
     n_gg = np.bincount(
         np.concatenate([pair, s_pair]), np.concatenate([prod, s_prod]), minlength=n_g * n_g
     )
-    corr = np.bincount(pair, (scaled[:, None] * nge[None, :]).reshape(-1), n_g * n_g)
+    corr = np.bincount(pair, pairs(scaled, nge), n_g * n_g)
     return n_gg, corr
 
 
