@@ -61,6 +61,17 @@ def _bracket(seed: int, k_count: int, n_pix: int, n_rep: int, split: bool, step:
     return values, valid, t
 
 
+def _eq7_rows(rng: np.random.Generator, k_count: int, n_pix: int, top: int):
+    """Random data rows of eq. 7 ``(K, P)``: which values are valid (every pixel has one),
+    their weights and level positions (values past the top level; an invalid value's
+    weight and position garbage)."""
+    valid = rng.random((k_count, n_pix)) < 0.7
+    valid[0] = True  # every pixel has a valid value
+    weights = np.where(valid, rng.random((k_count, n_pix)), rng.normal(0, 1e3, valid.shape))
+    knot_pos = np.where(valid, rng.random(valid.shape) * top * 1.1, -rng.random(valid.shape))
+    return valid, weights, knot_pos
+
+
 brackets = st.builds(
     _bracket,
     seed=st.integers(0, 2**32 - 1),
@@ -130,10 +141,7 @@ def test_the_compiled_normal_equations_are_the_numpy_ones(
     # every array of eq. 7's system, bit for bit: values past the top level, invalid
     # values (whose weights and positions are garbage), the sample's layout either way
     rng = np.random.default_rng(seed)
-    valid = rng.random((k_count, n_pix)) < 0.7
-    valid[0] = True  # every pixel has a valid value
-    weights = np.where(valid, rng.random((k_count, n_pix)), rng.normal(0, 1e3, valid.shape))
-    knot_pos = np.where(valid, rng.random(valid.shape) * top * 1.1, -rng.random(valid.shape))
+    valid, weights, knot_pos = _eq7_rows(rng, k_count, n_pix, top)
     log_t = (
         rng.normal(size=(k_count, n_pix)) if per_value_times else np.sort(rng.normal(size=k_count))
     )
@@ -308,10 +316,7 @@ def test_the_compiled_back_substitution_is_the_numpy_one(seed, k_count, n_pix, t
     from photoquant.response.debevec1997 import _back_substitution
 
     rng = np.random.default_rng(seed)
-    valid = rng.random((k_count, n_pix)) < 0.7
-    valid[0] = True
-    weights = np.where(valid, rng.random((k_count, n_pix)), rng.normal(0, 1e3, valid.shape))
-    knot_pos = np.where(valid, rng.random(valid.shape) * top * 1.1, -rng.random(valid.shape))
+    valid, weights, knot_pos = _eq7_rows(rng, k_count, n_pix, top)
     log_t = np.sort(rng.normal(size=k_count))
     eq = _normal_equations(valid, weights, log_t, knot_pos, top, rng.random(top + 1), 1.0, 0)
     g = np.cumsum(rng.random(top + 1))
