@@ -311,11 +311,17 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
         lines.append(line)
     vig = _section(rep, "vignetting")
     if "n_tracks" in vig:
-        lines.append(
+        line = (
             f"vignetting: {vig.get('n_tracks')} correspondences used of "
             f"{vig.get('n_tracks_given')} ({vig.get('correspondence_source')}), "
             f"{vig.get('n_pairs')} pairs, residual rms {_fmt(vig.get('residual_rms'))}"
         )
+        if "uncorrected_bias_rms" in vig:
+            line += (
+                ", uncorrected bias against the default fit (ln v, rms) "
+                f"{_fmt(vig['uncorrected_bias_rms'])}, in its uncertainty"
+            )
+        lines.append(line)
     params = getattr(model.vignetting, "params", None)
     if (
         isinstance(params, np.ndarray)
@@ -433,7 +439,8 @@ def _cmd_correct(args: argparse.Namespace) -> int:
             f"; {CALIBRATION_UNCERTAINTY_LAYER}.*: standard uncertainty of ln l from the "
             "calibration's statistical errors (response, sensor LUT, vignetting; common to "
             "every scene); "
-            f"{TOTAL_UNCERTAINTY_LAYER}.*: both combined"
+            f"{TOTAL_UNCERTAINTY_LAYER}.*: both combined, with the refined exposure times' "
+            "and the merge weighting's stated bias where there are"
         )
     out.parent.mkdir(parents=True, exist_ok=True)
     # no replace without the flag, and only of an OpenEXR image
@@ -482,6 +489,14 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         print(
             "uncertainty of ln l from the refined exposure times: "
             f"median {np.median(sigma) if sigma.size else float('nan'):.3g} "
+            f"(in {TOTAL_UNCERTAINTY_LAYER}.*)"
+        )
+    if result.log_sigma_weighting is not None:
+        sigma = result.log_sigma_weighting[np.isfinite(result.log_sigma_weighting)]
+        print(
+            "uncertainty of ln l from the merge weighting's bias against the default "
+            f"weighting: median {np.median(sigma) if sigma.size else float('nan'):.3g}, "
+            f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g} "
             f"(in {TOTAL_UNCERTAINTY_LAYER}.*)"
         )
     if result.exposures is not None:

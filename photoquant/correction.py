@@ -32,6 +32,7 @@ the refined ones.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,6 +50,7 @@ from photoquant.exposure import (
 )
 from photoquant.merge import MergeModel
 from photoquant.merge._tiled import merge_tiles
+from photoquant.merge.debevec1997 import DebevecMergeOptions
 from photoquant.merge.noise_aware import (
     NoiseParameters,
     estimate_noise_parameters,
@@ -59,6 +61,7 @@ from photoquant.merge.uncertainty import (
     log_variance_Debevec1997,
     log_variance_exposure_Debevec1997,
     log_variance_response_Debevec1997,
+    log_variance_weighting_bias_Debevec1997,
     merge_weights_Debevec1997,
     noise_parameters_from_record,
 )
@@ -131,6 +134,14 @@ class Correction:
         factors ``a_λ`` (:func:`~photoquant.balance.balance_log_variance`), a
         calibration component, one value per channel (0 in the reference
         channel); NaN where ``mask`` is set.
+    log_sigma_weighting : ndarray, shape (H, W, C), float32, optional
+        With ``uncertainty=True`` and a merge whose options ask for it
+        (``uncorrected_bias="stated"``, the paper's profile): the bias the
+        merge's weighting leaves against the default weighting on the same
+        values, stated as a standard uncertainty
+        (:func:`~photoquant.merge.uncertainty.log_variance_weighting_bias_Debevec1997`);
+        it varies from pixel to pixel with the scene, like the noise. NaN
+        where ``mask`` is set or the default weighting gives no value weight.
     """
 
     photoquantity: np.ndarray
@@ -147,6 +158,7 @@ class Correction:
     log_sigma_sensor_lut: np.ndarray | None = None
     log_sigma_exposure: np.ndarray | None = None
     log_sigma_balance: np.ndarray | None = None
+    log_sigma_weighting: np.ndarray | None = None
 
     @property
     def log_sigma_calibration(self) -> np.ndarray | None:
@@ -161,10 +173,13 @@ class Correction:
 
     @property
     def log_sigma(self) -> np.ndarray | None:
-        """The noise, exposure-time and calibration components stated, combined in
-        quadrature (``None``: none)."""
+        """The noise, exposure-time, weighting and calibration components stated,
+        combined in quadrature (``None``: none)."""
         return _quadrature(
-            self.log_sigma_noise, self.log_sigma_exposure, self.log_sigma_calibration
+            self.log_sigma_noise,
+            self.log_sigma_exposure,
+            self.log_sigma_weighting,
+            self.log_sigma_calibration,
         )
 
 
@@ -464,6 +479,11 @@ def _stated_uncertainty(
     }
     if not model.glare.is_identity:
         notes.append("uncertainty: the merge's noise before glare removal")
+    if _states_weighting_bias(merger):
+        out["log_sigma_weighting"] = _sigma(
+            log_variance_weighting_bias_Debevec1997(stack, response, merger.options),
+            mask,
+        )
     if model.response.covariance_factor is not None:
         out["log_sigma_response"] = _sigma(
             log_variance_response_Debevec1997(stack, response, merger.options, weights=weights),
@@ -509,6 +529,15 @@ def _stated_uncertainty(
             "the calibration uncertainty is not included"
         )
     return out
+
+
+def _states_weighting_bias(merger: MergeModel) -> bool:
+    """Whether the merge's options ask for the bias of their weighting to be stated, and
+    differ from the defaults (against which it is stated)."""
+    opts = merger.options
+    if not isinstance(opts, DebevecMergeOptions) or opts.uncorrected_bias != "stated":
+        return False
+    return dataclasses.replace(opts, uncorrected_bias="ignored") != DebevecMergeOptions()
 
 
 def _chart_centre(model: CameraModel) -> tuple[float, float] | None:

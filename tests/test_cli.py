@@ -22,6 +22,28 @@ def capture(tmp_path_factory):
     return write_capture_set(folder, camera_from_preset("ccd"), shape=(48, 64), n_repeats=2, seed=3)
 
 
+def test_the_paper_profile_says_which_biases_it_states(capture, tmp_path, capsys):
+    """The paper's profile keeps its estimates and states their biases: ``info`` names the
+    response's and the vignetting's, ``correct`` the merge weighting's, in the total."""
+    cam = tmp_path / "cam"
+    assert main(["calibrate", str(capture), "-o", str(cam), "-q", "--profile", "paper"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(cam)]) == 0
+    text = capsys.readouterr().out
+    assert "uncorrected bias against the default fit" in text  # the response's
+    assert "uncorrected bias against the default fit (ln v, rms) [" in text
+    exr = tmp_path / "scene.exr"
+    assert main(["correct", str(capture), "--camera", str(cam), "-o", str(exr), "-q"]) == 0
+    text = capsys.readouterr().out
+    assert "merge weighting's bias against the default weighting: median " in text
+    image, names = read_exr(exr)
+    noise, calibration, total = image[..., 3:6], image[..., 6:9], image[..., 9:]
+    ok = np.isfinite(image[..., :3])
+    # the total holds a part beyond the noise and the calibration's: the weighting's bias
+    assert np.all(total[ok] ** 2 >= (noise[ok] ** 2 + calibration[ok] ** 2) * (1 - 1e-5))
+    assert np.max(total[ok] ** 2 - noise[ok] ** 2 - calibration[ok] ** 2) > 0
+
+
 def test_calibrate_correct_info_round_trip(capture, tmp_path, capsys):
     import OpenEXR
 

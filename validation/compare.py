@@ -62,6 +62,7 @@ __all__ = [
     "compare_with_truth",
     "read_scene",
     "stated_uncertainty_coverage",
+    "gauge_removed_sigma",
     "format_comparison",
     "comparison_json",
     "comparison_figures",
@@ -91,20 +92,59 @@ def read_scene(manifest: Any, *, allow_outside: bool = False) -> tuple[Any, Any]
     return manifest, load_stack(manifest.scene, manifest)
 
 
-def stated_uncertainty_coverage(result: Any, truth_l: np.ndarray) -> dict[str, float] | None:
+def stated_uncertainty_coverage(
+    result: Any, truth_l: np.ndarray, stack: Any, model: CameraModel
+) -> dict[str, float] | None:
     """How a correction's stated uncertainty covers the truth
-    (:func:`validation.metrics.uncertainty_coverage`, one gauge per channel removed).
+    (:func:`validation.metrics.uncertainty_coverage`, one gauge per channel removed,
+    against :func:`gauge_removed_sigma`). ``None`` where the correction states no
+    uncertainty."""
+    stated = gauge_removed_sigma(result, stack, model)
+    if stated is None:
+        return None
+    return uncertainty_coverage(result.photoquantity, truth_l, stated)
+
+
+def gauge_removed_sigma(result: Any, stack: Any, model: CameraModel) -> np.ndarray | None:
+    """The stated standard uncertainty of ``ln l̂`` less its channel's mean over the
+    scene: what is left to compare with the truth once one gauge per channel is
+    removed (:func:`validation.metrics.normalised_errors`); ``None`` where the
+    correction states none.
 
     The balance's part is one constant per channel, which the gauge removes with
-    it: it is left out of ``σ`` (as :mod:`validation.experiments.uncertainty` does).
-    ``None`` where the correction states no uncertainty.
+    it: it is left out. The response's part, as the correction states it, is
+    relative to the white chart (the balance reads ``g`` there); the gauge takes
+    the scene's own mean away instead, so it is stated relative to that
+    (:meth:`~photoquant.ResponseModel.covariance_relative_to` the merge's mean
+    loadings over the scene, :func:`photoquant.merge.uncertainty.response_error_of_merge_Debevec1997`).
+    Where the response's error is small, the two agree; where it is large and
+    smooth (a stated uncorrected bias), the chart's reference would state the
+    scene's common offset, which the gauge does not see. The other parts are
+    taken as stated (their common part over the scene is a small share of them).
     """
+    from photoquant.merge.uncertainty import (
+        log_variance_response_Debevec1997,
+        response_error_of_merge_Debevec1997,
+    )
+
     stated = result.log_sigma
     if stated is None:
         return None
+    var = stated.astype(np.float64) ** 2
     if result.log_sigma_balance is not None:
-        stated = np.sqrt(np.maximum(stated**2 - result.log_sigma_balance**2, 0.0))
-    return uncertainty_coverage(result.photoquantity, truth_l, stated)
+        var = var - result.log_sigma_balance.astype(np.float64) ** 2
+    if result.log_sigma_response is not None and model.merge.method == "Debevec 1997":
+        response = model.balanced_response()
+        options = model.merge.options
+        loadings, rest = response_error_of_merge_Debevec1997(stack, response, options)
+        if np.all(np.isfinite(loadings)) and np.all(np.isfinite(rest)):
+            scene = response.covariance_relative_to(loadings, rest, "the scene's mean")
+            var = (
+                var
+                - result.log_sigma_response.astype(np.float64) ** 2
+                + log_variance_response_Debevec1997(stack, scene, options)
+            )
+    return np.sqrt(np.maximum(var, 0.0))
 
 
 def channel_scale_variance(stack: Any, model: CameraModel, mask: np.ndarray) -> np.ndarray | None:
@@ -370,7 +410,7 @@ def compare_with_truth(
         "true_params": None if cam.vignetting_params is None else np.asarray(cam.vignetting_params),
     }
     if uncertainty:
-        out["uncertainty"] = stated_uncertainty_coverage(res, scene_l)
+        out["uncertainty"] = stated_uncertainty_coverage(res, scene_l, scene, model)
     e, stats, _ = relative_error_eq8(scene_l, res.photoquantity, res.mask)
     out["maps"]["scene"] = e
     # with veiling glare that the camera model removes, the floor of the glare-free scene

@@ -476,12 +476,24 @@ class DebevecMergeOptions:
     exclude_below_valid_min : bool
         Give no weight to values below the response's ``valid_min``, where
         the response fit had no data (default); the paper uses every value.
+    uncorrected_bias : {"ignored", "stated"}
+        With ``"stated"`` (the paper's profile) and options that depart from
+        these defaults, a correction's stated uncertainty also covers the
+        bias the chosen weighting leaves against the defaults' on the same
+        values (:func:`~photoquant.merge.uncertainty.log_variance_weighting_bias_Debevec1997`);
+        the merge itself is unchanged.
     """
 
     weighting: str = "hat-quantisation"
     exclude_below_valid_min: bool = True
+    uncorrected_bias: str = "ignored"
 
     def __post_init__(self) -> None:
+        if self.uncorrected_bias not in ("ignored", "stated"):
+            raise InputError(
+                "`uncorrected_bias` must be one of ['ignored', 'stated'], "
+                f"got {self.uncorrected_bias!r}"
+            )
         weighting_function(self.weighting)
         if not isinstance(self.exclude_below_valid_min, bool):
             raise InputError(

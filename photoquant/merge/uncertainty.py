@@ -58,6 +58,8 @@ __all__ = [
     "log_variance_Debevec1997",
     "log_variance_exposure_Debevec1997",
     "log_variance_response_Debevec1997",
+    "log_variance_weighting_bias_Debevec1997",
+    "WEIGHTING_BIAS_BAND",
     "response_error_of_merge_Debevec1997",
     "noise_parameters_from_record",
     "noise_record",
@@ -141,6 +143,120 @@ def log_variance_Debevec1997(
         num += np.where(w > 0, w * w * tables.take(variance_table, k), 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(den > 0, num / np.where(den > 0, den * den, 1.0), np.nan)
+
+
+WEIGHTING_BIAS_BAND = 0.25
+"""Width in ``ln Ê`` of the bands over which the weighting's bias is averaged
+(:func:`log_variance_weighting_bias_Debevec1997`)."""
+
+
+def log_variance_weighting_bias_Debevec1997(
+    stack: ExposureStack,
+    response: ResponseModel,
+    options: DebevecMergeOptions,
+    reference: DebevecMergeOptions | None = None,
+) -> np.ndarray:
+    """The bias a merge's weighting leaves against a reference weighting, as a variance
+    per pixel: an *uncorrected bias* stated as an uncertainty [Phillips1997]_.
+
+    The two merges of the same values differ by
+    ``Δ = Σ_k (a_k − a'_k) (g(c̄_k) − ln t_k)`` (``a_k = w_k / Σ_k w_k`` the
+    merge's normalised weights, ``a'_k`` the reference's). ``Δ`` holds the
+    merge's bias against the reference, a function of the exposure ``E``
+    that the bracket's values are read from, and the noise of the values the
+    two weight differently, which is not a bias. The bias is the mean of
+    ``Δ`` over the pixels of the same exposure: per channel, the values are
+    grouped in bands of equal count of the merge's ``ln Ê`` (at least
+    :data:`WEIGHTING_BIAS_BIN_PIXELS` values each, at most
+    :data:`WEIGHTING_BIAS_MAX_BINS` bands), and each value is stated its
+    band's ``b² = max(Δ̄² − s²/n, 0)`` (the squared mean less its sampling
+    variance). E.g. the paper's hat weights the values of one or two DN,
+    where one DN is a coarse step in ``ln`` exposure and ``g`` is least
+    known, as much as its slope allows; the default ``"hat-quantisation"``
+    weighting hardly uses them, and in a scene's shadows the two differ by
+    several percent.
+
+    Parameters
+    ----------
+    stack : ExposureStack
+        The merged frames.
+    response : ResponseModel
+        The response both merges use.
+    options : DebevecMergeOptions
+        The merge's options.
+    reference : DebevecMergeOptions, optional
+        The reference's (the defaults when not given).
+
+    Returns
+    -------
+    ndarray, shape (H, W, C), float64
+        ``b²`` of each value's band; NaN where either merge gives no value a
+        weight.
+
+    References
+    ----------
+    .. [Phillips1997] Phillips, S. D., Eberhardt, K. R., & Parry, B. (1997).
+       Guidelines for expressing the uncertainty of measurement results
+       containing uncorrected bias. J. Res. NIST 102(5), 577-585.
+    """
+    log_e, delta = _weighting_difference(stack, response, options, reference)
+    out = np.full(delta.shape, np.nan)
+    for ch in range(delta.shape[-1]):
+        ok = np.isfinite(delta[..., ch])
+        if np.any(ok):
+            out[..., ch][ok] = _banded_bias_square(log_e[..., ch][ok], delta[..., ch][ok])
+    return out
+
+
+def _weighting_difference(
+    stack: ExposureStack,
+    response: ResponseModel,
+    options: DebevecMergeOptions,
+    reference: DebevecMergeOptions | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The merge's ``ln Ê`` and ``Δ``, its difference from the reference weighting's
+    merge of the same values, ``(H, W, C)`` each (NaN where either merges nothing)."""
+    scale = _Scale(response)
+    tables, own_table, own = _weight_setup(stack, response, options)
+    _, reference_table, ref = _weight_setup(stack, response, reference or DebevecMergeOptions())
+    g_table = tables.table(scale.log_inverse)
+
+    def weight(table: Any, inp: Any, k: int) -> np.ndarray:
+        w = tables.take(table, k)
+        for mask in (inp.saturated, inp.dark_clipped):
+            if mask is not None:
+                w[mask[k]] = 0.0
+        return w
+
+    sums = [np.zeros(_value_shape(stack)), np.zeros(_value_shape(stack))]
+    for k in range(stack.n_exposures):
+        sums[0] += weight(own_table, own, k)
+        sums[1] += weight(reference_table, ref, k)
+    merged = (sums[0] > 0) & (sums[1] > 0)
+    inv = [np.where(merged, 1.0 / np.where(merged, total, 1.0), 0.0) for total in sums]
+    log_e, delta = np.zeros_like(sums[0]), np.zeros_like(sums[0])
+    ln_t = np.log(np.asarray(stack.exposure_s, dtype=np.float64))
+    for k in range(stack.n_exposures):
+        a = weight(own_table, own, k) * inv[0]
+        a_ref = weight(reference_table, ref, k) * inv[1]
+        used = (a != 0.0) | (a_ref != 0.0)  # g only where a weight is (finite there)
+        log_e_k = np.where(used, tables.take(g_table, k) - ln_t[k], 0.0)
+        log_e += a * log_e_k
+        delta += (a - a_ref) * log_e_k
+    return np.where(merged, log_e, np.nan), np.where(merged, delta, np.nan)
+
+
+def _banded_bias_square(log_e: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """``max(Δ̄² − s²/n, 0)`` of each value's band of ``log_e`` (1-D), bands of width
+    :data:`WEIGHTING_BIAS_BAND` (a band averages whole patches of a scene)."""
+    band = np.floor((log_e - log_e.min()) / WEIGHTING_BIAS_BAND).astype(np.intp)
+    n_bins = int(band.max()) + 1
+    count = np.bincount(band, minlength=n_bins).astype(np.float64)
+    filled = np.maximum(count, 1.0)
+    mean = np.bincount(band, delta, n_bins) / filled
+    spread = np.maximum(np.bincount(band, delta * delta, n_bins) / filled - mean * mean, 0.0)
+    sampling = spread / np.maximum(count - 1.0, 1.0)
+    return np.maximum(mean * mean - sampling, 0.0)[band]
 
 
 class MergeWeights(NamedTuple):

@@ -70,6 +70,21 @@ fits: at 1024×768 one view's calibration 0.25 → 0.69 s (K = 4) and
 fails (a gap no pixel bridges), the sandwich is kept and the report says
 why.
 
+An uncorrected bias, stated
+---------------------------
+A fit whose options leave a known bias in ``g`` (the paper's eq. 7 as
+written: regression dilution in the noise, a random sample of 500 pixels,
+the toe and censored pairs untreated) can keep its ``g`` and still state
+an honest uncertainty: :func:`uncorrected_bias_factor` takes the
+difference ``δg = g − g_ref`` from a fit of the same frames that corrects
+those biases, in ``g``'s gauge, as one more row of the factor — the
+bias's direction from the data, its size stated as one standard
+uncertainty. This is the RSSu treatment of an uncorrected bias
+[Phillips1997]_ (GUM F.2.4.5): ``u² = u_c² + b²``, ``g`` itself
+unchanged. Its own error is the reference fit's, a small part of it
+(``"Debevec 1997"`` with ``uncorrected_bias="stated"``; the paper's
+profile).
+
 Low-rank factor
 ---------------
 ``Cov(g)`` is kept as ``F`` with ``Cov ≈ Fᵀ F`` (the leading eigenvectors,
@@ -93,6 +108,10 @@ References
    doi:10.1214/aos/1176345462
 .. [Shao1995] Shao, J., & Tu, D. (1995). *The Jackknife and Bootstrap*.
    Springer, ch. 2 (the delete-one jackknife variance estimator).
+.. [Phillips1997] Phillips, S. D., Eberhardt, K. R., & Parry, B. (1997).
+   Guidelines for expressing the uncertainty of measurement results
+   containing uncorrected bias. J. Res. NIST 102(5), 577-585.
+   doi:10.6028/jres.102.038
 """
 
 from __future__ import annotations
@@ -110,6 +129,7 @@ __all__ = [
     "cluster_sandwich_covariance",
     "exposure_jackknife_factor",
     "low_rank_factor",
+    "uncorrected_bias_factor",
 ]
 
 MIN_JACKKNIFE_EXPOSURES = 4
@@ -243,3 +263,57 @@ def exposure_jackknife_factor(g_left_out: np.ndarray) -> np.ndarray:
     k = g.shape[0]
     rows = np.sqrt((k - 1) / k) * (g - g.mean(axis=0))
     return np.ascontiguousarray(np.moveaxis(rows, 0, 1))
+
+
+def uncorrected_bias_factor(
+    g: np.ndarray, g_reference: np.ndarray, variance: np.ndarray | None = None
+) -> np.ndarray:
+    """The bias of ``g`` against a reference fit, as one factor row per channel.
+
+    Parameters
+    ----------
+    g : ndarray, shape (C, L)
+        The response kept (natural log, gauge ``g = 0`` at one level).
+    g_reference : ndarray, shape (C, L)
+        A fit of the same frames at the same levels that corrects the biases
+        ``g``'s method leaves (any additive gauge).
+    variance : ndarray, shape (C, L), optional
+        The statistical variance of the difference at each level (the two
+        fits' stated variances): the squared difference holds it beside the
+        bias's square, and it is taken away, level by level,
+        ``b² = max(δg² − variance, 0)``, so that the row does not state the
+        fits' noise a second time. ``None``: the difference as it is.
+
+    Returns
+    -------
+    ndarray, shape (C, 1, L)
+        ``δg = g − g_ref`` less its value at the level where ``g`` crosses 0
+        (the gauge of ``g``'s covariance, module notes), shrunk to ``b`` with
+        its sign: appended to a factor ``F``, ``Fᵀ F`` gains ``b bᵀ`` (module
+        notes, *An uncorrected bias, stated*).
+
+    Raises
+    ------
+    InputError
+        If the shapes differ or a value is not finite.
+    """
+    g = np.asarray(g, dtype=np.float64)
+    ref = np.asarray(g_reference, dtype=np.float64)
+    if g.ndim != 2 or ref.shape != g.shape:
+        raise InputError(
+            f"`g` and `g_reference` must both be (C, L), got shapes {g.shape} and {ref.shape}"
+        )
+    if not (np.all(np.isfinite(g)) and np.all(np.isfinite(ref))):
+        raise InputError("`g` and `g_reference` must be finite at every level")
+    bias = g - ref
+    gauge = np.argmin(np.abs(g), axis=1)
+    bias -= bias[np.arange(g.shape[0]), gauge][:, None]
+    if variance is not None:
+        var = np.asarray(variance, dtype=np.float64)
+        if var.shape != g.shape or not np.all(np.isfinite(var)) or np.any(var < 0):
+            raise InputError(
+                f"`variance` must be (C, L) = {g.shape}, finite and non-negative, "
+                f"got shape {var.shape}"
+            )
+        bias = np.sign(bias) * np.sqrt(np.maximum(bias * bias - var, 0.0))
+    return bias[:, None, :]

@@ -158,6 +158,7 @@ from photoquant.response.covariance import (
     cluster_sandwich_covariance,
     exposure_jackknife_factor,
     low_rank_factor,
+    uncorrected_bias_factor,
 )
 from photoquant.response.flat_samples import EDGE_METHODS, flat_candidates
 from photoquant.response.model import ResponseModel
@@ -214,6 +215,9 @@ TOE_MODES = ("continued", "solved")
 """Treatments of the dark end of ``g`` (module notes, *Toe*)."""
 COVARIANCE_MODES = ("sandwich", "exposure jackknife")
 """How ``"Debevec 1997"`` states ``g``'s covariance (:class:`DebevecResponseOptions`)."""
+UNCORRECTED_BIAS_MODES = ("ignored", "stated")
+"""Whether ``"Debevec 1997"`` states the bias its options leave in ``g``
+(:class:`DebevecResponseOptions`, ``uncorrected_bias``)."""
 
 
 _BLAS: list[ThreadpoolController] = []
@@ -1767,6 +1771,15 @@ class DebevecResponseOptions:
         Leave the candidates at an edge or in texture out (default), or
         sample from every candidate pixel (the paper's); see
         :mod:`photoquant.response.flat_samples`.
+    uncorrected_bias : {"ignored", "stated"}
+        With ``"stated"`` (the paper's profile) and options that depart from
+        these defaults, the same stack is also fitted with the defaults,
+        which correct the biases the chosen options leave (regression
+        dilution, the toe, censored pairs, a small random sample), and the
+        difference is added to ``g``'s covariance as one more row of its
+        factor: ``g`` is kept, its stated uncertainty covers the bias
+        (:func:`~photoquant.response.covariance.uncorrected_bias_factor`).
+        Costs one more fit; the report gives the bias's RMS per channel.
     """
 
     smoothness: float = DEFAULT_SMOOTHNESS
@@ -1785,8 +1798,14 @@ class DebevecResponseOptions:
     covariance: str = "sandwich"
     objective: str = "values"
     edges: str = "excluded"
+    uncorrected_bias: str = "ignored"
 
     def __post_init__(self) -> None:
+        if self.uncorrected_bias not in UNCORRECTED_BIAS_MODES:
+            raise InputError(
+                f"`uncorrected_bias` must be one of {list(UNCORRECTED_BIAS_MODES)}, "
+                f"got {self.uncorrected_bias!r}"
+            )
         if self.edges not in EDGE_METHODS:
             raise InputError(f"`edges` must be one of {list(EDGE_METHODS)}, got {self.edges!r}")
         if self.objective not in OBJECTIVES:
@@ -1929,6 +1948,19 @@ def characterise_response_Debevec1997(
                 f"sandwich (the exposure jackknife needs {MIN_JACKKNIFE_EXPOSURES} exposures, "
                 f"the stack has {n_k})"
             )
+    bias_rms = None
+    if opts.uncertainty and opts.uncorrected_bias == "stated":
+        reference = _bias_reference(stack, opts, rec, int(rng.integers(2**63)))
+        if isinstance(reference, str):
+            covariance = f"{covariance} (no bias stated: {reference})"
+        else:
+            row = uncorrected_bias_factor(
+                rec.log_inverse_response, reference[0], variance + reference[1]
+            )
+            factor = np.concatenate([factor, row], axis=1)
+            variance = variance + row[:, 0] ** 2
+            bias_rms = np.sqrt(np.mean(row[:, 0] ** 2, axis=1))
+            covariance = f"{covariance} + the uncorrected bias against the default fit"
     model = ResponseModel(
         method="Debevec 1997",
         levels=rec.levels,
@@ -1952,4 +1984,39 @@ def characterise_response_Debevec1997(
     }
     if covariance is not None:
         report["covariance"] = covariance
+    if bias_rms is not None:
+        report["uncorrected_bias_rms"] = bias_rms
     return StepFit(model, report)
+
+
+_REFERENCE_KEEPS = ("max_levels", "max_pixels")
+"""Options of :class:`DebevecResponseOptions` the bias's reference fit keeps (how much of
+the stack is looked at, not how ``g`` is estimated from it); it takes the defaults' others."""
+
+
+def _bias_reference(
+    stack: ExposureStack, opts: DebevecResponseOptions, rec: ResponseRecovery, seed: int
+) -> tuple[np.ndarray, np.ndarray] | str:
+    """``g`` of the same stack fitted with the default options (but
+    :data:`_REFERENCE_KEEPS`) and its variance, at ``rec``'s levels, or why none is
+    stated (the options are the defaults, or the reference fit failed).
+
+    Drawn from its own seed, after the fit's own draws: the fit's ``g`` is the
+    same with the bias stated or not.
+    """
+    kept = {name: getattr(opts, name) for name in _REFERENCE_KEEPS}
+    reference = DebevecResponseOptions(**kept)
+    if dataclasses.replace(opts, uncertainty=True, covariance="sandwich") == dataclasses.replace(
+        reference, uncorrected_bias=opts.uncorrected_bias
+    ):
+        return "the options are the defaults, the reference itself"
+    try:
+        fit = characterise_response_Debevec1997(stack, reference, np.random.default_rng(seed)).model
+    except (CalibrationError, InputError) as exc:  # e.g. too few flat candidates
+        return f"the reference fit failed: {exc}"
+    ref, var = fit.log_inverse_response, fit.covariance_diagonal
+    assert var is not None  # the default options state it
+    if fit.levels.shape != rec.levels.shape or np.any(fit.levels != rec.levels):
+        ref = np.stack([np.interp(rec.levels, fit.levels, row) for row in ref])
+        var = np.stack([np.interp(rec.levels, fit.levels, row) for row in var])
+    return ref, var

@@ -48,6 +48,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -1734,6 +1735,14 @@ class ExtendedGoldmanChenOptions:
     view_gain_centre : {"image", "free"}
         With ``view_gains``: the gains fitted with the centre held at the
         image centre, then held in the full fit (default), or jointly.
+    uncorrected_bias : {"ignored", "stated"}
+        With ``"stated"`` (the paper's profile) and options that depart from
+        these defaults, the same data are also fitted with the defaults and
+        the parameters' difference ``δm`` is added to their covariance as
+        ``δm δmᵀ``: the parameters are kept, the map's stated uncertainty
+        covers the bias the chosen options leave (the RSSu treatment of an
+        uncorrected bias, :mod:`photoquant.response.covariance`). Costs one
+        more fit; the report gives the bias's RMS over the map per channel.
     """
 
     normalise: str = "track"
@@ -1747,8 +1756,14 @@ class ExtendedGoldmanChenOptions:
     view_gains: bool | str = "auto"
     view_gain_sigma: float | None = None
     view_gain_centre: str = "image"
+    uncorrected_bias: str = "ignored"
 
     def __post_init__(self) -> None:
+        if self.uncorrected_bias not in ("ignored", "stated"):
+            raise InputError(
+                "`uncorrected_bias` must be one of ['ignored', 'stated'], "
+                f"got {self.uncorrected_bias!r}"
+            )
         if self.normalise not in ("track", "none"):
             raise InputError(f"`normalise` must be 'track' or 'none', got {self.normalise!r}")
         if not isinstance(self.scale_invariant, bool):
@@ -1857,10 +1872,67 @@ def characterise_vignetting_ExtendedGoldmanChen(
     warnings = residual_warnings(fit.residual_rms, fit.map_uncertainty)  # trust beyond the solver's
     if warnings:
         report["warnings"] = warnings
+    covariance = fit.param_covariance
+    if opts.uncorrected_bias == "stated" and covariance is not None:
+        covariance = _with_uncorrected_bias(data, opts, fit.params, covariance, report)
     return StepFit(
-        ExtendedGoldmanChenVignetting("Extended Goldman-Chen", fit.params, fit.param_covariance),
-        report,
+        ExtendedGoldmanChenVignetting("Extended Goldman-Chen", fit.params, covariance), report
     )
+
+
+_ESTIMATOR_FIELDS = (
+    "normalise",
+    "scale_invariant",
+    "view_gains",
+    "view_gain_sigma",
+    "view_gain_centre",
+)
+"""The options of :class:`ExtendedGoldmanChenOptions` that define the fit's objective, whose
+bias ``uncorrected_bias="stated"`` states against the defaults'."""
+
+
+def _with_uncorrected_bias(
+    data: VignettingData,
+    opts: ExtendedGoldmanChenOptions,
+    params: np.ndarray,
+    covariance: np.ndarray,
+    report: dict[str, Any],
+) -> np.ndarray:
+    """``Cov(m) + b bᵀ`` per channel, ``b`` the parameters less those of the default
+    fit of the same data, shrunk by the two fits' statistical part
+    (``uncorrected_bias="stated"``); the report gains the bias's RMS over the map
+    (``uncorrected_bias_rms``), or why none is stated.
+
+    The reference keeps the options' sampling of the data (window, tracks, trust
+    limits) and takes the defaults' objective (:data:`_ESTIMATOR_FIELDS`)."""
+    defaults = ExtendedGoldmanChenOptions()
+    estimator = {name: getattr(defaults, name) for name in _ESTIMATOR_FIELDS}
+    reference_options = dataclasses.replace(opts, uncorrected_bias="ignored", **estimator)
+    if dataclasses.replace(opts, uncorrected_bias="ignored") == reference_options:
+        report["uncorrected_bias"] = "none stated: the options are the defaults' objective"
+        return covariance
+    try:
+        reference = characterise_vignetting_ExtendedGoldmanChen(data, reference_options).model
+    except (CalibrationError, InputError) as exc:
+        report["uncorrected_bias"] = f"none stated: the reference fit failed: {exc}"
+        return covariance
+    grid = (max(2, data.image_shape[0] // 16), max(2, data.image_shape[1] // 16))  # coordinates
+    log_ratio = np.log(vignetting_map(params, grid)) - np.log(
+        vignetting_map(reference.params, grid)
+    )
+    # the difference holds both fits' statistical errors beside the bias: their mean
+    # variance over the map is taken from its mean square (b² = max(δ² − σ², 0)), so the
+    # statistical part is not stated twice
+    square = np.mean(log_ratio**2, axis=(0, 1))
+    noise = np.zeros_like(square)
+    for cov in (covariance, reference.param_covariance):
+        if cov is not None:
+            stated = ExtendedGoldmanChenVignetting("Extended Goldman-Chen", params, cov)
+            noise += np.mean(stated.log_map_variance(grid), axis=(0, 1))  # type: ignore[arg-type]
+    shrink = np.sqrt(np.maximum(square - noise, 0.0) / np.where(square > 0, square, 1.0))
+    bias = (params - reference.params) * shrink[:, None]
+    report["uncorrected_bias_rms"] = np.sqrt(square) * shrink
+    return covariance + bias[:, :, None] * bias[:, None, :]
 
 
 VIGNETTING_METHODS.add(

@@ -147,3 +147,22 @@ def test_the_scene_read_once_gives_the_same_comparison(capture, monkeypatch):
     assert given["scene"]["error"] == read["scene"]["error"]
     assert given["balance"] == read["balance"]
     assert given["uncertainty"] == read["uncertainty"]
+
+
+def test_the_gauge_leaves_the_stated_uncertainty_less_the_balances_constant():
+    """Without a response part, the uncertainty the comparison's gauge leaves is the stated
+    one less the balance's (one constant per channel, which the gauge removes with it)."""
+    from types import SimpleNamespace
+
+    from validation.compare import gauge_removed_sigma
+
+    rng = np.random.default_rng(0)
+    total = rng.uniform(0.01, 0.05, (4, 5, 3)).astype(np.float32)
+    balance = np.broadcast_to(np.float32([0.004, 0.0, 0.006]), total.shape)
+    result = SimpleNamespace(log_sigma=total, log_sigma_balance=balance, log_sigma_response=None)
+    np.testing.assert_allclose(
+        gauge_removed_sigma(result, None, None),
+        np.sqrt(total.astype(np.float64) ** 2 - balance.astype(np.float64) ** 2),
+        rtol=1e-12,
+    )
+    assert gauge_removed_sigma(SimpleNamespace(log_sigma=None), None, None) is None

@@ -2,8 +2,10 @@
 
 ``photoquant correct`` states, beside every photoquantity, the standard
 uncertainty of ``ln l``: the frames' noise, the calibration's statistical
-errors (the response, the sensor LUT, the vignetting) and, where the scene's
-times were refined, theirs (:attr:`photoquant.Correction.log_sigma`). On the
+errors (the response, the sensor LUT, the vignetting), where the scene's
+times were refined, theirs, and where a profile keeps a method with a known
+bias (the paper's), that bias measured against the default method on the
+same data (:attr:`photoquant.Correction.log_sigma`). On the
 simulator the truth shows how far each corrected value actually is. The
 capture set's HDR test scene is corrected with the calibrated camera and
 
@@ -11,9 +13,11 @@ capture set's HDR test scene is corrected with the calibrated camera and
 
 is formed per pixel and channel, ``ŝ_λ`` the inverse-variance weighted mean
 of ``ln l̂ − ln l`` of channel ``λ`` (the photoquantity is measured up to one
-scale per channel: the gauge, one number fitted to tens of thousands; the
-balance's part of the stated uncertainty, one constant per channel that the
-gauge removes with it, is left out of ``σ`` here). Where
+scale per channel: the gauge, one number fitted to tens of thousands). ``σ``
+is the stated uncertainty of what the gauge leaves
+(:func:`validation.compare.gauge_removed_sigma`): the balance's part, one
+constant per channel, is left out, and the response's part is taken relative
+to the scene's own mean instead of the white chart's. Where
 the stated uncertainty is the actual one, ``z`` is a standard normal
 variate: its spread is 1, and the central interval of nominal level ``p``
 (``|z| < Φ⁻¹((1 + p)/2)``) holds a share ``p`` of the values. Reported per
@@ -63,18 +67,20 @@ CACHE_KEYS = ("uncertainty",)
 """The :attr:`~validation.experiments.shared.Shared.cache` entries this experiment reads."""
 
 
-def _stated(shared: Shared, preset: str) -> tuple[Any, bool]:
-    """The test scene corrected with its stated uncertainty (once per run), and whether
-    its capture set's dark frames were subtracted."""
+def _stated(shared: Shared, preset: str) -> tuple[Any, np.ndarray | None, bool]:
+    """The test scene corrected with its stated uncertainty (once per run), the stated
+    uncertainty the comparison's gauge leaves (:func:`validation.compare.gauge_removed_sigma`),
+    and whether its capture set's dark frames were subtracted."""
     key = ("uncertainty", preset)
     if key not in shared.cache:
         from photoquant.correction import correct
-        from validation.compare import read_scene
+        from validation.compare import gauge_removed_sigma, read_scene
 
         cal = shared.calibration(preset)
         manifest, scene = read_scene(cal.manifest)
         result = correct(scene, cal.model, uncertainty="auto")
-        shared.cache[key] = (result, bool(manifest.dark_subtraction))
+        stated = gauge_removed_sigma(result, scene, cal.model)
+        shared.cache[key] = (result, stated, bool(manifest.dark_subtraction))
     return shared.cache[key]  # type: ignore[no-any-return]
 
 
@@ -113,16 +119,13 @@ def run(
     panels = []
     for preset in config.presets:
         cal = shared.calibration(preset)
-        result, dark_subtracted = _stated(shared, preset)
-        if result.log_sigma is None:
+        result, stated, dark_subtracted = _stated(shared, preset)
+        if stated is None:
             res.notes.append(f"{preset}: no uncertainty stated ({'; '.join(result.notes)})")
             continue
         scene = cal.truth.captures["scene"]
         truth = scene.l
         series = []
-        stated = result.log_sigma
-        if result.log_sigma_balance is not None:  # a per-channel constant: in the gauge
-            stated = np.sqrt(np.maximum(stated**2 - result.log_sigma_balance**2, 0.0))
         for part, sigma in (("stated", stated), ("noise", result.log_sigma_noise)):
             z = normalised_errors(result.photoquantity, truth, sigma)
             label = "stated uncertainty" if part == "stated" else "its noise part alone"
@@ -156,6 +159,7 @@ def run(
                 ("sensor LUT", result.log_sigma_sensor_lut),
                 ("vignetting", result.log_sigma_vignetting),
                 ("exposure times", result.log_sigma_exposure),
+                ("merge weighting's bias", result.log_sigma_weighting),
                 ("balance", result.log_sigma_balance),
             )
             if value is not None
