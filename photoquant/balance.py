@@ -411,14 +411,28 @@ class WhiteChartOptions:
         out exactly neutral) or from the linearised view as the paper does.
     reference_channel : int
         The channel whose factor is 1 (green, index 1).
+    uncorrected_bias : {"ignored", "stated"}
+        With ``"stated"`` (the paper's profile) and the ``"linearised"``
+        stage: the factors are kept, and the difference of their logarithms
+        from the factors read from the same chart after ``÷ u·v`` (the chart's
+        ``u·v`` ratio between the channels, which the linearised reading
+        takes into the factors) is added to their stated variance, as an
+        uncorrected bias. Both readings average the same pixels, so their
+        noise is common and the difference is the stage's bias.
     """
 
     stage: str = "uniformised"
     reference_channel: int = 1
+    uncorrected_bias: str = "ignored"
 
     def __post_init__(self) -> None:
         if self.stage not in ("uniformised", "linearised"):
             raise InputError(f"`stage` must be 'uniformised' or 'linearised', got {self.stage!r}")
+        if self.uncorrected_bias not in ("ignored", "stated"):
+            raise InputError(
+                "`uncorrected_bias` must be one of ['ignored', 'stated'], "
+                f"got {self.uncorrected_bias!r}"
+            )
         check_int(self.reference_channel, "reference_channel", 0)
 
 
@@ -432,6 +446,13 @@ def characterise_balance_WhiteChart(
         linear, data.roi, mask=data.mask, reference_channel=opts.reference_channel
     )
     variance = balance_log_variance(linear, data.roi, data.mask, opts.reference_channel)
+    bias = None
+    if opts.uncorrected_bias == "stated" and opts.stage == "linearised":
+        reference = colour_balance_WhiteChart(
+            data.uniformised, data.roi, mask=data.mask, reference_channel=opts.reference_channel
+        )
+        bias = np.log(factors) - np.log(reference)
+        variance = variance + bias * bias
     stated = bool(np.all(np.isfinite(variance)))
     model = BalanceModel(
         "White Chart",
@@ -446,6 +467,8 @@ def characterise_balance_WhiteChart(
     }
     if stated:
         report["log_std"] = np.sqrt(variance).tolist()
+    if bias is not None:
+        report["uncorrected_bias_log"] = bias.tolist()
     return StepFit(model, report)
 
 

@@ -294,7 +294,10 @@ def _print_summary(model: Any, where: Path | None = None) -> None:
         )
     line = f"balance: {_fmt(model.balance.factors)}"
     if "balance_log_std" in stated:
-        line += f", uncertainty of ln a (white chart's noise) {_fmt(stated['balance_log_std'])}"
+        what = "white chart's noise"
+        if "uncorrected_bias_log" in _section(rep, "balance"):
+            what += " and the linearised reading's bias against the uniformised"
+        line += f", uncertainty of ln a ({what}) {_fmt(stated['balance_log_std'])}"
     lines.append(line)
     noise = model.parameters.get("noise")
     if isinstance(noise, dict) and "gain_dn_per_e" in noise:

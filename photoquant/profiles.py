@@ -18,8 +18,8 @@ the RMS of ``v``, without which the objective taken literally is minimised by
 ``v → 0`` (§5.5 gives no constraint).
 
 The paper's profile also states the biases its methods leave as
-uncertainties (``uncorrected_bias="stated"`` on its response, merge and
-vignetting): each step compares its estimate with photoquant's default
+uncertainties (``uncorrected_bias="stated"`` on its response, merge,
+vignetting and balance): each step compares its estimate with photoquant's default
 method on the same data and adds the difference to what it states, without
 changing the estimate (the correct guide, *The paper's profile states its
 biases*). With every deviation applied there is nothing left to state.
@@ -89,7 +89,7 @@ _PAPER: dict[str, tuple[str, Mapping[str, Any]]] = {
         {"weighting": "hat", "exclude_below_valid_min": False, "uncorrected_bias": "stated"},
     ),
     # §5.3: the balance from the linearised white chart
-    "balance": ("White Chart", {"stage": "linearised"}),
+    "balance": ("White Chart", {"stage": "linearised", "uncorrected_bias": "stated"}),
     "sensor_lut": ("Irradiance Scene", {}),
     # §5.5: the residual in value units (with the scale gauge only), every view
     # on its own exposure scale (no view gains; photoquant's default too, see

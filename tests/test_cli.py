@@ -32,6 +32,7 @@ def test_the_paper_profile_says_which_biases_it_states(capture, tmp_path, capsys
     text = capsys.readouterr().out
     assert "uncorrected bias against the default fit" in text  # the response's
     assert "uncorrected bias against the default fit (ln v, rms) [" in text
+    assert "the linearised reading's bias against the uniformised" in text
     exr = tmp_path / "scene.exr"
     assert main(["correct", str(capture), "--camera", str(cam), "-o", str(exr), "-q"]) == 0
     text = capsys.readouterr().out

@@ -4,7 +4,8 @@ The ``coverage`` experiment of the validation job
 (:mod:`validation.experiments.coverage`) with every knob open: the preset,
 the image size, N, V, the seeds, and the camera's true response. For each
 seed a pqsim capture set is written (``write_capture_set``: V views, N
-repeats, small frames) and calibrated with the default pipeline; each stated
+repeats, small frames) and calibrated with the default pipeline (or
+``--profile``'s); each stated
 uncertainty is then compared with the truth
 (:func:`validation.experiments.coverage.coverage_z`) as
 
@@ -27,6 +28,7 @@ Usage::
 
     python tools/parameter_coverage.py --preset ccd --seeds 50 --shape 24x32
     python tools/parameter_coverage.py --preset cmos --seeds 20 --shape 48x64 --true-response
+    python tools/parameter_coverage.py --preset ccd --seeds 50 --profile paper
 """
 
 from __future__ import annotations
@@ -90,11 +92,12 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--views", type=int, default=3)
     parser.add_argument("--true-response", action="store_true")
+    parser.add_argument("--profile", default=None, help="paper or photoquant (the default)")
     args = parser.parse_args()
     shape = tuple(int(v) for v in args.shape.lower().split("x"))
     camera = camera_from_preset(args.preset)
     truth = camera.truth(shape)
-    kwargs = {}
+    kwargs = {} if args.profile is None else {"profile": args.profile}
     if args.true_response:
         _register_true_response(truth)
         kwargs["response"] = TRUE_RESPONSE
@@ -111,6 +114,7 @@ def main() -> None:
     print(
         f"{args.preset}, {shape[1]}x{shape[0]}, N = {args.repeats}, V = {args.views}, "
         f"{args.seeds} seeds{', true response' if args.true_response else ''}"
+        f"{'' if args.profile is None else f', {args.profile} profile'}"
     )
     for key, label in PARAMETERS:
         print(_summary(label, np.concatenate(found[key]) if found[key] else np.empty(0)))

@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import photoquant as pq
+from photoquant.balance import BalanceData, WhiteChartOptions, characterise_balance_WhiteChart
 from photoquant.errors import InputError
 from photoquant.merge import DebevecMergeOptions, MergeModel
 from photoquant.merge.debevec1997 import merge_stack_Debevec1997
@@ -55,9 +56,8 @@ PAPER_MERGE = dict(PROFILES["paper"]["merge"][1])
 
 
 def test_the_paper_profile_states_its_biases():
-    for options in (PAPER_RESPONSE, PAPER_VIGNETTING, PAPER_MERGE):
-        assert options["uncorrected_bias"] == "stated"
-    for step in ("response", "vignetting", "merge"):
+    for step in ("response", "vignetting", "merge", "balance"):
+        assert PROFILES["paper"][step][1]["uncorrected_bias"] == "stated"
         assert "uncorrected_bias" not in PROFILES["photoquant"][step][1]
 
 
@@ -97,6 +97,8 @@ def test_a_malformed_reference_is_named():
         ExtendedGoldmanChenOptions(uncorrected_bias="maybe")
     with pytest.raises(InputError, match="uncorrected_bias"):
         DebevecMergeOptions(uncorrected_bias=True)
+    with pytest.raises(InputError, match="uncorrected_bias"):
+        WhiteChartOptions(uncorrected_bias="yes")
 
 
 def _analytic_stack(seed: int = 4) -> ExposureStack:
@@ -297,3 +299,34 @@ def test_the_correction_states_the_weighting_bias_and_keeps_its_photoquantity():
     # the default merge asks for nothing
     default = pq.correct(stack, camera, merge="Debevec 1997", uncertainty=True)
     assert default.log_sigma_weighting is None
+
+
+# -- the balance ----------------------------------------------------------------------------
+
+
+def test_the_linearised_balance_states_the_charts_uv_ratio_as_its_bias():
+    """Read before ``÷ u·v`` (the paper's stage), the factors take the chart's ``u·v`` ratio
+    between the channels; the statement adds exactly that ratio's log to their variance."""
+    rng = np.random.default_rng(5)
+    h, w = 40, 60
+    uv = np.stack([np.full((h, w), f) for f in (0.9, 1.0, 1.05)], axis=-1)  # at the chart
+    white = np.array([0.8, 1.0, 1.2])  # the chart's colour after ÷ u·v
+    uniformised = white * (1 + 0.01 * rng.standard_normal((h, w, 3)))
+    data = BalanceData(uniformised * uv, uniformised, (10, 10, 50, 30), np.zeros((h, w, 3), bool))
+    paper = dict(PROFILES["paper"]["balance"][1])
+    stated = characterise_balance_WhiteChart(data, WhiteChartOptions(**paper))
+    plain = characterise_balance_WhiteChart(
+        data, WhiteChartOptions(**{**paper, "uncorrected_bias": "ignored"})
+    )
+    np.testing.assert_array_equal(stated.model.factors, plain.model.factors)
+    bias = np.log(stated.model.factors) - np.log(
+        characterise_balance_WhiteChart(data, WhiteChartOptions()).model.factors
+    )
+    np.testing.assert_allclose(bias, -np.log(uv[0, 0] / uv[0, 0, 1]), atol=1e-12)
+    np.testing.assert_allclose(
+        stated.model.log_variance, plain.model.log_variance + bias**2, rtol=1e-12
+    )
+    np.testing.assert_allclose(stated.report["uncorrected_bias_log"], bias, rtol=1e-12)
+    # read after ÷ u·v there is no stage bias to state
+    after = characterise_balance_WhiteChart(data, WhiteChartOptions(uncorrected_bias="stated"))
+    assert "uncorrected_bias_log" not in after.report
