@@ -902,6 +902,7 @@ def vignetting_step(
         spec,
         flat_field=flat,
         exposure_scale_std=exposures.view_scale_std,
+        response_loadings=_response_loadings(exposures.captures.views, merge),
     )
     log.report["vignetting"] = {
         "method": fit.model.method,
@@ -910,6 +911,26 @@ def vignetting_step(
     }
     log.notes.extend(fit.report.get("warnings", []))  # photoquant.vignetting.trust
     return VignettingStage(fit.model, spec, tracks, source)
+
+
+def _response_loadings(
+    views: Sequence[ExposureStack], merge: MergeStage
+) -> Callable[[int, np.ndarray], np.ndarray] | None:
+    """How the response's error moves each view's merge at given points
+    (:attr:`~photoquant.vignetting.VignettingData.response_loadings`), ``(n, C, R)``;
+    ``None`` where the response states no covariance or the merge is not eq. 6's."""
+    if merge.response.covariance_factor is None or merge.model.method != "Debevec 1997":
+        return None
+    from photoquant.merge.uncertainty import response_loadings_Debevec1997
+
+    def loadings(view: int, xy: np.ndarray) -> np.ndarray:
+        stack = views[view]
+        h, w = stack.image_shape
+        cols = np.clip(np.rint(xy[:, 0]), 0, w - 1).astype(np.intp)
+        rows = np.clip(np.rint(xy[:, 1]), 0, h - 1).astype(np.intp)
+        return response_loadings_Debevec1997(stack, merge.response, merge.model.options, rows, cols)
+
+    return loadings
 
 
 def balance_step(
@@ -1094,13 +1115,16 @@ def fit_vignetting_step(
     profile: str = DEFAULT_PROFILE,
     flat_field: np.ndarray | None = None,
     exposure_scale_std: float | None = None,
+    response_loadings: Callable[[int, np.ndarray], np.ndarray] | None = None,
 ) -> StepFit[VignettingModel]:
     """The vignetting step (§5.5) from sensor-uniformised views and correspondences.
 
     ``flat_field`` (``exp(merge) / u`` of a flat-field capture) is passed to
     the methods that use one (e.g. ``"Flat Field"``); ``exposure_scale_std``
     (how well each view's exposure scale is known, relative) to the methods
-    whose ``view_gains`` is ``"auto"``.
+    whose ``view_gains`` is ``"auto"``; ``response_loadings`` (how the
+    response's error moves the views, :class:`~photoquant.vignetting.VignettingData`)
+    to the methods that propagate it.
     """
     views = [np.asarray(v) for v in uniform_views]
     if not views:
@@ -1112,6 +1136,7 @@ def fit_vignetting_step(
         views[0].shape[:2],
         flat_field=None if flat_field is None else np.asarray(flat_field),
         exposure_scale_std=exposure_scale_std,
+        response_loadings=response_loadings,
     )
     return _checked_fit(method.function(data, options), method, VignettingModel)
 

@@ -74,6 +74,11 @@ class ValueTables:
             return fn
         return np.concatenate([fn(self.grid, ch) for ch in range(self.n_channels)])
 
+    def take_rows(self, table: np.ndarray, k: int) -> np.ndarray:
+        """Rows of a table of several quantities ``(C · G, R)`` (tabulated stacks only) at
+        every value of exposure ``k``: ``(H, W, C, R)``, one gather of ``R`` numbers each."""
+        return table[self._indices(k)]
+
     def take(self, table: np.ndarray | ValueFunction, k: int) -> np.ndarray:
         """The tabulated quantity at every value ``(H, W, C)`` of exposure ``k``."""
         if isinstance(table, np.ndarray):

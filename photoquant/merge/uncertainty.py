@@ -61,6 +61,7 @@ __all__ = [
     "log_variance_weighting_bias_Debevec1997",
     "WEIGHTING_BIAS_BAND",
     "response_error_of_merge_Debevec1997",
+    "response_loadings_Debevec1997",
     "noise_parameters_from_record",
     "noise_record",
 ]
@@ -683,6 +684,56 @@ def response_error_of_merge_Debevec1997(
         rest_table = _interpolated_table(tables, levels, rest_of_diagonal)
         rest = sum(w * w * tables.take(rest_table, k) for k, w in enumerate(per_exposure))
     return loadings, pixel_mean(rest * inv**2)
+
+
+def response_loadings_Debevec1997(
+    stack: ExposureStack,
+    response: ResponseModel,
+    options: DebevecMergeOptions | None,
+    rows: np.ndarray,
+    cols: np.ndarray,
+) -> np.ndarray:
+    """How each of the response's independent error variates moves the ``"Debevec 1997"``
+    merge of ``stack`` at a few pixels.
+
+    With ``Cov(g) = Fᵀ F + D`` (:func:`log_variance_response_Debevec1997`), the
+    merged ``ln Ê`` of a pixel moves by ``Σ_r ξ_r Σ_k a_k F_r(c̄_k)`` (``ξ_r``
+    independent standard variates, ``a_k = w_k / Σ_k w_k``): the loadings
+    ``Σ_k a_k F_r(c̄_k)`` at the pixels ``(rows, cols)``, merged from those
+    pixels' values alone (no full-size array is made). The uncorrelated rest
+    ``D`` is left out: it moves each value on its own.
+
+    Returns
+    -------
+    ndarray, shape (P, C, R)
+        0 where no exposure of the pixel has weight.
+
+    Raises
+    ------
+    InputError
+        If the response carries no covariance.
+    """
+    factor, _ = response.covariance_parts()
+    n_ch, n_rows = factor.shape[0], factor.shape[1]
+    rows, cols = np.asarray(rows, dtype=np.intp), np.asarray(cols, dtype=np.intp)
+    sub = stack.with_frames(stack.frames[:, :, rows, cols, :][:, :, :, None, :])
+    tables, per_exposure, den = merge_weights_Debevec1997(sub, response, options)
+    moved = np.zeros((rows.size, 1, n_ch, n_rows))
+    if tables.tabulated:  # every row's table at once: one gather of R numbers per value
+        stacked = np.stack(
+            [_interpolated_table(tables, response.levels, factor[:, r]) for r in range(n_rows)],
+            axis=-1,
+        )
+        for k, w in enumerate(per_exposure):
+            rows_k = tables.take_rows(stacked, k)  # a new array: weighted in place
+            rows_k *= w[..., None]
+            moved += rows_k
+    else:
+        for r in range(n_rows):
+            table = _interpolated_table(tables, response.levels, factor[:, r])
+            moved[..., r] = sum(w * tables.take(table, k) for k, w in enumerate(per_exposure))
+    inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
+    return (moved * inv[..., None])[:, 0]
 
 
 def log_variance_exposure_Debevec1997(

@@ -8,6 +8,7 @@ StepFit[VignettingModel]`` in :data:`VIGNETTING_METHODS`; its model is a
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -105,6 +106,13 @@ class VignettingData:
         :func:`photoquant.calibration.calibrate`); ``None``: unknown. Methods
         whose ``view_gains`` option is ``"auto"`` fit a gain per view when it
         exceeds :data:`AUTO_VIEW_GAIN_STD`.
+    response_loadings : callable, optional
+        ``(view, xy) → (n, C, R)``: how each of the response's independent
+        error variates moves ``ln`` of view ``view``'s values at the points
+        ``xy`` (``(n, 2)`` pixel indices ``x, y``)
+        (:func:`photoquant.merge.uncertainty.response_loadings_Debevec1997`),
+        for a method that propagates the response's error into its own
+        uncertainty; ``None``: the response states none.
     """
 
     uniform_views: list[np.ndarray]
@@ -112,6 +120,7 @@ class VignettingData:
     image_shape: tuple[int, int]
     flat_field: np.ndarray | None = None
     exposure_scale_std: float | None = None
+    response_loadings: Callable[[int, np.ndarray], np.ndarray] | None = None
 
 
 AUTO_VIEW_GAIN_STD = 0.002

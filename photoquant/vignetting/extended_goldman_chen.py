@@ -416,8 +416,12 @@ class VignettingFit:
         First-order standard uncertainty of ``view_gains`` (0 for the reference).
     param_covariance : ndarray, shape (C, 6, 6), optional
         First-order covariance of ``params`` per channel (marginal over the
-        view gains), the one ``map_uncertainty`` averages; NaN for a channel
-        that did not converge.
+        view gains), with ``value_log_loadings`` its part inherited from them
+        included; NaN for a channel that did not converge.
+    param_response_covariance : ndarray, shape (C, 6, 6), optional
+        With ``value_log_loadings``: the part of ``param_covariance``
+        inherited from them (the rest is the fit's own statistical error,
+        which ``map_uncertainty`` averages).
     """
 
     params: np.ndarray
@@ -431,6 +435,7 @@ class VignettingFit:
     view_gains: np.ndarray | None = None
     view_gain_std: np.ndarray | None = None
     param_covariance: np.ndarray | None = None
+    param_response_covariance: np.ndarray | None = None
 
 
 def _pairs_within_tracks(
@@ -731,6 +736,7 @@ class _PairedObservations:
     obs_view: np.ndarray  # (n_observations,) view of each observation
     obs_track: np.ndarray  # (n_observations,) track label 0 … n_tracks − 1
     pair_track: np.ndarray  # (n_pairs,) track label of each pair
+    source: np.ndarray  # (n_observations,) index of each among the observations given
     n_tracks: int
     n_pairs: int
     n_observations: int
@@ -780,6 +786,7 @@ def _paired_observations(
         obs_view=obs_view,
         obs_track=obs_track,
         pair_track=obs_track[a],
+        source=np.flatnonzero(usable)[used],
         n_tracks=int(obs_track.max()) + 1 if n_obs else 0,
         n_pairs=int(a.size),
         n_observations=n_obs,
@@ -847,8 +854,11 @@ def _centred_gains(
     settings: _FitSettings,
     gain_index: np.ndarray,
     n_gains: int,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One channel's view gains (reference first, 1) and their std, centre held at the image's."""
+    loadings: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """One channel's view gains (reference first, 1) and their std, centre held at the
+    image's; with ``loadings`` ``(n_obs, R)`` also the moves of their logarithms per unit
+    of each variate, ``(n_gains + 1, R)`` (0 for the reference; :func:`_response_shift`)."""
     problem = _pair_problem(pairs, c, settings, gain_index, n_gains)
     free = np.r_[0, 1, 2, 3, np.arange(_N_PARAMS, _N_PARAMS + n_gains)]
 
@@ -864,7 +874,12 @@ def _centred_gains(
         settings.view_gain_sigma,
     )
     std = np.sqrt(np.maximum(np.diag(cov)[4:], 0.0))
-    return np.r_[1.0, result.x[4:]], np.r_[0.0, std]
+    gains = np.r_[1.0, result.x[4:]]
+    moves = None
+    if loadings is not None:
+        shift = _response_shift(problem, pairs, c, settings, full(result.x), loadings, free)
+        moves = np.vstack([np.zeros((1, loadings.shape[1])), shift[:, 4:].T / gains[1:, None]])
+    return gains, np.r_[0.0, std], moves
 
 
 @dataclass(frozen=True)
@@ -1133,6 +1148,7 @@ class _ChannelFit:
     covariance: np.ndarray | None = None
     gains: np.ndarray | None = None
     gain_std: np.ndarray | None = None
+    response_covariance: np.ndarray | None = None
 
 
 def _why_untrusted(
@@ -1185,6 +1201,7 @@ def _fit_channel(
     n_gains: int,
     image_shape: tuple[int, int],
     neighbours: np.ndarray,
+    loadings: np.ndarray | None = None,
 ) -> _ChannelFit:
     """The fit of channel ``ch`` (values ``c``) from ``p0``, or from the linear start.
 
@@ -1217,6 +1234,10 @@ def _fit_channel(
     covariance = _track_clustered_covariance(result.jac, fun, pairs.pair_track, neighbours)
     uncertainty = _map_uncertainty(result.x, fun, result.jac, image_shape, cov)
     note = _why_untrusted(ch, result.x, uncertainty, image_shape, settings.max_uncertainty)
+    inherited = None
+    if loadings is not None:  # the response's error, carried through the values
+        shift = _response_shift(problem, pairs, c, settings, result.x, loadings)
+        inherited = (shift.T @ shift)[:_N_PARAMS, :_N_PARAMS]
     return _ChannelFit(
         params,
         rms,
@@ -1226,7 +1247,57 @@ def _fit_channel(
         covariance=covariance[:_N_PARAMS, :_N_PARAMS],
         gains=gains,
         gain_std=gain_std,
+        response_covariance=inherited,
     )
+
+
+def _response_shift(
+    problem: _PairProblem,
+    pairs: _PairedObservations,
+    c: np.ndarray,
+    settings: _FitSettings,
+    x: np.ndarray,
+    loadings: np.ndarray,
+    columns: np.ndarray | None = None,
+) -> np.ndarray:
+    """``(R, n_params)``: how the solution moves per unit of each of the response's error
+    variates, which move the observations' ``ln c`` by ``loadings`` ``(n_obs, R)``
+    (``columns``: the parameters solved for, of the problem's; all by default).
+
+    To first order the least-squares solution moves by ``δx = −J⁺ δr``, ``δr``
+    the residuals' change at the solution when the values move: with
+    ``c → c (1 + δ)``, ``δu = w (ρ c_a δ_a v_b − c_b δ_b v_a / ρ) / s − u δw/w``,
+    and for ``normalise="track"`` ``δw/w`` is the move of the track's mean
+    value, ``Σ c δ / Σ c`` over its observations (tested against refits of
+    moved values). ``Σ_r δx_r δx_rᵀ`` is the parameters' covariance inherited
+    from the response (GUM §5.1.2).
+    """
+    v = _evaluate(problem.x_n, problem.y_n, x[:_N_PARAMS])
+    rho, _ = problem._ratio(x)
+    scale = float(np.sqrt(np.mean(v**2))) if problem.scale_invariant else 1.0
+    rho_col = np.asarray(rho, dtype=np.float64).reshape(-1, 1)
+    term_a = (problem.weight * problem.c_a * v[problem.b])[:, None] * rho_col
+    term_b = (problem.weight * problem.c_b * v[problem.a])[:, None] / rho_col
+    moved = (term_a * loadings[problem.a] - term_b * loadings[problem.b]) / scale
+    if settings.normalise == "track":
+        track_sum = np.bincount(pairs.obs_track, weights=c)
+        relative = (
+            np.stack(
+                [
+                    np.bincount(pairs.obs_track, weights=c * loadings[:, r])
+                    for r in range(loadings.shape[1])
+                ],
+                axis=1,
+            )
+            / track_sum[:, None]
+        )
+        moved -= problem.residuals(x)[:, None] * relative[pairs.pair_track]
+    jac = problem.jacobian(x)
+    jac = jac if columns is None else jac[:, columns]
+    # the normal equations' pseudo-inverse, as the fit's covariance takes it (a direction
+    # the data leave free moves nothing): a 6×6 system, not an SVD of the pairs
+    step = np.linalg.pinv(jac.T @ jac) @ (jac.T @ moved)
+    return -step.T
 
 
 @dataclass(frozen=True)
@@ -1238,6 +1309,7 @@ class _ChannelFits:
     converged: np.ndarray  # (C,) bool
     uncertainty: np.ndarray  # (C,), NaN where the solver failed
     param_covariance: np.ndarray  # (C, 6, 6), NaN where the solver failed
+    response_covariance: np.ndarray | None  # (C, 6, 6): the part inherited from loadings
     gains: np.ndarray | None  # (C, V) with view gains, NaN for a view without observations
     gain_std: np.ndarray | None
     notes: tuple[str, ...]  # why a channel cannot be trusted, channel by channel
@@ -1249,6 +1321,7 @@ def _fit_channels(
     start: np.ndarray | None,
     image_shape: tuple[int, int],
     n_view_slots: int,
+    loadings: np.ndarray | None = None,
 ) -> _ChannelFits:
     """Every channel's fit, and with ``settings.view_gains`` every view's gain.
 
@@ -1263,6 +1336,7 @@ def _fit_channels(
     rms = np.empty(n_channels)
     uncertainty = np.full(n_channels, np.nan)
     param_cov = np.full((n_channels, _N_PARAMS, _N_PARAMS), np.nan)
+    inherited = None if loadings is None else np.full_like(param_cov, np.nan)
     converged = np.zeros(n_channels, dtype=bool)
     notes: list[str] = []
     present, gain_index = _view_labels(pairs.obs_view)
@@ -1272,23 +1346,47 @@ def _fit_channels(
     gain_std = np.full((n_channels, n_view_slots), np.nan)
     values = pairs.values
     if n_gains and settings.view_gain_centre == "image":
+        moves: list[np.ndarray] = []
         for ch in range(n_channels):
-            gains[ch, present], gain_std[ch, present] = _centred_gains(
-                pairs, values[:, ch], settings, gain_index, n_gains
+            gains[ch, present], gain_std[ch, present], moved = _centred_gains(
+                pairs,
+                values[:, ch],
+                settings,
+                gain_index,
+                n_gains,
+                None if loadings is None else loadings[pairs.source, ch],
             )
+            if moved is not None:
+                moves.append(moved)
         common = np.exp(np.mean(np.log(gains[:, present]), axis=0))
         values = values * common[gain_index][:, None]
+        if loadings is not None:  # the common gains move with the values, and the values
+            common_move = np.mean(moves, axis=0)[gain_index]  # (n_obs, R)
+            loadings = loadings.copy()
+            loadings[pairs.source] += common_move[:, None, :]
         n_gains = 0
     for ch in range(n_channels):
         p0 = start[ch] if start is not None else None
         fit = _fit_channel(
-            pairs, values[:, ch], ch, settings, p0, gain_index, n_gains, image_shape, neighbours
+            pairs,
+            values[:, ch],
+            ch,
+            settings,
+            p0,
+            gain_index,
+            n_gains,
+            image_shape,
+            neighbours,
+            None if loadings is None else loadings[pairs.source, ch],
         )
         params[ch], rms[ch], converged[ch] = fit.params, fit.rms, fit.converged
         if fit.gains is not None:
             gains[ch, present], gain_std[ch, present] = fit.gains, fit.gain_std
         if fit.covariance is not None:
             param_cov[ch], uncertainty[ch] = fit.covariance, fit.uncertainty
+            if inherited is not None and fit.response_covariance is not None:
+                inherited[ch] = fit.response_covariance
+                param_cov[ch] = param_cov[ch] + fit.response_covariance
         if fit.note is not None:
             notes.append(fit.note)
     return _ChannelFits(
@@ -1297,6 +1395,7 @@ def _fit_channels(
         converged=converged,
         uncertainty=uncertainty,
         param_covariance=param_cov,
+        response_covariance=inherited,
         gains=gains if settings.view_gains else None,
         gain_std=gain_std if settings.view_gains else None,
         notes=tuple(notes),
@@ -1338,6 +1437,7 @@ def fit_vignetting_ExtendedGoldmanChen(
     view_gain_sigma: float | None = None,
     view_gain_centre: Literal["image", "free"] = "image",
     sample_radius: int = 0,
+    value_log_loadings: Any = None,
 ) -> VignettingFit:
     """Fit the extended Goldman–Chen vignetting model to values seen from several views.
 
@@ -1410,6 +1510,14 @@ def fit_vignetting_ExtendedGoldmanChen(
         (:func:`photoquant.correspondences.sample_image`; 0: single samples).
         Tracks whose windows share pixels in a view have correlated errors:
         the stated covariance counts them (see Notes).
+    value_log_loadings : array_like, shape (M, C, R), optional
+        How ``R`` independent standard variates of an error common to the
+        observations (the response's, through the merge:
+        :func:`photoquant.merge.uncertainty.response_loadings_Debevec1997`)
+        move each observation's ``ln c``: the parameters' covariance gains
+        ``Σ_r δp_r δp_rᵀ``, ``δp_r`` the solution's first-order move per
+        unit of variate ``r``. The map's trust (``max_uncertainty``) is
+        judged on the fit's own statistical error.
 
     Returns
     -------
@@ -1527,9 +1635,19 @@ def fit_vignetting_ExtendedGoldmanChen(
     )
     _check_positions(xy, view, shape)
     start = _starting_parameters(initial, values.shape[1], settings.view_gains)
+    loadings = None
+    if value_log_loadings is not None:
+        loadings = check_array(value_log_loadings, "value_log_loadings", ndim=3, kind="f")
+        if loadings.shape[:2] != values.shape or not np.all(np.isfinite(loadings)):
+            raise InputError(
+                f"`value_log_loadings` must be finite, (M, C, R) with (M, C) = {values.shape}, "
+                f"got shape {loadings.shape}"
+            )
     pairs = _paired_observations(values, xy, view, _track_index(track, view), shape)
     _check_pairs_suffice(pairs, settings.min_pairs, settings.min_spread)
-    fits = _fit_channels(pairs, settings, start, shape, n_view_slots=int(view.max()) + 1)
+    fits = _fit_channels(
+        pairs, settings, start, shape, n_view_slots=int(view.max()) + 1, loadings=loadings
+    )
     return VignettingFit(
         params=fits.params,
         residual_rms=fits.rms,
@@ -1542,6 +1660,7 @@ def fit_vignetting_ExtendedGoldmanChen(
         view_gains=fits.gains,
         view_gain_std=fits.gain_std,
         param_covariance=fits.param_covariance,
+        param_response_covariance=fits.response_covariance,
     )
 
 
@@ -1735,6 +1854,14 @@ class ExtendedGoldmanChenOptions:
     view_gain_centre : {"image", "free"}
         With ``view_gains``: the gains fitted with the centre held at the
         image centre, then held in the full fit (default), or jointly.
+    response_error : {"propagated", "ignored"}
+        Where the data carry the response's error
+        (:attr:`~photoquant.vignetting.VignettingData.response_loadings`):
+        carry it through the fit into the parameters' covariance (default;
+        ``value_log_loadings`` of :func:`fit_vignetting_ExtendedGoldmanChen`),
+        or state the fit's own statistical error only. The views the map is
+        fitted to are merged with the recovered ``g``, whose error moves
+        their values level by level: the map inherits it.
     uncorrected_bias : {"ignored", "stated"}
         With ``"stated"`` (the paper's profile) and options that depart from
         these defaults, the same data are also fitted with the defaults and
@@ -1756,9 +1883,15 @@ class ExtendedGoldmanChenOptions:
     view_gains: bool | str = "auto"
     view_gain_sigma: float | None = None
     view_gain_centre: str = "image"
+    response_error: str = "propagated"
     uncorrected_bias: str = "ignored"
 
     def __post_init__(self) -> None:
+        if self.response_error not in ("propagated", "ignored"):
+            raise InputError(
+                "`response_error` must be one of ['propagated', 'ignored'], "
+                f"got {self.response_error!r}"
+            )
         if self.uncorrected_bias not in ("ignored", "stated"):
             raise InputError(
                 "`uncorrected_bias` must be one of ['ignored', 'stated'], "
@@ -1835,10 +1968,17 @@ def characterise_vignetting_ExtendedGoldmanChen(
         )
     n_ch = data.uniform_views[0].shape[-1]
     values = np.full((view_idx.size, n_ch), np.nan)
+    loadings: np.ndarray | None = None
+    propagate = opts.response_error == "propagated" and data.response_loadings is not None
     for v in range(n_views):
         sel = view_idx == v
         if np.any(sel):
             values[sel] = sample_image(data.uniform_views[v], xy[sel], radius=opts.sample_radius)
+            if propagate and data.response_loadings is not None:
+                found = data.response_loadings(v, xy[sel])
+                if loadings is None:
+                    loadings = np.zeros((view_idx.size, n_ch, found.shape[-1]))
+                loadings[sel] = found
     fit = fit_vignetting_ExtendedGoldmanChen(
         values,
         xy,
@@ -1855,6 +1995,7 @@ def characterise_vignetting_ExtendedGoldmanChen(
         view_gain_sigma=opts.view_gain_sigma,
         view_gain_centre=opts.view_gain_centre,  # type: ignore[arg-type]
         sample_radius=opts.sample_radius,
+        value_log_loadings=loadings,
     )
     if not np.all(fit.converged):
         raise CalibrationError(f"the vignetting fit cannot be trusted: {fit.message}")
@@ -1866,6 +2007,7 @@ def characterise_vignetting_ExtendedGoldmanChen(
         "n_observations": fit.n_observations,
         "residual_rms": fit.residual_rms,
         "map_uncertainty": fit.map_uncertainty,
+        "response_error": "propagated" if loadings is not None else "not stated",
         "message": fit.message,
         **view_gain_report(fit.view_gains, fit.view_gain_std),
     }
@@ -1874,7 +2016,10 @@ def characterise_vignetting_ExtendedGoldmanChen(
         report["warnings"] = warnings
     covariance = fit.param_covariance
     if opts.uncorrected_bias == "stated" and covariance is not None:
-        covariance = _with_uncorrected_bias(data, opts, fit.params, covariance, report)
+        inherited = fit.param_response_covariance
+        statistical = covariance if inherited is None else covariance - inherited
+        bias = _uncorrected_bias(data, opts, fit.params, statistical, report)
+        covariance = covariance + bias[:, :, None] * bias[:, None, :]
     return StepFit(
         ExtendedGoldmanChenVignetting("Extended Goldman-Chen", fit.params, covariance), report
     )
@@ -1891,31 +2036,35 @@ _ESTIMATOR_FIELDS = (
 bias ``uncorrected_bias="stated"`` states against the defaults'."""
 
 
-def _with_uncorrected_bias(
+def _uncorrected_bias(
     data: VignettingData,
     opts: ExtendedGoldmanChenOptions,
     params: np.ndarray,
     covariance: np.ndarray,
     report: dict[str, Any],
 ) -> np.ndarray:
-    """``Cov(m) + b bᵀ`` per channel, ``b`` the parameters less those of the default
-    fit of the same data, shrunk by the two fits' statistical part
-    (``uncorrected_bias="stated"``); the report gains the bias's RMS over the map
-    (``uncorrected_bias_rms``), or why none is stated.
+    """``b`` ``(C, 6)``, the parameters less those of the default fit of the same data,
+    shrunk by the two fits' statistical part (``covariance``, the fit's own; the error
+    both inherit from the response is common to them and not in their difference), for
+    ``Cov(m) + b bᵀ`` (``uncorrected_bias="stated"``); the report gains the bias's RMS
+    over the map (``uncorrected_bias_rms``), or why none is stated (``b = 0``).
 
     The reference keeps the options' sampling of the data (window, tracks, trust
     limits) and takes the defaults' objective (:data:`_ESTIMATOR_FIELDS`)."""
     defaults = ExtendedGoldmanChenOptions()
     estimator = {name: getattr(defaults, name) for name in _ESTIMATOR_FIELDS}
     reference_options = dataclasses.replace(opts, uncorrected_bias="ignored", **estimator)
+    none = np.zeros_like(params)
     if dataclasses.replace(opts, uncorrected_bias="ignored") == reference_options:
         report["uncorrected_bias"] = "none stated: the options are the defaults' objective"
-        return covariance
+        return none
     try:
-        reference = characterise_vignetting_ExtendedGoldmanChen(data, reference_options).model
+        reference = characterise_vignetting_ExtendedGoldmanChen(
+            data, dataclasses.replace(reference_options, response_error="ignored")
+        ).model
     except (CalibrationError, InputError) as exc:
         report["uncorrected_bias"] = f"none stated: the reference fit failed: {exc}"
-        return covariance
+        return none
     grid = (max(2, data.image_shape[0] // 16), max(2, data.image_shape[1] // 16))  # coordinates
     log_ratio = np.log(vignetting_map(params, grid)) - np.log(
         vignetting_map(reference.params, grid)
@@ -1930,9 +2079,8 @@ def _with_uncorrected_bias(
             stated = ExtendedGoldmanChenVignetting("Extended Goldman-Chen", params, cov)
             noise += np.mean(stated.log_map_variance(grid), axis=(0, 1))  # type: ignore[arg-type]
     shrink = np.sqrt(np.maximum(square - noise, 0.0) / np.where(square > 0, square, 1.0))
-    bias = (params - reference.params) * shrink[:, None]
     report["uncorrected_bias_rms"] = np.sqrt(square) * shrink
-    return covariance + bias[:, :, None] * bias[:, None, :]
+    return (params - reference.params) * shrink[:, None]
 
 
 VIGNETTING_METHODS.add(

@@ -10,6 +10,7 @@ truth it brings the paper's ``g`` from under-stated to covered.
 from __future__ import annotations
 
 import dataclasses
+from functools import partial
 
 import numpy as np
 import pytest
@@ -25,6 +26,8 @@ from photoquant.merge.uncertainty import (
     _banded_bias_square,
     _weighting_difference,
     log_variance_weighting_bias_Debevec1997,
+    response_error_of_merge_Debevec1997,
+    response_loadings_Debevec1997,
 )
 from photoquant.profiles import PROFILES
 from photoquant.response.covariance import uncorrected_bias_factor
@@ -37,7 +40,10 @@ from photoquant.stack import ExposureStack
 from photoquant.vignetting import VignettingData
 from photoquant.vignetting.extended_goldman_chen import (
     ExtendedGoldmanChenOptions,
+    ExtendedGoldmanChenVignetting,
     characterise_vignetting_ExtendedGoldmanChen,
+    fit_vignetting_ExtendedGoldmanChen,
+    vignetting_map,
 )
 
 from .analytic import capture, log_uniform_scene
@@ -330,3 +336,81 @@ def test_the_linearised_balance_states_the_charts_uv_ratio_as_its_bias():
     # read after ÷ u·v there is no stage bias to state
     after = characterise_balance_WhiteChart(data, WhiteChartOptions(uncorrected_bias="stated"))
     assert "uncorrected_bias_log" not in after.report
+
+
+# -- the response's error, inherited by the vignetting --------------------------------------
+
+
+def test_the_loadings_at_pixels_are_the_merges_own():
+    """Averaged over every pixel, the loadings at the pixels are the merge's mean loadings
+    (:func:`response_error_of_merge_Debevec1997`, computed over the whole stack)."""
+    stack = _analytic_stack(6)
+    model = characterise_response_Debevec1997(stack, DebevecResponseOptions(), 0).model
+    h, w = stack.image_shape
+    rows, cols = np.divmod(np.arange(h * w), w)
+    found = response_loadings_Debevec1997(stack, model, None, rows, cols)
+    assert found.shape == (h * w, 3, model.covariance_factor.shape[1])
+    mean, _ = response_error_of_merge_Debevec1997(stack, model, None)
+    weighted = np.isfinite(merge_stack_Debevec1997(stack, model).log_photoquantity)
+    weighted = weighted.reshape(h * w, 3)
+    for ch in range(3):
+        np.testing.assert_allclose(
+            found[weighted[:, ch], ch].mean(axis=0), mean[ch], rtol=1e-9, atol=1e-15
+        )
+
+
+@pytest.mark.parametrize(
+    ("normalise", "view_gains"), [("track", False), ("none", False), ("track", True)]
+)
+def test_the_vignetting_inherits_what_moves_its_values(normalise, view_gains):
+    """A common error that moves every observation's ``ln c`` by ``ε L`` moves the fit by
+    ``ε δp``; stated as one variate of loadings ``L``, the parameters' covariance gains
+    ``δp δpᵀ`` (first order: against the central difference of two refits)."""
+    data = _vignetting_data(flare=0.0)
+    from photoquant.correspondences import sample_image, tracks_to_observations
+
+    view, xy, track = tracks_to_observations(data.tracks)
+    values = np.full((view.size, 3), np.nan)
+    for v in range(len(data.uniform_views)):
+        sel = view == v
+        values[sel] = sample_image(data.uniform_views[v], xy[sel], radius=0)
+    # a level-dependent error, as a response's: ln c moves with ln c itself
+    loading = 0.02 * (np.log(values) - np.nanmean(np.log(values)))
+    fit = partial(fit_vignetting_ExtendedGoldmanChen, xy=xy, view=view, track=track,
+                  image_shape=data.image_shape, normalise=normalise,
+                  view_gains=view_gains)  # fmt: skip
+    plain = fit(values)
+    with_error = fit(values, value_log_loadings=loading[:, :, None])
+    eps = 1e-3
+    up, down = fit(values * np.exp(eps * loading)), fit(values * np.exp(-eps * loading))
+    added = with_error.param_covariance - plain.param_covariance
+    np.testing.assert_allclose(with_error.param_response_covariance, added, atol=1e-18)
+    # on the map (the parameters the map hardly sees, its centre with a mild fall-off,
+    # are held by the refits' tolerance only): the added variance of ln v against the
+    # squared central difference of ln v
+    grid = (12, 16)
+    moved = np.log(vignetting_map(up.params, grid)) - np.log(vignetting_map(down.params, grid))
+    expected = (moved / (2 * eps)) ** 2
+    stated = ExtendedGoldmanChenVignetting("Extended Goldman-Chen", plain.params, added)
+    np.testing.assert_allclose(
+        stated.log_map_variance(grid), expected, rtol=0.01, atol=0.01 * expected.max()
+    )
+    np.testing.assert_array_equal(with_error.params, plain.params)
+
+
+def test_the_calibration_carries_the_responses_error_into_the_vignetting(tmp_path):
+    from pqsim.capture_set import write_capture_set
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    manifest = write_capture_set(
+        tmp_path / "set", camera_from_preset("cmos"), shape=(48, 64), n_repeats=2, seed=1
+    )
+    camera = pq.calibrate_manifest(manifest)
+    alone = pq.calibrate_manifest(manifest, vignetting={"response_error": "ignored"})
+    assert camera.report["vignetting"]["response_error"] == "propagated"
+    assert alone.report["vignetting"]["response_error"] == "not stated"
+    np.testing.assert_array_equal(camera.vignetting.params, alone.vignetting.params)
+    more = camera.vignetting.log_map_variance((48, 64)) - alone.vignetting.log_map_variance(
+        (48, 64)
+    )
+    assert more.min() > -1e-15 and more.max() > 0
