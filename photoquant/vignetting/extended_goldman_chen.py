@@ -1272,27 +1272,34 @@ def _response_shift(
     moved values). ``Σ_r δx_r δx_rᵀ`` is the parameters' covariance inherited
     from the response (GUM §5.1.2).
     """
+    carried = np.all(np.isfinite(loadings), axis=1)
+    use = carried[problem.a] & carried[problem.b]  # the pairs of the tracks that carry it
+    loadings = np.where(carried[:, None], loadings, 0.0)
+    a, b = problem.a[use], problem.b[use]
     v = _evaluate(problem.x_n, problem.y_n, x[:_N_PARAMS])
     rho, _ = problem._ratio(x)
     scale = float(np.sqrt(np.mean(v**2))) if problem.scale_invariant else 1.0
-    rho_col = np.asarray(rho, dtype=np.float64).reshape(-1, 1)
-    term_a = (problem.weight * problem.c_a * v[problem.b])[:, None] * rho_col
-    term_b = (problem.weight * problem.c_b * v[problem.a])[:, None] / rho_col
-    moved = (term_a * loadings[problem.a] - term_b * loadings[problem.b]) / scale
+    rho_col = np.broadcast_to(np.asarray(rho, dtype=np.float64).reshape(-1, 1), (use.size, 1))
+    weight = problem.weight[use]
+    term_a = (weight * problem.c_a[use] * v[b])[:, None] * rho_col[use]
+    term_b = (weight * problem.c_b[use] * v[a])[:, None] / rho_col[use]
+    moved = (term_a * loadings[a] - term_b * loadings[b]) / scale
     if settings.normalise == "track":
-        track_sum = np.bincount(pairs.obs_track, weights=c)
+        track_sum = np.bincount(pairs.obs_track, weights=c, minlength=pairs.n_tracks)
         relative = (
             np.stack(
                 [
-                    np.bincount(pairs.obs_track, weights=c * loadings[:, r])
+                    np.bincount(
+                        pairs.obs_track, weights=c * loadings[:, r], minlength=pairs.n_tracks
+                    )
                     for r in range(loadings.shape[1])
                 ],
                 axis=1,
             )
             / track_sum[:, None]
         )
-        moved -= problem.residuals(x)[:, None] * relative[pairs.pair_track]
-    jac = problem.jacobian(x)
+        moved -= problem.residuals(x)[use][:, None] * relative[pairs.pair_track[use]]
+    jac = problem.jacobian(x)[use]
     jac = jac if columns is None else jac[:, columns]
     # the normal equations' pseudo-inverse, as the fit's covariance takes it (a direction
     # the data leave free moves nothing): a 6×6 system, not an SVD of the pairs
@@ -1516,8 +1523,10 @@ def fit_vignetting_ExtendedGoldmanChen(
         :func:`photoquant.merge.uncertainty.response_loadings_Debevec1997`)
         move each observation's ``ln c``: the parameters' covariance gains
         ``Σ_r δp_r δp_rᵀ``, ``δp_r`` the solution's first-order move per
-        unit of variate ``r``. The map's trust (``max_uncertainty``) is
-        judged on the fit's own statistical error.
+        unit of variate ``r``, from the pairs whose two observations both
+        have finite loadings (NaN rows: a subset of whole tracks carries
+        it, see :data:`RESPONSE_ERROR_TRACKS`). The map's trust
+        (``max_uncertainty``) is judged on the fit's own statistical error.
 
     Returns
     -------
@@ -1638,10 +1647,10 @@ def fit_vignetting_ExtendedGoldmanChen(
     loadings = None
     if value_log_loadings is not None:
         loadings = check_array(value_log_loadings, "value_log_loadings", ndim=3, kind="f")
-        if loadings.shape[:2] != values.shape or not np.all(np.isfinite(loadings)):
+        if loadings.shape[:2] != values.shape or np.any(np.isinf(loadings)):
             raise InputError(
-                f"`value_log_loadings` must be finite, (M, C, R) with (M, C) = {values.shape}, "
-                f"got shape {loadings.shape}"
+                f"`value_log_loadings` must be (M, C, R) with (M, C) = {values.shape}, finite "
+                f"or NaN, got shape {loadings.shape}"
             )
     pairs = _paired_observations(values, xy, view, _track_index(track, view), shape)
     _check_pairs_suffice(pairs, settings.min_pairs, settings.min_spread)
@@ -1970,15 +1979,19 @@ def characterise_vignetting_ExtendedGoldmanChen(
     values = np.full((view_idx.size, n_ch), np.nan)
     loadings: np.ndarray | None = None
     propagate = opts.response_error == "propagated" and data.response_loadings is not None
+    # whole tracks, evenly spread over the list, carry the response's error
+    every = max(1, -(-len(tracks) // RESPONSE_ERROR_TRACKS))
+    carries = track_idx % every == 0
     for v in range(n_views):
         sel = view_idx == v
         if np.any(sel):
             values[sel] = sample_image(data.uniform_views[v], xy[sel], radius=opts.sample_radius)
-            if propagate and data.response_loadings is not None:
-                found = data.response_loadings(v, xy[sel])
+            carried = sel & carries
+            if propagate and data.response_loadings is not None and np.any(carried):
+                found = data.response_loadings(v, xy[carried])
                 if loadings is None:
-                    loadings = np.zeros((view_idx.size, n_ch, found.shape[-1]))
-                loadings[sel] = found
+                    loadings = np.full((view_idx.size, n_ch, found.shape[-1]), np.nan)
+                loadings[carried] = found
     fit = fit_vignetting_ExtendedGoldmanChen(
         values,
         xy,
@@ -2023,6 +2036,15 @@ def characterise_vignetting_ExtendedGoldmanChen(
     return StepFit(
         ExtendedGoldmanChenVignetting("Extended Goldman-Chen", fit.params, covariance), report
     )
+
+
+RESPONSE_ERROR_TRACKS = 5000
+"""Most tracks through which ``response_error="propagated"`` carries the response's error
+into the parameters (evenly spread over the tracks used): the parameters' first-order move
+under a smooth error of ``g`` is a projection that a few thousand tracks fix nearly as
+well as all of them. Measured (2026-12-06, the paper's profile, 1024×768, N = 2, ccd and
+cmos presets): the inherited map uncertainty within 7 % of all 30 000 tracks' per channel
+(1 000 tracks: up to 25 % off), at a sixth of the cost (all of them: 0.25 s more)."""
 
 
 _ESTIMATOR_FIELDS = (
