@@ -117,6 +117,9 @@ class Correction:
         fit's statistical error (:meth:`~photoquant.vignetting.base.VignettingModel.log_map_variance`),
         a calibration component; NaN where ``mask`` is set. Relative to the
         white chart's centre where the balance read the chart after ``÷ u·v``.
+        The part the map inherited from the response's error is left out
+        (:meth:`~photoquant.vignetting.base.VignettingModel.excluding_response_error`):
+        the response's error is stated once, in ``log_sigma_response``.
     log_sigma_exposure : ndarray, shape (H, W, C), float32, optional
         With ``uncertainty=True`` and refined scene times: the standard
         uncertainty of ``ln l`` from the refined times' own statistical error
@@ -508,7 +511,8 @@ def _stated_uncertainty(
             "uncertainty: the sensor LUT states no noise; its part of the calibration "
             "uncertainty is not included"
         )
-    vignetting_variance = model.vignetting.log_map_variance(
+    # the response's error is stated once, through the scene's merge (above)
+    vignetting_variance = model.vignetting.excluding_response_error().log_map_variance(
         stack.image_shape, relative_to=_chart_centre(model)
     )
     if vignetting_variance is not None:

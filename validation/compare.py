@@ -177,7 +177,11 @@ def channel_scale_variance(stack: Any, model: CameraModel, mask: np.ndarray) -> 
         x0, y0, x1, y1 = model.balance.chart_roi
         centre = (0.5 * (x0 + x1), 0.5 * (y0 + y1))
     weights = (~np.asarray(mask, dtype=bool)).astype(np.float64)
-    vignetting = model.vignetting.log_mean_variance(stack.image_shape, weights, centre)
+    # the response's error is in the loadings above: the map's part inherited from it
+    # is not added again (VignettingModel.excluding_response_error)
+    vignetting = model.vignetting.excluding_response_error().log_mean_variance(
+        stack.image_shape, weights, centre
+    )
     if vignetting is not None:
         var = var + vignetting
     ref = 1 if var.size > 1 else 0

@@ -54,6 +54,16 @@ class VignettingModel:
         del image_shape, relative_to
         return None
 
+    def excluding_response_error(self) -> VignettingModel:
+        """The model with the part of its stated uncertainty inherited from the response's
+        error taken out; the model itself where it states none (the default).
+
+        A corrected photoquantity states the response's error through the scene's own
+        merge: the map's part inherited from the same error is correlated with it (a
+        slope error of ``g`` and the fall-off it leaves partly cancel in ``E / v``), so
+        the correction takes the map's own statistical error and leaves that part out."""
+        return self
+
     def log_mean_variance(
         self,
         image_shape: tuple[int, int],

@@ -1693,11 +1693,15 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
         The fit's first-order covariance of ``params`` (``σ² (JᵀJ)⁺`` of the
         Levenberg–Marquardt solution, marginal over the view gains), for the
         map's uncertainty (:meth:`log_map_variance`). ``None``: not stated.
+    param_response_covariance : ndarray, shape (C, 6, 6), optional
+        The part of ``param_covariance`` the map inherited from the response's
+        error (``response_error="propagated"``); ``None``: none stated.
     """
 
     method: str
     params: np.ndarray
     param_covariance: np.ndarray | None = None
+    param_response_covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = check_array(self.params, "vignetting params", ndim=2, kind="iuf", finite=True)
@@ -1718,6 +1722,33 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
             if np.any(np.diagonal(cov, axis1=1, axis2=2) < 0):
                 raise InputError("vignetting `param_covariance` must have non-negative variances")
             object.__setattr__(self, "param_covariance", 0.5 * (cov + cov.transpose(0, 2, 1)))
+        if self.param_response_covariance is not None:
+            if self.param_covariance is None:
+                raise InputError(
+                    "vignetting `param_response_covariance` is a part of `param_covariance`, "
+                    "which is not given"
+                )
+            part = check_array(
+                self.param_response_covariance,
+                "vignetting param_response_covariance",
+                shape=(p.shape[0], _N_PARAMS, _N_PARAMS),
+                kind="iuf",
+                finite=True,
+            ).astype(np.float64)
+            object.__setattr__(
+                self, "param_response_covariance", 0.5 * (part + part.transpose(0, 2, 1))
+            )
+
+    def excluding_response_error(self) -> ExtendedGoldmanChenVignetting:
+        """The model with the covariance it inherited from the response taken out
+        (:meth:`VignettingModel.excluding_response_error`)."""
+        if self.param_response_covariance is None or self.param_covariance is None:
+            return self
+        return dataclasses.replace(
+            self,
+            param_covariance=self.param_covariance - self.param_response_covariance,
+            param_response_covariance=None,
+        )
 
     @classmethod
     def identity(cls, n_channels: int) -> ExtendedGoldmanChenVignetting:
@@ -1790,6 +1821,8 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
         extra: dict[str, Any] = {}
         if self.param_covariance is not None:
             extra["param_covariance"] = self.param_covariance.tolist()
+        if self.param_response_covariance is not None:
+            extra["param_response_covariance"] = self.param_response_covariance.tolist()
         return (
             {
                 "model": "Extended Goldman-Chen",
@@ -1809,15 +1842,20 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
         values = params["params"]
         if not isinstance(values, list):
             raise InputError(f"vignetting `params` must be a list of lists, got {values!r}")
-        cov_values = params.get("param_covariance")
-        if cov_values is not None and not isinstance(cov_values, list):
-            raise InputError(f"vignetting `param_covariance` must be a list, got {cov_values!r}")
+        covariances = []
+        for key in ("param_covariance", "param_response_covariance"):
+            listed = params.get(key)
+            if listed is not None and not isinstance(listed, list):
+                raise InputError(f"vignetting `{key}` must be a list, got {listed!r}")
+            covariances.append(listed)
         try:
             arr = np.asarray(values, dtype=np.float64)
-            cov = None if cov_values is None else np.asarray(cov_values, dtype=np.float64)
+            cov, inherited = (
+                None if c is None else np.asarray(c, dtype=np.float64) for c in covariances
+            )
         except (TypeError, ValueError):
             raise InputError("vignetting `params` must be numbers (C rows of 6)") from None
-        return cls(method, arr, cov)
+        return cls(method, arr, cov, inherited)
 
 
 @dataclass(frozen=True)
@@ -2034,7 +2072,10 @@ def characterise_vignetting_ExtendedGoldmanChen(
         bias = _uncorrected_bias(data, opts, fit.params, statistical, report)
         covariance = covariance + bias[:, :, None] * bias[:, None, :]
     return StepFit(
-        ExtendedGoldmanChenVignetting("Extended Goldman-Chen", fit.params, covariance), report
+        ExtendedGoldmanChenVignetting(
+            "Extended Goldman-Chen", fit.params, covariance, fit.param_response_covariance
+        ),
+        report,
     )
 
 

@@ -414,3 +414,43 @@ def test_the_calibration_carries_the_responses_error_into_the_vignetting(tmp_pat
         (48, 64)
     )
     assert more.min() > -1e-15 and more.max() > 0
+
+
+def test_the_inherited_part_is_kept_apart_stored_and_left_out_of_a_correction(tmp_path):
+    from photoquant.io import load_manifest, load_stack
+    from pqsim.capture_set import write_capture_set
+    from pqsim.synth_camera.presets import camera_from_preset
+
+    manifest = write_capture_set(
+        tmp_path / "set", camera_from_preset("cmos"), shape=(48, 64), n_repeats=2, seed=2
+    )
+    camera = pq.calibrate_manifest(manifest)
+    vig = camera.vignetting
+    own = vig.excluding_response_error()
+    np.testing.assert_allclose(
+        own.param_covariance, vig.param_covariance - vig.param_response_covariance, atol=1e-18
+    )
+    assert own.param_response_covariance is None and own.excluding_response_error() is own
+    # stored with the camera (an optional entry: folders without it still load)
+    camera.save(tmp_path / "cam")
+    loaded = pq.load_camera(tmp_path / "cam").vignetting
+    np.testing.assert_allclose(loaded.param_response_covariance, vig.param_response_covariance)
+    params, _ = vig.to_params()
+    del params["param_response_covariance"]
+    old = type(vig).from_params(vig.method, params, {})
+    assert old.param_response_covariance is None
+    # the correction's vignetting part is the map's own (the response's error is in its
+    # own part, once)
+    scene = load_stack(load_manifest(manifest).scene, load_manifest(manifest))
+    result = pq.correct(scene, camera, uncertainty=True)
+    expected = own.log_map_variance(scene.image_shape, relative_to=None)
+    centre = camera.balance.chart_roi
+    if camera.balance.chart_stage == "uniformised" and centre is not None:
+        x0, y0, x1, y1 = centre
+        expected = own.log_map_variance(scene.image_shape, ((x0 + x1) / 2, (y0 + y1) / 2))
+    ok = ~result.mask
+    np.testing.assert_allclose(
+        result.log_sigma_vignetting[ok], np.sqrt(expected)[ok].astype(np.float32), rtol=1e-6
+    )
+    with pytest.raises(InputError, match="param_response_covariance"):
+        type(vig)(vig.method, vig.params, None, vig.param_response_covariance)
