@@ -1776,8 +1776,9 @@ class DebevecResponseOptions:
         these defaults, the same stack is also fitted with the defaults,
         which correct the biases the chosen options leave (regression
         dilution, the toe, censored pairs, a small random sample), and the
-        difference is added to ``g``'s covariance as one more row of its
-        factor: ``g`` is kept, its stated uncertainty covers the bias
+        difference, less the two fits' stated variance level by level, is
+        added to ``g``'s covariance as one more row of its factor: ``g`` is
+        kept, its stated uncertainty covers the bias
         (:func:`~photoquant.response.covariance.uncorrected_bias_factor`).
         Costs one more fit; the report gives the bias's RMS per channel.
     """
