@@ -148,7 +148,10 @@ def log_variance_Debevec1997(
 
 WEIGHTING_BIAS_BAND = 0.25
 """Width in ``ln Ê`` of the bands over which the weighting's bias is averaged
-(:func:`log_variance_weighting_bias_Debevec1997`)."""
+(:func:`log_variance_weighting_bias_Debevec1997`): wide beside the noise of a patch of
+constant light, so that a band holds the patch's values whole (``Δ`` and ``ln Ê`` are
+read from the same values: a band narrower than the noise would select values by their
+noise, and its mean of ``Δ`` would follow it)."""
 
 
 def log_variance_weighting_bias_Debevec1997(
@@ -167,11 +170,9 @@ def log_variance_weighting_bias_Debevec1997(
     that the bracket's values are read from, and the noise of the values the
     two weight differently, which is not a bias. The bias is the mean of
     ``Δ`` over the pixels of the same exposure: per channel, the values are
-    grouped in bands of equal count of the merge's ``ln Ê`` (at least
-    :data:`WEIGHTING_BIAS_BIN_PIXELS` values each, at most
-    :data:`WEIGHTING_BIAS_MAX_BINS` bands), and each value is stated its
-    band's ``b² = max(Δ̄² − s²/n, 0)`` (the squared mean less its sampling
-    variance). E.g. the paper's hat weights the values of one or two DN,
+    grouped in bands of the merge's ``ln Ê`` :data:`WEIGHTING_BIAS_BAND`
+    wide, and each value is stated its band's ``b² = max(Δ̄² − s²/n, 0)``
+    (the squared mean less its sampling variance). E.g. the paper's hat weights the values of one or two DN,
     where one DN is a coarse step in ``ln`` exposure and ``g`` is least
     known, as much as its slope allows; the default ``"hat-quantisation"``
     weighting hardly uses them, and in a scene's shadows the two differ by
