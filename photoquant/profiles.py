@@ -262,7 +262,7 @@ def profile_steps(profile: str) -> Mapping[str, tuple[str, Mapping[str, Any]]]:
     --------
     >>> from photoquant.profiles import profile_steps
     >>> profile_steps("paper")["balance"]
-    ('White Chart', {'stage': 'linearised'})
+    ('White Chart', {'stage': 'linearised', 'uncorrected_bias': 'stated'})
     >>> profile_steps("Photoquant")["vignetting"]
     ('Extended Goldman-Chen', {})
     """
