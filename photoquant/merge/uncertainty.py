@@ -223,24 +223,17 @@ def _weighting_difference(
     _, reference_table, ref = _weight_setup(stack, response, reference or DebevecMergeOptions())
     g_table = tables.table(scale.log_inverse)
 
-    def weight(table: Any, inp: Any, k: int) -> np.ndarray:
-        w = tables.take(table, k)
-        for mask in (inp.saturated, inp.dark_clipped):
-            if mask is not None:
-                w[mask[k]] = 0.0
-        return w
-
     sums = [np.zeros(_value_shape(stack)), np.zeros(_value_shape(stack))]
     for k in range(stack.n_exposures):
-        sums[0] += weight(own_table, own, k)
-        sums[1] += weight(reference_table, ref, k)
+        sums[0] += _exposure_weight(tables, own_table, own, k)
+        sums[1] += _exposure_weight(tables, reference_table, ref, k)
     merged = (sums[0] > 0) & (sums[1] > 0)
     inv = [np.where(merged, 1.0 / np.where(merged, total, 1.0), 0.0) for total in sums]
     log_e, delta = np.zeros_like(sums[0]), np.zeros_like(sums[0])
     ln_t = np.log(np.asarray(stack.exposure_s, dtype=np.float64))
     for k in range(stack.n_exposures):
-        a = weight(own_table, own, k) * inv[0]
-        a_ref = weight(reference_table, ref, k) * inv[1]
+        a = _exposure_weight(tables, own_table, own, k) * inv[0]
+        a_ref = _exposure_weight(tables, reference_table, ref, k) * inv[1]
         used = (a != 0.0) | (a_ref != 0.0)  # g only where a weight is (finite there)
         log_e_k = np.where(used, tables.take(g_table, k) - ln_t[k], 0.0)
         log_e += a * log_e_k
@@ -280,16 +273,23 @@ def merge_weights_Debevec1997(
     weights: list[np.ndarray] = []
     total = None
     for k in range(stack.n_exposures):
-        w = tables.take(weight_table, k)  # a new array: zeroed in place
-        for mask in (inp.saturated, inp.dark_clipped):
-            if mask is not None:
-                w[mask[k]] = 0.0
+        w = _exposure_weight(tables, weight_table, inp, k)
         weights.append(w)
         # Σ_k w_k in exposure order, as a sum over a stacked axis adds (the same bits,
         # without a (K, H, W, C) copy)
         total = w.copy() if total is None else np.add(total, w, out=total)
     assert total is not None  # a stack has at least one exposure
     return MergeWeights(tables, weights, total)
+
+
+def _exposure_weight(tables: ValueTables, weight_table: Any, inp: Any, k: int) -> np.ndarray:
+    """The merge's weight of exposure ``k``'s values ``(H, W, C)``, 0 where a repeat is
+    clipped (a new array)."""
+    w = tables.take(weight_table, k)  # a new array: zeroed in place
+    for mask in (inp.saturated, inp.dark_clipped):
+        if mask is not None:
+            w[mask[k]] = 0.0
+    return w
 
 
 def compiled_passes_apply(stack: ExposureStack) -> bool:
