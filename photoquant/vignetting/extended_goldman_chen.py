@@ -1678,6 +1678,21 @@ def fit_vignetting_ExtendedGoldmanChen(
 # ---------------------------------------------------------------------------
 
 
+def _checked_covariance(value: Any, name: str, n_channels: int) -> np.ndarray:
+    """A ``(C, 6, 6)`` covariance of the model's parameters, finite with non-negative
+    variances, made exactly symmetric (float64)."""
+    cov = check_array(
+        value,
+        f"vignetting {name}",
+        shape=(n_channels, _N_PARAMS, _N_PARAMS),
+        kind="iuf",
+        finite=True,
+    ).astype(np.float64)
+    if np.any(np.diagonal(cov, axis1=1, axis2=2) < 0):
+        raise InputError(f"vignetting `{name}` must have non-negative variances")
+    return 0.5 * (cov + cov.transpose(0, 2, 1))
+
+
 @dataclass(frozen=True, eq=False)
 class ExtendedGoldmanChenVignetting(VignettingModel):
     """The paper's extended Goldman–Chen model (§5.5): ``m1 … m6`` per channel.
@@ -1711,33 +1726,15 @@ class ExtendedGoldmanChenVignetting(VignettingModel):
                 f"({', '.join(VIGNETTING_PARAMETER_NAMES)}), got shape {p.shape}"
             )
         object.__setattr__(self, "params", p.astype(np.float64))
-        if self.param_covariance is not None:
-            cov = check_array(
-                self.param_covariance,
-                "vignetting param_covariance",
-                shape=(p.shape[0], _N_PARAMS, _N_PARAMS),
-                kind="iuf",
-                finite=True,
-            ).astype(np.float64)
-            if np.any(np.diagonal(cov, axis1=1, axis2=2) < 0):
-                raise InputError("vignetting `param_covariance` must have non-negative variances")
-            object.__setattr__(self, "param_covariance", 0.5 * (cov + cov.transpose(0, 2, 1)))
-        if self.param_response_covariance is not None:
-            if self.param_covariance is None:
-                raise InputError(
-                    "vignetting `param_response_covariance` is a part of `param_covariance`, "
-                    "which is not given"
-                )
-            part = check_array(
-                self.param_response_covariance,
-                "vignetting param_response_covariance",
-                shape=(p.shape[0], _N_PARAMS, _N_PARAMS),
-                kind="iuf",
-                finite=True,
-            ).astype(np.float64)
-            object.__setattr__(
-                self, "param_response_covariance", 0.5 * (part + part.transpose(0, 2, 1))
+        if self.param_response_covariance is not None and self.param_covariance is None:
+            raise InputError(
+                "vignetting `param_response_covariance` is a part of `param_covariance`, "
+                "which is not given"
             )
+        for name in ("param_covariance", "param_response_covariance"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, _checked_covariance(value, name, p.shape[0]))
 
     def excluding_response_error(self) -> ExtendedGoldmanChenVignetting:
         """The model with the covariance it inherited from the response taken out

@@ -454,3 +454,5 @@ def test_the_inherited_part_is_kept_apart_stored_and_left_out_of_a_correction(tm
     )
     with pytest.raises(InputError, match="param_response_covariance"):
         type(vig)(vig.method, vig.params, None, vig.param_response_covariance)
+    with pytest.raises(InputError, match="`param_response_covariance` must have non-negative"):
+        type(vig)(vig.method, vig.params, vig.param_covariance, -vig.param_response_covariance)
