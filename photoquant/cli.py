@@ -76,6 +76,15 @@ def _fmt(values: Any) -> str:
     return "[" + ", ".join(f"{v:.4g}" for v in arr.ravel()) + "]"
 
 
+def _median_and_p95(sigma: np.ndarray) -> str:
+    """``median M, 95th percentile P`` of an uncertainty layer's finite values (``nan``
+    where it has none)."""
+    finite = sigma[np.isfinite(sigma)]
+    median = np.median(finite) if finite.size else float("nan")
+    p95 = np.percentile(finite, 95) if finite.size else float("nan")
+    return f"median {median:.3g}, 95th percentile {p95:.3g}"
+
+
 def _parse_value(text: str) -> Any:
     """A command-line option value: JSON when it parses (numbers, true/false, lists), else text."""
     try:
@@ -460,11 +469,9 @@ def _cmd_correct(args: argparse.Namespace) -> int:
         f"{time.perf_counter() - t0:.2f} s"
     )
     if result.log_sigma_noise is not None and result.noise is not None:
-        sigma = result.log_sigma_noise[np.isfinite(result.log_sigma_noise)]
         print(
             f"uncertainty of ln l from noise ({result.noise.source} gain and read noise): "
-            f"median {np.median(sigma) if sigma.size else float('nan'):.3g}, "
-            f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g}, "
+            f"{_median_and_p95(result.log_sigma_noise)}, "
             f"channels {UNCERTAINTY_LAYER}.* in {out.name}"
         )
     if calibration is not None:
@@ -478,12 +485,10 @@ def _cmd_correct(args: argparse.Namespace) -> int:
             )
             if part is not None
         ]
-        sigma = calibration[np.isfinite(calibration)]
         parts = ", ".join(named[:-1]) + (" and " if len(named) > 1 else "") + named[-1]
         print(
             f"uncertainty of ln l from the calibration ({parts}): "
-            f"median {np.median(sigma) if sigma.size else float('nan'):.3g}, "
-            f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g}, "
+            f"{_median_and_p95(calibration)}, "
             f"channels {CALIBRATION_UNCERTAINTY_LAYER}.*, combined with the noise in "
             f"{TOTAL_UNCERTAINTY_LAYER}.* in {out.name}"
         )
@@ -495,11 +500,9 @@ def _cmd_correct(args: argparse.Namespace) -> int:
             f"(in {TOTAL_UNCERTAINTY_LAYER}.*)"
         )
     if result.log_sigma_weighting is not None:
-        sigma = result.log_sigma_weighting[np.isfinite(result.log_sigma_weighting)]
         print(
             "uncertainty of ln l from the merge weighting's bias against the default "
-            f"weighting: median {np.median(sigma) if sigma.size else float('nan'):.3g}, "
-            f"95th percentile {np.percentile(sigma, 95) if sigma.size else float('nan'):.3g} "
+            f"weighting: {_median_and_p95(result.log_sigma_weighting)} "
             f"(in {TOTAL_UNCERTAINTY_LAYER}.*)"
         )
     if result.exposures is not None:

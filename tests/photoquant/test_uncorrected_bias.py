@@ -35,7 +35,6 @@ from photoquant.response.debevec1997 import (
     DebevecResponseOptions,
     characterise_response_Debevec1997,
 )
-from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 from photoquant.vignetting import VignettingData
 from photoquant.vignetting.extended_goldman_chen import (
@@ -54,6 +53,7 @@ from .test_response_covariance import (
     _captures,
     _true_g_at_levels,
 )
+from .test_uncertainty import _linear_response
 from .test_vignetting_models import make_data, truth_maps
 
 PAPER_RESPONSE = dict(PROFILES["paper"]["response"][1])
@@ -219,20 +219,6 @@ def test_consistent_views_state_no_vignetting_bias():
 
 
 # -- the merge's weighting ------------------------------------------------------------------
-
-LINEAR_LEVELS = np.arange(256, dtype=np.float64)
-
-
-def _linear_response() -> ResponseModel:
-    g = np.log(np.maximum(LINEAR_LEVELS, 0.5))
-    return ResponseModel(
-        "linear",
-        LINEAR_LEVELS,
-        np.stack([g, g, g]),
-        np.full(3, 255.0),
-        valid_min=np.ones(3),
-        black_level=np.zeros(3),
-    )
 
 
 def test_the_weighting_difference_is_the_two_merges_difference():
