@@ -105,6 +105,8 @@ def test_a_malformed_reference_is_named():
         DebevecMergeOptions(uncorrected_bias=True)
     with pytest.raises(InputError, match="uncorrected_bias"):
         WhiteChartOptions(uncorrected_bias="yes")
+    with pytest.raises(InputError, match="response_error"):
+        ExtendedGoldmanChenOptions(response_error="both")
 
 
 def _analytic_stack(seed: int = 4) -> ExposureStack:
@@ -382,6 +384,10 @@ def test_the_vignetting_inherits_what_moves_its_values(normalise, view_gains):
         stated.log_map_variance(grid), expected, rtol=0.01, atol=0.01 * expected.max()
     )
     np.testing.assert_array_equal(with_error.params, plain.params)
+    with pytest.raises(InputError, match="value_log_loadings"):
+        fit(values, value_log_loadings=loading[:-1, :, None])  # one row short
+    with pytest.raises(InputError, match="value_log_loadings"):
+        fit(values, value_log_loadings=np.full((*values.shape, 1), np.inf))
 
 
 def test_the_calibration_carries_the_responses_error_into_the_vignetting(tmp_path):
