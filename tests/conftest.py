@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import os
 import signal
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import settings
+
+from tests._cpus import SUITE_CPUS, bind_worker, every_cpu
 
 # Property tests draw new examples on every run by default (and remember
 # failures in .hypothesis/). CI selects "ci" (HYPOTHESIS_PROFILE=ci, set by
@@ -23,30 +26,47 @@ _BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_TH
 
 
 def _share_the_cores_between_workers() -> None:
-    """Each pytest-xdist worker's BLAS on its share of the cores (``-n auto``).
+    """Each pytest-xdist worker on its share of the cores (``-n auto``): its threads and BLAS.
 
-    OpenBLAS starts a thread per core in every process; with one worker per
-    core, the workers' BLAS threads outnumber the cores, and OpenBLAS threads
-    that wait for each other spin: a least-squares solve of the size of the
-    validation job's colour-hdri peer took 40 s instead of 6 s beside other
-    busy processes. A worker gets ``cores // workers`` threads (at least one): the
-    BLAS libraries loaded already (numpy's) through threadpoolctl, the ones
-    loaded later (scipy's) and subprocesses through the variables. Nothing
-    changes in one process (``-n 0``) or where the variables are set already.
+    Every calibration and correction spreads over the CPUs its process may
+    run on (:func:`photoquant._checks.default_workers`), and OpenBLAS starts a
+    thread per core in every process. With one worker per core, each
+    worker's threads then compete with the other workers' for the same
+    cores: threads waiting for each other spin (a least-squares solve of the
+    size of the validation job's colour-hdri peer took 40 s instead of 6 s
+    beside other busy processes), and a fit split over its channels on two
+    threads on a core shared with another worker costs more than it saves.
+    A worker is therefore bound to its share of the CPUs
+    (:func:`tests._cpus.bind_worker`; the processes it starts inherit it), and its BLAS
+    libraries get that many threads: those loaded already (numpy's) through
+    threadpoolctl, those loaded later (scipy's) and subprocesses through the
+    variables. Measured on the 2-core machine (2026-12-06, ``-n auto``):
+    the suite 6 min 49 s – 7 min 45 s unbound, 5 min 43 s bound. A test of
+    several processes or threads on several CPUs asks for them back
+    (the :func:`all_cpus` fixture, :func:`tests._cpus.every_cpu`). Nothing changes in one process (``-n 0``) or where
+    the variables are set already.
     """
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if workers <= 1 or any(v in os.environ for v in _BLAS_THREAD_VARIABLES):
         return
     from threadpoolctl import threadpool_limits
 
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    threads = max(1, (cores or 1) // workers)
+    bound = bind_worker(workers, os.environ.get("PYTEST_XDIST_WORKER", ""))
+    threads = bound or max(1, (len(SUITE_CPUS) or os.cpu_count() or 1) // workers)
     for variable in _BLAS_THREAD_VARIABLES:
         os.environ[variable] = str(threads)
     threadpool_limits(limits=threads, user_api="blas")
 
 
 _share_the_cores_between_workers()
+
+
+@pytest.fixture
+def all_cpus() -> Iterator[None]:
+    """The test on every CPU of the suite (:func:`tests._cpus.every_cpu`): for a test of
+    what runs on more than one CPU, such as a second process."""
+    with every_cpu():
+        yield
 
 
 def pytest_configure(config: pytest.Config) -> None:

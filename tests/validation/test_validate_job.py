@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from photoquant.cli import main
+from tests._cpus import every_cpu
 from validation.baseline import (
     DEFAULT_BASELINE,
     check_results,
@@ -67,7 +68,8 @@ def cli_job(tmp_path_factory):
     """
     out = tmp_path_factory.mktemp("cli-job") / "report"
     printed = io.StringIO()
-    with contextlib.redirect_stdout(printed):
+    # every CPU: the noise experiment in a second process where there are two
+    with every_cpu(), contextlib.redirect_stdout(printed):
         status = main(["validate", "--tiny", "-q", "-o", str(out), "--experiments", *JOB])
     assert status == 0
     return out, printed.getvalue()
@@ -353,7 +355,7 @@ def test_ablation_compares_every_deviation_and_reuses_the_pipeline(tmp_path):
     ), "the paper's profile gave the photoquant profile's results: the profile was not applied"
 
 
-def test_an_error_in_the_second_process_is_one_line(tmp_path, monkeypatch):
+def test_an_error_in_the_second_process_is_one_line(tmp_path, monkeypatch, all_cpus):
     """An experiment that crashes in the forked process (not a refusal of the calibrator,
     which is its result) stops the run with one line naming the error."""
     from validation.experiments import _default_workers, noise
@@ -373,7 +375,9 @@ def test_an_error_in_the_second_process_is_one_line(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize(("sig", "status", "word"), [("SIGINT", 130, "interrupted"),
                                                      ("SIGTERM", 143, "terminated")])  # fmt: skip
-def test_stopping_a_two_process_run_is_one_line_and_leaves_nothing(tmp_path, sig, status, word):
+def test_stopping_a_two_process_run_is_one_line_and_leaves_nothing(
+    tmp_path, sig, status, word, all_cpus
+):
     """Ctrl-C (SIGINT to the terminal's process group) or SIGTERM while the second process
     ranks the leaderboard: one line, the status of the signal, no traceback from either
     process, neither left running, no report and no scratch folder."""
