@@ -42,3 +42,28 @@ def test_the_files_started_first_exist():
     assert len(set(RUN_FIRST)) == len(RUN_FIRST)
     missing = [name for name in RUN_FIRST if not (REPO / name).is_file()]
     assert not missing, missing
+
+
+def test_each_worker_gets_its_own_share_of_the_cpus():
+    from tests._cpus import worker_share
+
+    cpus = [0, 1, 2, 3, 4]
+    shares = [worker_share(cpus, 2, i) for i in range(2)]
+    assert shares == [{0, 2, 4}, {1, 3}]  # disjoint, every CPU, the first one more
+    assert [worker_share(cpus[:2], 2, i) for i in range(2)] == [{0}, {1}]
+    # more workers than CPUs: one each, shared in turn
+    assert [worker_share([3, 7], 3, i) for i in range(3)] == [{3}, {7}, {3}]
+
+
+def test_a_bound_worker_runs_on_its_share_and_every_cpu_gives_them_back():
+    import pytest
+
+    from tests._cpus import SUITE_CPUS, every_cpu
+
+    if not SUITE_CPUS:
+        pytest.skip("no CPU affinity on this platform")
+    before = os.sched_getaffinity(0)
+    assert before <= set(SUITE_CPUS)
+    with every_cpu():
+        assert os.sched_getaffinity(0) == set(SUITE_CPUS)
+    assert os.sched_getaffinity(0) == before
