@@ -699,7 +699,9 @@ def estimate_noise_from_exposures(
     sat = np.asarray(response.saturation_level, dtype=np.float64)
     lo = photon_transfer_floor(response)
     step = _grid_step(*stack.image_shape, max_pixels)
-    frames = stack.frames[0, :, ::step, ::step]
+    # the grid's values in one block (a strided view would be copied by every whole-array
+    # comparison below, four times)
+    frames = np.ascontiguousarray(stack.frames[0, :, ::step, ::step])
     # the grid's values only (the stack's masks are memoised at full size; the grid is a
     # sixteenth of them or less), compared per channel in the frames' own integer type
     clipped = stack.saturated(response.saturation_level)[:, ::step, ::step]
