@@ -37,14 +37,15 @@ def _share_the_cores_between_workers() -> None:
     beside other busy processes), and a fit split over its channels on two
     threads on a core shared with another worker costs more than it saves.
     A worker is therefore bound to its share of the CPUs
-    (:func:`tests._cpus.bind_worker`; the processes it starts inherit it), and its BLAS
-    libraries get that many threads: those loaded already (numpy's) through
-    threadpoolctl, those loaded later (scipy's) and subprocesses through the
-    variables. Measured on the 2-core machine (2026-12-06, ``-n auto``):
-    the suite 6 min 49 s – 7 min 45 s unbound, 5 min 43 s bound. A test of
-    several processes or threads on several CPUs asks for them back
-    (the :func:`all_cpus` fixture, :func:`tests._cpus.every_cpu`). Nothing changes in one process (``-n 0``) or where
-    the variables are set already.
+    (:func:`tests._cpus.bind_worker`; the processes it starts inherit it),
+    and its BLAS libraries get that many threads: those loaded already
+    (numpy's) through threadpoolctl, those loaded later (scipy's) and
+    subprocesses through the variables. Measured on the 2-core machine
+    (2026-12-06, ``-n auto``): the suite 6 min 49 s – 7 min 45 s unbound,
+    5 min 43 s – 5 min 53 s bound. A test of several processes or threads
+    on several CPUs asks for them back (the :func:`all_cpus` fixture,
+    :func:`tests._cpus.every_cpu`). Nothing changes in one process
+    (``-n 0``) or where the variables are set already.
     """
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if workers <= 1 or any(v in os.environ for v in _BLAS_THREAD_VARIABLES):
