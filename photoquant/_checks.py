@@ -19,7 +19,9 @@ from photoquant._stdio import safe_stdio  # one implementation (re-exported)
 from photoquant.errors import InputError
 
 __all__ = [
+    "check_choice",
     "check_int",
+    "UNCORRECTED_BIAS_MODES",
     "check_workers",
     "default_workers",
     "check_array",
@@ -183,6 +185,18 @@ def check_positive(
     if maximum is not None and v > maximum:
         raise InputError(f"`{name}` must be at most {maximum:g}, got {v:g}")
     return v
+
+
+def check_choice(value: Any, name: str, choices: Sequence[str]) -> str:
+    """``value`` where it is one of ``choices``, else an error naming them."""
+    if not isinstance(value, str) or value not in choices:
+        raise InputError(f"`{name}` must be one of {list(choices)}, got {value!r}")
+    return value
+
+
+UNCORRECTED_BIAS_MODES = ("ignored", "stated")
+"""The values of every method's ``uncorrected_bias`` option: whether it states the bias
+its options leave against photoquant's default method as an uncertainty."""
 
 
 def check_int(value: Any, name: str, lo: int | None = None, hi: int | None = None) -> int:

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from photoquant._checks import check_array, check_int
+from photoquant._checks import UNCORRECTED_BIAS_MODES, check_array, check_choice, check_int
 from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import REGISTRIES, Method, StepFit, options_from_mapping
 
@@ -428,11 +428,7 @@ class WhiteChartOptions:
     def __post_init__(self) -> None:
         if self.stage not in ("uniformised", "linearised"):
             raise InputError(f"`stage` must be 'uniformised' or 'linearised', got {self.stage!r}")
-        if self.uncorrected_bias not in ("ignored", "stated"):
-            raise InputError(
-                "`uncorrected_bias` must be one of ['ignored', 'stated'], "
-                f"got {self.uncorrected_bias!r}"
-            )
+        check_choice(self.uncorrected_bias, "uncorrected_bias", UNCORRECTED_BIAS_MODES)
         check_int(self.reference_channel, "reference_channel", 0)
 
 

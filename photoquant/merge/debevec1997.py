@@ -22,7 +22,13 @@ from typing import cast
 
 import numpy as np
 
-from photoquant._checks import check_array, check_exposure_times, check_int
+from photoquant._checks import (
+    UNCORRECTED_BIAS_MODES,
+    check_array,
+    check_choice,
+    check_exposure_times,
+    check_int,
+)
 from photoquant.errors import InputError
 from photoquant.merge._base import MergeResult, apply_log_inverse_response
 from photoquant.merge._tiled import (
@@ -489,11 +495,7 @@ class DebevecMergeOptions:
     uncorrected_bias: str = "ignored"
 
     def __post_init__(self) -> None:
-        if self.uncorrected_bias not in ("ignored", "stated"):
-            raise InputError(
-                "`uncorrected_bias` must be one of ['ignored', 'stated'], "
-                f"got {self.uncorrected_bias!r}"
-            )
+        check_choice(self.uncorrected_bias, "uncorrected_bias", UNCORRECTED_BIAS_MODES)
         weighting_function(self.weighting)
         if not isinstance(self.exclude_below_valid_min, bool):
             raise InputError(

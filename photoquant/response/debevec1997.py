@@ -139,8 +139,10 @@ import scipy.optimize
 from threadpoolctl import ThreadpoolController
 
 from photoquant._checks import (
+    UNCORRECTED_BIAS_MODES,
     check_array,
     check_bit_depth,
+    check_choice,
     check_exposure_times,
     check_int,
     check_positive,
@@ -215,9 +217,6 @@ TOE_MODES = ("continued", "solved")
 """Treatments of the dark end of ``g`` (module notes, *Toe*)."""
 COVARIANCE_MODES = ("sandwich", "exposure jackknife")
 """How ``"Debevec 1997"`` states ``g``'s covariance (:class:`DebevecResponseOptions`)."""
-UNCORRECTED_BIAS_MODES = ("ignored", "stated")
-"""Whether ``"Debevec 1997"`` states the bias its options leave in ``g``
-(:class:`DebevecResponseOptions`, ``uncorrected_bias``)."""
 
 
 _BLAS: list[ThreadpoolController] = []
@@ -1802,11 +1801,7 @@ class DebevecResponseOptions:
     uncorrected_bias: str = "ignored"
 
     def __post_init__(self) -> None:
-        if self.uncorrected_bias not in UNCORRECTED_BIAS_MODES:
-            raise InputError(
-                f"`uncorrected_bias` must be one of {list(UNCORRECTED_BIAS_MODES)}, "
-                f"got {self.uncorrected_bias!r}"
-            )
+        check_choice(self.uncorrected_bias, "uncorrected_bias", UNCORRECTED_BIAS_MODES)
         if self.edges not in EDGE_METHODS:
             raise InputError(f"`edges` must be one of {list(EDGE_METHODS)}, got {self.edges!r}")
         if self.objective not in OBJECTIVES:

@@ -56,7 +56,13 @@ from typing import Any, Literal
 import numpy as np
 from scipy.optimize import least_squares
 
-from photoquant._checks import check_array, check_int, check_positive
+from photoquant._checks import (
+    UNCORRECTED_BIAS_MODES,
+    check_array,
+    check_choice,
+    check_int,
+    check_positive,
+)
 from photoquant.errors import CalibrationError, InputError
 from photoquant.methods import Method, StepFit
 from photoquant.vignetting.base import (
@@ -1931,16 +1937,8 @@ class ExtendedGoldmanChenOptions:
     uncorrected_bias: str = "ignored"
 
     def __post_init__(self) -> None:
-        if self.response_error not in ("propagated", "ignored"):
-            raise InputError(
-                "`response_error` must be one of ['propagated', 'ignored'], "
-                f"got {self.response_error!r}"
-            )
-        if self.uncorrected_bias not in ("ignored", "stated"):
-            raise InputError(
-                "`uncorrected_bias` must be one of ['ignored', 'stated'], "
-                f"got {self.uncorrected_bias!r}"
-            )
+        check_choice(self.response_error, "response_error", ("propagated", "ignored"))
+        check_choice(self.uncorrected_bias, "uncorrected_bias", UNCORRECTED_BIAS_MODES)
         if self.normalise not in ("track", "none"):
             raise InputError(f"`normalise` must be 'track' or 'none', got {self.normalise!r}")
         if not isinstance(self.scale_invariant, bool):
