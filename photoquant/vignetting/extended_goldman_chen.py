@@ -2011,7 +2011,7 @@ def characterise_vignetting_ExtendedGoldmanChen(
     n_ch = data.uniform_views[0].shape[-1]
     values = np.full((view_idx.size, n_ch), np.nan)
     loadings: np.ndarray | None = None
-    propagate = opts.response_error == "propagated" and data.response_loadings is not None
+    carry = data.response_loadings if opts.response_error == "propagated" else None
     # whole tracks, evenly spread over the list, carry the response's error
     every = max(1, -(-len(tracks) // RESPONSE_ERROR_TRACKS))
     carries = track_idx % every == 0
@@ -2020,8 +2020,8 @@ def characterise_vignetting_ExtendedGoldmanChen(
         if np.any(sel):
             values[sel] = sample_image(data.uniform_views[v], xy[sel], radius=opts.sample_radius)
             carried = sel & carries
-            if propagate and data.response_loadings is not None and np.any(carried):
-                found = data.response_loadings(v, xy[carried])
+            if carry is not None and np.any(carried):
+                found = carry(v, xy[carried])
                 if loadings is None:
                     loadings = np.full((view_idx.size, n_ch, found.shape[-1]), np.nan)
                 loadings[carried] = found
