@@ -8,9 +8,12 @@ repeat statistics (:mod:`photoquant.stack`), the defect detection
 (:mod:`photoquant.defects`).
 
 Compiling costs time once per machine (the kernels are cached on disk): a
-first calibration on a fresh cache compiles them all, 18-22 s on a 2-core
-AMD EPYC (2026-12-06; 26-27 s while three kernels used numba's own median
-and partition, which :mod:`photoquant._select` replaces).
+first calibration on a fresh cache compiles them all, 18.5-19.9 s on a
+2-core AMD EPYC (160x120, K = 6, 2026-12-06). Kernels copy arrays element
+by element: a slice assignment between arrays (``x[:] = y``) makes numba
+compile its shape-mismatch error message, about 1.7 s in each kernel that
+has one; numba's own median and partition cost as much, which
+:mod:`photoquant._select` replaces.
 """
 
 from __future__ import annotations

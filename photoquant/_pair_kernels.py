@@ -299,7 +299,8 @@ def _chain(
 ) -> None:  # pragma: no cover - compiled by numba
     """:func:`photoquant.exposure._chain` into ``x``: the steps' offsets over the run
     ``start:stop`` chained to log times, the gauge kept."""
-    x[:] = x_nom
+    for i in range(x.size):  # elementwise: a slice copy compiles numba's shape-error messages
+        x[i] = x_nom[i]
     if stop <= start:
         return
     m = stop - start + 1
@@ -394,7 +395,8 @@ def screen_passes(
     psi = np.empty((n_rows, n_steps))
     for j in range(n_steps):
         dx_nom[j] = x_nom[j + 1] - x_nom[j]
-    x[:] = x_nom
+    for j in range(x.size):
+        x[j] = x_nom[j]
     start, stop = 0, 0
     scale = 1.0
     iterations = 0
@@ -437,7 +439,8 @@ def screen_passes(
             resid, w, sqrt_w, step, scale, huber_k, max_iterations, theta, h, u_last
         )
         if iterations:
-            u[:] = u_last
+            for e in range(n_pairs):
+                u[e] = u_last[e]
         counts[:] = 0
         for e in range(n_pairs):
             counts[step[e]] += use[e]

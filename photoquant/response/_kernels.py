@@ -297,7 +297,8 @@ def _rank_candidates_py(
                 start[b + 1] += 1
         for b in range(n_cells):
             start[b + 1] += start[b]
-        fill[:] = start[:n_cells]
+        for b in range(n_cells):
+            fill[b] = start[b]
         for c in range(n_c):  # a stable counting sort by bin: pixel order within a bin
             i = cand[c]
             b = bins[k, i]

@@ -425,10 +425,9 @@ def flat_candidates(
     if index.size == 0:
         return index
     n_c = values.shape[-1]
-    lo = np.ascontiguousarray(np.broadcast_to(np.asarray(black_level, dtype=np.float64), (n_c,)))
-    hi = np.ascontiguousarray(
-        np.broadcast_to(np.asarray(saturation_level, dtype=np.float64), (n_c,))
-    )
+    # fresh writable copies, whatever was given: one compiled signature of the kernel
+    lo = np.array(np.broadcast_to(np.asarray(black_level, dtype=np.float64), (n_c,)))
+    hi = np.array(np.broadcast_to(np.asarray(saturation_level, dtype=np.float64), (n_c,)))
     edge_ratio = _edge_ratio_compiled if HAVE_NUMBA else _edge_ratio_numpy
     ratio = edge_ratio(values, shape, index.astype(np.intp, copy=False), lo, hi, step, divisor)
     flat = ratio <= limit
