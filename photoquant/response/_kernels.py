@@ -8,7 +8,7 @@ sample selection
 normal equations of eq. 7. Their readable numpy versions make a dozen full
 passes each (``where``, ``floor``, ``bincount``, ``nonzero`` …); the kernels
 here make one or two, reading each value once. They are used when numba
-imports (``photoquant[fast]``) and give **the same bits** as the numpy
+imports (:mod:`photoquant._numba`) and give **the same bits** as the numpy
 versions, which stay the reference (``tests/photoquant/test_response_kernels.py``
 holds the two to equality on random data):
 

@@ -47,7 +47,7 @@ a one-pixel shift or a demosaicking error changes a value.
 
 Computation
 -----------
-With numba (``photoquant[fast]``) the test is three compiled passes on every
+With numba (:mod:`photoquant._numba`) the test is three compiled passes on every
 core: the Laplacians of every candidate, exposure and channel read straight
 from a stack's integer sums (``v = sums / N``, the mean's bits, no float
 copy of the frames), one exact median per ``(k, c)`` (a selection, not a
