@@ -24,9 +24,10 @@ paper-profile calibrations here leave their biases unstated
 (``uncorrected_bias="ignored"`` on the steps whose paper options state them,
 :func:`unstated`): the same estimates (the statement only adds a
 reference fit's difference to the stated uncertainty,
-``tests/photoquant/test_uncorrected_bias.py``), without a reference fit of
-the response and of the vignetting in each of the 26 calibrations (the
-quick job's 2 presets): about 4 s of its time on 2 cores.
+``tests/photoquant/test_uncorrected_bias.py``, and on a whole calibration
+``tests/validation/test_ablation.py``), without a second fit of the
+response and of the vignetting in each of its paper-profile calibrations:
+about 4 s of the quick job on 2 cores (2026-12-07).
 
 References
 ----------
