@@ -31,6 +31,7 @@ import numpy as np
 from photoquant._checks import (
     check_array,
     check_bit_depth,
+    check_choice,
     check_exposure_times,
     default_workers,
 )
@@ -466,11 +467,7 @@ class ExposureStack:
             if np.any(sat < 1) or np.any(sat > c_max):
                 raise InputError(f"`saturation_level` must lie in [1, {c_max}], got {sat.tolist()}")
         black = _check_black_level(self.black_level, frames, sat, c_max, channels)
-        if self.exposure_basis not in EXPOSURE_BASES:
-            raise InputError(
-                f"`exposure_basis` must be one of {list(EXPOSURE_BASES)}, "
-                f"got {self.exposure_basis!r}"
-            )
+        check_choice(self.exposure_basis, "exposure_basis", EXPOSURE_BASES)
         object.__setattr__(self, "frames", frames)
         object.__setattr__(self, "exposure_s", t)
         object.__setattr__(self, "bit_depth", bit_depth)

@@ -925,19 +925,14 @@ def _check_inputs(
     if k_count < 2:
         raise InputError("response recovery needs at least 2 exposure times, got 1")
     smoothness = check_positive(smoothness, "smoothness", allow_zero=True)
-    if toe not in TOE_MODES:
-        raise InputError(f"`toe` must be one of {list(TOE_MODES)}, got {toe!r}")
-    if censoring not in CENSORING_MODES:
-        raise InputError(f"`censoring` must be one of {list(CENSORING_MODES)}, got {censoring!r}")
-    if wide_steps not in WIDE_STEP_MODES:
-        raise InputError(f"`wide_steps` must be one of {list(WIDE_STEP_MODES)}, got {wide_steps!r}")
+    check_choice(toe, "toe", TOE_MODES)
+    check_choice(censoring, "censoring", CENSORING_MODES)
+    check_choice(wide_steps, "wide_steps", WIDE_STEP_MODES)
     if int(n_samples) < 2:
         raise InputError(f"`n_samples` must be at least 2, got {n_samples}")
     check_robust(robust, robust_rounds)
-    if objective not in OBJECTIVES:
-        raise InputError(f"`objective` must be one of {list(OBJECTIVES)}, got {objective!r}")
-    if edges not in EDGE_METHODS:
-        raise InputError(f"`edges` must be one of {list(EDGE_METHODS)}, got {edges!r}")
+    check_choice(objective, "objective", OBJECTIVES)
+    check_choice(edges, "edges", EDGE_METHODS)
     rounds = 1 + int(robust_rounds) if robust != "none" else 1
     if workers is None:  # one thread per channel wherever there is more than one CPU
         workers = n_ch if default_workers() > 1 else 1
@@ -1802,26 +1797,12 @@ class DebevecResponseOptions:
 
     def __post_init__(self) -> None:
         check_choice(self.uncorrected_bias, "uncorrected_bias", UNCORRECTED_BIAS_MODES)
-        if self.edges not in EDGE_METHODS:
-            raise InputError(f"`edges` must be one of {list(EDGE_METHODS)}, got {self.edges!r}")
-        if self.objective not in OBJECTIVES:
-            raise InputError(
-                f"`objective` must be one of {list(OBJECTIVES)}, got {self.objective!r}"
-            )
-        if self.covariance not in COVARIANCE_MODES:
-            raise InputError(
-                f"`covariance` must be one of {list(COVARIANCE_MODES)}, got {self.covariance!r}"
-            )
-        if self.toe not in TOE_MODES:
-            raise InputError(f"`toe` must be one of {list(TOE_MODES)}, got {self.toe!r}")
-        if self.censoring not in CENSORING_MODES:
-            raise InputError(
-                f"`censoring` must be one of {list(CENSORING_MODES)}, got {self.censoring!r}"
-            )
-        if self.wide_steps not in WIDE_STEP_MODES:
-            raise InputError(
-                f"`wide_steps` must be one of {list(WIDE_STEP_MODES)}, got {self.wide_steps!r}"
-            )
+        check_choice(self.edges, "edges", EDGE_METHODS)
+        check_choice(self.objective, "objective", OBJECTIVES)
+        check_choice(self.covariance, "covariance", COVARIANCE_MODES)
+        check_choice(self.toe, "toe", TOE_MODES)
+        check_choice(self.censoring, "censoring", CENSORING_MODES)
+        check_choice(self.wide_steps, "wide_steps", WIDE_STEP_MODES)
         check_positive(self.smoothness, "smoothness", allow_zero=True)
         check_int(self.n_samples, "n_samples", 2)
         check_int(self.max_levels, "max_levels", 16)
