@@ -378,15 +378,21 @@ class Shared:
     def chart(self, illuminant: str, preset: str) -> Any:
         """The ColorChecker seen by ``preset`` under ``illuminant`` (once), analytic or rendered.
 
-        The configuration's ``chart`` chooses (:func:`validation.experiments.chart.chart_scene`).
+        The configuration's ``chart`` chooses (:func:`validation.experiments.chart.chart_scene`);
+        a rendered chart is rendered with
+        :data:`~validation.experiments.chart.RENDER_VARIANT`.
         """
         key = (illuminant, self.sensitivities(preset))
         if key not in self._charts:
-            from validation.experiments.chart import chart_scene
+            from validation.experiments.chart import RENDER_VARIANT, chart_scene
 
             options = {}
-            if self.config.chart == "rendered":
-                options = {"spp": self.config.chart_spp, "cache_dir": self.config.render_cache}
+            if self.config.chart == "rendered":  # the same render on every machine
+                options = {
+                    "spp": self.config.chart_spp,
+                    "cache_dir": self.config.render_cache,
+                    "variant": RENDER_VARIANT,
+                }
             self._charts[key] = chart_scene(self.config.chart, self.config.shape, *key, **options)
         return self._charts[key]
 
