@@ -288,6 +288,18 @@ def huber_iterations(
     return iterations
 
 
+def _indices_of(flags: Any, out: Any) -> int:  # pragma: no cover - compiled by numba
+    """The indices where ``flags`` holds, in order, into ``out``; returns how many (a
+    kernel of its own: a count started at ``0`` in its caller is typed as the literal
+    ``0`` first, and every kernel it is passed to compiles twice)."""
+    n = 0
+    for e in range(flags.size):
+        if flags[e]:
+            out[n] = e
+            n += 1
+    return n
+
+
 def _longest_run(counts: Any, min_overlap: int) -> tuple[int, int]:  # pragma: no cover
     """:func:`photoquant.exposure._longest_run` of ``counts >= min_overlap``: the run of
     consecutive determined steps with the most values (the first of equals)."""
@@ -431,11 +443,7 @@ def screen_passes(
         # the pairs used (the others have no weight and no residual: exact zeros in
         # every sum below), the steps' weighted means, the scale (MAD), the Huber
         # iterations
-        n_use = 0
-        for e in range(n_pairs):
-            if use[e]:
-                used[n_use] = e
-                n_use += 1
+        n_use = _indices_of(use, used)
         total[:] = 0.0
         moment[:] = 0.0
         for m in range(n_use):
@@ -510,6 +518,7 @@ if HAVE_NUMBA:  # pragma: no cover - depends on the environment
     pairs_of_values = compile_kernel(pairs_of_values, error_model="numpy")
     pair_pass = compile_kernel(pair_pass, error_model="numpy")
     huber_iterations = compile_kernel(huber_iterations, error_model="numpy")
+    _indices_of = compile_kernel(_indices_of)
     _longest_run = compile_kernel(_longest_run)
     _chain = compile_kernel(_chain, error_model="numpy")
     _sandwich = compile_kernel(_sandwich, error_model="numpy")
