@@ -350,6 +350,10 @@ def _channel_medians(x: np.ndarray, center: np.ndarray | None = None) -> np.ndar
     (itself ~3× faster than numpy's introselect).
     """
     m, n_ch = x.shape
+    if HAVE_NUMBA and m >= 4096 and x.dtype.kind in "iu":
+        exact = _integer_channel_medians(x, center)
+        if exact is not None:
+            return exact
     if not HAVE_NUMBA or m < 4096 or x.dtype != np.float64:
         cols = [x[:, c] if center is None else np.abs(x[:, c] - center[c]) for c in range(n_ch)]
         return np.array([float(np.median(col)) for col in cols])
@@ -384,6 +388,79 @@ def _channel_medians(x: np.ndarray, center: np.ndarray | None = None) -> np.ndar
         )
         # numpy's median: the mean of the middle two (even M) or the middle one alone
         out[c] = float(np.mean(part[k_lo - below[c] : k_hi - below[c] + 1]))
+    return out
+
+
+_MAX_INTEGER_BINS = 1 << 20
+"""The widest range of integer values :func:`_integer_channel_medians` counts (beyond:
+the radix select of :func:`_channel_medians`)."""
+
+
+def _integer_key_counts_py(
+    x: Any, offset: int, center2: Any, counts: Any
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: per channel ``c`` of the integers ``x (M, C)``, the histogram of
+    ``x − offset`` (``center2`` empty) or of ``|2x − center2[c]|``, in one pass over the
+    interleaved values."""
+    m, n_ch = x.shape
+    if center2.size == 0:
+        for i in range(m):
+            for c in range(n_ch):
+                counts[c, np.int64(x[i, c]) - offset] += 1
+    else:
+        for i in range(m):
+            for c in range(n_ch):
+                counts[c, abs(2 * np.int64(x[i, c]) - center2[c])] += 1
+
+
+_integer_key_counts: Any = compile_kernel(_integer_key_counts_py) if HAVE_NUMBA else None
+
+
+def _integer_channel_medians(x: np.ndarray, center: np.ndarray | None) -> np.ndarray | None:
+    """:func:`_channel_medians` of integers ``x (M, C)`` from each channel's histogram.
+
+    An integer's median is one integer or the mean of two, and its absolute
+    deviations from it are integers or half-integers: their histogram (of
+    ``2 |x − center|`` for the deviations) gives the order statistics exactly,
+    in one pass, and their mean is numpy's to the bit (float64 holds them
+    exactly). ``None`` where the values span more than :data:`_MAX_INTEGER_BINS`
+    or ``center`` is not a whole or half number (the caller's radix select then).
+    Measured (2026-12-07, 2816×2112×3 int16 excess planes, 2 cores): the
+    median and the median absolute deviation of a plane 164 → 57 ms.
+    """
+    m, n_ch = x.shape
+    lo, hi = int(x.min()), int(x.max())
+    if center is None:
+        n_bins, offset, cen2 = hi - lo + 1, lo, np.empty(0, dtype=np.int64)
+    else:
+        cen = np.asarray(center, dtype=np.float64)
+        if not np.all(np.isfinite(cen)) or np.any(2 * cen != np.round(2 * cen)):
+            return None
+        cen2 = np.round(2 * cen).astype(np.int64)
+        n_bins = int(np.abs(2 * np.array([lo, hi])[:, None] - cen2[None]).max()) + 1
+        offset = 0
+    if n_bins > _MAX_INTEGER_BINS:
+        return None
+    counts = np.zeros((n_ch, n_bins), dtype=np.int64)
+    if _integer_key_counts is not None:
+        _integer_key_counts(np.ascontiguousarray(x), offset, cen2, counts)
+    else:  # the same histograms, a channel at a time
+        for c in range(n_ch):
+            col = x[:, c].astype(np.int64)
+            keys = col - offset if center is None else np.abs(2 * col - cen2[c])
+            counts[c] = np.bincount(keys, minlength=n_bins)
+    k_lo, k_hi = (m - 1) // 2, m // 2
+    out = np.empty(n_ch)
+    for c in range(n_ch):
+        cum = np.cumsum(counts[c])
+        key_lo = int(np.searchsorted(cum, k_lo, side="right"))
+        key_hi = int(np.searchsorted(cum, k_hi, side="right"))
+        if center is None:
+            a, b = float(key_lo + offset), float(key_hi + offset)
+        else:
+            a, b = key_lo / 2, key_hi / 2
+        # numpy's median: the mean of the middle two (even M) or the middle one alone
+        out[c] = a if k_lo == k_hi else float(np.mean([a, b]))
     return out
 
 
@@ -459,6 +536,39 @@ def _plane_means(stack: ExposureStack) -> Any:
     return lambda k: sums[k] / n
 
 
+def _excess_planes(stack: ExposureStack, mean: Any, rank: int) -> Any:
+    """``excess(k)``: the repeat mean of exposure ``k`` less its ring rank (the hot test).
+
+    One repeat of integer frames: the frame is its own mean and the ring's
+    rank one of its values, so the excess is an integer, computed from the
+    frame in its own dtype and held as ``int16`` (8-bit frames) or ``int32``:
+    the same numbers as the float64 planes, at a quarter or half their memory
+    (the kept planes fit the budget) and their robust spread from a histogram
+    (:func:`_integer_channel_medians`), compared with their thresholds in their
+    own dtype (:func:`_greater_level`). Measured (2026-12-07, the St. Louis
+    Arch's four 2816×2112 JPEG frames, 2 cores, min of two): the defect search
+    2.42 → 0.54 s, the same map (the float64 planes did not fit the kept
+    planes' budget: three of four were computed twice). Otherwise float64
+    planes of ``mean(k)``.
+    """
+    frames = stack.frames
+    if stack.n_repeats == 1 and frames.dtype.kind in "iu" and frames.dtype.itemsize <= 2:
+        kind = np.int16 if frames.dtype.itemsize == 1 else np.int32
+        return lambda k: np.subtract(frames[0, k], _ring_rank_fast(frames[0, k], rank), dtype=kind)
+    return lambda k: mean(k) - _ring_rank_fast(mean(k), rank)
+
+
+def _greater_level(values: np.ndarray, level: Any) -> Any:
+    """``level`` (``≥ 0``) for ``values > level``, in the values' dtype where they are
+    integers: ``⌊level⌋`` (``x > t ⟺ x > ⌊t⌋`` for an integer ``x``), at most the
+    dtype's largest value. The same booleans, without casting every value to
+    float64 for the comparison."""
+    if values.dtype.kind not in "iu":
+        return level
+    top = np.iinfo(values.dtype).max
+    return np.minimum(np.floor(level), top).astype(values.dtype)
+
+
 def _below_clip(stack: ExposureStack, mean: Any) -> Any:
     """``below(k)``: ``stack.mean()[k] < saturation_level − 0.5`` per value (bool).
 
@@ -499,6 +609,7 @@ def _one_stack(
     lo, hi = rep_lo.min(axis=0), rep_hi.max(axis=0)
     order = np.argsort(stack.exposure_s)
     mean = _plane_means(stack)  # mean(k): the repeat mean of exposure k, stack.mean()[k]
+    excess_of = _excess_planes(stack, mean, hot_rank)
     not_stuck = lo != hi
     # per-channel thresholds compared along whole rows (_compare_per_channel), not in
     # numpy's broadcast inner loops of length C: the same booleans, 5-6× faster
@@ -537,9 +648,8 @@ def _one_stack(
         n_use += use_k
         if not use_k.any():
             continue
-        mean_k = mean(k)
-        excess = mean_k - _ring_rank_fast(mean_k, hot_rank)
-        maybe &= (excess > hot_min_dn) | ~use_k
+        excess = excess_of(k)
+        maybe &= (excess > _greater_level(excess, hot_min_dn)) | ~use_k
         keep = keep_bytes + excess.nbytes <= _KEEP_EXCESS_BYTES
         keep_bytes += excess.nbytes if keep else 0
         used.append((int(k), use_k, excess if keep else None))
@@ -547,13 +657,11 @@ def _one_stack(
     if maybe.any() and used:
         above[:] = True
         for k, use_k, kept in used:
-            if kept is None:
-                kept = mean(k) - _ring_rank_fast(mean(k), hot_rank)
-            excess = kept
+            excess = excess_of(k) if kept is None else kept
             # per channel 1.4826 · median(|e − median(e)|), all channels in each pass
             flat = excess.reshape(-1, excess.shape[-1])
             spread = 1.4826 * _channel_medians(flat, _channel_medians(flat))
-            thr = np.maximum(hot_min_dn, hot_sigmas * spread)
+            thr = _greater_level(excess, np.maximum(hot_min_dn, hot_sigmas * spread))
             above &= _compare_per_channel(np.greater, excess, thr) | ~use_k
     elif not used:
         above[:] = True  # no exposure used: "above" in none is vacuous (never told)

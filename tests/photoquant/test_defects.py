@@ -217,7 +217,7 @@ def _image(shape_seed: tuple[int, int, int, int], dtype: type) -> np.ndarray:
 
 
 @settings(max_examples=60, deadline=None)
-@given(_images, st.integers(1, 8), st.sampled_from([np.float64, np.uint16]))
+@given(_images, st.integers(1, 8), st.sampled_from([np.float64, np.uint16, np.uint8]))
 def test_ring_rank_fast_equals_scipy(shape_seed, rank, dtype) -> None:  # noqa: ANN001
     from photoquant.defects import _ring_rank, _ring_rank_fast
 
@@ -266,12 +266,26 @@ def _reference_one_stack(
 
 @pytest.mark.parametrize("fraction", [0.0, 0.004])
 @pytest.mark.parametrize("n_views", [1, 3])
-def test_detector_equals_the_readable_reference(n_views: int, fraction: float) -> None:
+@pytest.mark.parametrize(
+    ("n_repeats", "bit_depth"),
+    [(3, 8), (1, 8), (1, 12)],  # one integer repeat: the integer excess planes, int16 / int32
+)
+def test_detector_equals_the_readable_reference(
+    n_views: int, fraction: float, n_repeats: int, bit_depth: int
+) -> None:
     # with no defects the fast path skips the robust spreads (no candidate is left)
     cam = camera_from_preset(
-        "cmos", disturbances={"hot_pixel_fraction": fraction, "stuck_pixel_fraction": fraction}
+        "cmos",
+        bit_depth=bit_depth,
+        disturbances={"hot_pixel_fraction": fraction, "stuck_pixel_fraction": fraction},
     )
-    views = [stack_of(cam.capture(scene_test_hdr(SHAPE), T, 3, rng=20 + v)) for v in range(n_views)]
+    captures = [
+        cam.capture(scene_test_hdr(SHAPE), T, n_repeats, rng=20 + v) for v in range(n_views)
+    ]
+    views = [
+        ExposureStack(c.frames, c.exposure_s, bit_depth=bit_depth, channels=("R", "G", "B"))
+        for c in captures
+    ]
     rank = 4 if n_views > 1 else 1
     parts = [_reference_one_stack(v, 8.0, 4.0, 2, 2.0, rank) for v in views]
     hot, not_hot, stuck, not_stuck = (np.logical_or.reduce([p[i] for p in parts]) for i in range(4))
@@ -377,6 +391,64 @@ def test_the_radix_medians_are_numpys(seed, n, n_ch, kinds, centred):
     center = rng.normal(size=n_ch) if centred else None
     cols = [x[:, c] if center is None else np.abs(x[:, c] - center[c]) for c in range(n_ch)]
     expected = np.array([np.median(col) for col in cols])
+    np.testing.assert_array_equal(_channel_medians(x, center), expected)
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    dtype=st.sampled_from([np.int16, np.int32, np.uint8, np.float64]),
+    level=st.one_of(
+        st.floats(0, 1e6, allow_nan=False),
+        st.integers(0, 70_000).map(float),
+        st.integers(0, 300).map(lambda v: v + 0.5),
+    ),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_an_integer_comparison_level_gives_the_float_comparison(dtype, level, seed):
+    # the hot test compares integer excess planes with its thresholds in their own dtype
+    from photoquant.defects import _greater_level
+
+    info = np.iinfo(dtype) if np.dtype(dtype).kind in "iu" else np.iinfo(np.int32)
+    rng = np.random.default_rng(seed)
+    x = rng.integers(max(info.min, -70_000), min(info.max, 70_000) + 1, size=500)
+    near = np.clip(np.floor(level) + np.arange(-2, 3), max(info.min, -70_000), info.max)
+    x = np.concatenate([x, near]).astype(dtype)
+    np.testing.assert_array_equal(x > _greater_level(x, level), x.astype(np.float64) > level)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(1, 20_000),
+    n_ch=st.integers(1, 4),
+    dtype=st.sampled_from([np.int16, np.int32, np.uint8, np.uint16]),
+    span=st.sampled_from([3, 255, 4095]),
+    centre=st.sampled_from(["none", "median", "half", "integer", "other"]),
+)
+def test_the_integer_histogram_medians_are_numpys(seed, n, n_ch, dtype, span, centre):
+    # integer excess planes (one integer repeat) take their medians and absolute
+    # deviations from a histogram: numpy's values to the bit, or no answer where the
+    # centre is not a whole or half number (the radix select then)
+    from photoquant.defects import _channel_medians, _integer_channel_medians
+
+    rng = np.random.default_rng(seed)
+    low = 0 if np.dtype(dtype).kind == "u" else -span
+    x = rng.integers(low, min(span, np.iinfo(dtype).max) + 1, size=(n, n_ch)).astype(dtype)
+    med = np.array([np.median(x[:, c]) for c in range(n_ch)])
+    center = {
+        "none": None,
+        "median": med,
+        "half": np.round(rng.normal(0, 50, n_ch)) + 0.5,
+        "integer": np.round(rng.normal(0, 50, n_ch)),
+        "other": rng.normal(0, 50, n_ch) + 0.25,
+    }[centre]
+    cols = [x[:, c] if center is None else np.abs(x[:, c] - center[c]) for c in range(n_ch)]
+    expected = np.array([np.median(col) for col in cols])
+    exact = _integer_channel_medians(x, center)
+    if centre == "other":
+        assert exact is None
+    else:
+        np.testing.assert_array_equal(exact, expected)
     np.testing.assert_array_equal(_channel_medians(x, center), expected)
 
 
