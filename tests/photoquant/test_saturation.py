@@ -30,6 +30,46 @@ def test_spread_marks_the_square_around_a_clip_in_every_channel():
     assert frames[1, 2, 4, 6, 1] == 200  # the input is not modified
 
 
+def _spread_reference(frames: np.ndarray, level: np.ndarray, radius: int) -> np.ndarray:
+    """The spread as its docstring states it: regions (a clip with a clipped neighbour in
+    its ring, convolved), their ``(2r + 1)²`` reach, every channel and repeat set."""
+    from scipy import ndimage
+
+    thr = np.ceil(np.asarray(level, dtype=np.float64)).astype(np.int64)
+    clipped = (frames >= thr).any(axis=(0, -1))  # (K, H, W)
+    ring = np.array([[[1, 1, 1], [1, 0, 1], [1, 1, 1]]], dtype=np.uint8)
+    clipped &= ndimage.convolve(clipped.astype(np.uint8), ring, mode="constant") > 0
+    size = 2 * radius + 1
+    near = ndimage.maximum_filter(clipped.astype(np.uint8), size=(1, size, size), mode="nearest")
+    out = frames.copy()
+    k, y, x = np.nonzero(near)
+    out[:, k, y, x, :] = thr.astype(frames.dtype)
+    return out
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    shape=st.tuples(
+        st.integers(1, 2),
+        st.integers(1, 3),
+        st.integers(1, 9),
+        st.integers(1, 9),
+        st.integers(1, 3),
+    ),
+    radius=st.integers(1, 3),
+    share=st.floats(0, 1),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_spread_is_its_readable_reference(shape, radius, share, seed):
+    rng = np.random.default_rng(seed)
+    frames = rng.integers(0, 200, size=shape).astype(np.uint8)
+    frames[rng.random(shape) < share] = 255
+    level = rng.integers(150, 256, shape[-1])
+    np.testing.assert_array_equal(
+        spread_saturation(frames, level, radius), _spread_reference(frames, level, radius)
+    )
+
+
 @pytest.mark.parametrize("radius", [-1, 65, 1.5, True, "1"])
 def test_spread_refuses_a_bad_radius(radius):
     with pytest.raises(InputError, match="saturation_spread"):
