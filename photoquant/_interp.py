@@ -26,7 +26,7 @@ import numpy as np
 
 from photoquant._numba import HAVE_NUMBA, compile_kernel
 
-__all__ = ["interp"]
+__all__ = ["at_interval", "interp", "interp_slopes", "interval"]
 
 _MAX_SPACING_RATIO = 1.5
 """Tables whose largest step is at most this times their smallest take the compiled path
@@ -98,3 +98,54 @@ def interp(x: Any, xp: Any, fp: Any) -> np.ndarray:
     out = np.empty(flat.size, dtype=np.float64)
     _interp_even_nb(flat, xp, fp, slopes, out)
     return out.reshape(x.shape)
+
+
+def interval_py(v: float, xp: Any) -> tuple[int, int]:  # pragma: no cover - numba
+    """Where ``np.interp`` reads ``v`` on ``xp`` (strictly increasing): ``(case, j)`` with
+    case 0 NaN, 1 the table's entry ``j`` itself (an end, or ``v == xp[j]``), 2 inside
+    ``xp[j] < v < xp[j + 1]`` (found by bisection); a value read on many tables of one
+    grid is located once (:func:`at_interval_py`)."""
+    last = xp.size - 1
+    if np.isnan(v):
+        return 0, 0
+    if v >= xp[last]:
+        return 1, last
+    if v < xp[0]:
+        return 1, 0
+    lo, hi = 0, last  # xp[lo] <= v < xp[hi]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if xp[mid] <= v:
+            lo = mid
+        else:
+            hi = mid
+    return (1, lo) if xp[lo] == v else (2, lo)
+
+
+def at_interval_py(
+    v: float, xp: Any, fp: Any, slopes: Any, case: int, j: int
+) -> float:  # pragma: no cover - numba
+    """``np.interp(v, xp, fp)`` at the place :func:`interval_py` found, numpy's arithmetic
+    (Module notes; ``slopes`` as :func:`interp` forms them)."""
+    if case == 0:
+        return v
+    if case == 1:
+        return fp[j]
+    s = slopes[j]
+    res = s * (v - xp[j]) + fp[j]
+    if np.isnan(res):  # numpy: "if we get nan in one direction, try the other"
+        res = s * (v - xp[j + 1]) + fp[j + 1]
+        if np.isnan(res) and fp[j] == fp[j + 1]:
+            res = fp[j]
+    return res
+
+
+interval: Any = compile_kernel(interval_py, inline="always") if HAVE_NUMBA else None
+at_interval: Any = compile_kernel(at_interval_py, inline="always") if HAVE_NUMBA else None
+
+
+def interp_slopes(xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """The slopes :func:`interp` and numpy use, ``(fp[j+1] − fp[j]) / (xp[j+1] − xp[j])``,
+    along ``fp``'s last axis."""
+    with np.errstate(all="ignore"):  # inf − inf in fp: a NaN slope, as numpy's (it warns not)
+        return (fp[..., 1:] - fp[..., :-1]) / (xp[1:] - xp[:-1])

@@ -41,7 +41,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from photoquant._interp import interp
+from photoquant._interp import at_interval, interp, interp_slopes, interval
 from photoquant._numba import HAVE_NUMBA, compile_kernel
 from photoquant._threads import even_spans, thread_map
 from photoquant.errors import InputError
@@ -409,16 +409,15 @@ def _fused_response_variance(
     values, sat, dark, out = _fused_arguments(stack, setup)
     size = tables.grid.size
     n_ch = stack.n_channels
-    flat_level = None if held_out_level is None else held_out_level.reshape(-1, n_ch)
+    if held_out_level is None:
+        held: tuple[np.ndarray, ...] = (np.zeros((0, 0)),) + (np.zeros((0, 0, 0)),) * 2
+    else:  # the factor's rows and the rest, read back at each value's level in the kernel
+        rows = np.ascontiguousarray(np.concatenate([np.moveaxis(factor, 1, 0), rest[None]]))
+        held = (held_out_level.reshape(-1, n_ch), rows, interp_slopes(levels, rows))
 
-    def held_out_terms(part: slice) -> tuple[np.ndarray, np.ndarray]:
-        if flat_level is None:
-            return np.zeros((0, 0, 0)), np.zeros((0, 0))
-        lv = flat_level[part]
-        return (
-            np.stack([_rows_at(lv, levels, factor[:, r]) for r in range(factor.shape[1])]),
-            _rows_at(lv, levels, rest),
-        )
+    def held_out_terms(part: slice) -> tuple[np.ndarray, ...]:
+        level, rows, slopes = held
+        return (level[part] if level.size else level, levels, rows, slopes)
 
     _run_in_spans(
         _response_variance_nb,
@@ -491,19 +490,24 @@ def _response_variance_py(  # pragma: no cover - compiled by numba
     w_table: Any,
     f_tables: Any,
     d_table: Any,
-    held_f: Any,
-    held_d: Any,
+    held_level: Any,
+    levels: Any,
+    held_rows: Any,
+    held_slopes: Any,
     sat: Any,
     dark: Any,
     out: Any,
 ) -> None:
     """numba body: ``Σ_r (Σ_k w_k F_r(c̄_k) / Σ_k w_k − F_r(ẑ))² + Σ_k w_k² D(c̄_k) /
     (Σ_k w_k)² + D(ẑ)`` per value, in the order of
-    :func:`log_variance_response_Debevec1997`'s numpy path; ``held_f (R, P, C)`` and
-    ``held_d (P, C)`` are ``F_r`` and ``D`` at the held-out levels ``ẑ``, or empty (no
-    read-back: the terms at ``ẑ`` left out)."""
+    :func:`log_variance_response_Debevec1997`'s numpy path. ``held_level (P, C)`` are
+    the held-out levels ``ẑ`` (empty: no read-back, the terms at ``ẑ`` left out);
+    ``held_rows (R + 1, C, L)`` the factor's rows and ``D`` on the response's
+    ``levels``, read at ``ẑ`` as ``np.interp`` reads them (each value located once,
+    :func:`photoquant._interp.interval`), with their ``held_slopes``."""
     n_k, n_p, n_c = values.shape
-    held = held_f.size > 0
+    held = held_level.size > 0
+    n_f = f_tables.shape[0]
     wk = np.empty(n_k)
     idx = np.empty(n_k, dtype=np.intp)
     for p in range(n_p):
@@ -514,22 +518,27 @@ def _response_variance_py(  # pragma: no cover - compiled by numba
                 continue
             for k in range(n_k):
                 idx[k] = np.intp(values[k, p, c]) + c * size
+            case, j = interval(held_level[p, c], levels) if held else (0, 0)
             inv = 1.0 / den
             total = 0.0
-            for r in range(f_tables.shape[0]):
+            for r in range(n_f):
                 acc = 0.0
                 for k in range(n_k):
                     acc += wk[k] * f_tables[r, idx[k]]
                 moved = acc * inv
                 if held:
-                    moved = moved - held_f[r, p, c]
+                    moved = moved - at_interval(
+                        held_level[p, c], levels, held_rows[r, c], held_slopes[r, c], case, j
+                    )
                 total += moved * moved
             acc = 0.0
             for k in range(n_k):
                 acc += wk[k] * wk[k] * d_table[idx[k]]
             total = total + acc * (inv * inv)
             if held:
-                total = total + held_d[p, c]
+                total = total + at_interval(
+                    held_level[p, c], levels, held_rows[n_f, c], held_slopes[n_f, c], case, j
+                )
             out[p, c] = total
 
 

@@ -77,3 +77,33 @@ def test_interp_uneven_and_short_tables_are_numpy():
     _assert_same_bits(x, [2.0], [7.0])  # one point
     assert not _interp._evenly_spaced(xp)
     assert _interp._evenly_spaced(np.arange(5.0))
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    n=st.integers(2, 30),
+    even=st.booleans(),
+    rows=st.integers(1, 4),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_a_value_located_once_reads_every_table_as_numpy(n, even, rows, seed):
+    # the held-out read-back of cross-validation's intervals: one interval search per
+    # value, every factor row of the response's covariance read there as np.interp does
+    from photoquant._interp import at_interval, at_interval_py, interp_slopes, interval, interval_py
+
+    locate = interval or interval_py
+    read = at_interval or at_interval_py
+    rng = np.random.default_rng(seed)
+    xp = np.arange(n) * 1.5 - 4 if even else np.cumsum(rng.uniform(0.01, 3, n))
+    fps = rng.normal(0, 10, (rows, n))
+    fps[rng.uniform(size=fps.shape) < 0.1] = rng.choice(_SPECIAL)
+    slopes = interp_slopes(xp, fps)
+    x = np.concatenate(
+        [xp, np.nextafter(xp, np.inf), rng.uniform(xp[0] - 2, xp[-1] + 2, 50), _SPECIAL]
+    )
+    for v in x:
+        case, j = locate(float(v), xp)
+        with np.errstate(all="ignore"):  # the plain-Python twins' numpy scalars (no numba)
+            got = np.array([read(float(v), xp, fps[r], slopes[r], case, j) for r in range(rows)])
+        want = np.array([np.interp(v, xp, fps[r]) for r in range(rows)])
+        np.testing.assert_array_equal(_bits(got), _bits(want))

@@ -553,6 +553,7 @@ def test_the_compiled_calibration_parts_give_the_numpy_bits(monkeypatch, part):
     # read-back levels between and at the response's levels, and beyond its ends
     held = rng.uniform(-3.0, 258.0, size=(12, 10, 3))
     held[0, 0] = [0.0, 17.0, 255.0]
+    held[0, 1] = [np.nan, np.inf, -np.inf]
 
     def variance(**kw):
         if part == "response":
