@@ -307,21 +307,24 @@ def test_prediction_intervals_cover_a_simulated_cameras_held_out_values():
     assert "prediction intervals" in result.format_table()
 
 
-def test_interval_stride_keeps_a_frame_within_the_scored_pixels():
-    from photoquant.crossval import INTERVAL_PIXELS, interval_stride
+def test_interval_pixels_are_every_pixel_or_a_fixed_random_sample():
+    from photoquant.crossval import INTERVAL_PIXELS, interval_pixels
 
-    assert interval_stride((512, 768)) == 1  # Memorial: every value
-    assert interval_stride((2112, 2816)) == 3  # the St. Louis Arch: a third of each axis
-    for shape in [(1, 1), (1024, 1024), (1025, 1024), (3000, 4000), (7, 10**7)]:
-        s = interval_stride(shape)
-        rows, cols = -(-shape[0] // s), -(-shape[1] // s)
-        assert rows * cols <= INTERVAL_PIXELS
-        assert s == 1 or -(-shape[0] // (s - 1)) * -(-shape[1] // (s - 1)) > INTERVAL_PIXELS
+    assert interval_pixels((512, 768)) is None  # Memorial: every value
+    pick = interval_pixels((2112, 2816))
+    assert pick is not None and pick.size == INTERVAL_PIXELS
+    assert np.all(np.diff(pick) > 0) and pick[0] >= 0 and pick[-1] < 2112 * 2816
+    np.testing.assert_array_equal(pick, interval_pixels((2112, 2816)))  # every run alike
+    # no grid: every site of a 2×2 mosaic and of an 8×8 block is sampled about evenly
+    rows, cols = np.divmod(pick, 2816)
+    sites = np.bincount((rows % 8) * 8 + cols % 8, minlength=64) / pick.size
+    assert np.all(np.abs(sites - 1 / 64) < 0.1 / 64)
 
 
-def test_a_large_frames_intervals_on_a_grid_state_the_whole_frames_coverage(monkeypatch):
-    """The intervals of a frame over INTERVAL_PIXELS are scored on a grid of its pixels (the
-    noise fit from every pixel): the coverage within its binomial error of every value's."""
+def test_a_large_frames_intervals_on_a_sample_state_the_whole_frames_coverage(monkeypatch):
+    """The intervals of a frame over INTERVAL_PIXELS are scored on a random sample of its
+    pixels (the noise fit from every pixel): the coverage within its binomial error of
+    every value's."""
     import photoquant as pq
     import photoquant.crossval as cv
     from benchmarks._data import hdr_stack
@@ -329,14 +332,14 @@ def test_a_large_frames_intervals_on_a_grid_state_the_whole_frames_coverage(monk
     data = hdr_stack(120, 160, 6, 1, 0, preset="cmos")
     stack = pq.ExposureStack(data.frames, data.exposure_s, bit_depth=8)
     whole = crossval_stack(stack)
-    monkeypatch.setattr(cv, "INTERVAL_PIXELS", 120 * 160 // 4)  # every other row and column
-    grid = crossval_stack(stack)
-    assert grid.overall_mae_dn == whole.overall_mae_dn  # the errors: every value still
+    monkeypatch.setattr(cv, "INTERVAL_PIXELS", 120 * 160 // 4)
+    sample = crossval_stack(stack)
+    assert sample.overall_mae_dn == whole.overall_mae_dn  # the errors: every value still
     n_whole = sum(r.n_intervals for r in whole.rows)
-    n_grid = sum(r.n_intervals for r in grid.rows)
-    assert 0.2 * n_whole <= n_grid <= 0.3 * n_whole
-    for a, b in zip(grid.interval_coverage()[:2], whole.interval_coverage()[:2], strict=True):
-        assert abs(a - b) < 4 * np.sqrt(0.25 / n_grid), (a, b)  # four binomial errors
+    n_sample = sum(r.n_intervals for r in sample.rows)
+    assert 0.2 * n_whole <= n_sample <= 0.3 * n_whole
+    for a, b in zip(sample.interval_coverage()[:2], whole.interval_coverage()[:2], strict=True):
+        assert abs(a - b) < 4 * np.sqrt(0.25 / n_sample), (a, b)  # four binomial errors
 
 
 def test_a_peer_states_no_interval(gamma_stack):
