@@ -617,18 +617,19 @@ INTERVAL_PIXELS = 1 << 20
 frame's are scored on a random sample of them (:func:`interval_pixels`).
 
 A coverage fraction from ``n`` values has a binomial standard error of at most
-``0.5 / √n``: 0.05 % for a million pixels of one channel, ten times below the
-figures' printed precision, while the intervals of every value of a 2816×2112
-bracket took 8 of its cross-validation's 21 s (2026-12-07, 2 cores)."""
+``0.5 / √n``: 0.05 % for a million values, below the printed 0.1 %, while the
+intervals of every value of a 2816×2112 bracket took 8 of its
+cross-validation's 21 s (2026-12-07, 2 cores)."""
 
 
 def interval_pixels(image_shape: Sequence[int]) -> np.ndarray | None:
     """The pixels (flat indices, ascending) of a held-out frame whose prediction intervals
     are scored: ``None`` (every one) up to :data:`INTERVAL_PIXELS`, else a simple random
     sample of that many, the same every run (seed 0). Not a regular grid: a stride of 2
-    keeps one site of a colour mosaic read as one channel (the 12-bit bracket's
-    coverage moved from 97.1 % to 95.7 % within its 95 % intervals), and any stride
-    that shares a factor with a JPEG block's 8 pixels or a mosaic's period aliases it."""
+    keeps one site of a colour mosaic read as one channel (on the 12-bit bracket 95.7 %
+    of its grid's values lie within their 95 % intervals, 97.1 % of every value and of
+    the sample), and any stride sharing a factor with a JPEG block's 8 pixels or a
+    mosaic's period aliases it."""
     h, w = (int(v) for v in image_shape[:2])
     if h * w <= INTERVAL_PIXELS:
         return None

@@ -559,14 +559,17 @@ def _excess_planes(stack: ExposureStack, mean: Any, rank: int) -> Any:
 
 
 def _greater_level(values: np.ndarray, level: Any) -> Any:
-    """``level`` (``≥ 0``) for ``values > level``, in the values' dtype where they are
-    integers: ``⌊level⌋`` (``x > t ⟺ x > ⌊t⌋`` for an integer ``x``), at most the
-    dtype's largest value. The same booleans, without casting every value to
-    float64 for the comparison."""
+    """``level`` for ``values > level``, in the values' dtype where they are integers:
+    ``⌊level⌋`` (``x > t ⟺ x > ⌊t⌋`` for an integer ``x``), at most the dtype's largest
+    value. The same booleans, without casting every value to float64 for the
+    comparison; ``level`` itself where its floor lies below the dtype's range."""
     if values.dtype.kind not in "iu":
         return level
-    top = np.iinfo(values.dtype).max
-    return np.minimum(np.floor(level), top).astype(values.dtype)
+    info = np.iinfo(values.dtype)
+    floor = np.floor(level)
+    if np.any(floor < info.min):
+        return level
+    return np.minimum(floor, info.max).astype(values.dtype)
 
 
 def _below_clip(stack: ExposureStack, mean: Any) -> Any:

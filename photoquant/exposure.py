@@ -1277,9 +1277,9 @@ def _short_steps_growth(counts: np.ndarray, min_overlap: int) -> np.ndarray:
     exposure would keep its nominal time, untested (or, where no step reaches it, the
     correction would fall back on the full refinement:
     :func:`photoquant.correction.correct`, 5.5 s instead of a screen's few
-    milliseconds on a 2816×2112 bracket's cross-validation fold, 2026-12-07). Its quota (and the draw) grows by
-    the shortfall, twice over, at most :data:`MAX_PAIR_GROWTH` times, where that reaches
-    ``min_overlap``. A step kept fewer pairs than ``min_overlap / MAX_PAIR_GROWTH`` does
+    milliseconds on a 2816×2112 bracket's cross-validation fold, 2026-12-07). Its
+    quota (and the draw) grows by the shortfall, twice over, at most
+    :data:`MAX_PAIR_GROWTH` times, where that reaches ``min_overlap``. A step kept fewer pairs than ``min_overlap / MAX_PAIR_GROWTH`` does
     not ask for it: so few pixels see both its exposures in range that the draw would
     have to approach the image, and the exposure it leaves nominal carries the merge
     at about as few pixels (its time matters as little to the result).
