@@ -1,4 +1,5 @@
-"""An exact median for the compiled kernels, cheap to compile (optional numba).
+"""Order statistics for the compiled kernels: an exact median cheap to compile, and the
+per-channel histograms of integer planes (optional numba).
 
 Several kernels need the median of a scratch array (the robust fit's noise
 scales, the exposure screen's Huber scale, the flat-region test's typical
@@ -25,9 +26,11 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from photoquant._numba import HAVE_NUMBA, compile_kernel
 
-__all__ = ["median_inplace", "select_inplace"]
+__all__ = ["channel_histograms", "median_inplace", "select_inplace"]
 
 
 def select_inplace(a: Any, k: int) -> float:  # pragma: no cover - compiled by numba
@@ -84,3 +87,45 @@ def median_inplace(a: Any) -> float:  # pragma: no cover - compiled by numba
 if HAVE_NUMBA:  # pragma: no cover - depends on the environment
     select_inplace = compile_kernel(select_inplace)
     median_inplace = compile_kernel(median_inplace)
+
+
+def _channel_counts_py(
+    x: Any, offset: int, center2: Any, counts: Any
+) -> None:  # pragma: no cover - compiled by numba
+    """numba body: per channel ``c`` of the integers ``x (M, C)``, the histogram of
+    ``x − offset`` (``center2`` empty) or of ``|2x − center2[c]|``, in one pass over the
+    interleaved values."""
+    m, n_ch = x.shape
+    if center2.size == 0:
+        for i in range(m):
+            for c in range(n_ch):
+                counts[c, np.int64(x[i, c]) - offset] += 1
+    else:
+        for i in range(m):
+            for c in range(n_ch):
+                counts[c, abs(2 * np.int64(x[i, c]) - center2[c])] += 1
+
+
+_channel_counts: Any = compile_kernel(_channel_counts_py) if HAVE_NUMBA else None
+
+
+def channel_histograms(
+    x: np.ndarray, offset: int, n_bins: int, center2: np.ndarray | None = None
+) -> np.ndarray:
+    """Per channel of the integers ``x (M, C)``, the counts ``(C, n_bins)`` int64 of
+    ``x − offset``, or of ``|2x − center2[c]|`` (``center2`` integers): every key must lie
+    in ``[0, n_bins)``. One compiled pass over the interleaved values where numba is
+    installed (a strided channel given to ``np.bincount`` is first copied to int64:
+    77 ms a channel of four 2816×2112 frames, 2026-12-07); ``np.bincount`` per channel
+    otherwise, the same counts."""
+    m, n_ch = x.shape
+    counts = np.zeros((n_ch, int(n_bins)), dtype=np.int64)
+    cen2 = np.empty(0, dtype=np.int64) if center2 is None else np.asarray(center2, np.int64)
+    if _channel_counts is not None:
+        _channel_counts(np.ascontiguousarray(x), int(offset), cen2, counts)
+        return counts
+    for c in range(n_ch):
+        col = x[:, c].astype(np.int64)
+        keys = col - offset if center2 is None else np.abs(2 * col - cen2[c])
+        counts[c] = np.bincount(keys, minlength=int(n_bins))
+    return counts

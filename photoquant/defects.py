@@ -58,6 +58,7 @@ from scipy import ndimage
 from photoquant._checks import check_int, default_workers
 from photoquant._grid import mirror_index
 from photoquant._numba import HAVE_NUMBA, compile_kernel
+from photoquant._select import channel_histograms
 from photoquant._threads import thread_map
 from photoquant.errors import InputError
 from photoquant.stack import ExposureStack, _compare_per_channel
@@ -396,26 +397,6 @@ _MAX_INTEGER_BINS = 1 << 20
 the radix select of :func:`_channel_medians`)."""
 
 
-def _integer_key_counts_py(
-    x: Any, offset: int, center2: Any, counts: Any
-) -> None:  # pragma: no cover - compiled by numba
-    """numba body: per channel ``c`` of the integers ``x (M, C)``, the histogram of
-    ``x − offset`` (``center2`` empty) or of ``|2x − center2[c]|``, in one pass over the
-    interleaved values."""
-    m, n_ch = x.shape
-    if center2.size == 0:
-        for i in range(m):
-            for c in range(n_ch):
-                counts[c, np.int64(x[i, c]) - offset] += 1
-    else:
-        for i in range(m):
-            for c in range(n_ch):
-                counts[c, abs(2 * np.int64(x[i, c]) - center2[c])] += 1
-
-
-_integer_key_counts: Any = compile_kernel(_integer_key_counts_py) if HAVE_NUMBA else None
-
-
 def _integer_channel_medians(x: np.ndarray, center: np.ndarray | None) -> np.ndarray | None:
     """:func:`_channel_medians` of integers ``x (M, C)`` from each channel's histogram.
 
@@ -441,14 +422,7 @@ def _integer_channel_medians(x: np.ndarray, center: np.ndarray | None) -> np.nda
         offset = 0
     if n_bins > _MAX_INTEGER_BINS:
         return None
-    counts = np.zeros((n_ch, n_bins), dtype=np.int64)
-    if _integer_key_counts is not None:
-        _integer_key_counts(np.ascontiguousarray(x), offset, cen2, counts)
-    else:  # the same histograms, a channel at a time
-        for c in range(n_ch):
-            col = x[:, c].astype(np.int64)
-            keys = col - offset if center is None else np.abs(2 * col - cen2[c])
-            counts[c] = np.bincount(keys, minlength=n_bins)
+    counts = channel_histograms(x, offset, n_bins, None if center is None else cen2)
     k_lo, k_hi = (m - 1) // 2, m // 2
     out = np.empty(n_ch)
     for c in range(n_ch):

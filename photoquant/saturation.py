@@ -50,6 +50,7 @@ import numpy as np
 from scipy import ndimage
 
 from photoquant._checks import check_array, check_bit_depth
+from photoquant._select import channel_histograms
 from photoquant.errors import InputError
 from photoquant.stack import detect_saturation_levels
 
@@ -138,13 +139,17 @@ def detect_saturation_levels_processed(
     levels = detect_saturation_levels(frames, bit_depth)
     span = max(2, (c_max + 1) // 64)
     values = frames.reshape(-1, frames.shape[-1])
+    hist = None
     for ch in range(values.shape[1]):
         if levels[ch] < c_max:
             continue  # an exact pile-up below the code range's top: unprocessed clipping
-        counts = np.bincount(values[:, ch], minlength=c_max + 1)
+        if hist is None:  # every channel's counts in one pass (np.bincount's, minlength c_max + 1)
+            n_bins = max(c_max, int(values.max())) + 1
+            hist = channel_histograms(values, 0, n_bins)
+        counts = hist[ch]
         lo = max(c_max + 1 - int(window), 2 * span)
         peak = lo + int(np.argmax(counts[lo:]))
-        if peak == int(values[:, ch].max()):
+        if peak == int(np.flatnonzero(counts)[-1]):  # the channel's largest value
             # a pile at the maximum itself is exact: the exact detector judged it (with
             # its own background) and found none; judged again here with another
             # background, a pile at its threshold could be taken

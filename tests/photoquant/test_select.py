@@ -55,3 +55,30 @@ def test_large_sorted_reversed_and_constant_inputs(compiled):
         rng.normal(size=30_001),
     ):
         assert median(a.copy()) == np.median(a)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(1, 3000),
+    n_ch=st.integers(1, 4),
+    dtype=st.sampled_from([np.uint8, np.uint16, np.int16, np.int32]),
+    centred=st.booleans(),
+)
+def test_channel_histograms_are_bincounts(seed, n, n_ch, dtype, centred):
+    # the defect search's integer medians and the processed saturation detection count
+    # each channel of an interleaved integer plane in one pass
+    rng = np.random.default_rng(seed)
+    low = 0 if np.dtype(dtype).kind == "u" else -200
+    x = rng.integers(low, 256, size=(n, n_ch)).astype(dtype)
+    offset = int(x.min())
+    center2 = rng.integers(-300, 300, n_ch) if centred else None
+    keys = [
+        (x[:, c].astype(np.int64) - offset)
+        if center2 is None
+        else np.abs(2 * x[:, c].astype(np.int64) - center2[c])
+        for c in range(n_ch)
+    ]
+    n_bins = max(int(k.max()) for k in keys) + 3
+    want = np.stack([np.bincount(k, minlength=n_bins) for k in keys])
+    np.testing.assert_array_equal(_select.channel_histograms(x, offset, n_bins, center2), want)
