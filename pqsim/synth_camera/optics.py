@@ -348,6 +348,40 @@ def _unit(field: np.ndarray) -> np.ndarray:
     return np.divide(field, std, out=np.zeros_like(field), where=std > 0)
 
 
+_FFT_RADIUS = 200
+"""The Gaussian kernel radius (pixels) above which :func:`_smooth` filters by FFT."""
+
+
+def _smooth(white: np.ndarray, sigma: float) -> np.ndarray:
+    """``scipy.ndimage.gaussian_filter(white, (σ, σ, 0), mode="reflect")`` of ``white (H, W,
+    C)``: the same kernel (truncated at 4σ, normalised), the same mirrored edges.
+
+    Above a radius of :data:`_FFT_RADIUS` the two 1-d passes are FFT convolutions of the
+    mirrored rows and columns (``scipy.signal.fftconvolve``), equal to the direct ones to
+    about 1e-15 (tested) and far faster for a wide kernel: the PRNU's smooth component at
+    2112×2816 (σ = 317 px, a twin of a 6-megapixel camera) took about 40 s directly, at
+    768×1024 (σ = 115 px, ``validate --full``) 1.8 s against 0.8 s (2026-12-07, 2 cores).
+    Narrower kernels (the quick job's σ = 36 px) take the direct filter.
+    """
+    radius = int(4.0 * sigma + 0.5)
+    if radius <= _FFT_RADIUS:
+        return gaussian_filter(white, sigma=(sigma, sigma, 0.0), mode="reflect")
+    from scipy.signal import fftconvolve
+
+    x = np.arange(-radius, radius + 1)
+    kernel = np.exp(-0.5 / (sigma * sigma) * x**2)
+    kernel /= kernel.sum()
+    out = white
+    for axis in (0, 1):
+        pad = [(0, 0)] * out.ndim
+        pad[axis] = (radius, radius)
+        shape = [1] * out.ndim
+        shape[axis] = kernel.size
+        mirrored = np.pad(out, pad, mode="symmetric")  # scipy.ndimage's "reflect"
+        out = fftconvolve(mirrored, kernel.reshape(shape), mode="valid", axes=axis)
+    return out
+
+
 def prnu_field(
     shape: Sequence[int],
     channels: int,
@@ -404,7 +438,7 @@ def prnu_field(
     white_low = rng.standard_normal((h, w, c))
     white_pix = rng.standard_normal((h, w, c))
     sigma_px = max(1.0, scale * min(h, w))
-    low = gaussian_filter(white_low, sigma=(sigma_px, sigma_px, 0.0), mode="reflect")
+    low = _smooth(white_low, sigma_px)
     u = 1.0 + sl * _unit(low) + sp * _unit(white_pix)
     if np.any(u <= 0):
         raise InputError(

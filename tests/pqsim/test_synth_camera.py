@@ -730,3 +730,19 @@ def test_simulator_does_not_import_the_calibrator() -> None:
                 if name.startswith("photoquant.") and not name.startswith(ok):
                     bad.append(f"{path.name}:{node.lineno} {name}")
     assert not bad, f"the simulator imports photoquant method modules: {bad}"
+
+
+@pytest.mark.parametrize(
+    ("shape", "sigma"), [((60, 80), 9.0), ((50, 70), 30.0), ((7, 120), 11.0), ((1, 1), 3.0)]
+)
+def test_the_prnu_fields_wide_smoothing_by_fft_is_the_direct_filter(monkeypatch, shape, sigma):
+    # a wide kernel (a large twin's PRNU) is applied by FFT over mirrored edges: the
+    # direct filter's values, kernels wider than the image included
+    from scipy.ndimage import gaussian_filter
+
+    from pqsim.synth_camera import optics
+
+    white = np.random.default_rng(3).standard_normal((*shape, 3))
+    direct = gaussian_filter(white, sigma=(sigma, sigma, 0.0), mode="reflect")
+    monkeypatch.setattr(optics, "_FFT_RADIUS", 0)
+    np.testing.assert_allclose(optics._smooth(white, sigma), direct, rtol=0, atol=1e-13)
