@@ -225,11 +225,8 @@ def _any_neighbour(mask: np.ndarray) -> np.ndarray:
     by eight shifted ORs."""
     out = np.zeros_like(mask)
     h, w = mask.shape[1:]
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            if dy == 0 and dx == 0:
-                continue
-            # out[y, x] |= mask[y + dy, x + dx] where that pixel lies inside the image
-            dst = out[:, max(0, -dy) : h - max(0, dy), max(0, -dx) : w - max(0, dx)]
-            dst |= mask[:, max(0, dy) : h - max(0, -dy), max(0, dx) : w - max(0, -dx)]
+    for dy, dx in np.argwhere(_RING[0]) - 1:  # the ring's offsets
+        # out[y, x] |= mask[y + dy, x + dx] where that pixel lies inside the image
+        dst = out[:, max(0, -dy) : h - max(0, dy), max(0, -dx) : w - max(0, dx)]
+        dst |= mask[:, max(0, dy) : h - max(0, -dy), max(0, dx) : w - max(0, -dx)]
     return out
