@@ -126,7 +126,9 @@ def at_interval_py(
     v: float, xp: Any, fp: Any, slopes: Any, case: int, j: int
 ) -> float:  # pragma: no cover - numba
     """``np.interp(v, xp, fp)`` at the place :func:`interval_py` found, numpy's arithmetic
-    (Module notes; ``slopes`` as :func:`interp` forms them)."""
+    (Module notes; ``slopes`` as :func:`interp` forms them). :func:`_interp_even_py` keeps
+    the same arithmetic in its own loop: calling this there made it 4.5× slower (2 million
+    values on 256 levels: 6.9 → 31 ms, 2026-12-07)."""
     if case == 0:
         return v
     if case == 1:
