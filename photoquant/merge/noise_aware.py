@@ -702,10 +702,10 @@ def estimate_noise_from_exposures(
     # the grid's values in one block (a strided view would be copied by every whole-array
     # comparison below, four times)
     frames = np.ascontiguousarray(stack.frames[0, :, ::step, ::step])
-    # the grid's values only (the stack's masks are memoised at full size; the grid is a
-    # sixteenth of them or less), compared per channel in the frames' own integer type
-    clipped = stack.saturated(response.saturation_level)[:, ::step, ::step]
-    clipped = clipped | stack.dark_clipped()[:, ::step, ::step]
+    # the grid's clip flags: views of the stack's full-size masks where it has them, else
+    # computed on the grid alone (a sixteenth of the image or less)
+    clipped = stack.saturated(response.saturation_level, stride=step)
+    clipped = clipped | stack.dark_clipped(stride=step)
     trusted = _within_levels(frames, lo, sat) & ~clipped
     t = np.asarray(stack.exposure_s, dtype=np.float64)
     order_t = np.argsort(t)

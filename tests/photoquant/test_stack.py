@@ -91,6 +91,38 @@ def test_sums_means_and_clip_flags_follow_their_definitions(rng, bit_depth):
         stack.saturated(np.array([1, 2]))
 
 
+@pytest.mark.parametrize("n_repeats", [1, 3])
+@pytest.mark.parametrize("stride", [2, 3, 7])
+def test_strided_clip_flags_are_the_full_masks_pixels(rng, n_repeats, stride):
+    """``saturated`` / ``dark_clipped`` of a grid equal the full-size masks on that grid,
+    computed from the grid alone (nothing memoised) or read from the memoised masks."""
+    frames = rng.integers(0, 256, (n_repeats, 3, 17, 23, 3)).astype(np.uint8)
+    frames[..., 0] = np.minimum(frames[..., 0], 250)  # a channel clipping below 255
+    level = np.array([250, 255, 240])
+
+    def fresh() -> ExposureStack:
+        return ExposureStack(frames, [0.01, 0.02, 0.04])
+
+    full = fresh()
+    expected_sat = full.saturated(level)[:, ::stride, ::stride]
+    expected_dark = full.dark_clipped(12.5)[:, ::stride, ::stride]
+    assert expected_sat.any() and not expected_sat.all() and expected_dark.any()
+    grid_only = fresh()
+    np.testing.assert_array_equal(grid_only.saturated(level, stride=stride), expected_sat)
+    np.testing.assert_array_equal(grid_only.dark_clipped(12.5, stride=stride), expected_dark)
+    assert grid_only._masks == {}  # no full-size mask made for a grid
+    grid_only._repeat_extremes()  # the repeats' extremes cached: the grid read from them
+    assert grid_only._extremes and grid_only._masks == {}
+    np.testing.assert_array_equal(grid_only.saturated(level, stride=stride), expected_sat)
+    memoised = full.saturated(level, stride=stride)
+    assert np.shares_memory(memoised, full.saturated(level))  # a view of the memoised mask
+    np.testing.assert_array_equal(memoised, expected_sat)
+    np.testing.assert_array_equal(full.saturated(level, stride=1), full.saturated(level))
+    for bad in (0, 1.5, True):
+        with pytest.raises(InputError, match="stride"):
+            full.saturated(level, stride=bad)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
