@@ -54,17 +54,19 @@ def _spread_reference(frames: np.ndarray, level: np.ndarray, radius: int) -> np.
         st.integers(1, 3),
         st.integers(1, 9),
         st.integers(1, 9),
-        st.integers(1, 3),
+        st.integers(1, 5),  # OpenCV's inRange takes up to 4 channels a frame
     ),
     radius=st.integers(1, 3),
     share=st.floats(0, 1),
     seed=st.integers(0, 2**32 - 1),
+    dtype=st.sampled_from([np.uint8, np.uint16, np.int32]),  # OpenCV's types, and another
 )
-def test_spread_is_its_readable_reference(shape, radius, share, seed):
+def test_spread_is_its_readable_reference(shape, radius, share, seed, dtype):
     rng = np.random.default_rng(seed)
-    frames = rng.integers(0, 200, size=shape).astype(np.uint8)
-    frames[rng.random(shape) < share] = 255
-    level = rng.integers(150, 256, shape[-1])
+    top = 255 if dtype == np.uint8 else 4095
+    frames = rng.integers(0, top * 0.8, size=shape).astype(dtype)
+    frames[rng.random(shape) < share] = top
+    level = rng.integers(top * 0.6, top + 1, shape[-1])
     np.testing.assert_array_equal(
         spread_saturation(frames, level, radius), _spread_reference(frames, level, radius)
     )
