@@ -82,3 +82,34 @@ def test_channel_histograms_are_bincounts(seed, n, n_ch, dtype, centred):
     n_bins = max(int(k.max()) for k in keys) + 3
     want = np.stack([np.bincount(k, minlength=n_bins) for k in keys])
     np.testing.assert_array_equal(_select.channel_histograms(x, offset, n_bins, center2), want)
+
+
+@pytest.mark.skipif(_select._channel_counts is None, reason="numba is not installed")
+@pytest.mark.parametrize("centred", [False, True])
+def test_channel_histograms_shared_among_threads_add_up_to_the_bincounts(monkeypatch, centred):
+    """Large inputs are counted in row spans on several threads: the same counts."""
+    rng = np.random.default_rng(3)
+    x = rng.integers(0, 256, size=(10_007, 3)).astype(np.uint8)
+    x[::7] = 255  # a pile: many increments of one bin
+    center2 = np.array([10, 255, 500]) if centred else None
+    n_bins = 520
+    want = _select.channel_histograms(x, 0, n_bins, center2)  # one pass (10 007 rows)
+    spans = []
+
+    def recording(fn, items, workers=None):
+        items = list(items)
+        spans.append(len(items))
+        return [fn(item) for item in items]
+
+    monkeypatch.setattr(_select, "THREADED_ROWS", 1000)
+    monkeypatch.setattr(_select, "default_workers", lambda: 4)
+    monkeypatch.setattr(_select, "thread_map", recording)
+    np.testing.assert_array_equal(_select.channel_histograms(x, 0, n_bins, center2), want)
+    assert spans == [4]
+    keys = [
+        x[:, c].astype(np.int64)
+        if center2 is None
+        else np.abs(2 * x[:, c].astype(np.int64) - center2[c])
+        for c in range(3)
+    ]
+    np.testing.assert_array_equal(want, np.stack([np.bincount(k, minlength=n_bins) for k in keys]))
