@@ -135,7 +135,6 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg
-import scipy.optimize
 from threadpoolctl import ThreadpoolController
 
 from photoquant._checks import (
@@ -818,6 +817,8 @@ def _solve_channel(
         ) from None
     constrained = False
     if np.any(np.diff(g) < 0):
+        from scipy.optimize import lsq_linear, nnls  # here only: 0.17 s to import
+
         # min ||Lᵀ g − L⁻¹ r||² with g = T x, x = [g_0, increments ≥ 0]
         lower = np.tril(chol[0])
         y = scipy.linalg.solve_triangular(lower, r_red, lower=True)
@@ -827,12 +828,12 @@ def _solve_channel(
         # finite number of steps; 100× faster here than a trust-region solver)
         split = np.c_[design[:, :1], -design[:, :1], design[:, 1:]]
         try:
-            xs = scipy.optimize.nnls(split, y, maxiter=50 * (n_g + 1))[0]
+            xs = nnls(split, y, maxiter=50 * (n_g + 1))[0]
             x = np.r_[xs[0] - xs[1], xs[2:]]
         except RuntimeError:  # pragma: no cover - active set did not terminate
             lb = np.zeros(n_g)
             lb[0] = -np.inf
-            x = scipy.optimize.lsq_linear(design, y, bounds=(lb, np.full(n_g, np.inf)), tol=1e-12).x
+            x = lsq_linear(design, y, bounds=(lb, np.full(n_g, np.inf)), tol=1e-12).x
         g = np.cumsum(x)
         g -= g[gauge]
         constrained = True

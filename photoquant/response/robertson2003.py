@@ -58,7 +58,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import isotonic_regression
 
 from photoquant._checks import check_int, check_positive
 from photoquant.errors import CalibrationError
@@ -112,6 +111,8 @@ def isotonic_increasing(y: np.ndarray, w: np.ndarray) -> np.ndarray:
     >>> isotonic_increasing(np.array([1.0, 3.0, 2.0, 4.0]), np.ones(4)).tolist()
     [1.0, 2.5, 2.5, 4.0]
     """
+    from scipy.optimize import isotonic_regression  # here only: 0.17 s to import
+
     y = np.asarray(y, dtype=np.float64)
     w = np.asarray(w, dtype=np.float64)
     return np.asarray(isotonic_regression(y, weights=w, increasing=True).x)
