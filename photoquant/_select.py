@@ -124,7 +124,7 @@ def channel_histograms(
     installed (a strided channel given to ``np.bincount`` is first copied to int64:
     77 ms a channel of four 2816×2112 frames, 2026-12-07), its rows shared among the
     CPUs from :data:`THREADED_ROWS` rows on (each thread its own counts, added: 72 →
-    39 ms for those frames' three channels on 2 cores); ``np.bincount`` per channel
+    37 ms for those frames' three channels on 2 cores); ``np.bincount`` per channel
     otherwise, the same counts."""
     m, n_ch = x.shape
     counts = np.zeros((n_ch, int(n_bins)), dtype=np.int64)

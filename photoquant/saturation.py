@@ -186,7 +186,7 @@ def spread_saturation(frames: np.ndarray, saturation_level: Any, radius: int) ->
     -----
     Measured (2026-12-07, the St. Louis Arch's four 2816×2112 JPEG frames, 2
     cores): 0.54–0.85 → 0.35 s, the same values (the ring's neighbours by
-    shifted ORs instead of a convolution); then 0.36 → 0.12 s, OpenCV finding
+    shifted ORs instead of a convolution); then 0.36 → 0.13 s, OpenCV finding
     the clipped values of a frame's channels at once (``cv2.inRange``, 73 →
     18 ms) and the clips' reach (``cv2.dilate``, 106 → 11 ms: the maximum of a
     window that leaves the image is that of the part inside, as with

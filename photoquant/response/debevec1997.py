@@ -817,7 +817,7 @@ def _solve_channel(
         ) from None
     constrained = False
     if np.any(np.diff(g) < 0):
-        from scipy.optimize import lsq_linear, nnls  # here only: 0.17 s to import
+        from scipy.optimize import lsq_linear, nnls  # here only: 70 ms to import
 
         # min ||Lᵀ g − L⁻¹ r||² with g = T x, x = [g_0, increments ≥ 0]
         lower = np.tril(chol[0])
