@@ -12,7 +12,8 @@ partition, selection and median templates. The quickselect here is a
 dozen lines: a fraction of a second to compile, the same numbers.
 
 The median is the middle value of the sorted data, or ``(a + b) / 2`` of the
-two middle values (:func:`numpy.median`'s bits: a sum of two and a halving);
+two middle values (:func:`numpy.median`'s bits: the mean of the middle
+values, a sum started at +0.0 and a halving, so a zero comes out positive);
 any correct selection finds the same ``a`` and ``b``, so the result does not
 depend on the algorithm. NaN is not handled: the callers leave it out first.
 
@@ -77,13 +78,15 @@ def median_inplace(a: Any) -> float:  # pragma: no cover - compiled by numba
     n = a.size
     half = n >> 1
     upper = select_inplace(a, half)
+    # numpy's median is the mean of the middle value(s), a sum started at +0.0: the same
+    # bits, a zero's sign included (−0.0 in, +0.0 out)
     if n & 1:
-        return upper
+        return 0.0 + upper
     lower = a[0]
     for i in range(1, half):
         if a[i] > lower:
             lower = a[i]
-    return (lower + upper) / 2
+    return ((0.0 + lower) + upper) / 2
 
 
 if HAVE_NUMBA:  # pragma: no cover - depends on the environment

@@ -276,6 +276,47 @@ def _histogram_bins_py(
             counts[k, b] += sub[0, b] + sub[1, b] + sub[2, b] + sub[3, b]
 
 
+def _stable_order_py(key: Any, members: Any, a: Any, b: Any) -> Any:  # pragma: no cover
+    """numba body: the positions ``0 … n − 1`` of ``members`` ordered by ``key[members]``,
+    ties in position order (``np.argsort(key[members], kind="mergesort")``'s order: a stable
+    sort's permutation is unique), by a bottom-up merge sort in the scratch arrays ``a`` and
+    ``b`` (at least ``n`` long each); returns the one holding the order. numba's own stable
+    ``argsort`` gives the same order and cost 1.6 s to compile (2026-12-07); no NaN keys
+    (the caller's candidates have ``key < limit``)."""
+    n = members.size
+    src = a[:n]
+    dst = b[:n]
+    for i in range(n):
+        src[i] = i
+    width = 1
+    while width < n:
+        for lo in range(0, n, 2 * width):
+            mid = min(lo + width, n)
+            hi = min(lo + 2 * width, n)
+            i = lo
+            j = mid
+            o = lo
+            while i < mid and j < hi:
+                if key[members[src[j]]] < key[members[src[i]]]:  # a tie keeps the left first
+                    dst[o] = src[j]
+                    j += 1
+                else:
+                    dst[o] = src[i]
+                    i += 1
+                o += 1
+            while i < mid:
+                dst[o] = src[i]
+                i += 1
+                o += 1
+            while j < hi:
+                dst[o] = src[j]
+                j += 1
+                o += 1
+        src, dst = dst, src
+        width *= 2
+    return src
+
+
 def _rank_candidates_py(
     bins: Any, key: Any, limits: Any, n_cells: int, best: Any
 ) -> None:  # pragma: no cover - compiled by numba
@@ -286,6 +327,8 @@ def _rank_candidates_py(
     start = np.empty(n_cells + 1, dtype=np.int64)
     fill = np.empty(n_cells, dtype=np.int64)
     grouped = np.empty(n_u, dtype=np.int64)
+    scratch_a = np.empty(n_u, dtype=np.int64)
+    scratch_b = np.empty(n_u, dtype=np.int64)
     for k in range(n_k):
         n_c = 0
         start[:] = 0
@@ -310,7 +353,7 @@ def _rank_candidates_py(
             if hi - lo == 0:
                 continue
             members = grouped[lo:hi]
-            order = np.argsort(key[members], kind="mergesort")  # stable: as lexsort
+            order = _stable_order(key, members, scratch_a, scratch_b)  # stable: as lexsort
             for r in range(order.size):
                 i = members[order[r]]
                 if r < best[i]:
@@ -565,6 +608,7 @@ if HAVE_NUMBA:  # pragma: no cover - depends on the environment
     _trim_visit = compile_kernel(_trim_visit_py)
     trim_few = compile_kernel(_trim_few_py)
     histogram_bins = compile_kernel(_histogram_bins_py)
+    _stable_order = compile_kernel(_stable_order_py)
     rank_candidates = compile_kernel(_rank_candidates_py)
     normal_blocks = compile_kernel(_normal_blocks_py)
     # a pixel without a valid value divides by 0: inf, refused by the caller (no exception)

@@ -387,3 +387,18 @@ def test_at_or_above_by_channel_is_the_broadcast_comparison(n_ch, n_pix, dtype, 
     got = _at_or_above_by_channel(cm, level)
     np.testing.assert_array_equal(got, values >= level)
     assert np.moveaxis(got, -1, 0).flags.c_contiguous or n_ch == 1
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    keys=st.lists(st.integers(0, 5).map(float), min_size=0, max_size=70),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_stable_order_is_numpys_stable_argsort(keys, seed):
+    """The histogram selection's ranking within a bin: the members' order by key, ties in
+    their order, as ``np.argsort(kind="mergesort")`` (few distinct keys: many ties)."""
+    key = np.array(keys + [9.0, 9.0], dtype=np.float64)  # two pixels not among the members
+    members = np.random.default_rng(seed).permutation(len(keys)).astype(np.int64)
+    a, b = np.empty(key.size, np.int64), np.empty(key.size, np.int64)
+    order = _kernels._stable_order(key, members, a, b)
+    np.testing.assert_array_equal(order, np.argsort(key[members], kind="mergesort"))
