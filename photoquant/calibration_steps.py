@@ -415,6 +415,8 @@ def response_step(
             )
         fit = fit_response(hide_defects(views[0], defects), spec, rng=seed)
     log.report["response"] = {"method": spec[0].name, **fit.report}
+    for note in fit.report.get("notes", ()):  # what the method has to tell the user
+        log.note(str(note))
     if selection is not None:
         log.report["response"]["selection"] = selection.as_dict()
     at_labels = None if joint is None else joint.at_labels

@@ -181,6 +181,7 @@ from photoquant.response.wide_steps import (
     step_factor,
     template_penalty,
     typical_step,
+    wide_step_note,
 )
 from photoquant.stack import ExposureStack
 from photoquant.weighting import WeightingFunction, weighting_function
@@ -1964,6 +1965,10 @@ def characterise_response_Debevec1997(
         report["covariance"] = covariance
     if bias_rms is not None:
         report["uncorrected_bias_rms"] = bias_rms
+    if rec.smoothness_factor is not None:
+        note = wide_step_note(float(np.max(rec.smoothness_factor)))
+        if note is not None:  # for the user: the calibration's notes
+            report["notes"] = [note]
     return StepFit(model, report)
 
 

@@ -94,6 +94,7 @@ __all__ = [
     "step_factor",
     "template_penalty",
     "typical_step",
+    "wide_step_note",
 ]
 
 REFERENCE_STEP = float(np.log(2.2))
@@ -137,6 +138,31 @@ def step_factor(step: float, reference: float = REFERENCE_STEP) -> float:
     if not step > reference:
         return 1.0
     return float((step / reference) ** _POWER)
+
+
+def wide_step_note(factor: float) -> str | None:
+    """The user's note for a response fitted with the smoothness scaled by ``factor`` (``F``).
+
+    ``None`` where ``F`` is 1 (steps up to ``ρ₀``, where eq. 7's β was set).
+    Above, more of the shape between the bracket's exposures comes from the
+    prior (module notes), and the calibration says so, with the typical step
+    ``ρ = ρ₀ F^(1/4)`` in stops.
+
+    >>> wide_step_note(1.0) is None
+    True
+    >>> wide_step_note(step_factor(3 * np.log(2)))[:55]
+    "the bracket's exposures are about 3.0 stops apart: the "
+    """
+    if not factor > 1.0:
+        return None
+    stops = REFERENCE_STEP * factor ** (1.0 / _POWER) / np.log(2.0)
+    return (
+        f"the bracket's exposures are about {stops:.1f} stops apart: the wider the steps, "
+        "the more of the response's shape between them comes from its smoothness prior "
+        f"(here eq. 7's penalty x{factor:.3g} about the mean of real cameras' responses, "
+        "EMoR) rather than from the data; check the response by cross-validation "
+        "(photoquant crossval, which also compares methods)"
+    )
 
 
 def emor_mean_log_inverse(levels: np.ndarray, c_lo: float, saturation: float) -> np.ndarray:

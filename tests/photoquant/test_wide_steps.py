@@ -20,6 +20,7 @@ from photoquant.response.wide_steps import (
     step_factor,
     template_penalty,
     typical_step,
+    wide_step_note,
 )
 
 from .analytic import log_uniform_scene
@@ -154,3 +155,36 @@ def test_two_frames_far_apart_follow_a_cameras_shape(coefficients, ratio):
     plain = camera_response_Debevec1997(values, t, wide_steps="none", rng=0, edges="kept")
     assert ours.smoothness_factor[0] == pytest.approx(step_factor(np.log(ratio)))
     assert _g_rms(ours, f) < _g_rms(plain, f) / 1.5
+
+
+# --------------------------------------------------------------------------- the user's note
+
+
+@given(step=st.floats(0.01, 8.0))
+def test_the_note_states_the_steps_in_stops_where_the_prior_is_scaled(step):
+    # F = (ρ/ρ₀)⁴ back to ρ: the note's stops are the step's, to its one decimal
+    note = wide_step_note(step_factor(step))
+    if step <= REFERENCE_STEP:
+        assert note is None
+    else:
+        assert note is not None
+        stated = float(note.split("about ")[1].split(" stops apart")[0])
+        assert abs(stated - step / np.log(2)) <= 0.05 + 1e-9
+
+
+def _calibration_notes(ratio: float, k_count: int) -> list[str]:
+    import photoquant as pq
+
+    values, t, _ = _emor_bracket(COEFFICIENTS[1], ratio, k_count)
+    stack = pq.ExposureStack(values.astype(np.uint8)[None], t, bit_depth=8, channels=("Y",))
+    return list(pq.calibrate([stack]).report["notes"])
+
+
+def test_a_calibration_of_wide_steps_says_the_prior_sets_the_shape():
+    notes = _calibration_notes(8.0, 3)  # three frames 3 stops apart
+    assert any("about 3.0 stops apart" in n and "crossval" in n for n in notes), notes
+
+
+def test_a_calibration_of_one_stop_steps_has_no_such_note():
+    notes = _calibration_notes(2.0, 6)
+    assert not any("stops apart" in n for n in notes), notes
