@@ -415,7 +415,8 @@ def response_step(
             )
         fit = fit_response(hide_defects(views[0], defects), spec, rng=seed)
     log.report["response"] = {"method": spec[0].name, **fit.report}
-    for note in fit.report.get("notes", ()):  # what the method has to tell the user
+    notes = fit.report.get("notes", ())  # what the method has to tell the user
+    for note in (notes,) if isinstance(notes, str) else notes:
         log.note(str(note))
     if selection is not None:
         log.report["response"]["selection"] = selection.as_dict()

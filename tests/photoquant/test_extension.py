@@ -121,6 +121,19 @@ def test_a_new_response_method_runs_through_calibrate_save_load_correct(capture,
         pq.load_camera(tmp_path / "camera")
 
 
+@pytest.mark.parametrize("notes", [["gamma assumed, not fitted", "second line"], "one line"])
+def test_a_response_methods_notes_reach_the_cameras_notes(capture, notes):
+    # a method's report may hold lines for the user (a list, or one string: one line)
+    def with_notes(stack, options, rng):
+        fit = characterise_response_power_law(stack, options, rng)
+        return pq.StepFit(fit.model, {**fit.report, "notes": notes})
+
+    with registered("response", "Noted (test)", with_notes, options=PowerLawOptions):
+        model = pq.calibrate_manifest(capture, response="noted (test)")
+    expected = [notes] if isinstance(notes, str) else notes
+    assert [n for n in model.report["notes"] if n in expected] == expected
+
+
 # ---------------------------------------------------------------------------
 # A vignetting model of its own class, stored as an image in the camera folder
 # ---------------------------------------------------------------------------
