@@ -132,6 +132,11 @@ class HeldOutScore:
         stated uncertainty is the actual one).
     n_intervals : int
         Values with an interval.
+    response_notes : tuple of str
+        What the fold's response method told the user (the calibration's
+        notes from its response step, e.g. that the fold's exposures are so
+        far apart that the response's shape between them comes from its
+        prior); empty for a peer.
     """
 
     index: int
@@ -147,6 +152,7 @@ class HeldOutScore:
     within_95: float | None = None
     z_spread: float | None = None
     n_intervals: int = 0
+    response_notes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -255,6 +261,7 @@ class CrossvalResult:
                     "within_95": r.within_95,
                     "z_spread": r.z_spread,
                     "n_intervals": r.n_intervals,
+                    "response_notes": list(r.response_notes),
                 }
                 for r in self.rows
             ],
@@ -303,6 +310,9 @@ class CrossvalResult:
         adequacy = ModelAdequacy.from_dict(self.model_adequacy)
         if adequacy is not None:
             lines.append(f"model adequacy: {adequacy.describe()}")
+        for r in self.rows:
+            for note in r.response_notes:
+                lines.append(f"with exposure {r.index + 1} held out: {note}")
         return "\n".join(lines)
 
 
@@ -407,6 +417,10 @@ def _fit_photoquant(
         )
     if adequacies is not None:
         adequacies.append(model.report.get("model_adequacy"))
+    if context is not None:
+        notes = model.report.get("response", {}).get("notes", ())
+        notes = (notes,) if isinstance(notes, str) else notes
+        context["response_notes"] = tuple(str(n) for n in notes)
     if calibration_only:
         resp = model.response
         merged = model.merge_stack(stack)
@@ -579,6 +593,7 @@ def crossval_stack(
                 n_bound=int(np.count_nonzero(bound & scored)),
                 time_s=time.perf_counter() - t0,
                 **intervals,
+                response_notes=context.get("response_notes", ()),
             )
         )
     return CrossvalResult(

@@ -160,8 +160,8 @@ def wide_step_note(factor: float) -> str | None:
         f"the bracket's exposures are about {stops:.1f} stops apart: the wider the steps, "
         "the more of the response's shape between them comes from its smoothness prior "
         f"(here eq. 7's penalty x{factor:.3g} about the mean of real cameras' responses, "
-        "EMoR) rather than from the data; check the response by cross-validation "
-        "(photoquant crossval, which also compares methods)"
+        "EMoR) rather than from the data; cross-validation (photoquant crossval) measures "
+        "what that costs, and its --method compares methods"
     )
 
 

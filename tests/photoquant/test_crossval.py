@@ -144,10 +144,30 @@ def test_json_and_table(gamma_stack):
     assert {"mae_dn", "bias_dn", "n_scored", "n_fallback", "n_bound"} <= set(data["held_out"][0])
     table = res.format_table()
     # the header, a row per held-out frame, the overall scores, the prediction
-    # intervals, the model's adequacy
-    assert "overall (every scored value)" in table and len(table.splitlines()) == 2 + 4 + 1 + 2
-    assert table.splitlines()[-2].startswith("prediction intervals")
-    assert table.splitlines()[-1].startswith("model adequacy: ")
+    # intervals, the model's adequacy, then each fold's response notes (its bracket's
+    # steps, 3.2 stops with an exposure of this 1.6-stop bracket held out)
+    lines = table.splitlines()
+    n_notes = sum(len(r.response_notes) for r in res.rows)
+    assert n_notes == 4, [r.response_notes for r in res.rows]
+    assert "overall (every scored value)" in table and len(lines) == 2 + 4 + 1 + 2 + n_notes
+    assert lines[-2 - n_notes].startswith("prediction intervals")
+    assert lines[-1 - n_notes].startswith("model adequacy: ")
+    assert lines[-1].startswith("with exposure 5 held out: the bracket's exposures are about")
+    assert data["held_out"][3]["response_notes"] == list(res.rows[3].response_notes)
+
+
+def test_a_folds_response_notes_say_when_its_steps_leave_the_shape_to_the_prior(rng):
+    # three exposures a stop apart: the middle one held out leaves two, two stops apart
+    # (wider than eq. 7's smoothness was set on: a note); seven half a stop apart: each
+    # fold's pixels still link exposures half a stop apart (no note); a peer: none
+    l = log_uniform_scene(rng, (48, 64, 3), decades=2.0)  # noqa: E741
+    for t, noted in ((2.0 ** np.arange(3.0), True), (2.0 ** (0.5 * np.arange(7.0)), False)):
+        res = crossval_stack(ExposureStack(capture(l, t, balance=(1.0, 1.0, 1.0)), t))
+        assert all(bool(r.response_notes) == noted for r in res.rows), (t, res.rows)
+        if noted:
+            assert "about 2.0 stops apart" in res.rows[0].response_notes[0]
+    peer = crossval_stack(ExposureStack(capture(l, t, balance=(1.0, 1.0, 1.0)), t), "opencv")
+    assert all(r.response_notes == () for r in peer.rows)
 
 
 def test_bad_input_is_named(gamma_stack):

@@ -182,7 +182,7 @@ def _calibration_notes(ratio: float, k_count: int) -> list[str]:
 
 def test_a_calibration_of_wide_steps_says_the_prior_sets_the_shape():
     notes = _calibration_notes(8.0, 3)  # three frames 3 stops apart
-    assert any("about 3.0 stops apart" in n and "crossval" in n for n in notes), notes
+    assert any("about 3.0 stops apart" in n and "photoquant crossval" in n for n in notes), notes
 
 
 def test_a_calibration_of_one_stop_steps_has_no_such_note():
