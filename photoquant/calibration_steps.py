@@ -81,7 +81,7 @@ from photoquant.merge.uncertainty import (
     noise_record,
     response_error_of_merge_Debevec1997,
 )
-from photoquant.methods import Method, StepFit, options_to_dict, resolve_method
+from photoquant.methods import Method, StepFit, options_to_dict, report_notes, resolve_method
 from photoquant.model import CameraModel
 from photoquant.profiles import DEFAULT_PROFILE, profile_setting, profile_steps
 from photoquant.response import fit_response, without_covariance
@@ -415,9 +415,8 @@ def response_step(
             )
         fit = fit_response(hide_defects(views[0], defects), spec, rng=seed)
     log.report["response"] = {"method": spec[0].name, **fit.report}
-    notes = fit.report.get("notes", ())  # what the method has to tell the user
-    for note in (notes,) if isinstance(notes, str) else notes:
-        log.note(str(note))
+    for note in report_notes(fit.report):  # what the method has to tell the user
+        log.note(note)
     if selection is not None:
         log.report["response"]["selection"] = selection.as_dict()
     at_labels = None if joint is None else joint.at_labels

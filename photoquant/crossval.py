@@ -78,6 +78,7 @@ from photoquant.holdout import (
     predict_values,
     score_range,
 )
+from photoquant.methods import report_notes
 from photoquant.response.model import ResponseModel
 from photoquant.stack import ExposureStack
 
@@ -418,9 +419,7 @@ def _fit_photoquant(
     if adequacies is not None:
         adequacies.append(model.report.get("model_adequacy"))
     if context is not None:
-        notes = model.report.get("response", {}).get("notes", ())
-        notes = (notes,) if isinstance(notes, str) else notes
-        context["response_notes"] = tuple(str(n) for n in notes)
+        context["response_notes"] = report_notes(model.report.get("response", {}))
     if calibration_only:
         resp = model.response
         merged = model.merge_stack(stack)

@@ -54,6 +54,7 @@ __all__ = [
     "register_method",
     "registry",
     "resolve_method",
+    "report_notes",
     "options_from_mapping",
     "load_plugins",
 ]
@@ -109,6 +110,17 @@ class StepFit(Generic[M]):
 
     model: M
     report: dict[str, Any] = field(default_factory=dict)
+
+
+def report_notes(report: Mapping[str, Any]) -> tuple[str, ...]:
+    """The lines a step's report holds for the user (``report["notes"]``: a list, or one
+    string as one line; none by default).
+
+    >>> report_notes({"notes": "one line"}), report_notes({"notes": ["a", "b"]})
+    (('one line',), ('a', 'b'))
+    """
+    notes = report.get("notes", ())
+    return tuple(str(n) for n in ((notes,) if isinstance(notes, str) else notes))
 
 
 @dataclass(frozen=True)
