@@ -120,7 +120,13 @@ def report_notes(report: Mapping[str, Any]) -> tuple[str, ...]:
     (('one line',), ('a', 'b'))
     """
     notes = report.get("notes", ())
-    return tuple(str(n) for n in ((notes,) if isinstance(notes, str) else notes))
+    if isinstance(notes, str):
+        return (notes,)
+    if not isinstance(notes, list | tuple):
+        raise InputError(
+            f"a step's report `notes` must be a string or a list of strings, got {notes!r}"
+        )
+    return tuple(str(n) for n in notes)
 
 
 @dataclass(frozen=True)

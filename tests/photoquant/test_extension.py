@@ -134,6 +134,16 @@ def test_a_response_methods_notes_reach_the_cameras_notes(capture, notes):
     assert [n for n in model.report["notes"] if n in expected] == expected
 
 
+def test_a_response_methods_notes_that_are_not_lines_are_a_named_error(capture):
+    def with_notes(stack, options, rng):
+        fit = characterise_response_power_law(stack, options, rng)
+        return pq.StepFit(fit.model, {**fit.report, "notes": 5})
+
+    with registered("response", "Noted (test)", with_notes, options=PowerLawOptions):
+        with pytest.raises(InputError, match=r"report `notes` must be a string or a list.*got 5"):
+            pq.calibrate_manifest(capture, response="noted (test)")
+
+
 # ---------------------------------------------------------------------------
 # A vignetting model of its own class, stored as an image in the camera folder
 # ---------------------------------------------------------------------------
