@@ -18,10 +18,14 @@ Two kernels carry the whole screen once its pixels are drawn:
 The screen's numpy twin forms the sandwich's ``ψᵀψ`` and the noise line's
 normal equations by BLAS products, which add in another order than these
 loops: the two paths agree to rounding (relative ``1e-12`` on the times,
-``1e-9`` on their covariance, tested), not to the bit. Measured (1024×768×3,
-K = 4, N = 1, 4 000 pixels drawn, one thread, min of 1 000 calls,
-2026-12-04 on the shared 2-core machine): ``refine_by_pairs`` 8.5 → 2.85 ms,
-of which the pairs 0.35 ms and the passes 1.7–1.9 ms.
+``1e-9`` on their covariance, tested), not to the bit. What the compiled
+screen costs, and what the alternatives did (1024×768×3, K = 4, N = 1,
+4 000 pixels drawn, one thread, on the shared 2-core machine): its numpy
+twin 8.5 ms against 2.85 ms for ``refine_by_pairs`` (2026-12-04); the passes
+over the correction benchmark's 6 188 pairs 1.12 ms (min of 300,
+2026-12-07) against 1.44 ms looping over every pair rather than the ones
+used; looping over every pair, 1.45 ms against 1.61–1.64 ms with a zero test
+before each division (min of 50, 2026-12-06).
 
 The helpers (:func:`interp_near`, :func:`rounding_at`, :func:`table_index`,
 :func:`lerp_at`, :func:`huber_iterations`) are compiled on their own and
@@ -29,14 +33,12 @@ called from the kernels; every name here is its plain-Python body when numba
 is not installed (the callers then take their numpy twins). Every loop with
 a division is compiled with numpy's error model (no zero test before each
 division: none divides by zero — the search's interval, the levels' steps
-and the totals are positive where they divide, and the rest is guarded);
-measured (2026-12-06, the correction benchmark's 6 188 pairs, three passes,
-min of 50): the passes 1.61–1.64 → 1.45 ms, the same results. The Huber
-iterations, the scale, the noise line and the sandwich loop over the pairs
-used only (a pair left out has no weight and no residual: it adds exact zeros),
-and a pair left out at its first end skips the second end's arithmetic but its
-``g''`` (what its next pass reads): on the correction benchmark's pairs, 660
-of them used, the passes 1.44 → 1.12 ms (min of 300, 2026-12-07), the same bits.
+and the totals are positive where they divide, and the rest is guarded).
+The Huber iterations, the scale, the noise line and the sandwich loop over
+the pairs used only (a pair left out has no weight and no residual: it adds
+exact zeros), and a pair left out at its first end skips the second end's
+arithmetic but its ``g''`` (what its next pass reads): the same bits as
+looping over every pair.
 """
 
 from __future__ import annotations

@@ -184,15 +184,17 @@ def spread_saturation(frames: np.ndarray, saturation_level: Any, radius: int) ->
 
     Notes
     -----
-    Measured (2026-12-07, the St. Louis Arch's four 2816×2112 JPEG frames, 2
-    cores): 0.54–0.85 → 0.35 s, the same values (the ring's neighbours by
-    shifted ORs instead of a convolution); then 0.36 → 0.13 s, OpenCV finding
-    the clipped values of a frame's channels at once (``cv2.inRange``, 73 →
-    18 ms) and the clips' reach (``cv2.dilate``, 106 → 11 ms: the maximum of a
-    window that leaves the image is that of the part inside, as with
-    ``scipy.ndimage.maximum_filter``'s ``"nearest"`` edges), and the spread set
-    at the pixels it reaches by a boolean index over ``(N, K·H·W, C)`` (159 →
-    72 ms; ``copyto`` with the mask broadcast over the channels and repeats).
+    How it is computed, and what the alternatives cost (2026-12-07, the St.
+    Louis Arch's four 2816×2112 JPEG frames, 2 cores; the same values every
+    way): 0.13 s in all. The ring's neighbours are shifted ORs (a convolution:
+    0.54–0.85 s for the whole spread); OpenCV finds the clipped values of a
+    frame's channels at once (``cv2.inRange``, 18 ms; numpy comparisons per
+    channel 73 ms) and the clips' reach (``cv2.dilate``, 11 ms; a maximum
+    filter 106 ms: the maximum of a window that leaves the image is that of
+    the part inside, as with ``scipy.ndimage.maximum_filter``'s ``"nearest"``
+    edges); a boolean index over ``(N, K·H·W, C)`` sets the spread at the
+    pixels it reaches (72 ms; ``copyto`` with the mask broadcast over the
+    channels and repeats 159 ms).
 
     Only clipped *regions* spread: a clipped pixel none of whose 8
     neighbours is clipped in that exposure is left as it is (still clipped
