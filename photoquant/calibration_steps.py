@@ -911,7 +911,7 @@ def vignetting_step(
         "correspondence_source": source,
         **fit.report,
     }
-    log.notes.extend(fit.report.get("warnings", []))  # photoquant.vignetting.trust
+    log.notes.extend(report_notes(fit.report, "warnings"))  # photoquant.vignetting.trust
     return VignettingStage(fit.model, spec, tracks, source)
 
 

@@ -112,19 +112,20 @@ class StepFit(Generic[M]):
     report: dict[str, Any] = field(default_factory=dict)
 
 
-def report_notes(report: Mapping[str, Any]) -> tuple[str, ...]:
-    """The lines a step's report holds for the user (``report["notes"]``: a list, or one
-    string as one line; none by default).
+def report_notes(report: Mapping[str, Any], key: str = "notes") -> tuple[str, ...]:
+    """The lines a step's report holds for the user under ``key`` (a response method's
+    ``"notes"``, the vignetting fit's ``"warnings"``: a list, or one string as one line;
+    none by default).
 
     >>> report_notes({"notes": "one line"}), report_notes({"notes": ["a", "b"]})
     (('one line',), ('a', 'b'))
     """
-    notes = report.get("notes", ())
+    notes = report.get(key, ())
     if isinstance(notes, str):
         return (notes,)
     if not isinstance(notes, list | tuple):
         raise InputError(
-            f"a step's report `notes` must be a string or a list of strings, got {notes!r}"
+            f"a step's report `{key}` must be a string or a list of strings, got {notes!r}"
         )
     return tuple(str(n) for n in notes)
 

@@ -191,6 +191,21 @@ def characterise_vignetting_falloff(
     return pq.StepFit(TabulatedVignetting("Falloff (test)", table), {"n_tracks": len(data.tracks)})
 
 
+def test_a_vignetting_methods_warnings_reach_the_cameras_notes(capture):
+    # the vignetting step's report warnings (photoquant.vignetting.trust's) are the
+    # camera's notes, read as a response method's notes are
+    def with_warnings(data, options):
+        fit = characterise_vignetting_falloff(data, options)
+        return pq.StepFit(fit.model, {**fit.report, "warnings": ["the views agree poorly"]})
+
+    with registered(
+        "vignetting", "Warned (test)", with_warnings, options=FalloffOptions,
+        model=TabulatedVignetting,
+    ):  # fmt: skip
+        model = pq.calibrate_manifest(capture, vignetting="warned (test)")
+    assert "the views agree poorly" in model.report["notes"]
+
+
 def test_a_new_vignetting_model_runs_through_calibrate_save_load_correct(capture, scene, tmp_path):
     with registered(
         "vignetting",
