@@ -861,13 +861,20 @@ def _add_characterise(sub: Any) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``photoquant`` command; returns the exit status."""
-    from photoquant._environ import check_environment
+    """Run the ``photoquant`` command; returns the exit status.
+
+    ``argv`` None: the process's own arguments, as the installed command
+    runs; the process is then the command's, and its memory advice is set
+    for a command's work (:func:`photoquant._environ.prefer_small_pages`).
+    """
+    from photoquant._environ import check_environment, prefer_small_pages
     from photoquant._signals import Terminated, handle_signals
     from photoquant._stdio import safe_stdio
     from photoquant.io.atomic import remove_live_temporaries
 
     safe_stdio()  # a strict locale must not turn a file name into a traceback
+    if argv is None:
+        prefer_small_pages()
     try:
         parser = build_parser()
         args = parser.parse_args(argv)

@@ -27,8 +27,9 @@ Other helpers:
 - :func:`to_json_value` — numpy scalars and arrays, tuples and paths as plain JSON values.
 - :func:`thread_map` — ``[fn(x) for x in items]`` on threads, in order.
 - :func:`handle_signals`, :class:`Terminated` — SIGTERM and Ctrl-C as clean exits (temporaries removed), for a command's ``main()``.
-- :func:`safe_stdio` — standard output and error that print any text whatever the locale, and
-  :func:`check_environment` — photoquant's environment variables checked before a command runs.
+- :func:`safe_stdio` — standard output and error that print any text whatever the locale,
+  :func:`check_environment` — photoquant's environment variables checked before a command runs, and
+  :func:`prefer_small_pages` — a command's process without numpy's huge-page advice.
 
 Examples
 --------
@@ -57,7 +58,7 @@ from photoquant._checks import (
     validate_method,
 )
 from photoquant._emor_data import emor_basis
-from photoquant._environ import check_environment
+from photoquant._environ import check_environment, prefer_small_pages
 from photoquant._json import load_json, to_json_value
 from photoquant._signals import Terminated, handle_signals
 from photoquant._stdio import safe_stdio
@@ -66,6 +67,7 @@ from photoquant._threads import thread_map
 __all__ = [
     "safe_stdio",
     "check_environment",
+    "prefer_small_pages",
     "load_json",
     "Terminated",
     "handle_signals",

@@ -430,11 +430,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``pqsim`` command; returns the exit status."""
+    """Run the ``pqsim`` command; returns the exit status (``argv`` None: the process's own
+    arguments, and its memory advice set for a command, as ``photoquant``'s)."""
     from photoquant.io.atomic import remove_live_temporaries
-    from photoquant.utils import Terminated, check_environment, handle_signals, safe_stdio
+    from photoquant.utils import (
+        Terminated,
+        check_environment,
+        handle_signals,
+        prefer_small_pages,
+        safe_stdio,
+    )
 
     safe_stdio()  # a strict locale must not turn a file name into a traceback
+    if argv is None:
+        prefer_small_pages()
     args = build_parser().parse_args(argv)
     try:
         check_environment()  # a bad variable is one line now, not a failure per frame
