@@ -9,6 +9,8 @@ from disk change no bit of it.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -163,3 +165,42 @@ def test_repeat_merges_in_tiles_equal_one_tile(rng, cached):
     assert (stack.cached_repeat_statistics() is not None) == cached  # the path under test
     for name in ("log_photoquantity", "weight_sum", "mask", "all_saturated", "all_dark"):
         np.testing.assert_array_equal(getattr(tiled, name), getattr(whole, name), err_msg=name)
+
+
+def test_the_kept_merge_tables_never_stand_for_another_bracket(rng):
+    """A camera keeps the tables of the last bracket it merged: a run of scenes each
+    differing from the one before in one thing (the times, the repeats, the merge's
+    options, the black level) corrects to the same bits as with a camera that kept
+    nothing, and a scene of the same bracket reuses the tables."""
+    shape = (9, 11)
+    kept = _model(shape, rng)
+    base = _stack(rng, shape, 1)
+    every_value = {"exclude_below_valid_min": False}  # so that the black level's codes count
+    dark = ExposureStack(
+        base.frames, EXPOSURES, saturation_level=base.saturation_level, black_level=1.0
+    )
+    later = ExposureStack(base.frames, EXPOSURES * 1.25, saturation_level=base.saturation_level)
+    # each scene differs from the one before it in one thing (or none: the second)
+    scenes = [
+        (base, None),
+        (_stack(rng, shape, 1), None),  # the same bracket, other values
+        (later, None),  # the times
+        (base, None),
+        (_stack(rng, shape, 3), None),  # the repeats
+        (base, None),
+        (base, every_value),  # the merge's options
+        (dark, every_value),  # the black level
+        (base, {"weighting": "hat"}),
+    ]
+    response = kept.balanced_response()
+    seen = []
+    for stack, options in scenes:
+        merge = None if options is None else ("Debevec 1997", options)
+        got = correct(stack, kept, refine_exposures=False, merge=merge)
+        fresh = dataclasses.replace(kept)  # the same camera, nothing kept yet
+        want = correct(stack, fresh, refine_exposures=False, merge=merge)
+        np.testing.assert_array_equal(got.photoquantity, want.photoquantity)
+        np.testing.assert_array_equal(got.mask, want.mask)
+        seen.append(response._cache["merge_tables"][1])
+    assert seen[1] is seen[0]  # the same bracket: made once
+    assert len({id(t) for t in seen}) == len(seen) - 1  # every other change: made again
