@@ -56,6 +56,10 @@ __all__ = [
 _MAX_TABLE_SIZE = 1 << 22
 """Largest integer value (per channel) for which the merge uses look-up tables."""
 
+_KEPT_TABLE_BYTES = 32 << 20
+"""Largest merge tables a camera keeps for the next scene of the same bracket (32 MiB:
+single 16-bit frames' tables, K = 8, are 19 MiB; 8-bit ones a few tens of kB)."""
+
 
 @dataclass(frozen=True, eq=False)
 class _Inputs:
@@ -549,7 +553,9 @@ def _merge_tables(
     and made again when one of those differs. A camera corrects many scenes of one
     bracket: building them was 0.3 ms of a 1024×768×3, K = 4 correction's 3.4 ms with
     the nominal times (interleaved, 2026-12-07); one entry, so that scenes of
-    ever-changing times (an automatic exposure) do not pile tables up."""
+    ever-changing times (an automatic exposure) do not pile tables up, and only tables
+    of at most :data:`_KEPT_TABLE_BYTES` (the sums of many 16-bit repeats have tables
+    of hundreds of MB, which a camera should not hold between scenes)."""
     key = (opts, stack.exposure_s.tobytes(), stack.n_repeats, stack.c_max, black.tobytes())
     cache = getattr(response, "_cache", None)
     if isinstance(cache, dict):
@@ -584,7 +590,10 @@ def _merge_tables(
         paired=single,  # repeat sums are merged by kernels that read w and wt apart
     )
     if isinstance(cache, dict):
-        cache["merge_tables"] = (key, tables)
+        size = sum(
+            a.nbytes for a in (tables.w, tables.wt, tables.clip, tables.pairs) if a is not None
+        )
+        cache["merge_tables"] = (key, tables) if size <= _KEPT_TABLE_BYTES else None
     return tables
 
 

@@ -204,3 +204,19 @@ def test_the_kept_merge_tables_never_stand_for_another_bracket(rng):
         seen.append(response._cache["merge_tables"][1])
     assert seen[1] is seen[0]  # the same bracket: made once
     assert len({id(t) for t in seen}) == len(seen) - 1  # every other change: made again
+
+
+def test_tables_above_the_bound_are_not_kept(rng, monkeypatch):
+    """Tables larger than the bound (the sums of many 16-bit repeats: hundreds of MB) are
+    made for the scene and dropped; the correction is the same."""
+    import photoquant.merge.debevec1997 as debevec
+
+    shape = (9, 11)
+    model, stack = _model(shape, rng), _stack(rng, shape, 1)
+    want = correct(stack, model, refine_exposures=False)
+    assert model.balanced_response()._cache["merge_tables"] is not None
+    monkeypatch.setattr(debevec, "_KEPT_TABLE_BYTES", 0)
+    small = dataclasses.replace(model)
+    got = correct(stack, small, refine_exposures=False)
+    assert small.balanced_response()._cache["merge_tables"] is None
+    np.testing.assert_array_equal(got.photoquantity, want.photoquantity)
