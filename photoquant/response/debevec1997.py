@@ -306,6 +306,11 @@ class ResponseRecovery:
         Whether the channel's ``g`` was refined in the values
         (``objective="values"`` on a bracket whose typical step's ``F`` is at
         most :data:`~photoquant.response.values_objective.MAX_STEP_FACTOR`).
+    bracket_step_factor : ndarray, shape (C,)
+        ``F`` of the typical step the channel's data link
+        (:func:`~photoquant.response.wide_steps.step_factor`), whatever
+        ``wide_steps``: ``smoothness_factor`` is this with
+        ``wide_steps="template"`` and 1 with ``"none"``.
     """
 
     levels: np.ndarray
@@ -319,6 +324,7 @@ class ResponseRecovery:
     valid_min: np.ndarray
     smoothness_factor: np.ndarray | None = None
     refined_in_values: np.ndarray | None = None
+    bracket_step_factor: np.ndarray | None = None
     log_inverse_response_factor: np.ndarray | None = None
     log_inverse_response_variance: np.ndarray | None = None
 
@@ -1391,6 +1397,7 @@ class _ChannelFit:
     constrained: bool
     valid_min: float
     smoothness_factor: float
+    bracket_factor: float
     refined_in_values: bool
     covariance_factor: np.ndarray | None
     variance: np.ndarray | None
@@ -1446,6 +1453,7 @@ def _fit_channel(
         constrained=solution.constrained,
         valid_min=settings.levels[lowest],
         smoothness_factor=factor,
+        bracket_factor=bracket_factor,
         refined_in_values=refined,
         covariance_factor=cov_factor,
         variance=variance,
@@ -1508,6 +1516,7 @@ def _response_recovery(
         valid_min=np.array([fit.valid_min for fit in fits], dtype=np.float64),
         smoothness_factor=np.array([fit.smoothness_factor for fit in fits], dtype=np.float64),
         refined_in_values=np.array([fit.refined_in_values for fit in fits], dtype=bool),
+        bracket_step_factor=np.array([fit.bracket_factor for fit in fits], dtype=np.float64),
         log_inverse_response_factor=(
             _stack_factors([fit.covariance_factor for fit in fits]) if uncertainty else None
         ),
@@ -1959,14 +1968,15 @@ def characterise_response_Debevec1997(
         "saturation_level": rec.saturation_level,
         "valid_min": rec.valid_min,
         "smoothness_factor": rec.smoothness_factor,
+        "bracket_step_factor": rec.bracket_step_factor,
         "refined_in_values": rec.refined_in_values,
     }
     if covariance is not None:
         report["covariance"] = covariance
     if bias_rms is not None:
         report["uncorrected_bias_rms"] = bias_rms
-    if rec.smoothness_factor is not None:
-        note = wide_step_note(float(np.max(rec.smoothness_factor)))
+    if rec.bracket_step_factor is not None:
+        note = wide_step_note(float(np.max(rec.bracket_step_factor)), wide_steps=opts.wide_steps)
         if note is not None:  # for the user: the calibration's notes
             report["notes"] = [note]
     return StepFit(model, report)

@@ -85,6 +85,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from photoquant._checks import check_choice
 from photoquant._emor_data import emor_basis
 
 __all__ = [
@@ -140,28 +141,40 @@ def step_factor(step: float, reference: float = REFERENCE_STEP) -> float:
     return float((step / reference) ** _POWER)
 
 
-def wide_step_note(factor: float) -> str | None:
-    """The user's note for a response fitted with the smoothness scaled by ``factor`` (``F``).
+def wide_step_note(factor: float, *, wide_steps: str = "template") -> str | None:
+    """The user's note for a response fitted on a bracket whose typical step has ``F = factor``.
 
     ``None`` where ``F`` is 1 (steps up to ``ρ₀``, where eq. 7's β was set).
     Above, more of the shape between the bracket's exposures comes from the
     prior (module notes), and the calibration says so, with the typical step
-    ``ρ = ρ₀ F^(1/4)`` in stops.
+    ``ρ = ρ₀ F^(1/4)`` in stops and the prior: with ``wide_steps="template"``
+    eq. 7's penalty scaled by ``F`` about the EMoR mean response, with
+    ``"none"`` eq. 7's penalty as the paper has it, whose prior is a straight
+    ``g`` (an exponential response, unlike any camera) at the β set on one-stop
+    steps.
 
     >>> wide_step_note(1.0) is None
     True
     >>> wide_step_note(step_factor(3 * np.log(2)))[:55]
     "the bracket's exposures are about 3.0 stops apart: the "
     """
+    check_choice(wide_steps, "wide_steps", WIDE_STEP_MODES)
     if not factor > 1.0:
         return None
     stops = REFERENCE_STEP * factor ** (1.0 / _POWER) / np.log(2.0)
+    if wide_steps == "template":
+        prior = f"eq. 7's penalty x{factor:.3g} about the mean of real cameras' responses, EMoR"
+    else:
+        prior = (
+            "eq. 7's penalty as set for one-stop steps, towards a straight g: an exponential "
+            "response, unlike any camera's; wide_steps='template' follows the mean of real "
+            "cameras' responses instead"
+        )
     return (
         f"the bracket's exposures are about {stops:.1f} stops apart: the wider the steps, "
         "the more of the response's shape between them comes from its smoothness prior "
-        f"(here eq. 7's penalty x{factor:.3g} about the mean of real cameras' responses, "
-        "EMoR) rather than from the data; cross-validation (photoquant crossval) measures "
-        "what that costs, and its --method compares methods"
+        f"(here {prior}) rather than from the data; cross-validation (photoquant crossval) "
+        "measures what that costs, and its --method compares methods"
     )
 
 

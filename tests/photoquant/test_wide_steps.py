@@ -172,19 +172,47 @@ def test_the_note_states_the_steps_in_stops_where_the_prior_is_scaled(step):
         assert abs(stated - step / np.log(2)) <= 0.05 + 1e-9
 
 
-def _calibration_notes(ratio: float, k_count: int) -> list[str]:
+def _calibration_notes(ratio: float, k_count: int, profile: str = "photoquant") -> list[str]:
     import photoquant as pq
 
     values, t, _ = _emor_bracket(COEFFICIENTS[1], ratio, k_count)
     stack = pq.ExposureStack(values.astype(np.uint8)[None], t, bit_depth=8, channels=("Y",))
-    return list(pq.calibrate([stack]).report["notes"])
+    return list(pq.calibrate([stack], profile=profile).report["notes"])
 
 
 def test_a_calibration_of_wide_steps_says_the_prior_sets_the_shape():
     notes = _calibration_notes(8.0, 3)  # three frames 3 stops apart
     assert any("about 3.0 stops apart" in n and "photoquant crossval" in n for n in notes), notes
+    assert any("mean of real cameras' responses, EMoR" in n for n in notes), notes
+
+
+def test_the_papers_profile_says_its_prior_is_a_straight_line():
+    # the paper's eq. 7 keeps its penalty whatever the step (wide_steps="none"): the note
+    # says the shape between wide steps is then an exponential response's
+    notes = _calibration_notes(8.0, 3, profile="paper")
+    assert any(
+        "about 3.0 stops apart" in n
+        and "towards a straight g" in n
+        and "wide_steps='template'" in n
+        for n in notes
+    ), notes
+    assert not any("stops apart" in n for n in _calibration_notes(2.0, 6, profile="paper"))
 
 
 def test_a_calibration_of_one_stop_steps_has_no_such_note():
     notes = _calibration_notes(2.0, 6)
     assert not any("stops apart" in n for n in notes), notes
+
+
+@pytest.mark.parametrize("wide_steps", ["template", "none"])
+def test_the_fit_records_the_brackets_step_whatever_its_prior(wide_steps):
+    values, t, _ = _emor_bracket(COEFFICIENTS[1], 8.0, 3)
+    rec = camera_response_Debevec1997(values, t, wide_steps=wide_steps, rng=0)
+    assert rec.bracket_step_factor[0] == pytest.approx(step_factor(np.log(8.0)))
+    used = rec.bracket_step_factor if wide_steps == "template" else np.ones(1)
+    np.testing.assert_array_equal(rec.smoothness_factor, used)
+
+
+def test_the_note_refuses_an_unknown_prior():
+    with pytest.raises(InputError, match="wide_steps"):
+        wide_step_note(2.0, wide_steps="straight")
