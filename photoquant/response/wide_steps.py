@@ -167,8 +167,9 @@ def wide_step_note(factor: float, *, wide_steps: str = "template") -> str | None
     else:
         prior = (
             "eq. 7's penalty as set for one-stop steps, towards a straight g: an exponential "
-            "response, unlike any camera's; wide_steps='template' follows the mean of real "
-            "cameras' responses instead"
+            "response, unlike any camera's; the response option wide_steps='template' "
+            "(photoquant calibrate --option response.wide_steps=template) follows the mean of "
+            "real cameras' responses instead"
         )
     return (
         f"the bracket's exposures are about {stops:.1f} stops apart: the wider the steps, "

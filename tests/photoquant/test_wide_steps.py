@@ -172,12 +172,14 @@ def test_the_note_states_the_steps_in_stops_where_the_prior_is_scaled(step):
         assert abs(stated - step / np.log(2)) <= 0.05 + 1e-9
 
 
-def _calibration_notes(ratio: float, k_count: int, profile: str = "photoquant") -> list[str]:
+def _calibration_notes(
+    ratio: float, k_count: int, profile: str = "photoquant", **specs: object
+) -> list[str]:
     import photoquant as pq
 
     values, t, _ = _emor_bracket(COEFFICIENTS[1], ratio, k_count)
     stack = pq.ExposureStack(values.astype(np.uint8)[None], t, bit_depth=8, channels=("Y",))
-    return list(pq.calibrate([stack], profile=profile).report["notes"])
+    return list(pq.calibrate([stack], profile=profile, **specs).report["notes"])
 
 
 def test_a_calibration_of_wide_steps_says_the_prior_sets_the_shape():
@@ -197,6 +199,18 @@ def test_the_papers_profile_says_its_prior_is_a_straight_line():
         for n in notes
     ), notes
     assert not any("stops apart" in n for n in _calibration_notes(2.0, 6, profile="paper"))
+
+
+def test_the_papers_note_names_a_flag_that_switches_the_prior():
+    # the command-line option the note names, parsed as the command parses it, gives the
+    # paper's profile the template prior, whose note then says so
+    from photoquant.cli import build_parser, step_specs
+
+    (note,) = (n for n in _calibration_notes(8.0, 3, profile="paper") if "stops apart" in n)
+    flag = note.split("photoquant calibrate ")[1].split(")")[0].split()
+    args = build_parser().parse_args(["calibrate", "capture.json", "-o", "cam", *flag])
+    notes = _calibration_notes(8.0, 3, profile="paper", **step_specs(args))
+    assert any("mean of real cameras' responses, EMoR" in n for n in notes), notes
 
 
 def test_a_calibration_of_one_stop_steps_has_no_such_note():
