@@ -911,7 +911,8 @@ def vignetting_step(
         "correspondence_source": source,
         **fit.report,
     }
-    log.notes.extend(report_notes(fit.report, "warnings"))  # photoquant.vignetting.trust
+    for note in report_notes(fit.report, "warnings"):  # photoquant.vignetting.trust
+        log.note(note)
     return VignettingStage(fit.model, spec, tracks, source)
 
 
