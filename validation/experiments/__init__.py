@@ -231,6 +231,7 @@ def run_validation(
     from photoquant.io.atomic import make_scratch_directory, remove_scratch_directory
     from photoquant.utils import check_int
     from validation._memory import return_free_memory
+    from validation.compile_ahead import CompileAhead, start_compile_ahead
     from validation.experiments.shared import Shared
 
     names = _select(experiments, config)
@@ -242,6 +243,10 @@ def run_validation(
     results: dict[str, ExperimentResult] = {}
     second = beside_for(config)
     beside = [n for n in second if n in names] if n_workers > 1 else []  # in its order
+    # on a machine's first run, a helper compiles the job's kernels from the last one needed
+    # while this process compiles from the first (validation.compile_ahead)
+    serial_first = n_workers > 1 and (second == BESIDE or not beside)
+    helper = start_compile_ahead() if serial_first else CompileAhead(None, None)
     try:
         # BLAS on one thread whatever the number of processes: the same bits either way
         with _one_blas_thread():
@@ -253,6 +258,7 @@ def run_validation(
                     return_free_memory()
                 # else the small-frame experiments, on capture sets of their own: forked first, without
                 # the paper-size calibrations in its memory
+                helper.stop()
                 other = _start_beside(beside, names, config, seed, root, shared)
                 try:
                     for name in names:
@@ -267,6 +273,7 @@ def run_validation(
                 for name in names:
                     results[name] = _run_one(name, names, config, seed, root, shared)
     finally:
+        helper.stop()
         if not keep:
             remove_scratch_directory(root)
     return ValidationRun(

@@ -1,0 +1,290 @@
+"""Compile the validation job's kernels in a helper process on a first run.
+
+photoquant's kernels are compiled by numba the first time each is called with
+new argument types, and kept in numba's on-disk cache for every later run. On a
+machine's first run of ``photoquant validate`` that compilation is most of the
+wait: the quick job compiles some fifty signatures, about 20 s on this project's
+two-core reference machine, one after another, because numba compiles under one
+lock per process and the job's calibrations run in one process before the
+experiments are shared between two. The second core waits.
+
+:func:`start_compile_ahead` forks a helper that compiles a recorded list of the
+job's kernels (:data:`KERNELS_FILE`) in the *reverse* of the order the job
+needs them, into the same cache. Numba looks in its cache before it compiles a
+signature, so the job loads what the helper has finished; the two meet in the
+middle. The helper stops at once where the cache already holds the last kernel
+the job needs (a machine that has run the job before), and when the job asks it
+to. It changes no result: a kernel loaded from the cache is the code the job
+would have compiled.
+
+The list is recorded by running the quick job in a fresh cache with every
+compilation noted (:func:`record_kernels`)::
+
+    python -m validation.compile_ahead --record
+
+An entry the kernels no longer match (a renamed function, a changed argument)
+is skipped by the helper and costs nothing but its attempt; a kernel the list
+misses is compiled by the job as before. Record again after changing the
+kernels' signatures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from importlib import import_module
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "KERNELS_FILE",
+    "KERNELS_FORMAT",
+    "KernelSignature",
+    "compile_ahead",
+    "load_kernels",
+    "record_kernels",
+    "resolve_kernel",
+    "start_compile_ahead",
+]
+
+#: The recorded kernels of the quick job, in the order the job compiles them.
+KERNELS_FILE = Path(__file__).with_name("first_run_kernels.json")
+
+#: The format written in :data:`KERNELS_FILE`.
+KERNELS_FORMAT = "photoquant.first-run-kernels/1"
+
+
+@dataclass(frozen=True)
+class KernelSignature:
+    """One compilation: a kernel's Python function and its argument types.
+
+    Attributes
+    ----------
+    module : str
+        The module defining the function (``photoquant.response._kernels``).
+    function : str
+        The function's qualified name in it (``_trim_few_py``).
+    args : str
+        The argument types as numba writes them
+        (``(Array(float64, 1, 'C', False, aligned=True), int64)``).
+    """
+
+    module: str
+    function: str
+    args: str
+
+
+def record_kernels(job: Callable[[], Any]) -> list[KernelSignature]:
+    """The kernel signatures ``job()`` compiles, in the order it compiles them.
+
+    Only the outermost compilations are kept: a kernel another kernel calls is
+    compiled (and cached) with its caller. Signatures found in numba's cache
+    are not compiled and so not recorded: run ``job`` with an empty cache
+    (``NUMBA_CACHE_DIR``) to record them all.
+    """
+    from numba.core import event
+
+    found: list[KernelSignature] = []
+    depth = [0]
+
+    class _Listener(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            if depth[0] == 0:
+                py_func = ev.data["dispatcher"].py_func
+                found.append(
+                    KernelSignature(
+                        py_func.__module__, py_func.__qualname__, repr(tuple(ev.data["args"]))
+                    )
+                )
+            depth[0] += 1
+
+        def on_end(self, ev: Any) -> None:  # noqa: ARG002 - the listener's interface
+            depth[0] -= 1
+
+    listener = _Listener()
+    event.register("numba:compile", listener)
+    try:
+        job()
+    finally:
+        event.unregister("numba:compile", listener)
+    return found
+
+
+def load_kernels(path: str | Path = KERNELS_FILE) -> list[KernelSignature]:
+    """The kernel signatures recorded in ``path`` (:data:`KERNELS_FILE` by default)."""
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    if data.get("format") != KERNELS_FORMAT:
+        raise ValueError(f"{path}: not a {KERNELS_FORMAT} file")
+    return [KernelSignature(*entry) for entry in data["kernels"]]
+
+
+def write_kernels(path: str | Path, kernels: Sequence[KernelSignature], job: str) -> None:
+    """Write ``kernels`` (in order) to ``path``, with the job and numba version that gave them."""
+    import numba
+
+    data = {
+        "format": KERNELS_FORMAT,
+        "job": job,
+        "numba": numba.__version__,
+        "kernels": [[k.module, k.function, k.args] for k in kernels],
+    }
+    Path(path).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+
+
+def resolve_kernel(kernel: KernelSignature) -> tuple[Any, tuple[Any, ...]] | None:
+    """The compiled kernel (numba dispatcher) of ``kernel.function`` with its argument
+    types, or ``None`` where the module has no such kernel or the types do not parse."""
+    import numba.types
+    from numba.core.dispatcher import Dispatcher
+
+    try:
+        module = import_module(kernel.module)
+    except ImportError:
+        return None
+    dispatcher = next(
+        (
+            value
+            for value in vars(module).values()
+            if isinstance(value, Dispatcher)
+            and value.py_func.__module__ == kernel.module
+            and value.py_func.__qualname__ == kernel.function
+        ),
+        None,
+    )
+    if dispatcher is None:
+        return None
+    names = {name: getattr(numba.types, name) for name in dir(numba.types)}
+    try:
+        args = eval(kernel.args, {"__builtins__": {}}, names)  # noqa: S307 - numba's own reprs
+    except Exception:  # noqa: BLE001 - a type numba no longer has: the entry is skipped
+        return None
+    return (dispatcher, args) if isinstance(args, tuple) else None
+
+
+def compile_ahead(
+    kernels: Iterable[KernelSignature], stop: Callable[[], bool] = lambda: False
+) -> int:
+    """Compile each of ``kernels`` in order into numba's cache; returns how many were
+    compiled here (not loaded from the cache). Stops when ``stop()`` is true between
+    two kernels, and after the first kernel where the cache already holds it (a cache
+    filled by an earlier run: the rest are there too). An entry that no longer
+    matches its kernel is skipped."""
+    compiled = 0
+    for i, kernel in enumerate(kernels):
+        if stop():
+            break
+        resolved = resolve_kernel(kernel)
+        if resolved is None:
+            continue
+        dispatcher, args = resolved
+        if dispatcher.stats.cache_path is None:  # numba keeps no on-disk cache for it
+            break
+        misses = sum(dispatcher.stats.cache_misses.values())
+        try:
+            dispatcher.compile(args)
+        except Exception:  # noqa: BLE001 - a stale entry (types the kernel refuses)
+            continue
+        if sum(dispatcher.stats.cache_misses.values()) > misses:
+            compiled += 1
+        elif i == 0:
+            break
+    return compiled
+
+
+@dataclass
+class CompileAhead:
+    """The helper process of :func:`start_compile_ahead`."""
+
+    process: Any
+    done: Any
+
+    def stop(self, wait_s: float = 0.25) -> None:
+        """Ask the helper to stop after the kernel it is compiling; end it after
+        ``wait_s`` seconds if it has not (a half-written cache file is never read:
+        numba writes each under a temporary name and renames it)."""
+        if self.process is None:
+            return
+        self.done.set()
+        self.process.join(timeout=wait_s)
+        if self.process.is_alive():
+            self.process.terminate()
+            self.process.join()
+        self.process = None
+
+
+def start_compile_ahead(kernels: Sequence[KernelSignature] | None = None) -> CompileAhead:
+    """Fork a helper compiling ``kernels`` (the recorded list by default) last first.
+
+    Nothing is started (the handle's :meth:`CompileAhead.stop` does nothing) where
+    numba is missing, the machine has one core, ``fork`` is not available, or the
+    list cannot be read. Call it before the job compiles anything, and stop the
+    helper before the job starts processes of its own.
+    """
+    from photoquant._numba import HAVE_NUMBA
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if not HAVE_NUMBA or (cores or 1) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return CompileAhead(None, None)
+    if kernels is None:
+        try:
+            kernels = load_kernels()
+        except (OSError, ValueError, KeyError, TypeError):
+            return CompileAhead(None, None)
+    order = list(reversed(kernels))
+    ctx = multiprocessing.get_context("fork")
+    done = ctx.Event()
+
+    def work() -> None:
+        from validation.experiments import ignore_interrupts
+
+        ignore_interrupts()
+        compile_ahead(order, done.is_set)
+
+    process = ctx.Process(target=work, name="photoquant-compile-ahead", daemon=True)
+    process.start()
+    return CompileAhead(process, done)
+
+
+def _record_quick_job() -> list[KernelSignature]:
+    """The quick validation job's kernels, recorded in one process with an empty cache."""
+    from validation.config import QUICK
+    from validation.experiments import run_validation
+
+    return record_kernels(lambda: run_validation(QUICK, workers=1, progress=lambda _: None))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m validation.compile_ahead --record``: record the quick job's kernels."""
+    parser = argparse.ArgumentParser(
+        prog="python -m validation.compile_ahead",
+        description="record the kernels the quick validation job compiles, in order",
+    )
+    parser.add_argument("--record", action="store_true", required=True)
+    parser.add_argument(
+        "-o", "--output", type=Path, default=KERNELS_FILE, help="default: %(default)s"
+    )
+    args = parser.parse_args(argv)
+    if "NUMBA_CACHE_DIR" not in os.environ or os.environ.get("_PQ_RECORDING") != "1":
+        # numba reads its cache folder at import: record in a fresh process with an empty one
+        import subprocess
+
+        with tempfile.TemporaryDirectory(prefix="photoquant-record-") as cache:
+            env = dict(os.environ, NUMBA_CACHE_DIR=cache, _PQ_RECORDING="1")
+            cmd = [sys.executable, "-m", "validation.compile_ahead", "--record", "-o"]
+            return subprocess.call([*cmd, str(args.output)], env=env)
+    t0 = time.perf_counter()
+    kernels = _record_quick_job()
+    write_kernels(args.output, kernels, "photoquant validate --quick")
+    print(f"{len(kernels)} kernels in {time.perf_counter() - t0:.0f} s: {args.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
