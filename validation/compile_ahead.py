@@ -1,23 +1,24 @@
-"""Compile the validation job's kernels in a helper process on a first run.
+"""Compile a job's kernels in a helper process on a first run.
 
 photoquant's kernels are compiled by numba the first time each is called with
 new argument types, and kept in numba's on-disk cache for every later run. On a
-machine's first run of ``photoquant validate`` that compilation is most of the
-wait: the quick job compiles some fifty signatures, about 20 s on this project's
-two-core reference machine, one after another, because numba compiles under one
-lock per process and the job's calibrations run in one process before the
-experiments are shared between two. The second core waits.
+machine's first run of ``photoquant validate`` or ``photoquant demo`` that
+compilation is most of the wait: each compiles some fifty signatures, about
+20 s on this project's two-core reference machine, one after another, because
+numba compiles under one lock per process and the calibrations run in one
+process (the validation job shares its experiments between two processes only
+after them). The second core waits.
 
 :func:`start_compile_ahead` forks a helper that compiles a recorded list of the
-job's kernels (:data:`KERNELS_FILE`) in the *reverse* of the order the job
-needs them, into the same cache. Numba looks in its cache before it compiles a
+job's kernels (:data:`KERNELS_FILE`, one list per job in :data:`JOBS`) in the
+*reverse* of the order the job needs them, into the same cache. Numba looks in its cache before it compiles a
 signature, so the job loads what the helper has finished; the two meet in the
 middle. The helper stops at once where the cache already holds the last kernel
 the job needs (a machine that has run the job before), and when the job asks it
 to. It changes no result: a kernel loaded from the cache is the code the job
 would have compiled.
 
-The list is recorded by running the quick job in a fresh cache with every
+The lists are recorded by running each job in a fresh cache with every
 compilation noted (:func:`record_kernels`)::
 
     python -m validation.compile_ahead --record
@@ -37,13 +38,14 @@ import os
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import import_module
 from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "JOBS",
     "KERNELS_FILE",
     "KERNELS_FORMAT",
     "KernelSignature",
@@ -54,8 +56,11 @@ __all__ = [
     "start_compile_ahead",
 ]
 
-#: The recorded kernels of the quick job, in the order the job compiles them.
+#: The recorded kernels of each job of :data:`JOBS`, in the order the job compiles them.
 KERNELS_FILE = Path(__file__).with_name("first_run_kernels.json")
+
+#: The jobs with a recorded list: name → the command it stands for.
+JOBS = {"validate": "photoquant validate --quick", "demo": "photoquant demo"}
 
 #: The format written in :data:`KERNELS_FILE`.
 KERNELS_FORMAT = "photoquant.first-run-kernels/1"
@@ -117,23 +122,31 @@ def record_kernels(job: Callable[[], Any]) -> list[KernelSignature]:
     return found
 
 
-def load_kernels(path: str | Path = KERNELS_FILE) -> list[KernelSignature]:
-    """The kernel signatures recorded in ``path`` (:data:`KERNELS_FILE` by default)."""
+def load_kernels(job: str, path: str | Path = KERNELS_FILE) -> list[KernelSignature]:
+    """The kernel signatures recorded for ``job`` in ``path`` (:data:`KERNELS_FILE`
+    by default); an empty list where it has none."""
     data = json.loads(Path(path).read_text(encoding="utf-8"))
     if data.get("format") != KERNELS_FORMAT:
         raise ValueError(f"{path}: not a {KERNELS_FORMAT} file")
-    return [KernelSignature(*entry) for entry in data["kernels"]]
+    entry = data["jobs"].get(job, {})
+    return [KernelSignature(*kernel) for kernel in entry.get("kernels", [])]
 
 
-def write_kernels(path: str | Path, kernels: Sequence[KernelSignature], job: str) -> None:
-    """Write ``kernels`` (in order) to ``path``, with the job and numba version that gave them."""
+def write_kernels(path: str | Path, jobs: Mapping[str, Sequence[KernelSignature]]) -> None:
+    """Write each job's kernels (in order) to ``path``, with the command it stands for
+    (:data:`JOBS`) and the numba version that compiled them."""
     import numba
 
     data = {
         "format": KERNELS_FORMAT,
-        "job": job,
         "numba": numba.__version__,
-        "kernels": [[k.module, k.function, k.args] for k in kernels],
+        "jobs": {
+            job: {
+                "command": JOBS.get(job, job),
+                "kernels": [[k.module, k.function, k.args] for k in kernels],
+            }
+            for job, kernels in jobs.items()
+        },
     }
     Path(path).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
 
@@ -219,8 +232,9 @@ class CompileAhead:
         self.process = None
 
 
-def start_compile_ahead(kernels: Sequence[KernelSignature] | None = None) -> CompileAhead:
-    """Fork a helper compiling ``kernels`` (the recorded list by default) last first.
+def start_compile_ahead(job: str | Sequence[KernelSignature]) -> CompileAhead:
+    """Fork a helper compiling ``job``'s recorded kernels (a name of :data:`JOBS`, or
+    the kernels themselves) last first.
 
     Nothing is started (the handle's :meth:`CompileAhead.stop` does nothing) where
     numba is missing, the machine has one core, ``fork`` is not available, or the
@@ -232,11 +246,15 @@ def start_compile_ahead(kernels: Sequence[KernelSignature] | None = None) -> Com
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     if not HAVE_NUMBA or (cores or 1) < 2 or "fork" not in multiprocessing.get_all_start_methods():
         return CompileAhead(None, None)
-    if kernels is None:
+    if isinstance(job, str):
         try:
-            kernels = load_kernels()
-        except (OSError, ValueError, KeyError, TypeError):
+            kernels = load_kernels(job)
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
             return CompileAhead(None, None)
+    else:
+        kernels = list(job)
+    if not kernels:
+        return CompileAhead(None, None)
     order = list(reversed(kernels))
     ctx = multiprocessing.get_context("fork")
     done = ctx.Event()
@@ -252,37 +270,58 @@ def start_compile_ahead(kernels: Sequence[KernelSignature] | None = None) -> Com
     return CompileAhead(process, done)
 
 
-def _record_quick_job() -> list[KernelSignature]:
-    """The quick validation job's kernels, recorded in one process with an empty cache."""
-    from validation.config import QUICK
-    from validation.experiments import run_validation
+def _run_job(job: str) -> None:
+    """Run ``job`` (a name of :data:`JOBS`) as its command does, printing nothing."""
+    import contextlib
 
-    return record_kernels(lambda: run_validation(QUICK, workers=1, progress=lambda _: None))
+    with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
+        if job == "validate":
+            from validation.config import QUICK
+            from validation.experiments import run_validation
+
+            run_validation(QUICK, workers=1, progress=lambda _: None)
+        elif job == "demo":
+            from validation.demo import run_demo
+
+            with contextlib.redirect_stderr(sink):
+                run_demo()
+        else:
+            raise ValueError(f"no job {job!r}; valid: {list(JOBS)}")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m validation.compile_ahead --record``: record the quick job's kernels."""
+    """``python -m validation.compile_ahead --record``: record the jobs' kernels."""
+    import subprocess
+
     parser = argparse.ArgumentParser(
         prog="python -m validation.compile_ahead",
-        description="record the kernels the quick validation job compiles, in order",
+        description="record the kernels each job compiles on a first run, in order",
     )
     parser.add_argument("--record", action="store_true", required=True)
     parser.add_argument(
         "-o", "--output", type=Path, default=KERNELS_FILE, help="default: %(default)s"
     )
+    parser.add_argument("--one-job", choices=list(JOBS), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    if "NUMBA_CACHE_DIR" not in os.environ or os.environ.get("_PQ_RECORDING") != "1":
-        # numba reads its cache folder at import: record in a fresh process with an empty one
-        import subprocess
-
+    if args.one_job:  # in a process of its own, with an empty cache
+        kernels = record_kernels(lambda: _run_job(args.one_job))
+        write_kernels(args.output, {args.one_job: kernels})
+        return 0
+    recorded: dict[str, list[KernelSignature]] = {}
+    for job in JOBS:
+        # numba reads its cache folder at import: each job in a fresh process, an empty cache
         with tempfile.TemporaryDirectory(prefix="photoquant-record-") as cache:
-            env = dict(os.environ, NUMBA_CACHE_DIR=cache, _PQ_RECORDING="1")
-            cmd = [sys.executable, "-m", "validation.compile_ahead", "--record", "-o"]
-            return subprocess.call([*cmd, str(args.output)], env=env)
-    t0 = time.perf_counter()
-    kernels = _record_quick_job()
-    write_kernels(args.output, kernels, "photoquant validate --quick")
-    print(f"{len(kernels)} kernels in {time.perf_counter() - t0:.0f} s: {args.output}")
+            out = Path(cache) / "kernels.json"
+            t0 = time.perf_counter()
+            cmd = [sys.executable, "-m", "validation.compile_ahead", "--record", "--one-job", job]
+            env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+            if subprocess.call([*cmd, "-o", str(out)], env=env) != 0:
+                print(f"recording {job} failed", file=sys.stderr)
+                return 1
+            recorded[job] = load_kernels(job, out)
+            print(f"{job}: {len(recorded[job])} kernels in {time.perf_counter() - t0:.0f} s")
+    write_kernels(args.output, recorded)
+    print(args.output)
     return 0
 
 

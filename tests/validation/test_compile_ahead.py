@@ -18,6 +18,7 @@ import pytest
 pytest.importorskip("numba")
 
 from validation.compile_ahead import (  # noqa: E402
+    JOBS,
     KERNELS_FORMAT,
     KernelSignature,
     compile_ahead,
@@ -38,9 +39,10 @@ LONGEST_RUN = KernelSignature(
 )
 
 
-def test_the_recorded_kernels_name_compiled_kernels_with_their_number_of_arguments():
-    kernels = load_kernels()
-    assert len(kernels) >= 20  # the quick job's calibration, correction and uncertainty
+@pytest.mark.parametrize("job", list(JOBS))
+def test_the_recorded_kernels_name_compiled_kernels_with_their_number_of_arguments(job):
+    kernels = load_kernels(job)
+    assert len(kernels) >= 20  # the calibration's, the correction's, the uncertainty's
     assert len(set(kernels)) == len(kernels)
     for kernel in kernels:
         resolved = resolve_kernel(kernel)
@@ -125,6 +127,7 @@ def test_compiled_ahead_kernels_are_loaded_by_another_process_from_the_cache(tmp
 
 def test_the_helper_starts_and_stops_and_does_nothing_without_numba(monkeypatch):
     helper = start_compile_ahead([KernelSignature("photoquant.stack", "no_such_kernel", "()")])
+    assert start_compile_ahead([]).process is None  # nothing to compile: no process
     process = helper.process
     if process is not None:  # two cores and fork: a process that finds nothing to do
         helper.stop(wait_s=30.0)
@@ -135,16 +138,19 @@ def test_the_helper_starts_and_stops_and_does_nothing_without_numba(monkeypatch)
     import photoquant._numba
 
     monkeypatch.setattr(photoquant._numba, "HAVE_NUMBA", False)
-    assert start_compile_ahead().process is None
+    assert start_compile_ahead("validate").process is None
 
 
-def test_the_kernel_list_round_trips_and_refuses_another_format(tmp_path):
+def test_the_kernel_lists_round_trip_and_another_format_is_refused(tmp_path):
     path = tmp_path / "kernels.json"
-    write_kernels(path, [INDICES_OF, LONGEST_RUN], "a job")
-    assert load_kernels(path) == [INDICES_OF, LONGEST_RUN]
+    write_kernels(path, {"validate": [INDICES_OF, LONGEST_RUN], "demo": [LONGEST_RUN]})
+    assert load_kernels("validate", path) == [INDICES_OF, LONGEST_RUN]
+    assert load_kernels("demo", path) == [LONGEST_RUN]
+    assert load_kernels("another job", path) == []
     data = json.loads(path.read_text())
-    assert data["format"] == KERNELS_FORMAT and data["job"] == "a job"
+    assert data["format"] == KERNELS_FORMAT
+    assert data["jobs"]["validate"]["command"] == JOBS["validate"]
     data["format"] = "something else/1"
     path.write_text(json.dumps(data))
     with pytest.raises(ValueError, match="not a photoquant.first-run-kernels/1 file"):
-        load_kernels(path)
+        load_kernels("validate", path)

@@ -246,7 +246,7 @@ def run_validation(
     # on a machine's first run, a helper compiles the job's kernels from the last one needed
     # while this process compiles from the first (validation.compile_ahead)
     serial_first = n_workers > 1 and (second == BESIDE or not beside)
-    helper = start_compile_ahead() if serial_first else CompileAhead(None, None)
+    helper = start_compile_ahead("validate") if serial_first else CompileAhead(None, None)
     try:
         # BLAS on one thread whatever the number of processes: the same bits either way
         with _one_blas_thread():
