@@ -19,9 +19,9 @@ to. It changes no result: a kernel loaded from the cache is the code the job
 would have compiled.
 
 The lists are recorded by running each job in a fresh cache with every
-compilation noted (:func:`record_kernels`)::
+compilation noted (:func:`record_kernels`), from a checkout::
 
-    python -m validation.compile_ahead --record
+    python tools/record_first_run_kernels.py
 
 An entry the kernels no longer match (a renamed function, a changed argument)
 is skipped by the helper and costs nothing but its attempt; a kernel the list
@@ -31,13 +31,10 @@ kernels' signatures.
 
 from __future__ import annotations
 
-import argparse
 import json
 import multiprocessing
 import os
-import sys
-import tempfile
-import time
+import signal
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import import_module
@@ -236,15 +233,14 @@ def start_compile_ahead(job: str | Sequence[KernelSignature]) -> CompileAhead:
     """Fork a helper compiling ``job``'s recorded kernels (a name of :data:`JOBS`, or
     the kernels themselves) last first.
 
-    Nothing is started (the handle's :meth:`CompileAhead.stop` does nothing) where
-    numba is missing, the machine has one core, ``fork`` is not available, or the
-    list cannot be read. Call it before the job compiles anything, and stop the
-    helper before the job starts processes of its own.
+    Nothing is started (the handle's :meth:`CompileAhead.stop` does nothing) where the
+    machine has one core, ``fork`` is not available, the list cannot be read, or its
+    last kernel is not a compiled kernel here (numba missing, or turned off by
+    ``PHOTOQUANT_NO_NUMBA=1``). Call it before the job compiles anything, and stop
+    the helper before the job starts processes of its own.
     """
-    from photoquant._numba import HAVE_NUMBA
-
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    if not HAVE_NUMBA or (cores or 1) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+    if (cores or 1) < 2 or "fork" not in multiprocessing.get_all_start_methods():
         return CompileAhead(None, None)
     if isinstance(job, str):
         try:
@@ -253,77 +249,18 @@ def start_compile_ahead(job: str | Sequence[KernelSignature]) -> CompileAhead:
             return CompileAhead(None, None)
     else:
         kernels = list(job)
-    if not kernels:
+    if not kernels or resolve_kernel(kernels[-1]) is None:
         return CompileAhead(None, None)
     order = list(reversed(kernels))
     ctx = multiprocessing.get_context("fork")
     done = ctx.Event()
 
     def work() -> None:
-        from validation.experiments import ignore_interrupts
-
-        ignore_interrupts()
+        # the job's to handle: an interrupt ends it, and it ends this process
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
         compile_ahead(order, done.is_set)
 
     process = ctx.Process(target=work, name="photoquant-compile-ahead", daemon=True)
     process.start()
     return CompileAhead(process, done)
-
-
-def _run_job(job: str) -> None:
-    """Run ``job`` (a name of :data:`JOBS`) as its command does, printing nothing."""
-    import contextlib
-
-    with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
-        if job == "validate":
-            from validation.config import QUICK
-            from validation.experiments import run_validation
-
-            run_validation(QUICK, workers=1, progress=lambda _: None)
-        elif job == "demo":
-            from validation.demo import run_demo
-
-            with contextlib.redirect_stderr(sink):
-                run_demo()
-        else:
-            raise ValueError(f"no job {job!r}; valid: {list(JOBS)}")
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m validation.compile_ahead --record``: record the jobs' kernels."""
-    import subprocess
-
-    parser = argparse.ArgumentParser(
-        prog="python -m validation.compile_ahead",
-        description="record the kernels each job compiles on a first run, in order",
-    )
-    parser.add_argument("--record", action="store_true", required=True)
-    parser.add_argument(
-        "-o", "--output", type=Path, default=KERNELS_FILE, help="default: %(default)s"
-    )
-    parser.add_argument("--one-job", choices=list(JOBS), help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.one_job:  # in a process of its own, with an empty cache
-        kernels = record_kernels(lambda: _run_job(args.one_job))
-        write_kernels(args.output, {args.one_job: kernels})
-        return 0
-    recorded: dict[str, list[KernelSignature]] = {}
-    for job in JOBS:
-        # numba reads its cache folder at import: each job in a fresh process, an empty cache
-        with tempfile.TemporaryDirectory(prefix="photoquant-record-") as cache:
-            out = Path(cache) / "kernels.json"
-            t0 = time.perf_counter()
-            cmd = [sys.executable, "-m", "validation.compile_ahead", "--record", "--one-job", job]
-            env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-            if subprocess.call([*cmd, "-o", str(out)], env=env) != 0:
-                print(f"recording {job} failed", file=sys.stderr)
-                return 1
-            recorded[job] = load_kernels(job, out)
-            print(f"{job}: {len(recorded[job])} kernels in {time.perf_counter() - t0:.0f} s")
-    write_kernels(args.output, recorded)
-    print(args.output)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
