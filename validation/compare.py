@@ -523,7 +523,7 @@ def comparison_figures(rep: dict[str, Any], channels: tuple[str, ...]) -> list[A
     """Figures of a comparison: per-channel error maps of ``v`` and ``u``, the scene's eq. 8 map.
 
     Returns :class:`validation.experiments.base.FigureSpec` objects for
-    :func:`validation.report.draw_figure`.
+    :func:`validation.figures.draw_figure`.
     """
     from validation.experiments.base import FigureSpec
 
@@ -578,7 +578,7 @@ def write_comparison_figures(
     """Draw :func:`comparison_figures` as PNG files into a new ``folder`` (written atomically)."""
     from photoquant.io.atomic import atomic_directory
     from photoquant.io.outputs import figures_folder_problem
-    from validation.report import draw_figure
+    from validation.figures import draw_figure
 
     specs = comparison_figures(rep, channels)
     target = Path(folder)

@@ -233,6 +233,7 @@ def run_validation(
     from validation._memory import return_free_memory
     from validation.compile_ahead import CompileAhead, start_compile_ahead
     from validation.experiments.shared import Shared
+    from validation.figures import draw_while
 
     names = _select(experiments, config)
     n_workers = _default_workers() if workers is None else check_int(workers, "workers", 1)
@@ -264,6 +265,8 @@ def run_validation(
                     for name in names:
                         if name not in beside:
                             results[name] = _run_one(name, names, config, seed, root, shared)
+                    # this process's figures, drawn while the other finishes (not after it)
+                    draw_while(results.values(), other.running)
                     done, seeds = other.results()
                 finally:
                     other.stop()
@@ -366,6 +369,10 @@ class _Beside:
 
     process: Any
     connection: Any
+
+    def running(self) -> bool:
+        """Whether the process has not sent its results yet."""
+        return not self.connection.poll()
 
     def results(self) -> tuple[dict[str, ExperimentResult], dict[str, int]]:
         """The experiments' results and the seed streams they drew (waits for them)."""

@@ -97,6 +97,9 @@ class ExperimentResult:
     notes: list[str] = field(default_factory=list)
     paper: dict[str, Any] = field(default_factory=dict)
     figure_paths: list[str] = field(default_factory=list)
+    drawn: dict[str, bytes] = field(default_factory=dict, repr=False)
+    """Figures already drawn, by name: the PNG bytes of :func:`validation.figures.figure_png`
+    (the run draws its own while it waits for its second process)."""
     elapsed_s: float = 0.0
     skipped: str | None = None
 
