@@ -460,13 +460,17 @@ def _normal_terms_py(
             coef[n_k + k, p] = wk * alpha[k, p]
     # sums over the exposures as numpy's axis-0 reduction makes them: the first row, then
     # each next row added
-    d = w[0] * w[0]
-    rhs_e = w[0] * wlt[0]
+    d = np.empty(n_p)
+    rhs_e = np.empty(n_p)
+    for p in range(n_p):
+        d[p] = w[0, p] * w[0, p]
+        rhs_e[p] = w[0, p] * wlt[0, p]
     for k in range(1, n_k):
         for p in range(n_p):
             d[p] += w[k, p] * w[k, p]
             rhs_e[p] += w[k, p] * wlt[k, p]
-    rhs_e = -rhs_e
+    for p in range(n_p):
+        rhs_e[p] = -rhs_e[p]
     nge = np.empty((2 * n_k, n_p))
     scaled = np.empty((2 * n_k, n_p))
     rhs_g = np.zeros(n_g)
@@ -484,9 +488,16 @@ def _normal_terms_py(
     n_gg = np.zeros(n_g * n_g)
     corr = np.zeros(n_g * n_g)
     normal_blocks(idx, coef, scaled, nge, n_k, n_g, s_pair, s_prod, n_gg, corr)
-    schur = (n_gg - corr).reshape(n_g, n_g)
-    r_red = rhs_g - back
-    return w, wlt, idx, coef, nge, d, rhs_e, schur, r_red, support[:n_g].copy()
+    schur = np.empty((n_g, n_g))
+    for i in range(n_g):
+        for j in range(n_g):
+            schur[i, j] = n_gg[i * n_g + j] - corr[i * n_g + j]
+    r_red = np.empty(n_g)
+    kept = np.empty(n_g)
+    for i in range(n_g):
+        r_red[i] = rhs_g[i] - back[i]
+        kept[i] = support[i]
+    return w, wlt, idx, coef, nge, d, rhs_e, schur, r_red, kept
 
 
 def _back_substitution_py(
