@@ -54,7 +54,7 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_const",
         const="quick",
         help="the default: 320x240, N = 4, K = 8, V = 3 (about 35 s on 2 cores; "
-        "45 s on a first run, which compiles the kernels)",
+        "47 s on a first run, which compiles the kernels)",
     )
     mode.add_argument(
         "--full",
