@@ -11,9 +11,9 @@ after them). The second core waits.
 
 :func:`start_compile_ahead` forks a helper that compiles a recorded list of the
 job's kernels (:data:`KERNELS_FILE`, one list per job in :data:`JOBS`) in the
-*reverse* of the order the job needs them, into the same cache. Numba looks in its cache before it compiles a
-signature, so the job loads what the helper has finished; the two meet in the
-middle. The helper stops at once where the cache already holds the last kernel
+*reverse* of the order the job needs them, into the same cache. Numba looks in
+its cache before it compiles a signature, so the job loads what the helper has
+finished; the two meet in the middle. The helper stops at once where the cache already holds the last kernel
 the job needs (a machine that has run the job before), and when the job asks it
 to. It changes no result: a kernel loaded from the cache is the code the job
 would have compiled.
@@ -51,6 +51,7 @@ __all__ = [
     "record_kernels",
     "resolve_kernel",
     "start_compile_ahead",
+    "write_kernels",
 ]
 
 #: The recorded kernels of each job of :data:`JOBS`, in the order the job compiles them.

@@ -213,7 +213,8 @@ def figure_png(spec: FigureSpec) -> bytes:
 def draw_while(results: Iterable[ExperimentResult], go_on: Callable[[], bool]) -> int:
     """Draw the figures of ``results`` into their ``drawn`` while ``go_on()`` holds (asked
     before each figure); returns how many were drawn. Nothing is drawn where matplotlib
-    is not installed."""
+    is not installed; a figure that fails to draw ends the drawing here, and the report
+    draws it again (and says why it cannot)."""
     try:
         import matplotlib  # noqa: F401
     except ImportError:
@@ -225,6 +226,9 @@ def draw_while(results: Iterable[ExperimentResult], go_on: Callable[[], bool]) -
                 continue
             if not go_on():
                 return count
-            res.drawn[spec.name] = figure_png(spec)
+            try:
+                res.drawn[spec.name] = figure_png(spec)
+            except Exception:  # noqa: BLE001 - the report's to say, where it draws it again
+                return count
             count += 1
     return count

@@ -47,6 +47,14 @@ def test_draw_while_stops_when_told_and_goes_on_where_it_stopped():
     assert [sorted(res.drawn) for res in results] == [["a", "b"], ["c"]]
 
 
+def test_a_figure_that_fails_to_draw_ends_the_drawing_and_is_left_to_the_report():
+    res = ExperimentResult("x", "X", "")
+    broken = FigureSpec("broken", "no such kind", "B", "", {})
+    res.figures += [_maps("a", 0), broken, _maps("c", 2)]
+    assert draw_while([res], lambda: True) == 1
+    assert sorted(res.drawn) == ["a"]
+
+
 def test_the_report_writes_a_drawn_figure_as_it_is_and_draws_the_others(tmp_path):
     res = ExperimentResult("response", "Response", "")
     drawn, left = _maps("drawn", 0), _maps("left", 1)

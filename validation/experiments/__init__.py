@@ -218,8 +218,12 @@ def run_validation(
         calibrated first, then the experiments of :func:`beside_for` run in a
         forked second process while this one runs the rest (the studies of
         ``--full``, which calibrate capture sets of their own, are forked
-        first). Each experiment's
-        metrics depend on its seed streams only, not on the process (their
+        first); while the presets are calibrated, a helper process compiles
+        the job's kernels on a machine's first run
+        (:mod:`validation.compile_ahead`), and this process draws its
+        experiments' figures while the second finishes
+        (:attr:`~validation.experiments.base.ExperimentResult.drawn`).
+        Each experiment's metrics depend on its seed streams only, not on the process (their
         shared memos are recomputed there: the same values); the timings of
         the calibrations in each process are taken beside the other's work.
         ``1``: everything in this process, in order.
