@@ -167,7 +167,7 @@ def _trim_few_py(
     left = np.zeros(n_rows, dtype=np.int64)
     data = (values, valid, few, spacing, cap, partners, longer)
     cells = (drop_all, row, hist, thr, left)
-    _trim_visit(data, cells, out, False)
+    _trim_visit(data, cells, out, np.bool_(False))  # not a literal: one compilation for both
     if n_rows == 0:
         return
     # per partial cell: the partner level holding its n_cens-th partner, and how many of
@@ -187,7 +187,7 @@ def _trim_few_py(
                         thr[r] = lev_j
                         left[r] = need - prev
                         break
-    _trim_visit(data, cells, out, True)
+    _trim_visit(data, cells, out, np.bool_(True))
 
 
 def _trim_visit_py(data: Any, cells: Any, out: Any, final: bool) -> None:  # pragma: no cover
