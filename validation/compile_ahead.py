@@ -13,10 +13,10 @@ after them). The second core waits.
 job's kernels (:data:`KERNELS_FILE`, one list per job in :data:`JOBS`) in the
 *reverse* of the order the job needs them, into the same cache. Numba looks in
 its cache before it compiles a signature, so the job loads what the helper has
-finished; the two meet in the middle. The helper stops at once where the cache already holds the last kernel
-the job needs (a machine that has run the job before), and when the job asks it
-to. It changes no result: a kernel loaded from the cache is the code the job
-would have compiled.
+finished; the two meet in the middle. No helper starts where the cache already
+holds the last kernel the job needs (a machine that has run the job before), and
+it stops when the job asks it to. It changes no result: a kernel loaded from the
+cache is the code the job would have compiled.
 
 The lists are recorded by running each job in a fresh cache with every
 compilation noted (:func:`record_kernels`), from a checkout::
@@ -42,11 +42,14 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "FIRST_RUN_NOTE",
     "JOBS",
     "KERNELS_FILE",
     "KERNELS_FORMAT",
+    "CompileAhead",
     "KernelSignature",
     "compile_ahead",
+    "is_cached",
     "load_kernels",
     "record_kernels",
     "resolve_kernel",
@@ -62,6 +65,12 @@ JOBS = {"validate": "photoquant validate --quick", "demo": "photoquant demo"}
 
 #: The format written in :data:`KERNELS_FILE`.
 KERNELS_FORMAT = "photoquant.first-run-kernels/1"
+
+#: What a job says where it starts the helper.
+FIRST_RUN_NOTE = (
+    "a first run on this machine: photoquant's kernels are compiled once, on both cores "
+    "(numba keeps them on disk for the next runs)"
+)
 
 
 @dataclass(frozen=True)
@@ -179,6 +188,23 @@ def resolve_kernel(kernel: KernelSignature) -> tuple[Any, tuple[Any, ...]] | Non
     return (dispatcher, args) if isinstance(args, tuple) else None
 
 
+def is_cached(kernel: KernelSignature) -> bool | None:
+    """Whether this process has ``kernel`` compiled or numba's on-disk cache holds it;
+    ``None`` where it cannot tell (not a compiled kernel here, or no on-disk cache)."""
+    resolved = resolve_kernel(kernel)
+    if resolved is None:
+        return None
+    dispatcher, args = resolved
+    if args in dispatcher.overloads:
+        return True
+    if dispatcher.stats.cache_path is None:
+        return None
+    try:  # numba's cache, read as its dispatcher does before it compiles a signature
+        return dispatcher._cache.load_overload(args, dispatcher.targetctx) is not None
+    except Exception:  # noqa: BLE001 - another numba's cache: cannot tell
+        return None
+
+
 def compile_ahead(
     kernels: Iterable[KernelSignature], stop: Callable[[], bool] = lambda: False
 ) -> int:
@@ -211,10 +237,12 @@ def compile_ahead(
 
 @dataclass
 class CompileAhead:
-    """The helper process of :func:`start_compile_ahead`."""
+    """The helper process of :func:`start_compile_ahead`; ``first_run``: whether it was
+    started (the job's kernels are not in numba's cache: a machine's first run)."""
 
     process: Any
     done: Any
+    first_run: bool = False
 
     def stop(self, wait_s: float = 0.25) -> None:
         """Ask the helper to stop after the kernel it is compiling; end it after
@@ -234,11 +262,12 @@ def start_compile_ahead(job: str | Sequence[KernelSignature]) -> CompileAhead:
     """Fork a helper compiling ``job``'s recorded kernels (a name of :data:`JOBS`, or
     the kernels themselves) last first.
 
-    Nothing is started (the handle's :meth:`CompileAhead.stop` does nothing) where the
-    machine has one core, ``fork`` is not available, the list cannot be read, or its
-    last kernel is not a compiled kernel here (numba missing, or turned off by
-    ``PHOTOQUANT_NO_NUMBA=1``). Call it before the job compiles anything, and stop
-    the helper before the job starts processes of its own.
+    Nothing is started (the handle's :meth:`CompileAhead.stop` does nothing) where
+    numba's cache already holds the list's last kernel (a machine that has run the
+    job), the machine has one core, ``fork`` is not available, the list cannot be
+    read, or its last kernel is not a compiled kernel here (numba missing, or turned
+    off by ``PHOTOQUANT_NO_NUMBA=1``). Call it before the job compiles anything, and
+    stop the helper before the job starts processes of its own.
     """
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     if (cores or 1) < 2 or "fork" not in multiprocessing.get_all_start_methods():
@@ -250,7 +279,7 @@ def start_compile_ahead(job: str | Sequence[KernelSignature]) -> CompileAhead:
             return CompileAhead(None, None)
     else:
         kernels = list(job)
-    if not kernels or resolve_kernel(kernels[-1]) is None:
+    if not kernels or is_cached(kernels[-1]) is not False:
         return CompileAhead(None, None)
     order = list(reversed(kernels))
     ctx = multiprocessing.get_context("fork")
@@ -264,4 +293,4 @@ def start_compile_ahead(job: str | Sequence[KernelSignature]) -> CompileAhead:
 
     process = ctx.Process(target=work, name="photoquant-compile-ahead", daemon=True)
     process.start()
-    return CompileAhead(process, done)
+    return CompileAhead(process, done, first_run=True)

@@ -27,7 +27,7 @@ from pqsim.capture_set import write_capture_set
 from pqsim.synth_camera.presets import camera_from_preset
 from pqsim.synth_camera.truth import load_truth
 from validation.compare import compare_with_truth, format_comparison
-from validation.compile_ahead import start_compile_ahead
+from validation.compile_ahead import FIRST_RUN_NOTE, start_compile_ahead
 
 __all__ = ["run_demo"]
 
@@ -80,6 +80,8 @@ def run_demo(
     root = Path(output) if keep else make_scratch_directory("photoquant-demo-")
     timings: dict[str, float] = {}
     helper = start_compile_ahead("demo")  # a machine's first run: validation.compile_ahead
+    if helper.first_run:
+        _say(f"demo: {FIRST_RUN_NOTE}")
     try:
         root.mkdir(parents=True, exist_ok=True)
         _say(f"demo: simulating the '{preset}' camera at {shape[1]}x{shape[0]} (seed {seed}) ...")

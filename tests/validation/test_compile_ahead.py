@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import multiprocessing
 import os
 import subprocess
 import sys
@@ -17,6 +18,7 @@ import pytest
 
 pytest.importorskip("numba")
 
+from tests._cpus import SUITE_CPUS, every_cpu  # noqa: E402
 from validation.compile_ahead import (  # noqa: E402
     JOBS,
     KERNELS_FORMAT,
@@ -123,6 +125,36 @@ def test_compiled_ahead_kernels_are_loaded_by_another_process_from_the_cache(tmp
         """,
     )
     assert again.split() == ["0", "1", "0"]
+
+
+@pytest.mark.skipif(
+    len(SUITE_CPUS) < 2 or "fork" not in multiprocessing.get_all_start_methods(),
+    reason="the helper runs beside a job on a second core, started by fork",
+)
+def test_a_first_run_starts_the_helper_and_the_next_finds_its_work_cached(tmp_path):
+    with every_cpu():  # the suite binds each worker to one CPU: the helper needs two
+        out = _first_run_then_the_next(tmp_path)
+    assert out.split() == ["False", "False", "True", "True", "0", "True", "True", "False", "True"]
+
+
+def _first_run_then_the_next(tmp_path: Path) -> str:
+    return _in_fresh_process(
+        tmp_path,
+        f"""
+        from validation.compile_ahead import KernelSignature, is_cached, start_compile_ahead
+        first = KernelSignature(*{astuple(INDICES_OF)!r})
+        second = KernelSignature(*{astuple(LONGEST_RUN)!r})
+        print(is_cached(first), is_cached(second))
+        helper = start_compile_ahead([second, first])  # the last kernel first
+        print(helper.first_run, helper.process is not None)
+        helper.process.join(timeout=100)  # both compiled, then it ends
+        print(helper.process.exitcode)
+        helper.stop()
+        print(is_cached(first), is_cached(second))
+        again = start_compile_ahead([second, first])
+        print(again.first_run, again.process is None)
+        """,
+    )
 
 
 def test_the_helper_starts_and_stops_and_starts_nothing_where_the_list_is_not_here():

@@ -235,7 +235,7 @@ def run_validation(
     from photoquant.io.atomic import make_scratch_directory, remove_scratch_directory
     from photoquant.utils import check_int
     from validation._memory import return_free_memory
-    from validation.compile_ahead import CompileAhead, start_compile_ahead
+    from validation.compile_ahead import FIRST_RUN_NOTE, CompileAhead, start_compile_ahead
     from validation.experiments.shared import Shared
     from validation.figures import draw_while
 
@@ -252,6 +252,8 @@ def run_validation(
     # while this process compiles from the first (validation.compile_ahead)
     serial_first = n_workers > 1 and (second == BESIDE or not beside)
     helper = start_compile_ahead("validate") if serial_first else CompileAhead(None, None)
+    if helper.first_run:
+        shared.say(f"validate: {FIRST_RUN_NOTE}")
     try:
         # BLAS on one thread whatever the number of processes: the same bits either way
         with _one_blas_thread():
