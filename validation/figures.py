@@ -213,8 +213,8 @@ def figure_png(spec: FigureSpec) -> bytes:
 def draw_while(results: Iterable[ExperimentResult], go_on: Callable[[], bool]) -> int:
     """Draw the figures of ``results`` into their ``drawn`` while ``go_on()`` holds (asked
     before each figure); returns how many were drawn. Nothing is drawn where matplotlib
-    is not installed; a figure that fails to draw ends the drawing here, and the report
-    draws it again (and says why it cannot)."""
+    is not installed; a figure that fails to draw ends the drawing here and is drawn again
+    by the report, where its error is raised as before."""
     try:
         import matplotlib  # noqa: F401
     except ImportError:
