@@ -31,9 +31,9 @@ kernels' signatures.
 
 from __future__ import annotations
 
+import functools
 import json
 import multiprocessing
-import os
 import signal
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -158,10 +158,17 @@ def write_kernels(path: str | Path, jobs: Mapping[str, Sequence[KernelSignature]
     Path(path).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
 
 
+@functools.cache
+def _numba_type_names() -> dict[str, Any]:
+    """numba's type names, the namespace its type reprs are read back in."""
+    import numba.types
+
+    return {name: getattr(numba.types, name) for name in dir(numba.types)}
+
+
 def resolve_kernel(kernel: KernelSignature) -> tuple[Any, tuple[Any, ...]] | None:
     """The compiled kernel (numba dispatcher) of ``kernel.function`` with its argument
     types, or ``None`` where the module has no such kernel or the types do not parse."""
-    import numba.types
     from numba.core.dispatcher import Dispatcher
 
     try:
@@ -180,9 +187,8 @@ def resolve_kernel(kernel: KernelSignature) -> tuple[Any, tuple[Any, ...]] | Non
     )
     if dispatcher is None:
         return None
-    names = {name: getattr(numba.types, name) for name in dir(numba.types)}
     try:
-        args = eval(kernel.args, {"__builtins__": {}}, names)  # noqa: S307 - numba's own reprs
+        args = eval(kernel.args, {"__builtins__": {}}, _numba_type_names())  # noqa: S307 - numba's own reprs
     except Exception:  # noqa: BLE001 - a type numba no longer has: the entry is skipped
         return None
     return (dispatcher, args) if isinstance(args, tuple) else None
@@ -269,8 +275,9 @@ def start_compile_ahead(job: str | Sequence[KernelSignature]) -> CompileAhead:
     off by ``PHOTOQUANT_NO_NUMBA=1``). Call it before the job compiles anything, and
     stop the helper before the job starts processes of its own.
     """
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    if (cores or 1) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+    from photoquant.utils import default_workers
+
+    if default_workers() < 2 or "fork" not in multiprocessing.get_all_start_methods():
         return CompileAhead(None, None)
     if isinstance(job, str):
         try:
