@@ -18,16 +18,25 @@ the full refinement's cost, with honest standard errors); where it relates
 no two exposures, :func:`photoquant.exposure.refine_against_response` is
 used instead. ``refine_exposures=True`` always takes the full refinement.
 
-The screen runs before the merge, on one thread. Merging with the nominal
-times on the other threads while the screen decides (the result where the
-screen keeps them, dropped for the refined times' where it does not) was
-measured and not kept (1024×768×3, K = 4, N = 1, 2 cores, 2026-12-06, the
-same bits either way): 7.3 → 6.1 ms a correction on exact times, 7.5 →
-9.0 ms on jittered ones — the screen itself runs 13–25 % slower beside a
-merge on the other core (also beside a merge in one compiled call, without
-any Python between tiles: the cores' shared resources, not the GIL), and a
-tile begun with the nominal times is finished before its thread turns to
-the refined ones.
+The screen runs on the calling thread while the merge with the nominal times
+begins on the others (:func:`photoquant.merge._tiled.start_merge_tiles`),
+where the camera's last tested scene kept its times: where the screen keeps
+them, what those threads merged is the result; where it refines them, the
+merge switches to the refined times' tables, merges the tiles not begun yet
+and then again those begun with the nominal times, on the same threads. The
+bits are those of the merge after the screen either way, and a camera keeps
+the tables of both (:func:`photoquant.merge.debevec1997.plan_stack_Debevec1997`).
+Interleaved in one process (1024×768×3, K = 4, N = 1, 2 cores, two runs of
+100 rounds, 2026-12-07): exact times 7.40–7.87 → 6.11–6.71 ms a correction
+(min). A scene whose times are refined gains nothing from it: the tiles the
+other threads merged while the screen ran are merged again, the screen runs
+4–8 % slower beside a merge on the other core, and the tile begun with the
+nominal times when the screen ends is finished before its thread turns to the
+refined ones — 6.60–6.67 → 6.85–6.89 ms where it was tried on every scene.
+Hence the camera's last decision: a camera's scenes tend to go one way (a
+shutter whose labels hold, or one whose labels are off), and after a refined
+scene the next one is screened first (7.55–7.94 ms either way in the runs
+above). On one thread (``workers=1``) the screen always runs first.
 """
 
 from __future__ import annotations
@@ -38,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from photoquant._checks import check_workers
 from photoquant.defects import detect_defects
 from photoquant.errors import CalibrationError, InputError
 from photoquant.exposure import (
@@ -49,7 +59,7 @@ from photoquant.exposure import (
     refine_by_pairs,
 )
 from photoquant.merge import MergeModel
-from photoquant.merge._tiled import merge_tiles
+from photoquant.merge._tiled import CodeSource, MergeTables, TileMerge, start_merge_tiles
 from photoquant.merge.debevec1997 import DebevecMergeOptions
 from photoquant.merge.noise_aware import (
     NoiseParameters,
@@ -325,20 +335,21 @@ def correct(
         )
     if not (isinstance(uncertainty, bool) or uncertainty == "auto"):
         raise InputError(f"`uncertainty` must be true, false or 'auto', got {uncertainty!r}")
-    refinement, decision, notes = _scene_exposures(stack, model, refine_exposures)
     if uncertainty and merger.method != "Debevec 1997":
         problem = (
             f"the uncertainty is propagated through the 'Debevec 1997' merge, not {merger.method!r}"
         )
         if uncertainty is True:
             raise InputError(problem)
-        notes.append(f"no uncertainty: {problem}")
         uncertainty = False
-    if refinement is not None:
-        stack = refinement.apply(stack)
-    photoquantity, mask, all_saturated, all_dark = _merge_and_uniformise(
-        stack, model, merger, tile_rows=tile_rows, workers=workers
+    else:
+        problem = None
+    stack, refinement, decision, notes, merged = _tested_and_merged(
+        stack, model, merger, refine_exposures, tile_rows=tile_rows, workers=workers
     )
+    photoquantity, mask, all_saturated, all_dark = merged
+    if problem is not None:
+        notes.append(f"no uncertainty: {problem}")
     # hot/stuck pixels: not merged (NaN, flagged); the calibration's map of the sensor when
     # the camera has one (no search per scene: 75 ms of a 1024x768 K = 4 stack's ~100 ms)
     flagged = _defect_indices(model, stack)
@@ -403,6 +414,61 @@ def _unmerged_note(mask: np.ndarray, all_saturated: np.ndarray, all_dark: np.nda
     )
 
 
+def _tested_and_merged(
+    stack: ExposureStack,
+    model: CameraModel,
+    merger: MergeModel,
+    refine_exposures: bool | None,
+    *,
+    tile_rows: int | None,
+    workers: int | None,
+) -> tuple[
+    ExposureStack,
+    ExposureRefinement | None,
+    ExposureDecision | None,
+    list[str],
+    tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+]:
+    """:func:`_scene_exposures` and :func:`_merge_and_uniformise` with the times it gives:
+    ``(stack labelled with them, refinement, decision, notes, (l, mask, all saturated,
+    all dark))``.
+
+    Where the scene's times are tested and the camera's last tested scene kept
+    its nominal times (:data:`_KEPT_LAST`; a camera's scenes tend to go one way:
+    a shutter whose labels hold, or one whose labels are off), the one-pass
+    merge with the nominal times begins on the other threads while the test
+    runs on this one: its result where the test keeps them, switched to the
+    refined times where it does not (the tiles merged already are merged again,
+    :meth:`photoquant.merge._tiled.TileMerge.switch`). The same bits either way.
+    """
+    tested = refine_exposures is None and _camera_refines(model)
+    begun = None
+    if tested and model._cache.get(_KEPT_LAST, True) and check_workers(workers) > 1:
+        begun = _start_one_pass(stack, model, merger, tile_rows=tile_rows, workers=workers)
+    try:
+        refinement, decision, notes = _scene_exposures(stack, model, refine_exposures)
+        if tested:
+            model._cache[_KEPT_LAST] = refinement is None
+        if refinement is not None:
+            stack = refinement.apply(stack)
+            if begun is not None:
+                plan = _one_pass_plan(stack, model, merger)
+                assert plan is not None  # as the nominal times' plan: only the times differ
+                begun.merge.switch(*plan)
+        if begun is not None:
+            return stack, refinement, decision, notes, begun.finish()
+        merged = _merge_and_uniformise(stack, model, merger, tile_rows=tile_rows, workers=workers)
+        return stack, refinement, decision, notes, merged
+    finally:
+        if begun is not None:  # no thread outlives the call (a failure, an interrupt)
+            begun.merge.stop()
+
+
+_KEPT_LAST = "scene_times_kept"
+"""The key, in a camera's cache, of whether the last scene whose times it tested kept
+them (:func:`_tested_and_merged` merges while it tests where it did)."""
+
+
 def _merge_and_uniformise(
     stack: ExposureStack,
     model: CameraModel,
@@ -413,44 +479,85 @@ def _merge_and_uniformise(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``l = exp(merge) / (u·v)`` (float32) with the merge's flags ``(mask, all
     saturated, all dark)``: in one tiled pass where the merge treats each pixel on its
-    own and there is no glare to remove, else merged whole (glare deconvolved on the
-    sensor, after ``÷ u``)."""
+    own and there is no glare to remove (:func:`_start_one_pass`), else merged whole
+    (glare deconvolved on the sensor, after ``÷ u``)."""
+    one_pass = _start_one_pass(stack, model, merger, tile_rows=tile_rows, workers=workers)
+    if one_pass is not None:
+        return one_pass.finish()
+    # a method that merges the whole image at once, or glare to remove
     gain = gain_map_f32(model)
-    plan = merger.tile_plan(stack, model.balanced_response()) if model.glare.is_identity else None
-    if plan is not None:  # one pass: frames -> ln c -> l, tile by tile
-        shape = (*stack.image_shape, stack.n_channels)
-        photoquantity = np.empty(shape, dtype=np.float32)
-        # zeroed flags, set only where they hold (photoquant.merge._tiled.merge_tiles)
-        mask, all_saturated, all_dark = (np.zeros(shape, dtype=bool) for _ in range(3))
+    merged = merger.merge(stack, model.balanced_response())
+    with np.errstate(invalid="ignore"):
+        if model.glare.is_identity:
+            photoquantity = np.exp(merged.log_photoquantity).astype(np.float32) * gain
+        else:  # veiling glare: deconvolve on the sensor (÷ u first), then ÷ v (photoquant.glare)
+            sensor = np.exp(merged.log_photoquantity) / model.sensor_lut.lut
+            photoquantity = (model.glare.remove(sensor) / model.vignetting_map()).astype(np.float32)
+    return photoquantity, merged.mask, merged.all_saturated, merged.all_dark
 
-        def uniformise(rows: slice, log_c: np.ndarray, flagged: np.ndarray) -> None:
-            del flagged  # NaN there already, and exp(NaN) · gain stays NaN
-            np.exp(log_c, out=log_c)
-            log_c *= gain[rows]
 
-        merge_tiles(
-            *plan,
-            photoquantity,
-            mask,
-            all_saturated,
-            all_dark,
-            tile_rows=tile_rows,
-            workers=workers,
-            on_tile=uniformise,
-            flags_zeroed=True,
-        )
-    else:  # a method that merges the whole image at once, or glare to remove
-        merged = merger.merge(stack, model.balanced_response())
-        with np.errstate(invalid="ignore"):
-            if model.glare.is_identity:
-                photoquantity = np.exp(merged.log_photoquantity).astype(np.float32) * gain
-            else:  # veiling glare: deconvolve on the sensor (÷ u first), then ÷ v (photoquant.glare)
-                sensor = np.exp(merged.log_photoquantity) / model.sensor_lut.lut
-                photoquantity = (model.glare.remove(sensor) / model.vignetting_map()).astype(
-                    np.float32
-                )
-        mask, all_saturated, all_dark = merged.mask, merged.all_saturated, merged.all_dark
-    return photoquantity, mask, all_saturated, all_dark
+@dataclass(frozen=True, eq=False)
+class _OnePass:
+    """The one-pass correction's arrays and its tiled merge, begun on threads
+    (:func:`_start_one_pass`)."""
+
+    photoquantity: np.ndarray
+    mask: np.ndarray
+    all_saturated: np.ndarray
+    all_dark: np.ndarray
+    merge: TileMerge
+
+    def finish(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The arrays, once every tile is merged (the caller merging the tiles left)."""
+        self.merge.finish()
+        return self.photoquantity, self.mask, self.all_saturated, self.all_dark
+
+
+def _one_pass_plan(
+    stack: ExposureStack, model: CameraModel, merger: MergeModel
+) -> tuple[CodeSource, MergeTables] | None:
+    """The tiled merge's source and tables, where the merge treats each pixel on its own
+    and there is no glare to remove (else ``None``)."""
+    return merger.tile_plan(stack, model.balanced_response()) if model.glare.is_identity else None
+
+
+def _start_one_pass(
+    stack: ExposureStack,
+    model: CameraModel,
+    merger: MergeModel,
+    *,
+    tile_rows: int | None,
+    workers: int | None,
+) -> _OnePass | None:
+    """Frames → ``ln c`` → ``l = exp(ln c) / (u·v)``, tile by tile, begun on ``workers − 1``
+    threads (:func:`photoquant.merge._tiled.start_merge_tiles`); ``None`` where
+    :func:`_one_pass_plan` has no plan."""
+    plan = _one_pass_plan(stack, model, merger)
+    if plan is None:
+        return None
+    gain = gain_map_f32(model)
+    shape = (*stack.image_shape, stack.n_channels)
+    photoquantity = np.empty(shape, dtype=np.float32)
+    # zeroed flags, set only where they hold (photoquant.merge._tiled.merge_tiles)
+    mask, all_saturated, all_dark = (np.zeros(shape, dtype=bool) for _ in range(3))
+
+    def uniformise(rows: slice, log_c: np.ndarray, flagged: np.ndarray) -> None:
+        del flagged  # NaN there already, and exp(NaN) · gain stays NaN
+        np.exp(log_c, out=log_c)
+        log_c *= gain[rows]
+
+    run = start_merge_tiles(
+        *plan,
+        photoquantity,
+        mask,
+        all_saturated,
+        all_dark,
+        tile_rows=tile_rows,
+        workers=workers,
+        on_tile=uniformise,
+        flags_zeroed=True,
+    )
+    return _OnePass(photoquantity, mask, all_saturated, all_dark, run)
 
 
 def _stated_uncertainty(

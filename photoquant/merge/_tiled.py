@@ -38,7 +38,7 @@ from typing import Protocol
 import numpy as np
 
 from photoquant._checks import check_workers
-from photoquant._threads import thread_map
+from photoquant._threads import BackgroundMap, thread_map
 from photoquant.merge._kernels import (
     accumulate_codes,
     accumulate_repeats,
@@ -52,9 +52,11 @@ __all__ = [
     "DirectCodes",
     "RepeatCodes",
     "SummaryCodes",
+    "TileMerge",
     "row_tiles",
     "merge_tiles",
     "merge_tiles_linear",
+    "start_merge_tiles",
 ]
 
 PAIRED_TABLE_SIZE = (1 << 16) + 2
@@ -376,20 +378,84 @@ def merge_tiles(
     fresh ``np.zeros`` array is mapped page by page on first write: 7 MiB of
     flags for 1024×768×3 are not written at all).
     """
-    height = source.shape[0]
-    tiles = row_tiles(height, source.bytes_per_row, tile_rows, check_workers(workers))
+    start_merge_tiles(
+        source,
+        tables,
+        log_out,
+        mask_out,
+        all_saturated_out,
+        all_dark_out,
+        weight_out=weight_out,
+        tile_rows=tile_rows,
+        workers=workers,
+        on_tile=on_tile,
+        backend=backend,
+        flags_zeroed=flags_zeroed,
+    ).finish()
 
-    def job(rows: slice) -> None:
+
+@dataclass(frozen=True, eq=False)
+class TileMerge:
+    """A :func:`merge_tiles` begun on ``workers − 1`` threads (:func:`start_merge_tiles`)
+    while the caller does something else."""
+
+    tiles: list[slice]
+    _run: BackgroundMap[None, tuple[CodeSource, MergeTables]]
+
+    def switch(self, source: CodeSource, tables: MergeTables) -> None:
+        """Merge the tiles left, and again those begun already, from ``source`` and
+        ``tables`` (the same stack with other exposure times): each tile merged again
+        writes all its outputs, its flags too."""
+        self._run.switch((source, tables))
+
+    def finish(self) -> None:
+        """Merge the tiles left beside the threads and wait for them (raising as
+        :func:`merge_tiles` does)."""
+        self._run.finish()
+
+    def stop(self) -> None:
+        """Begin no more tiles and wait for those begun (what the outputs hold then is
+        not a result)."""
+        self._run.stop()
+
+
+def start_merge_tiles(
+    source: CodeSource,
+    tables: MergeTables,
+    log_out: np.ndarray,
+    mask_out: np.ndarray,
+    all_saturated_out: np.ndarray,
+    all_dark_out: np.ndarray,
+    *,
+    weight_out: np.ndarray | None = None,
+    tile_rows: int | None = None,
+    workers: int | None = None,
+    on_tile: Callable[[slice, np.ndarray, np.ndarray], None] | None = None,
+    backend: str = "auto",
+    flags_zeroed: bool = False,
+) -> TileMerge:
+    """:func:`merge_tiles` begun on ``workers − 1`` threads, returned at once: the caller
+    then :meth:`~TileMerge.finish` es it (working on the tiles left as its
+    ``workers``-th thread), after a :meth:`~TileMerge.switch` of its tables where
+    they turned out wrong, or :meth:`~TileMerge.stop` s it. Each tile is written
+    by the same kernel whichever thread takes it, so the result is that of
+    :func:`merge_tiles` from the last tables, bit for bit."""
+    height = source.shape[0]
+    n_workers = check_workers(workers)
+    tiles = row_tiles(height, source.bytes_per_row, tile_rows, n_workers)
+
+    def job(rows: slice, plan: tuple[CodeSource, MergeTables], again: bool) -> None:
         num = log_out[rows]
         shape = num.shape
         den = weight_out[rows] if weight_out is not None else np.empty(shape, dtype=np.float32)
         flags = (mask_out[rows], all_saturated_out[rows], all_dark_out[rows])
-        # num: ln c (NaN: no weight)
-        source.accumulate(rows, tables, num, den, flags, backend, flags_zeroed)
+        # num: ln c (NaN: no weight); a tile merged again may hold flags of its first merge
+        plan[0].accumulate(rows, plan[1], num, den, flags, backend, flags_zeroed and not again)
         if on_tile is not None:
             on_tile(rows, num, flags[0])
 
-    thread_map(job, tiles, workers)
+    n_threads = min(n_workers, len(tiles)) - 1
+    return TileMerge(tiles, BackgroundMap(job, tiles, (source, tables), n_threads))
 
 
 def merge_tiles_linear(

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -59,6 +59,9 @@ _MAX_TABLE_SIZE = 1 << 22
 _KEPT_TABLE_BYTES = 32 << 20
 """Largest merge tables a camera keeps for the next scene of the same bracket (32 MiB:
 single 16-bit frames' tables, K = 8, are 19 MiB; 8-bit ones a few tens of kB)."""
+
+_KEPT_TABLES = 2
+"""How many merge tables a camera keeps: its bracket's and the last refined times'."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -547,22 +550,28 @@ def _merge_tables(
     opts: DebevecMergeOptions,
     black: np.ndarray,
 ) -> MergeTables:
-    """The tables of :func:`plan_stack_Debevec1997`: the last ones made are kept in the
-    response's ``_cache`` with what they depend on beside the response (the options, the
-    exposure times, the number of repeats, the code range and the stack's black level),
-    and made again when one of those differs. A camera corrects many scenes of one
-    bracket: building them was 0.3 ms of a 1024×768×3, K = 4 correction's 3.4 ms with
-    the nominal times (interleaved, 2026-12-07); one entry, so that scenes of
-    ever-changing times (an automatic exposure) do not pile tables up, and only tables
-    of at most :data:`_KEPT_TABLE_BYTES` (the sums of many 16-bit repeats have tables
-    of hundreds of MB, which a camera should not hold between scenes)."""
+    """The tables of :func:`plan_stack_Debevec1997`: the last :data:`_KEPT_TABLES` used
+    are kept in the response's ``_cache`` with what they depend on beside the response
+    (the options, the exposure times, the number of repeats, the code range and the
+    stack's black level), and made again when none matches. A camera corrects many
+    scenes of one bracket: building them was 0.3 ms of a 1024×768×3, K = 4 correction's
+    3.4 ms with the nominal times (interleaved, 2026-12-07). Two, because a correction
+    that tests a scene's times merges with the nominal ones while it tests them
+    (:func:`photoquant.correction.correct`) and again with the refined ones where the
+    test refines them: the bracket's tables stay kept beside the last scene's. No more,
+    so that scenes of ever-changing times (an automatic exposure) do not pile tables up,
+    and only tables of at most :data:`_KEPT_TABLE_BYTES` (the sums of many 16-bit
+    repeats have tables of hundreds of MB, which a camera should not hold between
+    scenes)."""
     key = (opts, stack.exposure_s.tobytes(), stack.n_repeats, stack.c_max, black.tobytes())
     cache = getattr(response, "_cache", None)
+    kept: tuple[tuple[Any, MergeTables], ...] = ()
     if isinstance(cache, dict):
-        kept = cache.get("merge_tables")
-        if kept is not None and kept[0] == key:
-            found: MergeTables = kept[1]
-            return found
+        kept = cache.get("merge_tables") or ()
+        for i, (kept_key, found) in enumerate(kept):
+            if kept_key == key:  # the last used first
+                cache["merge_tables"] = (kept[i], *kept[:i], *kept[i + 1 :])
+                return found
     n_ch = stack.n_channels
     top = stack.n_repeats * stack.c_max
     inp = _check_inputs(
@@ -593,7 +602,8 @@ def _merge_tables(
         size = sum(
             a.nbytes for a in (tables.w, tables.wt, tables.clip, tables.pairs) if a is not None
         )
-        cache["merge_tables"] = (key, tables) if size <= _KEPT_TABLE_BYTES else None
+        if size <= _KEPT_TABLE_BYTES:
+            cache["merge_tables"] = ((key, tables), *kept)[:_KEPT_TABLES]
     return tables
 
 

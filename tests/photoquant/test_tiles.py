@@ -201,9 +201,12 @@ def test_the_kept_merge_tables_never_stand_for_another_bracket(rng):
         want = correct(stack, fresh, refine_exposures=False, merge=merge)
         np.testing.assert_array_equal(got.photoquantity, want.photoquantity)
         np.testing.assert_array_equal(got.mask, want.mask)
-        seen.append(response._cache["merge_tables"][1])
-    assert seen[1] is seen[0]  # the same bracket: made once
-    assert len({id(t) for t in seen}) == len(seen) - 1  # every other change: made again
+        seen.append(response._cache["merge_tables"][0][1])  # the last made or used
+    # the same bracket: made once, and kept beside the last other one (other times,
+    # other repeats) for the scene after it
+    assert seen[1] is seen[0] and seen[3] is seen[0] and seen[5] is seen[0]
+    assert len({id(t) for t in seen}) == len(seen) - 3  # every other change: made again
+    assert len(response._cache["merge_tables"]) == 2
 
 
 def test_tables_above_the_bound_are_not_kept(rng, monkeypatch):
@@ -214,9 +217,105 @@ def test_tables_above_the_bound_are_not_kept(rng, monkeypatch):
     shape = (9, 11)
     model, stack = _model(shape, rng), _stack(rng, shape, 1)
     want = correct(stack, model, refine_exposures=False)
-    assert model.balanced_response()._cache["merge_tables"] is not None
+    assert model.balanced_response()._cache["merge_tables"]
     monkeypatch.setattr(debevec, "_KEPT_TABLE_BYTES", 0)
     small = dataclasses.replace(model)
     got = correct(stack, small, refine_exposures=False)
-    assert small.balanced_response()._cache["merge_tables"] is None
+    assert not small.balanced_response()._cache.get("merge_tables")
     np.testing.assert_array_equal(got.photoquantity, want.photoquantity)
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.05])
+def test_merging_while_the_times_are_tested_changes_no_bit(rng, monkeypatch, jitter):
+    """A camera that tests a scene's times begins the merge with the nominal ones on the
+    other threads meanwhile, keeps it where the test keeps them and merges again with the
+    refined ones where it does not: the sequential correction's result, bit for bit."""
+    from photoquant.merge._tiled import TileMerge
+
+    shape = (48, 40)
+    model = dataclasses.replace(_model(shape, rng), parameters={"refine_exposures": True})
+    actual = EXPOSURES * np.exp(jitter * rng.standard_normal(EXPOSURES.size))
+    l = log_uniform_scene(rng, (*shape, 3), decades=4.0)
+    l[:3], l[-3:] = 1e3 * l.max(), 1e-4 * l.min()  # saturated, dark in every exposure
+    frames = capture(l, actual, balance=BALANCE, noise_dn=1.5, n_repeats=1, rng=rng)
+    stack = ExposureStack(frames, EXPOSURES, saturation_level=np.round(np.array(BALANCE) * 255))
+    switches = []
+    switch = TileMerge.switch
+    monkeypatch.setattr(TileMerge, "switch", lambda *a: (switches.append(1), switch(*a))[1])
+    alone = correct(stack, model, workers=1)  # tested first, then merged
+    assert not switches
+    fresh = dataclasses.replace(model)  # no scene tested yet
+    both = correct(stack, fresh, workers=2, tile_rows=3)  # merged while tested
+    assert both.exposure_decision == alone.exposure_decision
+    assert both.exposure_decision.refine == (jitter > 0)
+    assert len(switches) == (jitter > 0)  # the tiles merged with the nominal times redone
+    for field in ("photoquantity", "mask", "all_saturated", "all_dark"):
+        np.testing.assert_array_equal(getattr(both, field), getattr(alone, field), err_msg=field)
+    assert both.all_saturated[:3].any() and both.all_dark[-3:].any()  # flags kept or redone
+    assert both.notes == alone.notes
+
+
+def test_a_failing_test_of_the_times_leaves_no_merge_running(rng, monkeypatch):
+    import threading
+
+    import photoquant.correction as correction
+
+    shape = (48, 40)
+    model = dataclasses.replace(_model(shape, rng), parameters={"refine_exposures": True})
+    stack = _stack(rng, shape, 1)
+    stopped = []
+    begun = correction._start_one_pass
+
+    def start(*args, **kwargs):  # the merge begun, watched
+        one_pass = begun(*args, **kwargs)
+        stopped.append(one_pass.merge._run)
+        return one_pass
+
+    def fail(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(correction, "_start_one_pass", start)
+    monkeypatch.setattr(correction, "_scene_exposures", fail)
+    with pytest.raises(KeyboardInterrupt):
+        correct(stack, model, workers=2, tile_rows=1)
+    assert stopped and not any(t.is_alive() for t in stopped[0]._threads)
+    assert threading.active_count() >= 1
+
+
+def test_a_camera_whose_last_scene_was_refined_tests_the_next_before_merging(rng, monkeypatch):
+    """Merging while testing pays where the test keeps the times; a camera whose last
+    tested scene was refined tests the next one first (the same result either way)."""
+    import photoquant.correction as correction
+
+    shape = (48, 40)
+    model = dataclasses.replace(_model(shape, rng), parameters={"refine_exposures": True})
+    l = log_uniform_scene(rng, (*shape, 3), decades=4.0)
+    saturation = np.round(np.array(BALANCE) * 255)
+    scenes = {}
+    for name, jitter in (("right", 0.0), ("off", 0.05)):
+        actual = EXPOSURES * np.exp(jitter * rng.standard_normal(EXPOSURES.size))
+        frames = capture(l, actual, balance=BALANCE, noise_dn=1.5, n_repeats=1, rng=rng)
+        scenes[name] = ExposureStack(frames, EXPOSURES, saturation_level=saturation)
+    events = []
+    start, test = correction._start_one_pass, correction._scene_exposures
+
+    def merge_begun(*args, **kwargs):
+        events.append("merge")
+        return start(*args, **kwargs)
+
+    def tested(*args):
+        events.append("test")
+        return test(*args)
+
+    monkeypatch.setattr(correction, "_start_one_pass", merge_begun)
+    monkeypatch.setattr(correction, "_scene_exposures", tested)
+    order = []
+    for name in ("right", "off", "off", "right", "right"):
+        events.clear()
+        got = correct(scenes[name], model, workers=2)
+        assert got.exposure_decision.refine == (name == "off")
+        order.append(events[0])
+        want = correct(scenes[name], dataclasses.replace(model), workers=1)
+        np.testing.assert_array_equal(got.photoquantity, want.photoquantity)
+    # merged while tested: the first scene, and each after a scene whose times were kept
+    assert order == ["merge", "merge", "test", "test", "merge"]
