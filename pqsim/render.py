@@ -141,8 +141,9 @@ def _llvm_library_candidates() -> list[str | None]:
     return [*newest_first, None]
 
 
-def _probe(variant: str, libllvm: str | None, timeout_s: float) -> bool:
-    """Render a 4×4 image in a subprocess; a crash (e.g. an abort in LLVM) cannot hurt us."""
+def _probe(variant: str, libllvm: str | None, timeout_s: float) -> bool | None:
+    """Render a 4×4 image in a subprocess; a crash (e.g. an abort in LLVM) cannot hurt us.
+    ``None`` where it ran out of time (or could not start)."""
     env = dict(os.environ)
     if libllvm is not None:
         env["DRJIT_LIBLLVM_PATH"] = libllvm
@@ -156,8 +157,64 @@ def _probe(variant: str, libllvm: str | None, timeout_s: float) -> bool:
             check=False,
         )
     except (OSError, subprocess.TimeoutExpired):
-        return False
+        return None
     return res.returncode == 0 and res.stdout.strip().endswith("ok")
+
+
+PROBES_FILE = "variant-probes.json"
+"""The verdicts of the LLVM probes, kept in :func:`default_cache_dir` (format
+``pqsim.variant-probes/1``): a probe's answer for a variant and a library holds
+until the library file, Mitsuba, Dr.Jit or the interpreter changes."""
+
+_PROBES_FORMAT = "pqsim.variant-probes/1"
+
+
+def _probe_key(variant: str, lib: str | None, candidates: Sequence[str | None]) -> str:
+    """What a probe's verdict depends on: the variant, the library (its size and time,
+    or, for Dr.Jit's own search, those of every library it could find), Mitsuba's and
+    Dr.Jit's versions and the interpreter."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    def stamp(path: str) -> str:
+        try:
+            st = os.stat(path)
+        except OSError:
+            return f"{path}:missing"
+        return f"{path}:{st.st_size}:{st.st_mtime_ns}"
+
+    libs = [lib] if lib is not None else [c for c in candidates if c is not None]
+    versions = []
+    for package in ("mitsuba", "drjit"):
+        try:
+            versions.append(f"{package} {version(package)}")
+        except PackageNotFoundError:
+            versions.append(f"{package} ?")
+    return "|".join([variant, str(lib), *map(stamp, libs), *versions, sys.executable])
+
+
+def _read_probes(path: Path) -> dict[str, bool]:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    if not isinstance(data, dict) or data.get("format") != _PROBES_FORMAT:
+        return {}
+    verdicts = data.get("verdicts")
+    if not isinstance(verdicts, dict):
+        return {}
+    return {k: v for k, v in verdicts.items() if isinstance(k, str) and isinstance(v, bool)}
+
+
+def _write_probes(path: Path, verdicts: dict[str, bool]) -> None:
+    """Kept where the cache can be written (atomically); nothing is lost but the time of
+    probing again where it cannot."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps({"format": _PROBES_FORMAT, "verdicts": verdicts}, indent=1))
+        os.replace(tmp, path)
+    except OSError:
+        _log.debug("could not keep the variant probes in %s", path)
 
 
 @functools.cache
@@ -165,18 +222,28 @@ def _choose_variant_cached(allow_llvm: bool, timeout_s: float) -> tuple[str, str
     mi = _mitsuba()
     available = set(mi.variants())
     if allow_llvm:
+        path = default_cache_dir() / PROBES_FILE
+        kept = _read_probes(path)
+        candidates = _llvm_library_candidates()
         for variant in LLVM_VARIANTS:
             if variant not in available:
                 continue
-            for lib in _llvm_library_candidates():
-                if _probe(variant, lib, timeout_s):
+            for lib in candidates:
+                key = _probe_key(variant, lib, candidates)
+                works = kept.get(key)
+                if works is None:
+                    works = _probe(variant, lib, timeout_s)
+                    if works is not None:  # a probe that ran out of time is asked again
+                        kept = {**_read_probes(path), key: works}
+                        _write_probes(path, kept)
+                if works:
                     return variant, lib
     if DEFAULT_VARIANT not in available:
         raise RuntimeError(f"Mitsuba has no {DEFAULT_VARIANT!r} variant (has {sorted(available)})")
     return DEFAULT_VARIANT, None
 
 
-def choose_variant(*, allow_llvm: bool = True, probe_timeout_s: float = 120.0) -> str:
+def choose_variant(*, allow_llvm: bool = True, probe_timeout_s: float = 30.0) -> str:
     """Return the Mitsuba variant to render with.
 
     ``$PQSIM_MITSUBA_VARIANT`` wins when set. Otherwise an LLVM spectral
@@ -186,14 +253,19 @@ def choose_variant(*, allow_llvm: bool = True, probe_timeout_s: float = 120.0) -
     Dr.Jit abort the process); the library that worked is then exported in
     ``DRJIT_LIBLLVM_PATH`` for this process. In every other case the result is
     :data:`DEFAULT_VARIANT` (``scalar_spectral``). The choice is made once per
-    process.
+    process, and each probe's verdict is kept on disk (:data:`PROBES_FILE`), so
+    that the next process does not probe again (a probe took 0.1–0.2 s, and a
+    machine with a system LLVM has several libraries to try): a changed library,
+    Mitsuba, Dr.Jit or interpreter is probed anew, and so is a probe that ran
+    out of time.
 
     Parameters
     ----------
     allow_llvm : bool
         Whether LLVM variants may be probed and chosen.
     probe_timeout_s : float
-        Time limit of each probe subprocess.
+        Time limit of each probe subprocess (a 4×4 render: a second or two where
+        the library works).
 
     Returns
     -------

@@ -293,6 +293,90 @@ def test_render_rejects_non_spectral_films_and_objects():
         render.render_photoquantity(scene, spp=4, seed=0, variant=VARIANT, progress=False)
 
 
+@pytest.fixture
+def probes(monkeypatch, tmp_path):
+    """The LLVM probes of a machine with two fake libraries: each probe counted, the
+    verdicts kept under ``tmp_path``, the process's choice forgotten before and after."""
+    libs = [tmp_path / "libLLVM-19.so", tmp_path / "libLLVM-18.so"]
+    for lib in libs:
+        lib.write_bytes(b"not a library")
+    asked = []
+    answers = {}
+
+    def probe(variant, lib, timeout_s):
+        asked.append((variant, lib))
+        return answers.get((variant, lib), False)
+
+    monkeypatch.delenv(render.VARIANT_ENV, raising=False)
+    monkeypatch.setenv("PQSIM_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(render, "_probe", probe)
+    monkeypatch.setattr(render, "_llvm_library_candidates", lambda: [*map(str, libs), None])
+    render._choose_variant_cached.cache_clear()
+    yield asked, answers, libs
+    render._choose_variant_cached.cache_clear()
+
+
+def _choose_anew():
+    render._choose_variant_cached.cache_clear()  # a new process
+    return render._choose_variant_cached(True, 30.0)
+
+
+def test_llvm_probes_are_kept_and_asked_again_when_a_library_changes(probes):
+    asked, _, libs = probes
+    llvm = [v for v in render.LLVM_VARIANTS if v in mi.variants()]
+    if not llvm:
+        pytest.skip("this Mitsuba has no LLVM variant to probe")
+    assert _choose_anew() == (render.DEFAULT_VARIANT, None)
+    assert len(asked) == 3 * len(llvm)  # two libraries and Dr.Jit's own search, each
+    kept = json.loads((libs[0].parent / "cache" / render.PROBES_FILE).read_text())
+    assert kept["format"] == "pqsim.variant-probes/1"
+    assert len(kept["verdicts"]) == len(asked) and not any(kept["verdicts"].values())
+    asked.clear()
+    assert _choose_anew() == (render.DEFAULT_VARIANT, None)
+    assert asked == []  # the next process probes nothing
+    libs[1].write_bytes(b"another library")  # a library replaced (and with it the search)
+    _choose_anew()
+    assert set(asked) == {(v, lib) for v in llvm for lib in (str(libs[1]), None)}
+    assert len(asked) == 2 * len(llvm)
+
+
+def test_a_working_library_is_chosen_from_the_kept_verdict(probes):
+    asked, answers, libs = probes
+    llvm = [v for v in render.LLVM_VARIANTS if v in mi.variants()]
+    if not llvm:
+        pytest.skip("this Mitsuba has no LLVM variant to probe")
+    answers[(llvm[0], str(libs[1]))] = True
+    assert _choose_anew() == (llvm[0], str(libs[1]))
+    asked.clear()
+    answers.clear()  # the verdict kept, not probed again
+    assert _choose_anew() == (llvm[0], str(libs[1]))
+    assert asked == []
+
+
+def test_a_probe_out_of_time_is_not_kept(probes):
+    asked, answers, libs = probes
+    llvm = [v for v in render.LLVM_VARIANTS if v in mi.variants()]
+    if not llvm:
+        pytest.skip("this Mitsuba has no LLVM variant to probe")
+    answers[(llvm[0], str(libs[0]))] = None  # ran out of time
+    _choose_anew()
+    asked.clear()
+    _choose_anew()
+    assert asked == [(llvm[0], str(libs[0]))]
+
+
+def test_an_unwritable_or_damaged_probe_file_only_costs_a_probe(probes, tmp_path):
+    asked, _, _ = probes
+    if not any(v in mi.variants() for v in render.LLVM_VARIANTS):
+        pytest.skip("this Mitsuba has no LLVM variant to probe")
+    path = tmp_path / "cache" / render.PROBES_FILE
+    path.parent.mkdir()
+    path.write_text("{not json")
+    assert _choose_anew() == (render.DEFAULT_VARIANT, None)
+    assert asked  # probed, and the file replaced by a readable one
+    assert json.loads(path.read_text())["format"] == "pqsim.variant-probes/1"
+
+
 def test_choose_variant_defaults_and_override(monkeypatch):
     monkeypatch.delenv(render.VARIANT_ENV, raising=False)
     assert render.choose_variant(allow_llvm=False) == "scalar_spectral"
