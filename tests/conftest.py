@@ -71,7 +71,8 @@ def all_cpus() -> Iterator[None]:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """SIGINT delivered as from a terminal, however the suite was started.
+    """SIGINT delivered as from a terminal, however the suite was started, and the
+    kernels compiled once for the whole suite (:func:`_compile_the_kernels_once`).
 
     A run started in the background of a non-interactive shell (``cmd &``, as
     a CI script may do) has SIGINT ignored; Python leaves it ignored and every
@@ -79,9 +80,34 @@ def pytest_configure(config: pytest.Config) -> None:
     (``tests/test_no_data_loss.py``, ``test_atomic.py``) would fail for a
     reason that is not theirs (seen in a dry run of ``.ci/run`` under nohup).
     """
-    del config
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    _compile_the_kernels_once(config)
+
+
+def _compile_the_kernels_once(config: pytest.Config) -> None:
+    """The whole suite (``python -m pytest``, its test paths) on an empty kernel cache
+    (a clean clone): photoquant's kernels compiled once, on both cores, before the
+    workers start (:func:`validation.compile_ahead.compile_both_ways`, the lists of
+    the validation job and the demo).
+
+    Each worker compiles the kernels its tests call; the longest files, started
+    first on both workers (:data:`RUN_FIRST`), call the same calibration kernels at
+    the same time, so each compiled them (numba compiles under a lock per process,
+    not per cache). A worker that finds a kernel in the cache loads it. Nothing is
+    done in a worker, for a chosen set of tests (which may need no kernel), or where
+    the cache holds them already.
+    """
+    if hasattr(config, "workerinput") or config.args_source != pytest.Config.ArgsSource.TESTPATHS:
+        return
+    from validation.compile_ahead import compile_both_ways, load_kernels
+
+    try:
+        kernels = load_kernels("validate")
+        kernels += [k for k in load_kernels("demo") if k not in kernels]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return
+    compile_both_ways(kernels)
 
 
 REPO = Path(__file__).resolve().parents[1]

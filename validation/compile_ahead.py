@@ -49,6 +49,7 @@ __all__ = [
     "CompileAhead",
     "KernelSignature",
     "compile_ahead",
+    "compile_both_ways",
     "is_cached",
     "load_kernels",
     "record_kernels",
@@ -301,3 +302,29 @@ def start_compile_ahead(job: str | Sequence[KernelSignature]) -> CompileAhead:
     process = ctx.Process(target=work, name="photoquant-compile-ahead", daemon=True)
     process.start()
     return CompileAhead(process, done, first_run=True)
+
+
+def compile_both_ways(kernels: Sequence[KernelSignature]) -> int:
+    """Compile ``kernels`` into numba's cache on two processes at once, before anything
+    needs them: this one from the first, a forked helper (:func:`start_compile_ahead`)
+    from the last, until this one reaches a kernel the helper has cached; returns how
+    many this one compiled.
+
+    Nothing is compiled where the helper would not start (the cache holds the last
+    kernel, one core, no ``fork``, not compiled kernels here). For work that will
+    need the kernels in several processes at once (the test suite's workers each
+    compile what their tests call, the same kernels at the same time): compiled once
+    here, each loads them.
+    """
+    helper = start_compile_ahead(kernels)
+    if not helper.first_run:
+        return 0
+    compiled = 0
+    try:
+        for kernel in kernels:
+            if is_cached(kernel):  # the helper has come this far: it compiled the rest
+                break
+            compiled += compile_ahead([kernel])
+    finally:
+        helper.stop(wait_s=30.0)  # the kernel it holds is one compiled here: end it
+    return compiled

@@ -157,6 +157,30 @@ def _first_run_then_the_next(tmp_path: Path) -> str:
     )
 
 
+@pytest.mark.skipif(
+    len(SUITE_CPUS) < 2 or "fork" not in multiprocessing.get_all_start_methods(),
+    reason="the helper compiles beside this process on a second core, started by fork",
+)
+def test_compiling_both_ways_caches_every_kernel_once_and_then_nothing(tmp_path):
+    third = KernelSignature(
+        "photoquant._pair_kernels",
+        "_longest_run",
+        "(Array(int64, 1, 'A', False, aligned=True), int64)",
+    )
+    with every_cpu():
+        out = _in_fresh_process(
+            tmp_path,
+            f"""
+            from validation.compile_ahead import KernelSignature, compile_both_ways, is_cached
+            kernels = [KernelSignature(*k) for k in {[astuple(k) for k in (INDICES_OF, LONGEST_RUN, third)]!r}]
+            here = compile_both_ways(kernels)
+            print(1 <= here <= 3, [is_cached(k) for k in kernels])
+            print(compile_both_ways(kernels))  # all cached: nothing started, nothing compiled
+            """,
+        )
+    assert out.splitlines() == ["True [True, True, True]", "0"]
+
+
 def test_the_helper_starts_and_stops_and_starts_nothing_where_the_list_is_not_here():
     stale = KernelSignature("photoquant.stack", "no_such_kernel", "()")
     helper = start_compile_ahead([stale, INDICES_OF])  # its last kernel first
