@@ -59,7 +59,8 @@ class BackgroundMap(Generic[T, C]):
     ) -> None:
         self._fn, self._items = fn, list(items)
         self._lock = threading.Lock()
-        self._queue = list(range(len(self._items)))  # item indices; an item run again twice
+        # the items' indices in the order they are taken (an item run again: twice)
+        self._queue = list(range(len(self._items)))
         self._next = 0
         self._context, self._generation = context, 0
         self._results: list[Any] = [None] * len(self._items)

@@ -26,17 +26,18 @@ merge switches to the refined times' tables, merges the tiles not begun yet
 and then again those begun with the nominal times, on the same threads. The
 bits are those of the merge after the screen either way, and a camera keeps
 the tables of both (:func:`photoquant.merge.debevec1997.plan_stack_Debevec1997`).
-Interleaved in one process (1024×768×3, K = 4, N = 1, 2 cores, two runs of
-100 rounds, 2026-12-07): exact times 7.40–7.87 → 6.11–6.71 ms a correction
-(min). A scene whose times are refined gains nothing from it: the tiles the
-other threads merged while the screen ran are merged again, the screen runs
-4–8 % slower beside a merge on the other core, and the tile begun with the
-nominal times when the screen ends is finished before its thread turns to the
-refined ones — 6.60–6.67 → 6.85–6.89 ms where it was tried on every scene.
-Hence the camera's last decision: a camera's scenes tend to go one way (a
-shutter whose labels hold, or one whose labels are off), and after a refined
-scene the next one is screened first (7.55–7.94 ms either way in the runs
-above). On one thread (``workers=1``) the screen always runs first.
+Interleaved in one process (1024×768×3, K = 4, N = 1, 2 cores, 2026-12-07,
+each run 100 rounds, min): exact times 6.41–6.46 → 5.77–5.82 ms a correction
+in two runs, 7.40–7.87 → 6.11–6.71 ms in two runs of a slower hour. A scene
+whose times are refined gains nothing from it: the tiles the other threads
+merged while the screen ran are merged again, the screen runs 4–8 % slower
+beside a merge on the other core, and the tile begun with the nominal times
+when the screen ends is finished before its thread turns to the refined ones
+(6.60–6.67 → 6.85–6.89 ms in the first two runs, merging while testing every
+scene). Hence the camera's last decision: a camera's scenes tend to go one
+way (a shutter whose labels hold, or one whose labels are off), and after a
+refined scene the next one is screened first. On one thread
+(``workers=1``) the screen always runs first.
 """
 
 from __future__ import annotations

@@ -304,7 +304,9 @@ def start_compile_ahead(job: str | Sequence[KernelSignature]) -> CompileAhead:
     return CompileAhead(process, done, first_run=True)
 
 
-def compile_both_ways(kernels: Sequence[KernelSignature]) -> int:
+def compile_both_ways(
+    kernels: Sequence[KernelSignature], say: Callable[[str], None] | None = None
+) -> int:
     """Compile ``kernels`` into numba's cache on two processes at once, before anything
     needs them: this one from the first, a forked helper (:func:`start_compile_ahead`)
     from the last, until this one reaches a kernel the helper has cached; returns how
@@ -319,6 +321,8 @@ def compile_both_ways(kernels: Sequence[KernelSignature]) -> int:
     helper = start_compile_ahead(kernels)
     if not helper.first_run:
         return 0
+    if say is not None:
+        say(FIRST_RUN_NOTE)
     compiled = 0
     try:
         for kernel in kernels:
