@@ -225,8 +225,9 @@ def test_tables_above_the_bound_are_not_kept(rng, monkeypatch):
     np.testing.assert_array_equal(got.photoquantity, want.photoquantity)
 
 
+@pytest.mark.parametrize("n_repeats", [1, 3])
 @pytest.mark.parametrize("jitter", [0.0, 0.05])
-def test_merging_while_the_times_are_tested_changes_no_bit(rng, monkeypatch, jitter):
+def test_merging_while_the_times_are_tested_changes_no_bit(rng, monkeypatch, jitter, n_repeats):
     """A camera that tests a scene's times begins the merge with the nominal ones on the
     other threads meanwhile, keeps it where the test keeps them and merges again with the
     refined ones where it does not: the sequential correction's result, bit for bit."""
@@ -237,7 +238,7 @@ def test_merging_while_the_times_are_tested_changes_no_bit(rng, monkeypatch, jit
     actual = EXPOSURES * np.exp(jitter * rng.standard_normal(EXPOSURES.size))
     l = log_uniform_scene(rng, (*shape, 3), decades=4.0)
     l[:3], l[-3:] = 1e3 * l.max(), 1e-4 * l.min()  # saturated, dark in every exposure
-    frames = capture(l, actual, balance=BALANCE, noise_dn=1.5, n_repeats=1, rng=rng)
+    frames = capture(l, actual, balance=BALANCE, noise_dn=1.5, n_repeats=n_repeats, rng=rng)
     stack = ExposureStack(frames, EXPOSURES, saturation_level=np.round(np.array(BALANCE) * 255))
     switches = []
     switch = TileMerge.switch
