@@ -215,10 +215,14 @@ def _read_frames(
     first = jobs[0].file
     shape: tuple[int, ...] | None = None  # the first frame's
 
-    def decode(i: int) -> tuple[np.ndarray, RawFrame | None]:
-        """Frame ``i`` read and checked against the manifest and the first frame."""
+    def decode(i: int, into: np.ndarray | None = None) -> tuple[np.ndarray, RawFrame | None]:
+        """Frame ``i`` read and checked against the manifest and the first frame.
+
+        ``into``: its place in the stack, where a decoder may write it
+        (:func:`photoquant.io.images._read_pixels`).
+        """
         frame = jobs[i]
-        got = read_raw(frame.file) if raws[i] else _read_pixels(frame.file, None)
+        got = read_raw(frame.file) if raws[i] else _read_pixels(frame.file, None, into)
         raw = got if isinstance(got, RawFrame) else None
         img = raw.image if raw is not None else got
         assert isinstance(img, np.ndarray)
@@ -262,7 +266,9 @@ def _read_frames(
         out = np.empty((n_rep, n_exposures, *shape), dtype=want_dtype)
         levels = [place(0, img0, raw0)]
         del img0, raw0
-        levels += thread_map(lambda i: place(i, *decode(i)), range(1, len(jobs)), workers)
+        levels += thread_map(
+            lambda i: place(i, *decode(i, out[i % n_rep, i // n_rep])), range(1, len(jobs)), workers
+        )
     if flat:
         out = out[0]
     return out, levels

@@ -773,13 +773,16 @@ def read_image(path: PathLike, *, max_pixels: int | None = None) -> np.ndarray:
     return np.ascontiguousarray(_read_pixels(Path(path), max_pixels))
 
 
-def _read_pixels(path: Path, max_pixels: int | None) -> np.ndarray:
+def _read_pixels(path: Path, max_pixels: int | None, into: np.ndarray | None = None) -> np.ndarray:
     """:func:`read_image`'s array, every check done, but not yet made contiguous.
 
     A colour PNG or JPEG that OpenCV cannot decode as R, G, B (before 4.11)
     comes as a view of the decoder's B, G, R(, A) array with its channels
     reversed; :func:`_copy_pixels` copies it into a destination in one pass
-    (the frame loader's way to skip a copy).
+    (the frame loader's way to skip a copy). A PNG that
+    :func:`photoquant.io._png.decode_png` reads is decoded into ``into``
+    where that is its place (the same shape and type, contiguous), which is
+    then returned: no copy at all.
     """
     f, size = _open(path)
     with f:
@@ -801,7 +804,16 @@ def _read_pixels(path: Path, max_pixels: int | None) -> np.ndarray:
                 header = _header(f, path, size)
                 _check_limits(header, path, size, max_pixels)
                 f.seek(0)
-                arr = _decode_opencv(path, f.read(), header)
+                data = f.read()
+                fast = None
+                if header.format == "png":
+                    from photoquant.io._png import decode_png  # imports numba: not before a PNG
+
+                    fast = decode_png(data, into)
+                if fast is not None:
+                    arr = _drop_alpha_and_to_rgb(fast, bgr=False)
+                else:
+                    arr = _decode_opencv(path, data, header)
         except OSError as exc:
             raise _fail(path, exc.strerror or exc) from None
     if arr.dtype not in (np.uint8, np.uint16):
@@ -829,6 +841,13 @@ def _copy_pixels(dst: np.ndarray, src: np.ndarray) -> None:
     for 1024×768×3, 2026-12-03); the swap is a permutation, so the values
     are the same bits.
     """
+    if (
+        src.shape == dst.shape
+        and src.dtype == dst.dtype
+        and src.strides == dst.strides
+        and src.__array_interface__["data"][0] == dst.__array_interface__["data"][0]
+    ):
+        return  # decoded in place (_read_pixels' `into`)
     if (
         src.ndim == 3
         and src.shape[2] == 3

@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from photoquant.errors import ImageReadError, ManifestError
-from photoquant.io import CAPTURE_FORMAT, load_manifest, load_stack, read_image, write_image
+from photoquant.io import CAPTURE_FORMAT, _png, load_manifest, load_stack, read_image, write_image
 from photoquant.io.frames import black_level_from_dark
 from photoquant.io.images import _copy_pixels
 from photoquant.io.manifest import _Parser, _tracks_if_valid
@@ -68,8 +68,17 @@ def _random_images(dtype, channels: int, n_repeats: int = 3, top: int | None = N
     ],
 )
 @pytest.mark.parametrize("workers", [1, 2, 5])
-def test_stack_is_read_image_of_every_frame(tmp_path, dtype, channels, bit_depth, names, workers):
-    """Frame ``[n, k]`` of the stack is the file's :func:`read_image`, bit for bit."""
+@pytest.mark.parametrize("fast_png", [True, False])
+def test_stack_is_read_image_of_every_frame(
+    tmp_path, monkeypatch, dtype, channels, bit_depth, names, workers, fast_png
+):
+    """Frame ``[n, k]`` of the stack is the file's :func:`read_image`, bit for bit.
+
+    With the PNG fast path (each frame decoded into its place) or without it
+    (OpenCV's decode, copied).
+    """
+    if not fast_png:
+        monkeypatch.setattr(_png, "_unfilter_nb", None)
     top = 2**bit_depth - 1
     images = _random_images(dtype, channels, top=top)
     m = load_manifest(_capture(tmp_path, images, bit_depth=bit_depth, channels=names))
@@ -110,16 +119,17 @@ def _as_stored(path: Path) -> np.ndarray:
 @pytest.mark.parametrize(
     ("dtype", "channels"), [(np.uint8, 3), (np.uint8, 4), (np.uint16, 3), (np.uint16, 4)]
 )
-@pytest.mark.parametrize("rgb_decoder", [True, False])
-def test_colour_png_decodes_to_its_stored_samples(
-    tmp_path, monkeypatch, dtype, channels, rgb_decoder
-):
-    """Decoded as R, G, B by OpenCV (4.11+) or as stored and reversed: the same samples."""
+@pytest.mark.parametrize("decoder", ["fast", "opencv-rgb", "opencv-as-stored"])
+def test_colour_png_decodes_to_its_stored_samples(tmp_path, monkeypatch, dtype, channels, decoder):
+    """Decoded by the fast path, as R, G, B by OpenCV (4.11+) or as stored and reversed:
+    the same samples."""
     import cv2
 
     from photoquant.io import images
 
-    if not rgb_decoder:
+    if decoder != "fast":
+        monkeypatch.setattr(_png, "_unfilter_nb", None)
+    if decoder == "opencv-as-stored":
         monkeypatch.setattr(images, "_RGB_FLAGS", None)
     rng = np.random.default_rng(11)
     stored = rng.integers(0, np.iinfo(dtype).max + 1, (9, 13, channels), dtype=dtype)
