@@ -6,11 +6,20 @@ order (grayscale as ``C = 1``; an alpha channel is dropped):
 ========  ==========================  ======================================
 Format    Read as                     Decoder
 ========  ==========================  ======================================
-PNG       uint8 or uint16             OpenCV (keeps 16-bit RGB, unlike Pillow)
+PNG       uint8 or uint16             photoquant's (``photoquant.io._png``)
+                                      or OpenCV (keeps 16-bit RGB, unlike
+                                      Pillow)
 JPEG      uint8                       OpenCV
 TIFF      uint8 or uint16             tifffile
 OpenEXR   float32                     OpenEXR 3.x (``OpenEXR.File``)
 ========  ==========================  ======================================
+
+A PNG of 8 or 16 bits, gray, RGB or RGBA and not interlaced -- a camera's
+frames, ``pqsim capture``'s -- is inflated by libdeflate (through
+``imagecodecs``) and its rows unfiltered by a compiled kernel, in about half
+OpenCV's time and to the same values; the frame loader decodes each frame
+straight into its place in the stack. Any other PNG, and a damaged one, is
+decoded by OpenCV.
 
 The format is recognised from the file's first bytes, not from its name, so a
 text file renamed ``.png`` is reported as "not an image". Every failure raises
