@@ -184,3 +184,22 @@ def test_read_image_gives_the_same_array_with_the_fast_path_or_without(tmp_path,
     slow = read_image(path)
     assert fast.shape == slow.shape == (7, 6, 3) and fast.dtype == slow.dtype == np.uint16
     np.testing.assert_array_equal(fast, slow)
+
+
+def _real_pngs() -> list:
+    from tests.conftest import SHARED
+
+    return sorted((SHARED / "data" / "real").glob("*/*.png"))
+
+
+@needs_fast_path
+def test_the_real_cameras_png_frames_decode_to_opencvs_values() -> None:
+    """A machine-vision camera's 16-bit gray frames and a scanned film bracket's RGB."""
+    files = _real_pngs()
+    if not files:
+        pytest.skip("../shared/data/real is not available")
+    for path in files:
+        data = path.read_bytes()
+        fast = _png.decode_png(data)
+        assert fast is not None, path.name
+        np.testing.assert_array_equal(fast, opencv_pixels(data), err_msg=path.name)
