@@ -7,14 +7,14 @@ Intel Xeon, 2026-12-07). This module reads the common PNG -- 8 or 16 bits,
 gray, RGB or RGBA, not interlaced -- as the PNG specification lays it out
 (W3C, *Portable Network Graphics (PNG) Specification*, 3rd ed., 2025,
 §5 Datastream structure, §7.3 Filtering, §9 Filtering): the chunks walked
-and their CRCs checked, the ``IDAT`` stream inflated by libdeflate (through
+and the critical ones' CRCs checked, the ``IDAT`` stream inflated by libdeflate (through
 ``imagecodecs``), each row's filter undone by a compiled kernel. Frames
 decode in about half OpenCV's time, to the same values.
 
 Anything else -- a palette, fewer than 8 bits, Adam7 interlacing, gray with
 alpha, an unknown critical chunk, a damaged file, or no numba -- returns
-``None``, and the caller decodes the file with OpenCV as before, whose
-messages name what is wrong with a damaged file.
+``None``, and the caller decodes the file with OpenCV, whose messages name
+what is wrong with a damaged file.
 """
 
 from __future__ import annotations
