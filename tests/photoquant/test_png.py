@@ -139,10 +139,20 @@ def _with_body_byte_flipped(data: bytes, kind: bytes) -> bytes:
     return data[:at] + bytes([data[at] ^ 0x01]) + data[at + 1 :]
 
 
+def _with_crc_flipped(data: bytes, kind: bytes) -> bytes:
+    """The first ``kind`` chunk's CRC wrong, its data intact (libpng refuses a critical one)."""
+    at = data.index(kind)
+    (length,) = struct.unpack(">I", data[at - 4 : at])
+    crc = at + 4 + length
+    return data[:crc] + bytes([data[crc] ^ 0x80]) + data[crc + 1 :]
+
+
 @pytest.mark.parametrize(
     "name, data",
     [
         ("gray with alpha", encode_png(_image()[..., :2], [0] * 5)),
+        ("IDAT's CRC wrong", _with_crc_flipped(encode_png(_image(), [1] * 5), b"IDAT")),
+        ("IEND's CRC wrong", _with_crc_flipped(encode_png(_image(), [1] * 5), b"IEND")),
         ("unknown critical chunk", encode_png(_image(), [0] * 5, extra=_chunk(b"ABCD", b"x"))),
         ("damaged IDAT", _with_body_byte_flipped(encode_png(_image(), [1] * 5), b"IDAT")),
         ("damaged IHDR", _with_body_byte_flipped(encode_png(_image(), [1] * 5), b"IHDR")),
@@ -203,3 +213,18 @@ def test_the_real_cameras_png_frames_decode_to_opencvs_values() -> None:
         fast = _png.decode_png(data)
         assert fast is not None, path.name
         np.testing.assert_array_equal(fast, opencv_pixels(data), err_msg=path.name)
+
+
+@needs_fast_path
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 10**9), st.integers(1, 255))
+def test_a_flipped_byte_anywhere_gives_the_image_or_a_hand_back(where: int, bits: int) -> None:
+    """Every critical chunk is CRC-checked: a damaged byte never yields other pixels."""
+    image = np.random.default_rng(5).integers(0, 255, (6, 7, 3), dtype=np.uint8)
+    text = _chunk(b"tEXt", b"Comment\x00a frame")
+    data = bytearray(encode_png(image, [0, 1, 2, 3, 4, 1], splits=2, extra=text))
+    at = 8 + where % (len(data) - 8)  # past the signature, which the sniffing checks
+    data[at] ^= bits
+    got = _png.decode_png(bytes(data))
+    if got is not None:
+        np.testing.assert_array_equal(got, image)
