@@ -7,9 +7,9 @@ Intel Xeon, 2026-12-07). This module reads the common PNG -- 8 or 16 bits,
 gray, RGB or RGBA, not interlaced -- as the PNG specification lays it out
 (W3C, *Portable Network Graphics (PNG) Specification*, 3rd ed., 2025,
 §5 Datastream structure, §7.3 Filtering, §9 Filtering): the chunks walked
-and the critical ones' CRCs checked, the ``IDAT`` stream inflated by libdeflate (through
-``imagecodecs``), each row's filter undone by a compiled kernel. Frames
-decode in about half OpenCV's time, to the same values.
+and the critical ones' CRCs checked, the ``IDAT`` stream inflated by
+libdeflate (through ``imagecodecs``), each row's filter undone by a compiled
+kernel. Frames decode in about half OpenCV's time, to the same values.
 
 Anything else -- a palette, fewer than 8 bits, Adam7 interlacing, gray with
 alpha, an unknown critical chunk, a damaged file, or no numba -- returns
@@ -26,10 +26,10 @@ from typing import Any
 import numpy as np
 
 from photoquant._numba import HAVE_NUMBA, compile_kernel
+from photoquant.io.images import _PNG_MAGIC
 
 __all__ = ["decode_png"]
 
-_MAGIC = b"\x89PNG\r\n\x1a\n"
 _CHANNELS = {0: 1, 2: 3, 6: 4}
 """Colour types read here and their samples per pixel: gray, RGB, RGBA."""
 _KNOWN_CRITICAL = frozenset({b"IHDR", b"PLTE", b"IDAT", b"IEND"})
@@ -129,10 +129,10 @@ def _scratch(nbytes: int) -> np.ndarray:
 
 def _datastream(data: bytes) -> tuple[tuple[int, ...], bytes] | None:
     """``(IHDR fields, the IDAT stream)`` of a PNG whose chunks are whole and sound, else None."""
-    if not data.startswith(_MAGIC) or _crc32 is None:
+    if not data.startswith(_PNG_MAGIC):
         return None
     view = memoryview(data)
-    pos, end = len(_MAGIC), len(data)
+    pos, end = len(_PNG_MAGIC), len(data)
     ihdr: tuple[int, ...] | None = None
     idat: list[memoryview] = []
     idat_ended = False
@@ -148,7 +148,7 @@ def _datastream(data: bytes) -> tuple[tuple[int, ...], bytes] | None:
             if kind not in _KNOWN_CRITICAL or _crc32(view[pos + 4 : body_end]) != crc:
                 return None  # an unknown critical chunk, or a damaged one
         if kind == b"IHDR":
-            if ihdr is not None or pos != len(_MAGIC) or length != 13:
+            if ihdr is not None or pos != len(_PNG_MAGIC) or length != 13:
                 return None
             ihdr = struct.unpack_from(">IIBBBBB", data, pos + 8)
         elif kind == b"IDAT":

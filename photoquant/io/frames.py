@@ -253,22 +253,23 @@ def _read_frames(
     lock = threading.Lock()
     with tqdm(total=len(jobs), desc=f"reading {where}", unit="frame", disable=not progress) as bar:
 
-        def place(i: int, img: np.ndarray, raw: RawFrame | None) -> RawFrame | None:
-            dst = out[i % n_rep, i // n_rep]
-            _copy_pixels(dst, img)
+        def place(dst: np.ndarray, img: np.ndarray, raw: RawFrame | None) -> RawFrame | None:
+            _copy_pixels(dst, img)  # nothing to copy where `img` was decoded into `dst`
             with lock:
                 bar.update()
             # the levels, without a reference to the decoded copy
             return None if raw is None else dataclasses.replace(raw, image=dst)
 
+        def load(i: int) -> RawFrame | None:
+            dst = out[i % n_rep, i // n_rep]
+            return place(dst, *decode(i, dst))
+
         img0, raw0 = decode(0)
         shape = img0.shape
         out = np.empty((n_rep, n_exposures, *shape), dtype=want_dtype)
-        levels = [place(0, img0, raw0)]
+        levels = [place(out[0, 0], img0, raw0)]
         del img0, raw0
-        levels += thread_map(
-            lambda i: place(i, *decode(i, out[i % n_rep, i // n_rep])), range(1, len(jobs)), workers
-        )
+        levels += thread_map(load, range(1, len(jobs)), workers)
     if flat:
         out = out[0]
     return out, levels
