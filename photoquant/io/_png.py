@@ -26,10 +26,12 @@ from typing import Any
 import numpy as np
 
 from photoquant._numba import HAVE_NUMBA, compile_kernel
-from photoquant.io.images import _PNG_MAGIC
 
 __all__ = ["decode_png"]
 
+_PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+"""The PNG signature (as :mod:`photoquant.io.images` sniffs it, which imports this module
+lazily: no import from there)."""
 _CHANNELS = {0: 1, 2: 3, 6: 4}
 """Colour types read here and their samples per pixel: gray, RGB, RGBA."""
 _KNOWN_CRITICAL = frozenset({b"IHDR", b"PLTE", b"IDAT", b"IEND"})
