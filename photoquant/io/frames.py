@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from photoquant._checks import check_workers
+from photoquant._checks import check_memory, check_workers, stack_nbytes
 from photoquant._threads import thread_map
 from photoquant.darkframe import DarkFrameModel, characterise_dark_frames, subtract_dark_frames
 from photoquant.errors import InputError, ManifestError
@@ -266,6 +266,7 @@ def _read_frames(
 
         img0, raw0 = decode(0)
         shape = img0.shape
+        _check_stack_memory(where, (n_rep, n_exposures, *shape), want_dtype, workers, error)
         out = np.empty((n_rep, n_exposures, *shape), dtype=want_dtype)
         levels = [place(out[0, 0], img0, raw0)]
         del img0, raw0
@@ -273,6 +274,30 @@ def _read_frames(
     if flat:
         out = out[0]
     return out, levels
+
+
+def _check_stack_memory(
+    where: str,
+    shape: tuple[int, ...],
+    dtype: np.dtype,
+    workers: int | None,
+    error: Callable[[str], ManifestError],
+) -> None:
+    """Refuse a stack of ``shape`` (``N, K, H, W, C``) that this process has no memory for.
+
+    Checked once, from the first frame, before the stack is allocated: its
+    frames, and one decoded frame per thread beside it (a decoder that cannot
+    write a frame into its place). The frames after the first are then read
+    without a check of their own (:func:`photoquant.io.images._read_pixels`
+    with a place to decode into).
+    """
+    frame = stack_nbytes(shape[2:], dtype)
+    need = stack_nbytes(shape, dtype) + check_workers(workers) * frame
+    n, k, h, w, c = shape
+    try:
+        check_memory(need, f"`{where}` ({n} x {k} frames of {w}x{h}x{c} {dtype.name})")
+    except InputError as exc:
+        raise error(str(exc)) from None
 
 
 def _raw_levels(

@@ -811,7 +811,8 @@ def _read_pixels(path: Path, max_pixels: int | None, into: np.ndarray | None = N
             else:
                 f.seek(0)
                 header = _header(f, path, size)
-                _check_limits(header, path, size, max_pixels)
+                # a frame with its place in a stack: the loader checked the stack's memory
+                _check_limits(header, path, size, max_pixels, memory=into is None)
                 f.seek(0)
                 data = f.read()
                 fast = None

@@ -208,6 +208,44 @@ def _error(exc_type, fn) -> str:
     return text
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_stack_without_the_memory_for_it_is_refused_before_it_is_read(
+    tmp_path, monkeypatch, workers
+):
+    """The stack's memory (its frames and one decoded frame per thread) is checked once,
+    from the first frame, with one line naming the frame set; its other frames are then
+    read without a check each (the memory asked for does not grow with the frames)."""
+    import photoquant._checks as checks
+
+    images = _random_images(np.uint8, 3, n_repeats=2)
+    path = _capture(tmp_path, images)
+    frame = 5 * 7 * 3
+    need = len(images) * frame + workers * frame
+    asked = []
+
+    def available(room):
+        def memory_available():
+            asked.append(room)
+            return room
+
+        return memory_available
+
+    monkeypatch.setattr(checks, "memory_available", available(int(need / 0.9) - 1))
+    with pytest.raises(ManifestError) as info:
+        load_stack(load_manifest(path).views[0], load_manifest(path), workers=workers)
+    message = " ".join(str(info.value).split())
+    assert message.endswith(
+        f"`views[0]` (2 x 3 frames of 7x5x3 uint8) needs {need} bytes of memory, but only "
+        f"{int(need / 0.9) - 1} bytes is available"
+    ), message
+    assert "\n" not in str(info.value)
+    monkeypatch.setattr(checks, "memory_available", available(int(need / 0.9) + 2))
+    asked.clear()
+    stack = load_stack(load_manifest(path).views[0], load_manifest(path), workers=workers)
+    assert stack.frames.shape == (2, 3, 5, 7, 3)
+    assert len(asked) == 2  # the first frame's decode and the stack; none for the others
+
+
 @pytest.mark.parametrize("workers", [1, 2, 7])
 def test_bad_files_same_one_line_error_with_threads(tmp_path, workers):
     """Corrupt, mislabelled, odd-shaped and out-of-range files: one line, the first file."""
