@@ -106,8 +106,9 @@ def _axis_png(rows: Sequence[Mapping[str, Any]], axes: Sequence[str], axis: str)
     metrics = [m for m in HEADLINE if any(r["metric"] == m for r in rows)]
     ncols = 3
     nrows = max(1, math.ceil(len(metrics) / ncols))
-    fig = Figure(figsize=(5.2 * ncols, 3.8 * nrows), layout="constrained")
+    fig = Figure(figsize=(5.2 * ncols, 3.8 * nrows))
     FigureCanvasAgg(fig)
+    _fixed_margins(fig, nrows, ncols)
     numeric = all(isinstance(r[axis], int | float) for r in rows)
     notes = set()
     for i, metric in enumerate(metrics):
@@ -144,6 +145,28 @@ def _axis_png(rows: Sequence[Mapping[str, Any]], axes: Sequence[str], axis: str)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
     return buf.getvalue()
+
+
+def _fixed_margins(fig: Any, nrows: int, ncols: int) -> None:
+    """Margins and gaps of a panel grid in inches: room for the tick labels, the axis
+    label, the panel titles and the figure's title.
+
+    A fixed layout, not matplotlib's constrained one: that one draws every
+    panel's text once more to measure it, half the drawing time of a summary.
+    """
+    width, height = fig.get_size_inches()
+    left, right, bottom, top = 0.75, 0.2, 0.8, 0.65  # inches
+    row_gap, col_gap = 1.0, 0.75
+    axis_height = (height - bottom - top - (nrows - 1) * row_gap) / nrows
+    axis_width = (width - left - right - (ncols - 1) * col_gap) / ncols
+    fig.subplots_adjust(
+        left=left / width,
+        right=1 - right / width,
+        bottom=bottom / height,
+        top=1 - top / height,
+        hspace=row_gap / axis_height,
+        wspace=col_gap / axis_width,
+    )
 
 
 def summary_rows(rows: Sequence[Mapping[str, Any]], axes: Sequence[str]) -> list[dict[str, Any]]:
