@@ -49,7 +49,10 @@ frame is refused, with one line, when
   that 100 bytes cannot make the decoder allocate 196 Mpixel.
 
 :func:`check_stack_memory` does the same for a whole stack of frames from its
-first frame's header, before any is decoded.
+first frame's header, before any is decoded. The frame loader
+(:func:`photoquant.io.load_stack`) checks a frame set's memory once, from its
+first frame (the stack and one decoded frame per thread), and decodes the
+other frames into their places without a check each.
 
 TIFF and OpenEXR pixels are read from the open file, not from a copy of it.
 
