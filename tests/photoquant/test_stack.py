@@ -242,6 +242,36 @@ def test_both_paths_detect_and_summarise_as_the_reference(compiled, seed, shape,
 
 
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed (the numpy path is used)")
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_compiled_frame_extremes_are_numpys_on_threads(dtype, all_cpus, monkeypatch):
+    """The stack's extremes over its ``N·K`` frames in one compiled pass, split over the
+    threads by positions (a stack large enough for two spans, every CPU available), are
+    numpy's; and the saturation levels found with them, stuck pixels and a pile below
+    the nominal maximum included, are those of the numpy path and of the reference."""
+    import photoquant.stack as stack_module
+
+    rng = np.random.default_rng(11)
+    c_max = int(np.iinfo(dtype).max) if dtype == np.uint8 else 4095
+    frames = rng.integers(0, c_max - 40, (3, 4, 100, 300, 3)).astype(dtype)
+    frames[..., 0] = np.minimum(frames[..., 0] + 60, c_max - 39)  # red piles below the top
+    frames[:, :, 5, 7, 2] = c_max - 100  # a stuck pixel of blue, at a value of its own
+    frames[:, :, 9, 9, 1] = 3  # and one of green
+    lo, hi = stack_module._frame_extremes(frames)
+    np.testing.assert_array_equal(lo, frames.min(axis=(0, 1)))
+    np.testing.assert_array_equal(hi, frames.max(axis=(0, 1)))
+    bits = 8 if dtype == np.uint8 else 12
+    compiled = detect_saturation_levels(frames, bits)
+    np.testing.assert_array_equal(compiled, _detect_reference(frames, bits))
+    assert compiled[0] == c_max - 39  # the pile is found
+    monkeypatch.setattr(stack_module, "_frame_extremes", lambda f: None)
+    np.testing.assert_array_equal(detect_saturation_levels(frames, bits), compiled)
+    # a view that is not contiguous, and one frame, take the numpy path
+    monkeypatch.undo()
+    assert stack_module._frame_extremes(frames[:, :, :, ::2]) is None
+    assert stack_module._frame_extremes(frames[:1, :1]) is None
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed (the numpy path is used)")
 @settings(max_examples=20, deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),
