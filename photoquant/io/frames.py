@@ -287,8 +287,8 @@ def _check_stack_memory(
 
     Checked once, from the first frame, before the stack is allocated: its
     frames, and one decoded frame per thread beside it (a decoder that cannot
-    write a frame into its place). The frames after the first are then read
-    without a check of their own (:func:`photoquant.io.images._read_pixels`
+    write a frame into its place). The PNG and JPEG frames after the first are
+    then read without a check of their own (:func:`photoquant.io.images._read_pixels`
     with a place to decode into).
     """
     frame = stack_nbytes(shape[2:], dtype)

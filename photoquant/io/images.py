@@ -51,8 +51,9 @@ frame is refused, with one line, when
 :func:`check_stack_memory` does the same for a whole stack of frames from its
 first frame's header, before any is decoded. The frame loader
 (:func:`photoquant.io.load_stack`) checks a frame set's memory once, from its
-first frame (the stack and one decoded frame per thread), and decodes the
-other frames into their places without a check each.
+first frame (the stack and one decoded frame per thread); its other PNG and
+JPEG frames are then read without a check each (TIFF and OpenEXR frames keep
+theirs).
 
 TIFF and OpenEXR pixels are read from the open file, not from a copy of it.
 
