@@ -158,3 +158,73 @@ def test_the_validate_command_keeps_freed_blocks_before_it_runs(monkeypatch, tmp
     with pytest.raises(SystemExit):
         main(["validate", "--quick", "-o", str(tmp_path / "report"), "-q"])
     assert calls == ["kept", "run"]
+
+
+def test_the_charts_hdr_capture_is_simulated_once_and_scores_as_a_fresh_one(tmp_path, monkeypatch):
+    """Table 1, Fig. 7 and the leaderboard correct one chart capture per preset and
+    illuminant with many cameras: the capture is simulated once and kept (its stack's
+    memos with it); each camera's patch values are those from a capture simulated
+    afresh for it (nothing kept)."""
+    import validation.experiments.table1 as table1
+    from validation.truth_model import camera_model_from_truth
+
+    shared = Shared(TINY, 0, tmp_path, lambda s: None)
+    cal = shared.calibration("ccd")
+    chart = shared.chart("D65", "ccd")
+    # two cameras that differ in every step (the calibrated one, the truth's), in turn
+    models = [cal.model, camera_model_from_truth(cal.truth.camera), cal.model]
+    streams = []
+    stream = shared.stream
+
+    def counted(*names):
+        streams.append(names)
+        return stream(*names)
+
+    monkeypatch.setattr(shared, "stream", counted)
+
+    def patches():
+        streams.clear()
+        out = [
+            table1._corrected_chart(TINY, shared, "ccd", "outdoor", cal.camera, m, chart)[1:3]
+            for m in models
+        ]
+        return out, sum(s[0] == "chart_hdr" for s in streams)
+
+    kept, simulated = patches()
+    assert simulated == 1 and ("chart-hdr", "ccd", "outdoor") in shared.cache
+    monkeypatch.setattr(table1, "CHART_HDR_KEPT_BYTES", 0)
+    del shared.cache["chart-hdr", "ccd", "outdoor"]
+    fresh, simulated = patches()
+    assert simulated == len(models) and not any(k[0] == "chart-hdr" for k in shared.cache)
+    for (hdr_k, bal_k), (hdr_f, bal_f) in zip(kept, fresh, strict=True):
+        np.testing.assert_array_equal(hdr_k, hdr_f)
+        np.testing.assert_array_equal(bal_k, bal_f)
+    assert not np.array_equal(kept[0][0], kept[1][0])  # the two cameras measure differently
+
+
+def test_a_process_keeps_only_the_memos_its_own_later_experiments_read(tmp_path, monkeypatch):
+    """With two processes, each drops after an experiment the memos that none of the
+    experiments it still runs reads (those the other process runs do not count)."""
+    import sys
+    import types
+
+    import validation.experiments as experiments
+
+    fake = types.ModuleType("photoquant_test_fake_experiment")
+    fake.TITLE = "fake"
+
+    def run(config, seed, workdir, *, shared):
+        shared.cache.update({("chart", "x"): 1, ("chart-hdr", "ccd", "outdoor"): 2, "study": 3})
+        return ExperimentResult("fake", "fake", "")
+
+    fake.run = run
+    monkeypatch.setitem(sys.modules, fake.__name__, fake)
+    monkeypatch.setitem(experiments.EXPERIMENTS, "fake", fake.__name__)
+    shared = Shared(TINY, 0, tmp_path, lambda s: None)
+    names = ["fake", "fig7", "leaderboard"]
+    # Fig. 7 (a reader of "chart") runs in the other process: its memo goes
+    experiments._run_one("fake", names, TINY, 0, tmp_path, shared, ["fake", "leaderboard"])
+    assert set(shared.cache) == {("chart-hdr", "ccd", "outdoor"), "study"}
+    # in one process every later experiment is this one's: Fig. 7's memo stays
+    experiments._run_one("fake", names, TINY, 0, tmp_path, shared)
+    assert ("chart", "x") in shared.cache

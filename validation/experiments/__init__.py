@@ -268,9 +268,9 @@ def run_validation(
                 helper.stop()
                 other = _start_beside(beside, names, config, seed, root, shared)
                 try:
-                    for name in names:
-                        if name not in beside:
-                            results[name] = _run_one(name, names, config, seed, root, shared)
+                    mine = [n for n in names if n not in beside]
+                    for name in mine:
+                        results[name] = _run_one(name, names, config, seed, root, shared, mine)
                     # this process's figures, drawn while the other finishes (not after it)
                     draw_while(results.values(), other.running)
                     done, seeds = other.results()
@@ -343,8 +343,14 @@ def _run_one(
     seed: int,
     root: Path,
     shared: Any,
+    here: Sequence[str] | None = None,
 ) -> ExperimentResult:
-    """One experiment, timed; a refusal of the calibrator is its result (skipped, with why)."""
+    """One experiment, timed; a refusal of the calibrator is its result (skipped, with why).
+
+    ``names`` are the run's experiments (for the progress line); ``here`` those this
+    process runs (``names`` by default): the memos that none of them still to run reads
+    are dropped after it, whatever the other process runs.
+    """
     from photoquant.errors import PhotoquantError
     from validation._memory import return_free_memory
     from validation.experiments.base import compact_map_panels
@@ -360,7 +366,8 @@ def _run_one(
         shared.say(f"validate: {name} failed: {exc}")
     res.elapsed_s = time.perf_counter() - t0
     compact_map_panels(res)
-    later = names[names.index(name) + 1 :]
+    mine = list(names if here is None else here)
+    later = mine[mine.index(name) + 1 :]
     shared.release_cache(
         {key for n in later for key in getattr(import_module(EXPERIMENTS[n]), "CACHE_KEYS", ())}
     )
@@ -423,7 +430,7 @@ def _start_beside(
         ignore_interrupts()  # the parent's to handle: it ends this process
         receive.close()
         try:
-            done = {n: _run_one(n, names, config, seed, root, shared) for n in beside}
+            done = {n: _run_one(n, names, config, seed, root, shared, beside) for n in beside}
             send.send(("ok", done, dict(shared.seeds)))
         except BaseException:  # noqa: BLE001 - reported by the parent, in one line
             last = traceback.format_exc().strip().splitlines()[-1]

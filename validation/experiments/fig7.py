@@ -40,7 +40,7 @@ __all__ = ["run", "linear_fit", "PAPER", "TITLE"]
 
 TITLE = "Fig. 7: regression of measured vs ground truth"
 
-CACHE_KEYS = ("chart", "chart-pipeline", "pipeline-model")
+CACHE_KEYS = ("chart", "chart-pipeline", "pipeline-model", "chart-hdr")
 """The :attr:`~validation.experiments.shared.Shared.cache` entries this experiment reads."""
 
 PAPER = {

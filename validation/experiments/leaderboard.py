@@ -45,7 +45,7 @@ EXTRA_CAMERAS: tuple[str, ...] = ("emor", "emor-1", "film")
 
 TITLE = "Leaderboard: every registered method ranked against the truth"
 
-CACHE_KEYS = ("study",)
+CACHE_KEYS = ("study", "chart-hdr")
 """The :attr:`~validation.experiments.shared.Shared.cache` entries this experiment reads."""
 
 
