@@ -31,12 +31,12 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from photoquant._checks import check_memory, check_workers, stack_nbytes
+from photoquant._checks import check_workers, stack_nbytes
 from photoquant._threads import thread_map
 from photoquant.darkframe import DarkFrameModel, characterise_dark_frames, subtract_dark_frames
 from photoquant.errors import InputError, ManifestError
 from photoquant.io.exif import ExposureMetadata, read_exposure_metadata
-from photoquant.io.images import _copy_pixels, _read_pixels
+from photoquant.io.images import _check_stack_nbytes, _copy_pixels, _read_pixels
 from photoquant.io.manifest import CaptureManifest, FrameRef, FrameSetRef, _group_by_exposure
 from photoquant.io.raw import RawFrame, is_raw_file, read_raw, read_raw_metadata
 from photoquant.stack import ExposureStack
@@ -291,11 +291,9 @@ def _check_stack_memory(
     then read without a check of their own (:func:`photoquant.io.images._read_pixels`
     with a place to decode into).
     """
-    frame = stack_nbytes(shape[2:], dtype)
-    need = stack_nbytes(shape, dtype) + check_workers(workers) * frame
-    n, k, h, w, c = shape
+    in_flight = check_workers(workers) * stack_nbytes(shape[2:], dtype)
     try:
-        check_memory(need, f"`{where}` ({n} x {k} frames of {w}x{h}x{c} {dtype.name})")
+        _check_stack_nbytes(shape, dtype, in_flight, f"`{where}`")
     except InputError as exc:
         raise error(str(exc)) from None
 

@@ -614,15 +614,22 @@ def check_stack_memory(
     path = Path(first_frame)
     header = read_image_header(path)
     _check_limits(header, path, 0, max_pixels, memory=False)
-    n, k, c = (int(v) for v in (n_repeats, n_exposures, n_channels))
-    dt = np.dtype(dtype)
-    need = stack_nbytes((n, k, header.height, header.width, c), dt)
-    need += int(in_flight) * header.decoded_nbytes
-    check_memory(
-        need,
-        f"{what} ({n} x {k} frames of {header.width}x{header.height}x{c} {dt.name})",
-    )
+    shape = (n_repeats, n_exposures, header.height, header.width, n_channels)
+    _check_stack_nbytes(shape, dtype, int(in_flight) * header.decoded_nbytes, what)
     return header
+
+
+def _check_stack_nbytes(
+    shape: Sequence[int], dtype: np.dtype | type | str, extra_nbytes: int, what: str
+) -> None:
+    """:func:`check_memory` of a stack of ``shape`` ``(N, K, H, W, C)`` and ``extra_nbytes``
+    beside it (decoded frames in flight), its message naming ``what`` and the stack."""
+    n, k, h, w, c = (int(v) for v in shape)
+    dt = np.dtype(dtype)
+    check_memory(
+        stack_nbytes((n, k, h, w, c), dt) + int(extra_nbytes),
+        f"{what} ({n} x {k} frames of {w}x{h}x{c} {dt.name})",
+    )
 
 
 def _check_limits(
