@@ -12,17 +12,10 @@ import contextlib
 import os
 from collections.abc import Iterator
 
+from validation._cpus import worker_share
+
 SUITE_CPUS: list[int] = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_setaffinity") else []
 """The CPUs the suite may run on, as the process found them on import (before any binding)."""
-
-
-def worker_share(cpus: list[int], workers: int, index: int) -> set[int]:
-    """The CPUs of worker ``index`` of ``workers``: every ``workers``-th of ``cpus`` from
-    its own (the first workers one more where they do not divide), one where there are
-    more workers than CPUs (a CPU shared, as the scheduler would share it)."""
-    if workers >= len(cpus):
-        return {cpus[index % len(cpus)]}
-    return set(cpus[index::workers])
 
 
 def bind_worker(workers: int, worker: str) -> int | None:

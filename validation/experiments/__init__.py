@@ -218,7 +218,9 @@ def run_validation(
         calibrated first, then the experiments of :func:`beside_for` run in a
         forked second process while this one runs the rest (the studies of
         ``--full``, which calibrate capture sets of their own, are forked
-        first); while the presets are calibrated, a helper process compiles
+        first), each process bound to half the CPUs while both work
+        (:mod:`validation._cpus`; this process's CPUs are restored before
+        the function returns); while the presets are calibrated, a helper process compiles
         the job's kernels on a machine's first run
         (:mod:`validation.compile_ahead`), and this process draws its
         experiments' figures while the second finishes
@@ -234,6 +236,7 @@ def run_validation(
     """
     from photoquant.io.atomic import make_scratch_directory, remove_scratch_directory
     from photoquant.utils import check_int
+    from validation._cpus import split_cpus
     from validation._memory import return_free_memory
     from validation.compile_ahead import FIRST_RUN_NOTE, CompileAhead, start_compile_ahead
     from validation.experiments.shared import Shared
@@ -267,14 +270,20 @@ def run_validation(
                 # the paper-size calibrations in its memory
                 helper.stop()
                 other = _start_beside(beside, names, config, seed, root, shared)
+                # each process's threads on its own CPUs while both work (validation._cpus)
+                cpus = split_cpus(other.process.pid)
                 try:
                     mine = [n for n in names if n not in beside]
                     for name in mine:
+                        if not other.running():
+                            cpus.rejoin()  # the other is done: every CPU to this one
                         results[name] = _run_one(name, names, config, seed, root, shared, mine)
                     # this process's figures, drawn while the other finishes (not after it)
                     draw_while(results.values(), other.running)
+                    cpus.rejoin()  # this one waits: every CPU to the other
                     done, seeds = other.results()
                 finally:
+                    cpus.rejoin()
                     other.stop()
                 results.update(done)
                 shared.seeds.update(seeds)

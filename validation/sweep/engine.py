@@ -455,7 +455,7 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
         from dask.config import set as dask_config_set
         from distributed import Client, LocalCluster
 
-        from validation.sweep.worker_logs import QuietWorkerLogs
+        from validation.sweep.worker_logs import QuietWorkerLogs, WorkerCpus
     except ImportError:
         raise SweepError(
             "photoquant sweep needs Dask distributed and pyarrow (pip install '.[sweep]')"
@@ -493,6 +493,7 @@ def _client(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
         try:
             client = Client(cluster, timeout=NETWORK_TIMEOUT_S)
             client.register_plugin(QuietWorkerLogs(), name="photoquant-quiet-worker-logs")
+            client.register_plugin(WorkerCpus(n), name="photoquant-worker-cpus")
         except BaseException:
             cluster.close(timeout=NETWORK_TIMEOUT_S)
             raise

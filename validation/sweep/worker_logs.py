@@ -1,4 +1,5 @@
-"""The sweep's local workers keep their log lines out of the user's terminal."""
+"""The sweep's local workers: their log lines out of the user's terminal, each on its
+share of the CPUs."""
 
 from __future__ import annotations
 
@@ -22,3 +23,30 @@ class QuietWorkerLogs(WorkerPlugin):
 
     def setup(self, worker: Any) -> None:  # noqa: ARG002 - the same for every worker
         logging.getLogger("distributed").setLevel(logging.CRITICAL + 1)
+
+
+class WorkerCpus(WorkerPlugin):
+    """A Dask worker plugin: worker ``i`` of the local cluster's ``workers`` bound to its
+    share of the CPUs (:func:`validation._cpus.worker_share`).
+
+    A cell's calibration spreads its array work over the CPUs its process may
+    use; with every worker on every CPU, the workers' threads outnumber the
+    CPUs and wait for each other (:mod:`validation._cpus`). Only the sweep's own
+    local cluster gets it, whose workers are named ``0 … workers − 1``; a
+    worker of another name keeps every CPU.
+    """
+
+    def __init__(self, workers: int) -> None:
+        self.workers = int(workers)
+
+    def setup(self, worker: Any) -> None:
+        import os
+
+        from validation._cpus import bind_process, worker_share
+
+        if not hasattr(os, "sched_getaffinity") or not isinstance(worker.name, int):
+            return
+        cpus = sorted(os.sched_getaffinity(0))
+        share = worker_share(cpus, self.workers, worker.name)
+        if share != set(cpus):
+            bind_process(share)
