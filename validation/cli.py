@@ -175,9 +175,9 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
         "--workers",
         type=int,
         choices=(1, 2),
-        help="processes: 2 runs the leaderboard and the noise experiment beside the others "
-        "(the default where the machine has two CPUs; the same metrics), 1 runs everything "
-        "in one",
+        help="processes: 2 runs the leaderboard and the chart's experiments beside the "
+        "others (the default where the machine has two CPUs; the same metrics), 1 runs "
+        "everything in one",
     )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
 

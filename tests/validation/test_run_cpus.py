@@ -56,20 +56,27 @@ def test_each_process_gets_its_share_and_both_get_every_cpu_back(all_cpus):
     assert os.sched_getaffinity(0) == every
 
 
-def _meeting_experiment(name: str, mine: Path, theirs: Path) -> types.ModuleType:
-    """An experiment that notes the CPUs it runs on, then waits until the other process's
-    has noted its own: both noted while both processes work."""
+def _wait_for(path: Path) -> bool:
+    deadline = time.monotonic() + 60
+    while not path.exists() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return path.exists()
+
+
+def _meeting_experiment(name: str, other: str, folder: Path) -> types.ModuleType:
+    """An experiment that notes the CPUs it runs on once the other process's has begun
+    (the first process's begins after the split), then waits until the other has noted
+    its own: both noted while both processes work."""
     module = types.ModuleType(f"_fake_experiment_{name}")
     module.TITLE = name
 
     def run(config, seed, workdir, *, shared=None):
         res = ExperimentResult(name, name, "")
+        (folder / f"{name}-begun").touch()
+        res.paper["met"] = _wait_for(folder / f"{other}-begun")
         res.paper["cpus"] = sorted(os.sched_getaffinity(0))
-        mine.touch()
-        deadline = time.monotonic() + 30
-        while not theirs.exists() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        res.paper["met"] = theirs.exists()
+        (folder / f"{name}-noted").touch()
+        res.paper["met"] &= _wait_for(folder / f"{other}-noted")
         return res
 
     module.run = run
@@ -79,8 +86,8 @@ def _meeting_experiment(name: str, mine: Path, theirs: Path) -> types.ModuleType
 def test_a_two_process_run_splits_the_cpus_and_gives_the_caller_its_own_back(
     all_cpus, tmp_path, monkeypatch
 ):
-    first = _meeting_experiment("first", tmp_path / "first", tmp_path / "second")
-    second = _meeting_experiment("second", tmp_path / "second", tmp_path / "first")
+    first = _meeting_experiment("first", "second", tmp_path)
+    second = _meeting_experiment("second", "first", tmp_path)
     for module in (first, second):
         monkeypatch.setitem(sys.modules, module.__name__, module)
     monkeypatch.setattr(
@@ -132,3 +139,56 @@ def test_a_sweep_worker_and_all_its_threads_run_on_its_share(all_cpus, workers):
         share = SUITE_CPUS if workers == 1 else SUITE_CPUS[index::workers]
         expected = str(share).strip("[]")
         assert [part.strip("[]\n") for part in out] == [expected] * 3
+
+
+def _figure_experiment(name: str, wait_for: Path | None) -> types.ModuleType:
+    """An experiment with one small map figure; it waits for ``wait_for`` to exist first."""
+    import numpy as np
+
+    from validation.experiments.base import FigureSpec
+
+    module = types.ModuleType(f"_fake_experiment_{name}")
+    module.TITLE = name
+
+    def run(config, seed, workdir, *, shared=None):
+        if wait_for is not None:
+            _wait_for(wait_for)
+        res = ExperimentResult(name, name, "")
+        image = np.random.default_rng(len(name)).random((12, 16))
+        panel = {"title": "t", "image": image, "vmin": 0.0, "vmax": 1.0}
+        res.figures.append(FigureSpec(f"{name}_map", "maps", name, "", {"panels": [panel]}))
+        return res
+
+    module.run = run
+    return module
+
+
+def test_the_second_process_done_first_draws_its_figures_while_the_first_works(
+    all_cpus, tmp_path, monkeypatch
+):
+    pytest.importorskip("matplotlib")
+    import validation.figures as figures
+
+    drawn = tmp_path / "drawn"
+    # the first process's experiment ends only once the second has drawn
+    first = _figure_experiment("first", drawn)
+    second = _figure_experiment("second", None)
+    for module in (first, second):
+        monkeypatch.setitem(sys.modules, module.__name__, module)
+    monkeypatch.setattr(
+        experiments, "EXPERIMENTS", {"first": first.__name__, "second": second.__name__}
+    )
+    monkeypatch.setattr(experiments, "BESIDE", ("second",))
+    monkeypatch.setattr(experiments, "_calibrate_or_remember", lambda shared, preset: None)
+    draw_while = figures.draw_while
+
+    def noted(results, go_on):  # its drawing done, noted in a file (the second's first)
+        count = draw_while(results, go_on)
+        drawn.touch()
+        return count
+
+    monkeypatch.setattr(figures, "draw_while", noted)
+    run = run_validation(TINY, 0, workers=2, workdir=tmp_path / "w", progress=lambda _m: None)
+    res = run.experiments["second"]
+    assert list(res.drawn) == ["second_map"]
+    assert res.drawn["second_map"] == figures.figure_png(res.figures[0])

@@ -68,7 +68,7 @@ def cli_job(tmp_path_factory):
     """
     out = tmp_path_factory.mktemp("cli-job") / "report"
     printed = io.StringIO()
-    # every CPU: the noise experiment in a second process where there are two
+    # every CPU: Table 1 and its neighbours in a second process where there are two
     with every_cpu(), contextlib.redirect_stdout(printed):
         status = main(["validate", "--tiny", "-q", "-o", str(out), "--experiments", *JOB])
     assert status == 0
@@ -81,7 +81,7 @@ def cli_job(tmp_path_factory):
 def test_same_seed_same_metrics(tiny_results, cli_job):
     # every experiment of JOB run twice, in two runs with their own capture sets
     # (the second through the command line: its results.json), in one process and,
-    # where the machine has two CPUs, with the noise experiment in a second one
+    # where the machine has two CPUs, with Table 1 and its neighbours in a second one
     again = json.loads((cli_job[0] / "results.json").read_text(encoding="utf-8"))
     other = _results(run_validation(TINY, 1, experiments=["response"], progress=_quiet))
 
@@ -367,7 +367,7 @@ def test_ablation_compares_every_deviation_and_reuses_the_pipeline(tmp_path):
 def test_an_error_in_the_second_process_is_one_line(tmp_path, monkeypatch, all_cpus):
     """An experiment that crashes in the forked process (not a refusal of the calibrator,
     which is its result) stops the run with one line naming the error."""
-    from validation.experiments import _default_workers, noise
+    from validation.experiments import BESIDE, _default_workers, sensor_lut
 
     if _default_workers() < 2:
         pytest.skip("one CPU or no fork: no second process")
@@ -375,11 +375,12 @@ def test_an_error_in_the_second_process_is_one_line(tmp_path, monkeypatch, all_c
     def crash(*args, **kwargs):
         raise RuntimeError("deliberately broken")
 
-    monkeypatch.setattr(noise, "run", crash)
+    assert "sensor_lut" in BESIDE and "response" not in BESIDE
+    monkeypatch.setattr(sensor_lut, "run", crash)
     config = TINY.replace(presets=("ccd",))
     with pytest.raises(ValidationError, match="second process failed: RuntimeError: deliber"):
-        run_validation(config, 0, experiments=["response", "noise"], workdir=tmp_path / "w",
-                       progress=_quiet)  # fmt: skip
+        run_validation(config, 0, experiments=["response", "sensor_lut"],
+                       workdir=tmp_path / "w", progress=_quiet)  # fmt: skip
 
 
 @pytest.mark.parametrize(("sig", "status", "word"), [("SIGINT", 130, "interrupted"),

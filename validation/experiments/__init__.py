@@ -74,10 +74,12 @@ OPT_IN: dict[str, str] = {
 """Experiment key → the :class:`ValidationConfig` flag that includes it in a default run
 (a flag the configuration does not have: only when named)."""
 
-BESIDE: tuple[str, ...] = ("noise", "leaderboard")
+BESIDE: tuple[str, ...] = ("sensor_lut", "uncertainty", "table1", "fig7", "leaderboard")
 """Experiments a run with two workers gives to a second process, beside the others there
 (:func:`run_validation`), in the order it runs them: about half of the quick job's time
-after the calibrations."""
+after the calibrations, and every experiment that reads the chart's HDR capture
+(Table 1, Fig. 7 and the leaderboard: simulated once, in that process) where the first
+reads the test scene's correction (the balance, noise and timings experiments)."""
 
 STUDIES: tuple[str, ...] = ("leaderboard", "robustness", "robustness_pairs")
 """The studies beyond the paper on capture sets of the configuration's study size
@@ -278,6 +280,7 @@ def run_validation(
                         if not other.running():
                             cpus.rejoin()  # the other is done: every CPU to this one
                         results[name] = _run_one(name, names, config, seed, root, shared, mine)
+                    other.others_done()
                     # this process's figures, drawn while the other finishes (not after it)
                     draw_while(results.values(), other.running)
                     cpus.rejoin()  # this one waits: every CPU to the other
@@ -387,10 +390,20 @@ def _run_one(
 
 @dataclass
 class _Beside:
-    """A forked process running some experiments; its results come back through a pipe."""
+    """A forked process running some experiments; its results come back through a pipe.
+
+    Done with its experiments before this process, it draws their figures
+    until :meth:`others_done` (as this process draws its own while it waits).
+    """
 
     process: Any
     connection: Any
+    others: Any
+    """The event :meth:`others_done` sets."""
+
+    def others_done(self) -> None:
+        """Tell the process that this one's experiments are done: it stops drawing."""
+        self.others.set()
 
     def running(self) -> bool:
         """Whether the process has not sent its results yet."""
@@ -432,14 +445,19 @@ def _start_beside(
     import multiprocessing
     import traceback
 
+    from validation.figures import draw_while
+
     ctx = multiprocessing.get_context("fork")
     receive, send = ctx.Pipe(duplex=False)
+    others = ctx.Event()
 
     def work() -> None:
         ignore_interrupts()  # the parent's to handle: it ends this process
         receive.close()
         try:
             done = {n: _run_one(n, names, config, seed, root, shared, beside) for n in beside}
+            # its figures drawn while the parent's experiments run (not after them)
+            draw_while(done.values(), lambda: not others.is_set())
             send.send(("ok", done, dict(shared.seeds)))
         except BaseException:  # noqa: BLE001 - reported by the parent, in one line
             last = traceback.format_exc().strip().splitlines()[-1]
@@ -450,4 +468,4 @@ def _start_beside(
     process = ctx.Process(target=work, name="photoquant-validate-beside", daemon=True)
     process.start()
     send.close()
-    return _Beside(process, receive)
+    return _Beside(process, receive, others)
