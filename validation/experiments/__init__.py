@@ -222,10 +222,10 @@ def run_validation(
         ``--full``, which calibrate capture sets of their own, are forked
         first), each process bound to half the CPUs while both work
         (:mod:`validation._cpus`; this process's CPUs are restored before
-        the function returns); while the presets are calibrated, a helper process compiles
-        the job's kernels on a machine's first run
-        (:mod:`validation.compile_ahead`), and this process draws its
-        experiments' figures while the second finishes
+        the function returns); while the presets are calibrated, a helper
+        process compiles the job's kernels on a machine's first run
+        (:mod:`validation.compile_ahead`), and the process done first draws
+        its experiments' figures while the other finishes
         (:attr:`~validation.experiments.base.ExperimentResult.drawn`).
         Each experiment's metrics depend on its seed streams only, not on the process (their
         shared memos are recomputed there: the same values); the timings of
