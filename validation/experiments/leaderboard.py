@@ -9,8 +9,9 @@ error beside its noise floor, the sensor LUT's error and Table 1's
 ColorChecker correlation) and timed.
 
 The quick job ranks the response and vignetting steps only, photoquant's
-methods and the plug-ins', with one timed calibration per method (one to
-two seconds each on two cores); the peers' methods (OpenCV, colour-hdri,
+methods and the plug-ins', with one timed calibration per method (0.5 to
+2.1 s each on the CPU the job's second process is bound to, 2026-12-08); the
+peers' methods (OpenCV, colour-hdri,
 Hugin, pfstools: most of them run their own iterative solvers or programs,
 5–30 s a calibration at 320×240) would take two minutes of it
 (``--peers`` ranks them). ``--full`` (configuration ``full``) ranks the
