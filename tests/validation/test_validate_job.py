@@ -383,14 +383,19 @@ def test_an_error_in_the_second_process_is_one_line(tmp_path, monkeypatch, all_c
                        workdir=tmp_path / "w", progress=_quiet)  # fmt: skip
 
 
-@pytest.mark.parametrize(("sig", "status", "word"), [("SIGINT", 130, "interrupted"),
-                                                     ("SIGTERM", 143, "terminated")])  # fmt: skip
+@pytest.mark.parametrize(("sig", "status", "word", "when"), [
+    ("SIGINT", 130, "interrupted", "leaderboard: response /"),
+    ("SIGTERM", 143, "terminated", "leaderboard: response /"),
+    # before the fork, while the first preset is calibrated
+    ("SIGINT", 130, "interrupted", "validate: calibrating 'ccd'"),
+])  # fmt: skip
 def test_stopping_a_two_process_run_is_one_line_and_leaves_nothing(
-    tmp_path, sig, status, word, all_cpus
+    tmp_path, sig, status, word, when, all_cpus
 ):
     """Ctrl-C (SIGINT to the terminal's process group) or SIGTERM while the second process
-    ranks the leaderboard: one line, the status of the signal, no traceback from either
-    process, neither left running, no report and no scratch folder."""
+    ranks the leaderboard, or before the fork: one line, the status of the signal, no
+    traceback from either process, neither left running, no report and no scratch
+    folder."""
     import os
     import signal
     import subprocess
@@ -417,9 +422,9 @@ def test_stopping_a_two_process_run_is_one_line_and_leaves_nothing(
     ) as proc:
         assert proc.stderr is not None
         seen = []
-        for line in proc.stderr:  # the second process's progress: both are working
+        for line in proc.stderr:  # the progress line of the moment the signal is for
             seen.append(line)
-            if "leaderboard: response /" in line:
+            if when in line:
                 break
         os.killpg(proc.pid, getattr(signal, sig))
         err = "".join(seen) + proc.stderr.read()
