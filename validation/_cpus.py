@@ -7,7 +7,8 @@ take every CPU and the two sets share them: more threads than CPUs, which wait
 for each other at every step. Bound to half the CPUs each, each process runs
 one thread a CPU; measured on the quick job (2 CPUs, four runs each,
 interleaved, 2026-12-07): every experiment 8–12 % faster, the job 37.8–42.1 s
-against 41.3–42.6 s, the same metrics. The sweep's local Dask workers, one
+against 41.3–42.6 s (in a slower hour, 52.6–52.9 s against 55.8–59.0 s), the
+same metrics. The sweep's local Dask workers, one
 cell each at a time, are bound the same way (:func:`bind_process`, from the
 worker plugin :class:`validation.sweep.worker_logs.WorkerCpus`): the example
 sweep 12.7–13.6 s against 13.3–14.0 s (three runs each, interleaved).
